@@ -1,0 +1,17 @@
+defmodule RingTracer.Application do
+  @moduledoc false
+  use Application
+
+  alias RingTracer.Names
+
+  @impl Application
+  def start(_type, _args) do
+    children = [
+      RingTracer.SceneCache,
+      {DynamicSupervisor, name: Names.jobs(), strategy: :one_for_one},
+      {DynamicSupervisor, name: Names.children(), strategy: :one_for_one}
+    ]
+
+    Supervisor.start_link(children, strategy: :one_for_one, name: RingTracer.Supervisor)
+  end
+end

@@ -1,0 +1,24 @@
+defmodule RingTracer.Error do
+  @moduledoc """
+  The error RingTracer returns in `{:error, %RingTracer.Error{}}` and raises
+  from the `!` functions.
+
+  `:reason` is a machine-readable atom, `:message` says what went wrong and,
+  for scene files, where: `scene.nff:12: polygon needs at least 3 vertices`.
+
+  | reason | when |
+  |---|---|
+  | `:invalid_option` | an option has the wrong type or is out of range |
+  | `:file` | a file could not be read or written |
+  | `:invalid_scene` | the scene failed to parse (message names file and line) |
+  | `:render_failed` | the job could not complete (a crash, a timeout) |
+  """
+  defexception [:reason, :message]
+
+  @type t :: %__MODULE__{reason: atom(), message: String.t()}
+
+  @doc false
+  @spec new(atom(), String.t()) :: t()
+  def new(reason, message) when is_atom(reason) and is_binary(message),
+    do: %__MODULE__{reason: reason, message: message}
+end

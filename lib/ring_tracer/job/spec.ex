@@ -1,0 +1,23 @@
+defmodule RingTracer.Job.Spec do
+  @moduledoc """
+  Everything a job's processes need to know, built once by `RingTracer.render/2`
+  and handed to the parent, which hands each child its part. It holds the
+  scene's source (bytes), never a scene handle, so it can cross nodes.
+  """
+
+  alias RingTracer.{Layout, Settings}
+  alias RingTracer.Scene.Source
+
+  @enforce_keys [:id, :source, :settings, :layout, :caller]
+  defstruct [:id, :source, :settings, :layout, :caller, nodes: [], handover_delay: 0]
+
+  @type t :: %__MODULE__{
+          id: reference(),
+          source: Source.t(),
+          settings: Settings.t(),
+          layout: Layout.t(),
+          caller: pid(),
+          nodes: [node()],
+          handover_delay: non_neg_integer()
+        }
+end

@@ -1,0 +1,76 @@
+defmodule RingTracer.Layout do
+  @moduledoc """
+  How an image is cut into strips and atoms.
+
+  The image's pixels are numbered row-major from the top-left, `0..w*h-1`.
+  With `n` children and `k` atoms per child there are `m = n * k` atoms; atom
+  `a` covers pixels `div(a * p, m)` up to (not including) `div((a + 1) * p, m)`
+  where `p = w * h`. Child `i`'s strip is atoms `i*k .. i*k + k - 1`, so strips
+  are contiguous, atoms tile the image exactly once for every size, and
+  concatenating atom results in atom order gives the image. When `p < m` some
+  atoms are empty (zero pixels); they are still traced (instantly) and counted.
+
+      iex> layout = RingTracer.Layout.new(10, 1, 2, 2)
+      iex> Enum.map(RingTracer.Layout.atoms(layout), &RingTracer.Layout.span(layout, &1))
+      [{0, 2}, {2, 3}, {5, 2}, {7, 3}]
+      iex> RingTracer.Layout.strip(layout, 1)
+      [2, 3]
+  """
+
+  @enforce_keys [:width, :height, :children, :atoms_per_child]
+  defstruct [:width, :height, :children, :atoms_per_child]
+
+  @type t :: %__MODULE__{
+          width: pos_integer(),
+          height: pos_integer(),
+          children: pos_integer(),
+          atoms_per_child: pos_integer()
+        }
+  @typedoc "An atom's index, `0..n*k-1`."
+  @type atom_id :: non_neg_integer()
+
+  @doc "A layout for a `width` x `height` image, `children` strips of `atoms_per_child` atoms."
+  @spec new(pos_integer(), pos_integer(), pos_integer(), pos_integer()) :: t()
+  def new(width, height, children, atoms_per_child)
+      when is_integer(width) and width > 0 and is_integer(height) and height > 0 and
+             is_integer(children) and children > 0 and is_integer(atoms_per_child) and
+             atoms_per_child > 0 do
+    %__MODULE__{
+      width: width,
+      height: height,
+      children: children,
+      atoms_per_child: atoms_per_child
+    }
+  end
+
+  @doc "Number of pixels."
+  @spec pixels(t()) :: non_neg_integer()
+  def pixels(%__MODULE__{width: w, height: h}), do: w * h
+
+  @doc "Total number of atoms."
+  @spec atom_count(t()) :: pos_integer()
+  def atom_count(%__MODULE__{children: n, atoms_per_child: k}), do: n * k
+
+  @doc "Every atom index, in image order."
+  @spec atoms(t()) :: Range.t()
+  def atoms(layout), do: 0..(atom_count(layout) - 1)
+
+  @doc "The atoms of child `i`'s strip, in order."
+  @spec strip(t(), non_neg_integer()) :: [atom_id()]
+  def strip(%__MODULE__{children: n, atoms_per_child: k}, i) when i in 0..(n - 1)//1 do
+    Enum.to_list((i * k)..(i * k + k - 1))
+  end
+
+  @doc "The child whose strip holds atom `a` (its original owner)."
+  @spec owner(t(), atom_id()) :: non_neg_integer()
+  def owner(%__MODULE__{atoms_per_child: k}, a), do: div(a, k)
+
+  @doc "`{first_pixel, pixel_count}` of atom `a`."
+  @spec span(t(), atom_id()) :: {non_neg_integer(), non_neg_integer()}
+  def span(layout, a) do
+    m = atom_count(layout)
+    p = pixels(layout)
+    first = div(a * p, m)
+    {first, div((a + 1) * p, m) - first}
+  end
+end

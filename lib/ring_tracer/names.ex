@@ -1,0 +1,18 @@
+defmodule RingTracer.Names do
+  @moduledoc """
+  Every registered name RingTracer uses, built in one place.
+
+  Per node: the jobs supervisor (parents), the children supervisor (children
+  started on this node by any job's parent) and the scene cache.
+  """
+
+  @doc "Supervisor of parents, one per running job, on this node."
+  @spec jobs() :: atom()
+  def jobs, do: RingTracer.Jobs
+
+  @doc "Supervisor of children on `node`, as a reference usable from any node."
+  @spec children(node()) :: atom() | {atom(), node()}
+  def children(node \\ node())
+  def children(node) when node == node(), do: RingTracer.Children
+  def children(node), do: {RingTracer.Children, node}
+end

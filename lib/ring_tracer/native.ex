@@ -1,0 +1,36 @@
+defmodule RingTracer.Native do
+  @moduledoc false
+  # NIF stubs only. The library is built by Mix.Tasks.Compile.RingTracerNative
+  # into priv/native/. Public modules above this one validate and document.
+
+  @on_load :load_nif
+
+  @doc false
+  def load_nif do
+    path = :filename.join(:code.priv_dir(:ring_tracer), ~c"native/libring_tracer_nif")
+
+    case :erlang.load_nif(path, 0) do
+      :ok ->
+        :ok
+
+      {:error, {reason, text}} ->
+        IO.warn(
+          "RingTracer could not load its native library #{path}.so (#{reason}: #{text}). " <>
+            "Build it with `mix compile` (needs cargo), or run `./ringtracer test`."
+        )
+
+        :ok
+    end
+  end
+
+  def scene_parse(_bytes, _format, _name, _base_dir, _includes), do: err()
+  def scene_live_count, do: err()
+  def trace_atom(_scene, _settings, _start, _count), do: err()
+  def render_image(_scene, _settings, _threads), do: err()
+  def validate_settings(_settings), do: err()
+  def write_image(_path, _width, _height, _pixels), do: err()
+  def encode_png(_width, _height, _pixels), do: err()
+  def to_srgb8_binary(_pixels), do: err()
+
+  defp err, do: :erlang.nif_error(:nif_not_loaded)
+end

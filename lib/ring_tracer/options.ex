@@ -1,0 +1,108 @@
+defmodule RingTracer.Options do
+  @moduledoc """
+  Validation of `RingTracer.render/2`'s options. Every option is checked
+  before a job starts; a bad one is an `{:error, %RingTracer.Error{reason:
+  :invalid_option}}` that names it.
+  """
+
+  alias RingTracer.Error
+
+  @schema [
+    children: {:pos_integer, nil},
+    atoms: {:pos_integer, 16},
+    width: {:pos_integer, nil},
+    height: {:pos_integer, nil},
+    depth: {:pos_integer, 5},
+    cutoff: {:non_neg_number, 1 / 255},
+    samples: {:pos_integer, 1},
+    spd: {:boolean, false},
+    nodes: {:nodes, []},
+    timeout: {:timeout, :infinity},
+    handover_delay: {:non_neg_integer, 0}
+  ]
+
+  @max_children 100_000
+
+  @doc "The option names and their defaults."
+  @spec defaults() :: keyword()
+  def defaults, do: Enum.map(@schema, fn {k, {_, d}} -> {k, d} end)
+
+  @doc """
+  Validates `opts` and fills in defaults.
+
+      iex> {:ok, opts} = RingTracer.Options.validate(children: 3)
+      iex> {opts[:children], opts[:atoms]}
+      {3, 16}
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Options.validate(atoms: 0)
+      iex> message
+      "option :atoms must be a positive integer, got: 0"
+  """
+  @spec validate(keyword()) :: {:ok, keyword()} | {:error, Error.t()}
+  def validate(opts) when is_list(opts) do
+    with :ok <- known(opts) do
+      Enum.reduce_while(@schema, {:ok, []}, fn {key, {type, default}}, {:ok, acc} ->
+        value = Keyword.get(opts, key, default)
+
+        case if(is_nil(value) and is_nil(default), do: :ok, else: check(type, value)) do
+          :ok -> {:cont, {:ok, [{key, value} | acc]}}
+          {:error, what} -> {:halt, {:error, invalid(key, what, value)}}
+        end
+      end)
+      |> case do
+        {:ok, acc} -> finish(Enum.reverse(acc))
+        error -> error
+      end
+    end
+  end
+
+  def validate(other),
+    do:
+      {:error,
+       Error.new(:invalid_option, "options must be a keyword list, got: #{inspect(other)}")}
+
+  defp finish(opts) do
+    opts = Keyword.update!(opts, :children, &(&1 || System.schedulers_online()))
+
+    if opts[:children] > @max_children do
+      {:error, invalid(:children, "at most #{@max_children}", opts[:children])}
+    else
+      {:ok, opts}
+    end
+  end
+
+  defp known(opts) do
+    case Keyword.keys(opts) -- Keyword.keys(@schema) do
+      [] ->
+        :ok
+
+      [key | _] ->
+        {:error,
+         Error.new(
+           :invalid_option,
+           "unknown option #{inspect(key)}; known: #{inspect(Keyword.keys(@schema))}"
+         )}
+    end
+  end
+
+  defp check(:pos_integer, v) when is_integer(v) and v > 0, do: :ok
+  defp check(:pos_integer, _), do: {:error, "a positive integer"}
+  defp check(:non_neg_integer, v) when is_integer(v) and v >= 0, do: :ok
+  defp check(:non_neg_integer, _), do: {:error, "a non-negative integer"}
+  defp check(:non_neg_number, v) when is_number(v) and v >= 0, do: :ok
+  defp check(:non_neg_number, _), do: {:error, "a non-negative number"}
+  defp check(:boolean, v) when is_boolean(v), do: :ok
+  defp check(:boolean, _), do: {:error, "a boolean"}
+  defp check(:timeout, :infinity), do: :ok
+  defp check(:timeout, v) when is_integer(v) and v > 0, do: :ok
+  defp check(:timeout, _), do: {:error, "a positive integer (ms) or :infinity"}
+
+  defp check(:nodes, v) when is_list(v) do
+    if Enum.all?(v, &is_atom/1), do: :ok, else: {:error, "a list of node names (atoms)"}
+  end
+
+  defp check(:nodes, _), do: {:error, "a list of node names (atoms)"}
+
+  defp invalid(key, what, value),
+    do:
+      Error.new(:invalid_option, "option #{inspect(key)} must be #{what}, got: #{inspect(value)}")
+end

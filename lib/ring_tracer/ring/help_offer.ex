@@ -1,0 +1,81 @@
+defmodule RingTracer.Ring.HelpOffer do
+  @moduledoc """
+  The help offer (the ring's token) and what a child does when one reaches it.
+
+  A child that has traced every atom it holds sends an offer to its left
+  sibling: who made it (`origin`, `pid`), how many atoms it has computed
+  (`done`) and a sequence number (`seq`) so that a child can tell its current
+  offer from a stale one. Only the origin's own offers carry its pid: atoms are
+  handed over directly to it, not along the ring.
+
+  `decide/2` is the whole rule, pure:
+
+    * the offer is the child's own and current -> `:returned`: nobody needed
+      help, the child is finished and waits for the parent's stop message;
+    * an old offer of its own (superseded) -> `:drop`;
+    * the share rule gives at least one atom -> `{:give, g}`: the token is
+      consumed, and the child sends its last `g` queued atoms to the offerer;
+    * otherwise -> `:pass` to the left sibling.
+
+  More than one offer can be in the ring at once (one per idle child); they
+  cross freely. An offer reaching a child that is itself idle is passed on,
+  because such a child has nothing queued.
+  """
+
+  alias RingTracer.Ring.Share
+
+  @enforce_keys [:origin, :pid, :done, :seq]
+  defstruct [:origin, :pid, :done, :seq]
+
+  @type t :: %__MODULE__{
+          origin: non_neg_integer(),
+          pid: pid(),
+          done: non_neg_integer(),
+          seq: non_neg_integer()
+        }
+
+  @typedoc "What a child knows of itself when an offer arrives."
+  @type view :: %{
+          index: non_neg_integer(),
+          remaining: non_neg_integer(),
+          in_flight: non_neg_integer(),
+          done: non_neg_integer(),
+          offer_seq: non_neg_integer() | nil
+        }
+
+  @type decision :: :returned | :drop | :pass | {:give, pos_integer()}
+
+  @doc """
+  What the child described by `view` does with `offer`.
+
+      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3}
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 1, remaining: 0, in_flight: 0, done: 8, offer_seq: 3}, offer)
+      :returned
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, done: 8, offer_seq: nil}, offer)
+      {:give, 4}
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil}, offer)
+      :pass
+  """
+  @spec decide(view(), t()) :: decision()
+  def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
+    if seq == current, do: :returned, else: :drop
+  end
+
+  def decide(view, %__MODULE__{done: offerer_done}) do
+    case Share.give(view.remaining, view.in_flight, offerer_done, view.done) do
+      0 -> :pass
+      g -> {:give, g}
+    end
+  end
+
+  @doc """
+  Splits the queued atoms into the ones kept and the `g` given away (the last
+  ones of the queue, farthest from being traced).
+
+      iex> RingTracer.Ring.HelpOffer.split_queue([1, 2, 3, 4, 5], 2)
+      {[1, 2, 3], [4, 5]}
+  """
+  @spec split_queue([non_neg_integer()], non_neg_integer()) ::
+          {[non_neg_integer()], [non_neg_integer()]}
+  def split_queue(queue, g), do: Enum.split(queue, length(queue) - g)
+end

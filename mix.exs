@@ -1,0 +1,39 @@
+# Our own Mix compiler for the Rust NIF (no hex, no rustler mix package). It
+# lives beside the crates and is loaded here so it can run before Elixir's
+# compiler: the NIF library exists by the time modules are loaded.
+unless Code.ensure_loaded?(Mix.Tasks.Compile.RingTracerNative) do
+  Code.require_file("native/mix_compiler.exs", __DIR__)
+end
+
+defmodule RingTracer.MixProject do
+  use Mix.Project
+
+  def project do
+    [
+      app: :ring_tracer,
+      version: "0.1.0",
+      elixir: "~> 1.14",
+      start_permanent: Mix.env() == :prod,
+      compilers: [:ring_tracer_native | Mix.compilers()],
+      deps: [],
+      elixirc_paths: elixirc_paths(Mix.env()),
+      test_coverage: [summary: [threshold: 0]],
+      dialyzer_ignore: [],
+      aliases: aliases()
+    ]
+  end
+
+  def application do
+    [
+      extra_applications: [:logger, :crypto],
+      mod: {RingTracer.Application, []}
+    ]
+  end
+
+  defp elixirc_paths(:test), do: ["lib", "test/support"]
+  defp elixirc_paths(_), do: ["lib"]
+
+  defp aliases do
+    []
+  end
+end

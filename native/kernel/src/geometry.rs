@@ -1,0 +1,527 @@
+//! Primitive shapes and their ray intersection routines.
+//!
+//! Shapes are stored in an enum (no dynamic dispatch in the intersection loop); bulky ones
+//! (polygons, cones) live in side arrays and the enum holds an index. All routines take unit-length
+//! ray directions and report the nearest hit in the open interval `(tmin, tmax)`.
+//!
+//! Sidedness: spheres, cones and polygons are intersected from both sides (the integrator flips
+//! the normal towards the viewer), except shapes given with negative radii, which only exist from
+//! the inside (NFF: "only the inside of the object is visible").
+
+use crate::ray::Ray;
+use glam::Vec3A;
+
+/// Axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Minimum corner.
+    pub min: Vec3A,
+    /// Maximum corner.
+    pub max: Vec3A,
+}
+
+impl Aabb {
+    /// The empty box (union identity).
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3A::splat(f32::INFINITY),
+        max: Vec3A::splat(f32::NEG_INFINITY),
+    };
+
+    /// Smallest box containing both.
+    #[inline]
+    pub fn union(self, o: Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    /// Grows the box to contain a point.
+    #[inline]
+    pub fn grow(self, p: Vec3A) -> Aabb {
+        Aabb {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+
+    /// Half the surface area (0 for an empty box).
+    #[inline]
+    pub fn half_area(&self) -> f32 {
+        let d = (self.max - self.min).max(Vec3A::ZERO);
+        d.x * d.y + d.y * d.z + d.z * d.x
+    }
+
+    /// Centre point.
+    #[inline]
+    pub fn centre(&self) -> Vec3A {
+        (self.min + self.max) * 0.5
+    }
+
+    /// True if no point is inside.
+    pub fn is_empty(&self) -> bool {
+        self.min.cmpgt(self.max).any()
+    }
+
+    /// Length of the diagonal (0 when empty).
+    pub fn diagonal(&self) -> f32 {
+        if self.is_empty() {
+            0.0
+        } else {
+            (self.max - self.min).length()
+        }
+    }
+}
+
+/// A planar polygon of any vertex count (convex or concave), tested with the crossing rule in
+/// the projection that drops the normal's dominant axis.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PolygonData {
+    pub normal: Vec3A,
+    pub d: f32,
+    pub axis_u: u8,
+    pub axis_v: u8,
+    pub first: u32,
+    pub count: u32,
+}
+
+/// A cone or cylinder frustum without end caps.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ConeData {
+    pub base: Vec3A,
+    /// Unit axis from base to apex.
+    pub axis: Vec3A,
+    pub height: f32,
+    pub r0: f32,
+    /// Radius change per unit length along the axis.
+    pub slope: f32,
+    /// Only the inside exists (negative radii in NFF).
+    pub inside: bool,
+}
+
+/// Intersectable shape.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Shape {
+    Sphere {
+        center: Vec3A,
+        radius: f32,
+        inside: bool,
+    },
+    Triangle {
+        v0: Vec3A,
+        e1: Vec3A,
+        e2: Vec3A,
+    },
+    Polygon(u32),
+    Cone(u32),
+}
+
+/// Bulk shape storage.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Geometry {
+    pub shapes: Vec<Shape>,
+    pub polys: Vec<PolygonData>,
+    pub poly_verts: Vec<[f32; 2]>,
+    pub cones: Vec<ConeData>,
+}
+
+#[inline]
+fn comp(v: Vec3A, axis: u8) -> f32 {
+    match axis {
+        0 => v.x,
+        1 => v.y,
+        _ => v.z,
+    }
+}
+
+#[inline]
+pub(crate) fn hit_sphere(
+    center: Vec3A,
+    radius: f32,
+    inside: bool,
+    ray: &Ray,
+    tmin: f32,
+    tmax: f32,
+) -> Option<f32> {
+    let oc = ray.origin - center;
+    let b = oc.dot(ray.dir);
+    // distance from the centre to the line, computed stably
+    let l = oc - ray.dir * b;
+    let disc = radius * radius - l.length_squared();
+    if disc < 0.0 {
+        return None;
+    }
+    let q = disc.sqrt();
+    let t0 = -b - q;
+    let t1 = -b + q;
+    if !inside && t0 > tmin && t0 < tmax {
+        return Some(t0);
+    }
+    if t1 > tmin && t1 < tmax {
+        return Some(t1);
+    }
+    None
+}
+
+/// Möller–Trumbore; returns (t, u, v).
+#[inline]
+pub(crate) fn hit_triangle(
+    v0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+    ray: &Ray,
+    tmin: f32,
+    tmax: f32,
+) -> Option<(f32, f32, f32)> {
+    let p = ray.dir.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = ray.origin - v0;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = ray.dir.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = e2.dot(q) * inv;
+    if t > tmin && t < tmax {
+        Some((t, u, v))
+    } else {
+        None
+    }
+}
+
+#[inline]
+fn hit_polygon(p: &PolygonData, verts: &[[f32; 2]], ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
+    let dn = p.normal.dot(ray.dir);
+    if dn == 0.0 {
+        return None;
+    }
+    let t = (p.d - p.normal.dot(ray.origin)) / dn;
+    if !(t > tmin && t < tmax) {
+        return None;
+    }
+    let hit = ray.at(t);
+    let tx = comp(hit, p.axis_u);
+    let ty = comp(hit, p.axis_v);
+    let start = p.first as usize;
+    let vs = verts.get(start..start + p.count as usize)?;
+    let mut inside = false;
+    let mut j = vs.len() - 1;
+    for (i, vi) in vs.iter().enumerate() {
+        let vj = vs[j];
+        if (vi[1] > ty) != (vj[1] > ty)
+            && tx < (vj[0] - vi[0]) * (ty - vi[1]) / (vj[1] - vi[1]) + vi[0]
+        {
+            inside = !inside;
+        }
+        j = i;
+    }
+    if inside {
+        Some(t)
+    } else {
+        None
+    }
+}
+
+impl ConeData {
+    /// Outward normal (before the inside flip) at a point on the surface.
+    #[inline]
+    pub fn outward_normal(&self, p: Vec3A) -> Vec3A {
+        let d = p - self.base;
+        let s = d.dot(self.axis);
+        let radial = d - self.axis * s;
+        let r = self.r0 + self.slope * s;
+        let n = radial.normalize_or_zero() - self.axis * self.slope;
+        let _ = r;
+        n.try_normalize().unwrap_or(self.axis)
+    }
+}
+
+#[inline]
+fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
+    let oc = ray.origin - c.base;
+    let so = oc.dot(c.axis);
+    let sd = ray.dir.dot(c.axis);
+    let w = oc - c.axis * so;
+    let v = ray.dir - c.axis * sd;
+    let rr = c.r0 + c.slope * so;
+    let ks = c.slope * sd;
+    let a = v.length_squared() - ks * ks;
+    let hb = w.dot(v) - ks * rr;
+    let cc = w.length_squared() - rr * rr;
+    let mut roots = [f32::INFINITY; 2];
+    if a.abs() < 1e-12 {
+        if hb.abs() < 1e-30 {
+            return None;
+        }
+        roots[0] = -cc / (2.0 * hb);
+    } else {
+        let disc = hb * hb - a * cc;
+        if disc < 0.0 {
+            return None;
+        }
+        let q = disc.sqrt();
+        // numerically stable pair of roots
+        let qq = -(hb + q.copysign(hb));
+        let (r1, r2) = if qq != 0.0 {
+            (qq / a, cc / qq)
+        } else {
+            let r = -hb / a;
+            (r, r)
+        };
+        roots = if r1 <= r2 { [r1, r2] } else { [r2, r1] };
+    }
+    for t in roots {
+        if !(t > tmin && t < tmax) {
+            continue;
+        }
+        let s = so + t * sd;
+        if s < 0.0 || s > c.height || c.r0 + c.slope * s < 0.0 {
+            continue;
+        }
+        if c.inside {
+            let n = c.outward_normal(ray.at(t));
+            if n.dot(ray.dir) <= 0.0 {
+                continue;
+            }
+        }
+        return Some(t);
+    }
+    None
+}
+
+impl Geometry {
+    /// Intersects shape `i`.
+    #[inline(always)]
+    pub fn hit(&self, shape: &Shape, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
+        match *shape {
+            Shape::Triangle { v0, e1, e2 } => hit_triangle(v0, e1, e2, ray, tmin, tmax).map(|h| h.0),
+            Shape::Sphere {
+                center,
+                radius,
+                inside,
+            } => hit_sphere(center, radius, inside, ray, tmin, tmax),
+            Shape::Polygon(k) => {
+                let p = self.polys.get(k as usize)?;
+                hit_polygon(p, &self.poly_verts, ray, tmin, tmax)
+            }
+            Shape::Cone(k) => hit_cone(self.cones.get(k as usize)?, ray, tmin, tmax),
+        }
+    }
+
+    /// Geometric normal (outward per the primitive's convention: CCW polygon winding, inward for
+    /// inside-only shapes) at hit point `p`.
+    pub fn geometric_normal(&self, shape: &Shape, p: Vec3A) -> Vec3A {
+        match *shape {
+            Shape::Triangle { e1, e2, .. } => e1.cross(e2).normalize_or(Vec3A::Z),
+            Shape::Sphere {
+                center,
+                radius,
+                inside,
+            } => {
+                let n = ((p - center) / radius).normalize_or(Vec3A::Z);
+                if inside {
+                    -n
+                } else {
+                    n
+                }
+            }
+            Shape::Polygon(k) => self.polys.get(k as usize).map_or(Vec3A::Z, |q| q.normal),
+            Shape::Cone(k) => self.cones.get(k as usize).map_or(Vec3A::Z, |c| {
+                let n = c.outward_normal(p);
+                if c.inside {
+                    -n
+                } else {
+                    n
+                }
+            }),
+        }
+    }
+
+    /// Bounding box of a shape (needs the 3D polygon vertices, which are not kept after the build).
+    pub fn bounds(&self, shape: &Shape, poly_bounds: &[Aabb]) -> Aabb {
+        match *shape {
+            Shape::Triangle { v0, e1, e2 } => Aabb::EMPTY.grow(v0).grow(v0 + e1).grow(v0 + e2),
+            Shape::Sphere { center, radius, .. } => Aabb {
+                min: center - Vec3A::splat(radius),
+                max: center + Vec3A::splat(radius),
+            },
+            Shape::Polygon(k) => poly_bounds.get(k as usize).copied().unwrap_or(Aabb::EMPTY),
+            Shape::Cone(k) => match self.cones.get(k as usize) {
+                None => Aabb::EMPTY,
+                Some(c) => {
+                    let e = (Vec3A::ONE - c.axis * c.axis).max(Vec3A::ZERO);
+                    let e = Vec3A::new(e.x.sqrt(), e.y.sqrt(), e.z.sqrt());
+                    let r1 = c.r0 + c.slope * c.height;
+                    let apex = c.base + c.axis * c.height;
+                    Aabb {
+                        min: c.base - e * c.r0,
+                        max: c.base + e * c.r0,
+                    }
+                    .union(Aabb {
+                        min: apex - e * r1,
+                        max: apex + e * r1,
+                    })
+                }
+            },
+        }
+    }
+}
+
+/// Builds polygon data from 3D vertices; `None` if the polygon is degenerate (zero area).
+/// The normal comes from Newell's method, which follows the CCW winding for any simple polygon.
+pub(crate) fn make_polygon(verts: &[Vec3A], first: u32, out2d: &mut Vec<[f32; 2]>) -> Option<PolygonData> {
+    if verts.len() < 3 {
+        return None;
+    }
+    let mut n = Vec3A::ZERO;
+    for (i, a) in verts.iter().enumerate() {
+        let b = verts[(i + 1) % verts.len()];
+        n += Vec3A::new(
+            (a.y - b.y) * (a.z + b.z),
+            (a.z - b.z) * (a.x + b.x),
+            (a.x - b.x) * (a.y + b.y),
+        );
+    }
+    let normal = n.try_normalize()?;
+    let an = normal.abs();
+    let (axis_u, axis_v) = if an.x >= an.y && an.x >= an.z {
+        (1u8, 2u8)
+    } else if an.y >= an.z {
+        (2, 0)
+    } else {
+        (0, 1)
+    };
+    let centroid = verts.iter().copied().sum::<Vec3A>() / verts.len() as f32;
+    for v in verts {
+        out2d.push([comp(*v, axis_u), comp(*v, axis_v)]);
+    }
+    Some(PolygonData {
+        normal,
+        d: normal.dot(centroid),
+        axis_u,
+        axis_v,
+        first,
+        count: verts.len() as u32,
+    })
+}
+
+/// Builds cone data; `None` if the axis has zero length or both radii are zero.
+pub(crate) fn make_cone(base: Vec3A, r0: f32, apex: Vec3A, r1: f32) -> Option<ConeData> {
+    let inside = r0 < 0.0 && r1 < 0.0;
+    let (r0, r1) = (r0.abs(), r1.abs());
+    let d = apex - base;
+    let height = d.length();
+    let axis = d.try_normalize()?;
+    if height <= 0.0 || (r0 == 0.0 && r1 == 0.0) {
+        return None;
+    }
+    Some(ConeData {
+        base,
+        axis,
+        height,
+        r0,
+        slope: (r1 - r0) / height,
+        inside,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ray(o: [f32; 3], d: [f32; 3]) -> Ray {
+        Ray::new(Vec3A::from_array(o), Vec3A::from_array(d))
+    }
+
+    #[test]
+    fn sphere_hits_and_misses() {
+        let c = Vec3A::new(0.0, 0.0, -5.0);
+        let t = hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        assert!((t.unwrap() - 4.0).abs() < 1e-5);
+        // from inside: far root
+        let t = hit_sphere(c, 1.0, false, &ray([0.0, 0.0, -5.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        assert!((t.unwrap() - 1.0).abs() < 1e-5);
+        // miss beside
+        assert!(hit_sphere(c, 1.0, false, &ray([1.01, 0.0, 0.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        // behind
+        assert!(hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, 1.0]), 0.0, f32::INFINITY).is_none());
+        // tmax respected
+        assert!(hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, 3.9).is_none());
+        // inside-only sphere is invisible from outside until the far side
+        let t = hit_sphere(c, 1.0, true, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        assert!((t.unwrap() - 6.0).abs() < 1e-5);
+    }
+
+    fn poly(vs: &[[f32; 3]]) -> (Geometry, Shape) {
+        let mut g = Geometry::default();
+        let v: Vec<Vec3A> = vs.iter().map(|a| Vec3A::from_array(*a)).collect();
+        let p = make_polygon(&v, 0, &mut g.poly_verts).unwrap();
+        g.polys.push(p);
+        (g, Shape::Polygon(0))
+    }
+
+    #[test]
+    fn polygon_hits_and_misses() {
+        // unit square in z=0, CCW seen from +z
+        let (g, s) = poly(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]);
+        let t = g.hit(&s, &ray([0.5, 0.5, 2.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        assert!((t.unwrap() - 2.0).abs() < 1e-6);
+        assert!(g.hit(&s, &ray([1.5, 0.5, 2.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        // from behind too (two-sided intersection)
+        assert!(g.hit(&s, &ray([0.5, 0.5, -2.0], [0.0, 0.0, 1.0]), 0.0, f32::INFINITY).is_some());
+        // parallel
+        assert!(g.hit(&s, &ray([0.5, 0.5, 2.0], [1.0, 0.0, 0.0]), 0.0, f32::INFINITY).is_none());
+        assert!((g.geometric_normal(&s, Vec3A::ZERO) - Vec3A::Z).length() < 1e-6);
+        // concave "L" shape: the notch is outside
+        let (g, s) = poly(&[
+            [0.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [2.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [1.0, 2.0, 0.0],
+            [0.0, 2.0, 0.0],
+        ]);
+        assert!(g.hit(&s, &ray([1.5, 1.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(g.hit(&s, &ray([0.5, 1.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_some());
+        assert!(g.hit(&s, &ray([1.5, 0.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_some());
+    }
+
+    #[test]
+    fn triangle_hits_and_misses() {
+        let v0 = Vec3A::new(0.0, 0.0, 0.0);
+        let e1 = Vec3A::new(1.0, 0.0, 0.0);
+        let e2 = Vec3A::new(0.0, 1.0, 0.0);
+        let h = hit_triangle(v0, e1, e2, &ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).unwrap();
+        assert!((h.0 - 1.0).abs() < 1e-6 && (h.1 - 0.25).abs() < 1e-6 && (h.2 - 0.25).abs() < 1e-6);
+        assert!(hit_triangle(v0, e1, e2, &ray([0.6, 0.6, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+    }
+
+    #[test]
+    fn cylinder_and_cone() {
+        let mut g = Geometry::default();
+        g.cones.push(make_cone(Vec3A::ZERO, 1.0, Vec3A::new(0.0, 0.0, 2.0), 1.0).unwrap());
+        let s = Shape::Cone(0);
+        let t = g.hit(&s, &ray([5.0, 0.0, 1.0], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).unwrap();
+        assert!((t - 4.0).abs() < 1e-5);
+        let n = g.geometric_normal(&s, Vec3A::new(1.0, 0.0, 1.0));
+        assert!((n - Vec3A::X).length() < 1e-5);
+        // above the top: miss; down the open axis: miss (no caps)
+        assert!(g.hit(&s, &ray([5.0, 0.0, 2.5], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).is_none());
+        assert!(g.hit(&s, &ray([0.0, 0.0, 5.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        // cone: radius 1 at z=0 to 0 at z=1; at z=0.5 the radius is 0.5
+        g.cones.push(make_cone(Vec3A::ZERO, 1.0, Vec3A::Z, 0.0).unwrap());
+        let s = Shape::Cone(1);
+        let t = g.hit(&s, &ray([5.0, 0.0, 0.5], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).unwrap();
+        assert!((t - 4.5).abs() < 1e-5);
+        let n = g.geometric_normal(&s, Vec3A::new(0.5, 0.0, 0.5));
+        assert!((n - Vec3A::new(1.0, 0.0, 1.0).normalize()).length() < 1e-5);
+    }
+}

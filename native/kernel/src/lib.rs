@@ -1,0 +1,49 @@
+//! # ring_tracer_kernel
+//!
+//! RingTracer's ray-tracing kernel: scene parsing (NFF, native TOML, OBJ), a binned-SAH BVH,
+//! Whitted-style recursive ray tracing, and PNG/EXR output. Plain Rust; the Erlang NIF lives
+//! in a separate crate.
+//!
+//! ```no_run
+//! use ring_tracer_kernel::{render_image, write_image, Scene, Settings};
+//! let scene = Scene::load(std::path::Path::new("balls_s1.nff"))?;
+//! let settings = Settings::for_scene(&scene);
+//! let (rgb, stats) = render_image(&scene, &settings, 2)?;
+//! write_image(std::path::Path::new("balls.png"), settings.width, settings.height, &rgb)?;
+//! println!("{} eye rays, {} shadow rays", stats.eye, stats.shadow);
+//! # Ok::<(), ring_tracer_kernel::Error>(())
+//! ```
+//!
+//! Determinism: [`trace_span`] is a pure function of (scene, settings, pixel index), so any split
+//! of the image into spans, on any number of threads or machines, gives the same bits.
+#![deny(missing_docs)]
+
+pub mod bvh;
+pub mod camera;
+pub mod error;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod limits;
+pub mod material;
+pub mod nff;
+pub mod obj;
+pub mod ray;
+pub mod render;
+pub mod scene;
+pub mod stats;
+pub mod toml_scene;
+
+pub use camera::Camera;
+pub use error::Error;
+pub use film::{encode_png, to_srgb8, write_image};
+pub use geometry::Aabb;
+pub use glam;
+pub use integrator::{Integrator, Whitted};
+pub use light::Light;
+pub use material::{Checker, Material};
+pub use ray::Ray;
+pub use render::{render_image, trace_span, Settings};
+pub use scene::{Format, Hit, Scene};
+pub use stats::RayStats;

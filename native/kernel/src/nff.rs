@@ -1,0 +1,366 @@
+//! Parser for Eric Haines' Neutral File Format (NFF, see `NFF.TXT` of the SPD).
+//!
+//! Entities: `v` (from/at/up/angle/hither/resolution), `b`, `l x y z [r g b]`,
+//! `f r g b Kd Ks Shine T ior`, `c` (cone/cylinder: base + radius, apex + radius),
+//! `s x y z r`, `p n` + n vertices, `pp n` + n (vertex, normal) pairs, and `#` comments.
+//! The file is read as a stream of whitespace-separated tokens, so an entity may span lines
+//! (the polygon vertices follow on the next lines) or share one (`c` on one line).
+//!
+//! Conventions chosen where the format leaves freedom (SPD Readme, "relative intensity"):
+//! - a light without a colour has intensity `sqrt(n) / (2 n)` for `n` lights, in all channels;
+//! - the ambient term is that same value times the surface colour (it is not scaled by Kd);
+//! - a polygon with 3 vertices becomes a triangle; larger ones (also concave, e.g. the 144-gons
+//!   of `gears`) are tested with the crossing rule; degenerate (zero-area) ones are dropped;
+//! - a `pp` patch is triangulated as a fan (SPD patches are always triangles) with its vertex
+//!   normals interpolated for smooth shading;
+//! - negative radii (both, for cones) make the object visible only from the inside.
+//!
+//! Errors carry the line: `balls.nff:12: polygon needs at least 3 vertices, got 2`. Numbers
+//! that are NaN or infinite (also after conversion to f32) are rejected.
+
+use crate::camera::Camera;
+use crate::light::{spd_intensity, Light};
+use crate::limits;
+use crate::material::Material;
+use crate::scene::{Scene, SceneBuilder};
+use crate::Error;
+use glam::Vec3A;
+
+struct Lexer<'a> {
+    src: &'a [u8],
+    pos: usize,
+    line: usize,
+    file: &'a str,
+}
+
+impl<'a> Lexer<'a> {
+    /// Next token and its line, or `None` at the end.
+    fn next(&mut self) -> Option<(&'a [u8], usize)> {
+        let s = self.src;
+        loop {
+            let c = *s.get(self.pos)?;
+            match c {
+                b'\n' => {
+                    self.line += 1;
+                    self.pos += 1;
+                }
+                b'#' => {
+                    while self.pos < s.len() && s[self.pos] != b'\n' {
+                        self.pos += 1;
+                    }
+                }
+                c if c.is_ascii_whitespace() => self.pos += 1,
+                _ => break,
+            }
+        }
+        let start = self.pos;
+        while self.pos < s.len() && !s[self.pos].is_ascii_whitespace() && s[self.pos] != b'#' {
+            self.pos += 1;
+        }
+        Some((&s[start..self.pos], self.line))
+    }
+
+    fn peek(&mut self) -> Option<&'a [u8]> {
+        let (pos, line) = (self.pos, self.line);
+        let t = self.next().map(|t| t.0);
+        self.pos = pos;
+        self.line = line;
+        t
+    }
+
+    fn err(&self, line: usize, msg: impl Into<String>) -> Error {
+        Error::parse(self.file, line, msg)
+    }
+
+    fn number(&mut self, what: &str, entity_line: usize) -> Result<f32, Error> {
+        let Some((tok, line)) = self.next() else {
+            return Err(self.err(
+                entity_line,
+                format!("file ended in the middle of {what}"),
+            ));
+        };
+        let text = String::from_utf8_lossy(tok);
+        match text.parse::<f32>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            Ok(_) => Err(self.err(line, format!("number '{text}' in {what} is not finite"))),
+            Err(_) => Err(self.err(line, format!("expected a number in {what}, got '{text}'"))),
+        }
+    }
+
+    fn vec3(&mut self, what: &str, entity_line: usize) -> Result<Vec3A, Error> {
+        Ok(Vec3A::new(
+            self.number(what, entity_line)?,
+            self.number(what, entity_line)?,
+            self.number(what, entity_line)?,
+        ))
+    }
+
+    fn integer(&mut self, what: &str, entity_line: usize) -> Result<(u64, usize), Error> {
+        let Some((tok, line)) = self.next() else {
+            return Err(self.err(entity_line, format!("file ended in the middle of {what}")));
+        };
+        let text = String::from_utf8_lossy(tok);
+        match text.parse::<u64>() {
+            Ok(v) => Ok((v, line)),
+            Err(_) => Err(self.err(
+                line,
+                format!("expected a non-negative integer for {what}, got '{text}'"),
+            )),
+        }
+    }
+}
+
+fn is_number(tok: &[u8]) -> bool {
+    matches!(tok.first(), Some(c) if c.is_ascii_digit() || *c == b'-' || *c == b'+' || *c == b'.')
+}
+
+/// Parses NFF bytes into a scene.
+pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
+    let mut lx = Lexer {
+        src: bytes,
+        pos: 0,
+        line: 1,
+        file,
+    };
+    let mut b = SceneBuilder::new();
+    let mut material = b.material(Material::default());
+    let mut colourless_lights = Vec::new();
+    let mut verts: Vec<Vec3A> = Vec::new();
+    let mut normals: Vec<Vec3A> = Vec::new();
+    let mut last_line = 1;
+    while let Some((tok, line)) = lx.next() {
+        last_line = line;
+        match tok {
+            b"v" => parse_view(&mut lx, &mut b, line)?,
+            b"b" => b.background = lx.vec3("background colour 'b'", line)?,
+            b"l" => {
+                let position = lx.vec3("light 'l'", line)?;
+                limits::check("light count", b.lights.len() as u64 + 1, limits::MAX_LIGHTS as u64)
+                    .map_err(|e| lx.err(line, e.to_string()))?;
+                let color = if lx.peek().is_some_and(is_number) {
+                    lx.vec3("light colour", line)?
+                } else {
+                    colourless_lights.push(b.lights.len());
+                    Vec3A::ZERO
+                };
+                b.lights.push(Light { position, color });
+            }
+            b"f" => {
+                let what = "fill colour 'f'";
+                let color = lx.vec3(what, line)?;
+                let m = Material {
+                    color,
+                    kd: lx.number(what, line)?,
+                    ks: lx.number(what, line)?,
+                    shine: lx.number(what, line)?,
+                    t: lx.number(what, line)?,
+                    ior: lx.number(what, line)?,
+                    checker: None,
+                };
+                material = b.material(m);
+            }
+            b"s" => {
+                let c = lx.vec3("sphere 's'", line)?;
+                let r = lx.number("sphere 's'", line)?;
+                b.sphere(c, r, material).map_err(|e| lx.err(line, e.to_string()))?;
+            }
+            b"c" => {
+                let what = "cone/cylinder 'c'";
+                let base = lx.vec3(what, line)?;
+                let r0 = lx.number(what, line)?;
+                let apex = lx.vec3(what, line)?;
+                let r1 = lx.number(what, line)?;
+                b.cone(base, r0, apex, r1, material)
+                    .map_err(|e| lx.err(line, e.to_string()))?;
+            }
+            b"p" | b"pp" => {
+                let patch = tok == b"pp";
+                let what = if patch { "patch 'pp'" } else { "polygon 'p'" };
+                let (n, nline) = lx.integer(&format!("the vertex count of {what}"), line)?;
+                if n < 3 {
+                    let kind = if patch { "patch" } else { "polygon" };
+                    return Err(lx.err(nline, format!("{kind} needs at least 3 vertices, got {n}")));
+                }
+                if n > limits::MAX_POLYGON_VERTICES as u64 {
+                    return Err(lx.err(
+                        nline,
+                        format!(
+                            "{what} has {n} vertices, above the limit of {} (raise MAX_POLYGON_VERTICES in native/kernel/src/limits.rs)",
+                            limits::MAX_POLYGON_VERTICES
+                        ),
+                    ));
+                }
+                verts.clear();
+                normals.clear();
+                for _ in 0..n {
+                    verts.push(lx.vec3(what, line)?);
+                    if patch {
+                        normals.push(lx.vec3(what, line)?);
+                    }
+                }
+                let r = if patch {
+                    let mut r = Ok(());
+                    for i in 1..verts.len() - 1 {
+                        r = b.triangle(
+                            [verts[0], verts[i], verts[i + 1]],
+                            Some([normals[0], normals[i], normals[i + 1]]),
+                            material,
+                        );
+                        if r.is_err() {
+                            break;
+                        }
+                    }
+                    r
+                } else {
+                    b.polygon(&verts, material)
+                };
+                r.map_err(|e| lx.err(line, e.to_string()))?;
+            }
+            _ => {
+                return Err(lx.err(
+                    line,
+                    format!(
+                        "unknown entity '{}' (expected v, b, l, f, c, s, p, pp or #)",
+                        String::from_utf8_lossy(tok)
+                    ),
+                ))
+            }
+        }
+    }
+    if b.camera.is_none() {
+        return Err(lx.err(last_line, "no viewpoint: the file has no 'v' entity"));
+    }
+    let intensity = spd_intensity(b.lights.len());
+    for i in colourless_lights {
+        if let Some(l) = b.lights.get_mut(i) {
+            l.color = Vec3A::splat(intensity);
+        }
+    }
+    Ok(b.build())
+}
+
+fn parse_view(lx: &mut Lexer, b: &mut SceneBuilder, line: usize) -> Result<(), Error> {
+    let (mut from, mut at, mut up, mut angle) = (None, None, None, None);
+    let mut resolution = (512u32, 512u32);
+    while let Some(tok) = lx.peek() {
+        let what = match tok {
+            b"from" | b"at" | b"up" | b"angle" | b"hither" | b"resolution" => tok,
+            _ => break,
+        };
+        let Some((_, kline)) = lx.next() else { break };
+        match what {
+            b"from" => from = Some(lx.vec3("'from'", kline)?),
+            b"at" => at = Some(lx.vec3("'at'", kline)?),
+            b"up" => up = Some(lx.vec3("'up'", kline)?),
+            b"angle" => angle = Some(lx.number("'angle'", kline)?),
+            b"hither" => {
+                lx.number("'hither'", kline)?;
+            }
+            _ => {
+                let (w, _) = lx.integer("'resolution'", kline)?;
+                let (h, hline) = lx.integer("'resolution'", kline)?;
+                let (w32, h32) = (w.min(u32::MAX as u64) as u32, h.min(u32::MAX as u64) as u32);
+                limits::check_resolution(w32, h32)
+                    .and_then(|_| limits::check("image width", w, limits::MAX_SIDE as u64))
+                    .and_then(|_| limits::check("image height", h, limits::MAX_SIDE as u64))
+                    .map_err(|e| lx.err(hline, format!("resolution {w} {h}: {e}")))?;
+                resolution = (w32, h32);
+            }
+        }
+    }
+    let missing = |n: &str| lx.err(line, format!("viewpoint 'v' lacks '{n}'"));
+    let from = from.ok_or_else(|| missing("from"))?;
+    let at = at.ok_or_else(|| missing("at"))?;
+    let up = up.ok_or_else(|| missing("up"))?;
+    let angle = angle.ok_or_else(|| missing("angle"))?;
+    b.camera = Some(Camera::new(from, at, up, angle).ok_or_else(|| {
+        lx.err(
+            line,
+            "degenerate view: 'from' equals 'at', 'up' is parallel to the view direction, or 'angle' is not in (0, 180)",
+        )
+    })?);
+    b.resolution = resolution;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 6\n";
+
+    fn err(src: &str) -> String {
+        match parse(src.as_bytes(), "t.nff") {
+            Ok(_) => panic!("expected an error for {src:?}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn parses_all_entities() {
+        let src = format!(
+            "{HEAD}b 0.1 0.2 0.3\nl 1 2 3\nl 4 5 6 1 0.5 0.25\n# comment\nf 1 0 0 1 0 1 0 1\n\
+             s 0 0 0 1 # trailing comment\np 3\n0 0 0\n1 0 0\n0 1 0\np 4 0 0 1 1 0 1 1 1 1 0 1 1\n\
+             pp 3\n0 0 0 0 0 1\n1 0 0 0 0 1\n0 1 0 0 0 1\nc 0 0 0 1 0 0 1 1\n"
+        );
+        let s = parse(src.as_bytes(), "t.nff").unwrap();
+        assert_eq!(s.resolution(), (8, 6));
+        assert_eq!(s.light_count(), 2);
+        assert_eq!(s.primitive_count(), 5);
+        let i = spd_intensity(2);
+        assert_eq!(s.lights[0].color, Vec3A::splat(i));
+        assert_eq!(s.lights[1].color, Vec3A::new(1.0, 0.5, 0.25));
+        assert_eq!(s.background, Vec3A::new(0.1, 0.2, 0.3));
+    }
+
+    #[test]
+    fn line_numbered_errors() {
+        assert_eq!(
+            err(&format!("{HEAD}\np 2\n0 0 0\n1 1 1\n")),
+            "t.nff:9: polygon needs at least 3 vertices, got 2"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}s 0 0 x 1\n")),
+            "t.nff:8: expected a number in sphere 's', got 'x'"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}s 0 0 0\n")),
+            "t.nff:8: file ended in the middle of sphere 's'"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}\n\nq 1 2\n")),
+            "t.nff:10: unknown entity 'q' (expected v, b, l, f, c, s, p, pp or #)"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}s 0 0 nan 1\n")),
+            "t.nff:8: number 'nan' in sphere 's' is not finite"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}s 0 0 1e39 1\n")),
+            "t.nff:8: number '1e39' in sphere 's' is not finite"
+        );
+        assert!(err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 100000 10\n")
+            .starts_with("t.nff:6: resolution 100000 10: image width is 100000"));
+        assert!(err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 16384 16384\n")
+            .starts_with("t.nff:6: resolution 16384 16384: image pixel count"));
+        assert!(err(&format!("{HEAD}p 99999999999\n")).starts_with("t.nff:8: polygon 'p' has 99999999999 vertices"));
+        assert_eq!(err("s 0 0 0 1\n"), "t.nff:1: no viewpoint: the file has no 'v' entity");
+        assert!(err("v\nfrom 0 0 0\nat 0 0 0\nup 0 1 0\nangle 45\n").starts_with("t.nff:1: degenerate view"));
+        assert_eq!(
+            err(&format!("{HEAD}p 3\n0 0 0\n1 0 0\n")),
+            "t.nff:8: file ended in the middle of polygon 'p'"
+        );
+        assert_eq!(
+            err(&format!("{HEAD}p -3\n")),
+            "t.nff:8: expected a non-negative integer for the vertex count of polygon 'p', got '-3'"
+        );
+    }
+
+    #[test]
+    fn never_panics_on_garbage() {
+        let inputs: [&[u8]; 6] = [b"", b"\xff\xfe v", b"v from", b"pp 3 1 2 3", b"l 1 2 3 4", b"#\n#\n"];
+        for i in inputs {
+            let _ = parse(i, "g.nff");
+        }
+    }
+}

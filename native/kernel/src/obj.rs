@@ -1,0 +1,179 @@
+//! Wavefront OBJ meshes (via `tobj`), with MTL diffuse colours.
+//!
+//! Used two ways:
+//! - as a standalone scene ([`Format::Obj`](crate::Format::Obj)): the mesh with a default
+//!   camera looking at the centre of its bounding box from `centre + (0.3, 0.3, 1.1) * diagonal`
+//!   (45 degrees, +y up), one white light above and behind the camera, 640x480;
+//! - inside a TOML scene (`type = "mesh"`) with a transform.
+//!
+//! Faces are triangulated (fan). Vertex normals, when the file has them, give smooth shading.
+//! MTL `Kd` becomes the material colour (Kd coefficient 0.9), `Ks` (max channel) the specular
+//! weight, `Ns` the Phong exponent. Missing MTL files fall back to a light-grey material.
+
+use crate::camera::Camera;
+use crate::geometry::Aabb;
+use crate::light::Light;
+use crate::limits;
+use crate::material::Material;
+use crate::scene::{Scene, SceneBuilder};
+use crate::Error;
+use glam::{Affine3A, Vec3A};
+
+fn grey() -> Material {
+    Material {
+        color: Vec3A::splat(0.8),
+        kd: 0.9,
+        ks: 0.0,
+        shine: 20.0,
+        ..Material::default()
+    }
+}
+
+/// Loads an OBJ into the builder; returns the bounding box of the added triangles.
+pub(crate) fn load_mesh(
+    bytes: &[u8],
+    name: &str,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    xf: Affine3A,
+    material: Option<u32>,
+    smooth: bool,
+    b: &mut SceneBuilder,
+) -> Result<Aabb, Error> {
+    limits::check("mesh file size in bytes", bytes.len() as u64, limits::MAX_FILE_BYTES)?;
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let mut reader = std::io::BufReader::new(bytes);
+        tobj::load_obj_buf(&mut reader, &opts, |p| {
+            let rel = p.to_string_lossy();
+            match resolve(&rel) {
+                Ok(data) => tobj::load_mtl_buf(&mut std::io::BufReader::new(data.as_slice())),
+                Err(_) => Err(tobj::LoadError::OpenFileFailed),
+            }
+        })
+    }));
+    let (models, mtls) = match loaded {
+        Ok(Ok(r)) => r,
+        Ok(Err(e)) => return Err(Error::scene(name, format!("invalid OBJ: {e}"))),
+        Err(_) => return Err(Error::scene(name, "invalid OBJ (the OBJ reader failed)")),
+    };
+    let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
+    limits::check("mesh triangle count", total as u64, limits::MAX_MESH_TRIANGLES as u64)?;
+    let default_mat = match material {
+        Some(m) => m,
+        None => b.material(grey()),
+    };
+    let mtl_ids: Vec<u32> = match (&mtls, material) {
+        (Ok(ms), None) => ms
+            .iter()
+            .map(|m| {
+                let ok3 = |v: Option<[f32; 3]>| v.filter(|a| a.iter().all(|x| x.is_finite()));
+                let mut mat = grey();
+                if let Some(kd) = ok3(m.diffuse) {
+                    mat.color = Vec3A::from_array(kd).clamp(Vec3A::ZERO, Vec3A::ONE);
+                }
+                if let Some(ks) = ok3(m.specular) {
+                    mat.ks = Vec3A::from_array(ks).max_element().clamp(0.0, 1.0);
+                }
+                if let Some(ns) = m.shininess.filter(|s| s.is_finite() && *s >= 0.0) {
+                    mat.shine = ns;
+                }
+                b.material(mat)
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
+    let nxf = xf.matrix3.inverse().transpose();
+    let nxf_ok = nxf.is_finite();
+    let mut bounds = Aabb::EMPTY;
+    for model in &models {
+        let m = &model.mesh;
+        let mat = m
+            .material_id
+            .and_then(|i| mtl_ids.get(i).copied())
+            .unwrap_or(default_mat);
+        let pos = |i: u32| -> Result<Vec3A, Error> {
+            let i = i as usize * 3;
+            let p = m
+                .positions
+                .get(i..i + 3)
+                .ok_or_else(|| Error::scene(name, "vertex index out of range"))?;
+            let v = Vec3A::new(p[0], p[1], p[2]);
+            if !v.is_finite() {
+                return Err(Error::scene(name, "vertex coordinate is not a finite number"));
+            }
+            Ok(xf.transform_point3a(v))
+        };
+        let has_normals = smooth && nxf_ok && !m.normals.is_empty() && m.normal_indices.len() == m.indices.len();
+        let nrm = |i: u32| -> Option<Vec3A> {
+            let i = i as usize * 3;
+            let p = m.normals.get(i..i + 3)?;
+            let n = Vec3A::new(p[0], p[1], p[2]);
+            (nxf * n).try_normalize()
+        };
+        for (k, tri) in m.indices.chunks_exact(3).enumerate() {
+            let v = [pos(tri[0])?, pos(tri[1])?, pos(tri[2])?];
+            bounds = bounds.grow(v[0]).grow(v[1]).grow(v[2]);
+            let normals = if has_normals {
+                let ni = m.normal_indices.get(k * 3..k * 3 + 3);
+                match ni {
+                    Some(ni) => match (nrm(ni[0]), nrm(ni[1]), nrm(ni[2])) {
+                        (Some(a), Some(b2), Some(c)) => Some([a, b2, c]),
+                        _ => None,
+                    },
+                    None => None,
+                }
+            } else {
+                None
+            };
+            b.triangle(v, normals, mat)?;
+        }
+    }
+    Ok(bounds)
+}
+
+/// The default view of a bounding box used for OBJ scenes (and the ray-casting benchmark):
+/// looking at the centre from `centre + (0.3, 0.3, 1.1) * diagonal`, 45 degrees, +y up.
+pub fn default_camera(bounds: Aabb) -> Camera {
+    let (c, diag) = if bounds.is_empty() {
+        (Vec3A::ZERO, 1.0)
+    } else {
+        (bounds.centre(), bounds.diagonal().max(1e-6))
+    };
+    let from = c + Vec3A::new(0.3, 0.3, 1.1) * diag;
+    Camera::new(from, c, Vec3A::Y, 45.0).unwrap_or(Camera {
+        from,
+        forward: -Vec3A::Z,
+        right: Vec3A::X,
+        up: Vec3A::Y,
+        tan_half: (22.5f32).to_radians().tan(),
+    })
+}
+
+/// A standalone OBJ scene.
+pub(crate) fn parse_scene(
+    bytes: &[u8],
+    name: &str,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+) -> Result<Scene, Error> {
+    let mut b = SceneBuilder::new();
+    let bounds = load_mesh(bytes, name, resolve, Affine3A::IDENTITY, None, true, &mut b)?;
+    if b.primitive_count() == 0 {
+        return Err(Error::scene(name, "the OBJ file has no faces"));
+    }
+    let cam = default_camera(bounds);
+    let diag = bounds.diagonal().max(1e-6);
+    b.lights.push(Light {
+        position: cam.from + Vec3A::new(0.5, 1.0, 0.2) * diag,
+        color: Vec3A::splat(0.85),
+    });
+    b.ambient = Some(Vec3A::splat(0.15));
+    b.background = Vec3A::new(0.05, 0.06, 0.08);
+    b.camera = Some(cam);
+    b.resolution = (640, 480);
+    Ok(b.build())
+}

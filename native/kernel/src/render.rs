@@ -1,0 +1,271 @@
+//! Rendering settings, pixel spans and whole images.
+//!
+//! Every pixel value is a pure function of (scene, settings, pixel index): sample positions come
+//! from a hash of (pixel index, sample index), SPD corner values from the corner position only,
+//! and accumulation order is fixed. Hence [`trace_span`] over any split of the image and
+//! [`render_image`] with any thread count give bit-identical pixels, and ray statistics that sum
+//! to the same totals.
+
+use crate::camera::Camera;
+use crate::integrator::{Integrator, Whitted};
+use crate::limits;
+use crate::scene::Scene;
+use crate::stats::RayStats;
+use crate::Error;
+use glam::Vec3A;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// How to render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Maximum ray-tree depth; the eye ray is depth 1. Default 5.
+    pub depth: u32,
+    /// Adaptive cut-off weight (default 1/255); 0 disables.
+    pub cutoff: f32,
+    /// S: SxS stratified jittered samples per pixel; 1 (default) shoots through the pixel centre.
+    pub samples: u32,
+    /// SPD corner mode (SPD testing procedure): rays through the (W+1)x(H+1) pixel corners, the
+    /// four corners of a pixel averaged; forces depth 5, no cut-off and one sample.
+    pub spd: bool,
+}
+
+impl Settings {
+    /// Defaults with the scene's resolution.
+    pub fn for_scene(scene: &Scene) -> Settings {
+        let (width, height) = scene.resolution();
+        Settings {
+            width,
+            height,
+            depth: 5,
+            cutoff: 1.0 / 255.0,
+            samples: 1,
+            spd: false,
+        }
+    }
+
+    /// Checks the settings against [`crate::limits`].
+    pub fn validate(&self) -> Result<(), Error> {
+        limits::check_resolution(self.width, self.height)?;
+        if self.depth == 0 {
+            return Err(Error::InvalidArgument("depth must be at least 1".into()));
+        }
+        limits::check("ray depth", self.depth as u64, limits::MAX_DEPTH as u64)?;
+        if self.samples == 0 {
+            return Err(Error::InvalidArgument("samples must be at least 1".into()));
+        }
+        limits::check("samples per pixel side", self.samples as u64, limits::MAX_SAMPLES as u64)?;
+        if !(self.cutoff.is_finite() && self.cutoff >= 0.0) {
+            return Err(Error::InvalidArgument(format!(
+                "cutoff must be a finite number >= 0, got {}",
+                self.cutoff
+            )));
+        }
+        Ok(())
+    }
+
+    fn integrator(&self) -> Whitted {
+        if self.spd {
+            Whitted {
+                max_depth: 5,
+                cutoff: 0.0,
+            }
+        } else {
+            Whitted {
+                max_depth: self.depth,
+                cutoff: self.cutoff,
+            }
+        }
+    }
+}
+
+/// SplitMix64 finaliser.
+#[inline]
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Two uniform numbers in [0, 1) from (pixel, sample).
+#[inline]
+fn jitter(pixel: u64, sample: u64) -> (f32, f32) {
+    let h = mix(pixel.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ mix(sample));
+    let a = (h >> 40) as f32 * (1.0 / 16_777_216.0);
+    let b = ((h >> 8) & 0xFF_FFFF) as f32 * (1.0 / 16_777_216.0);
+    (a, b)
+}
+
+fn check_span(settings: &Settings, start: u64, count: u64) -> Result<u64, Error> {
+    settings.validate()?;
+    let total = settings.width as u64 * settings.height as u64;
+    match start.checked_add(count) {
+        Some(end) if end <= total => Ok(end),
+        _ => Err(Error::InvalidArgument(format!(
+            "pixel span {start}+{count} is outside the {}x{} image ({total} pixels)",
+            settings.width, settings.height
+        ))),
+    }
+}
+
+/// Trace `count` pixels starting at linear pixel index `start` (row-major, index = y*width + x,
+/// y=0 is the TOP row). Returns linear-light RGB f32, 3 floats per pixel, and the ray
+/// statistics. A pure function of (scene, settings, pixel index): the same pixel gives
+/// bit-identical values whatever span it is traced in.
+pub fn trace_span(scene: &Scene, settings: &Settings, start: u64, count: u64) -> Result<(Vec<f32>, RayStats), Error> {
+    let end = check_span(settings, start, count)?;
+    let mut out = Vec::with_capacity(count as usize * 3);
+    let mut stats = RayStats::default();
+    if count == 0 {
+        return Ok((out, stats));
+    }
+    let integ = settings.integrator();
+    if settings.spd {
+        spd_span(scene, settings, &integ, start, end, &mut out, &mut stats);
+    } else {
+        let (w, h) = (settings.width, settings.height);
+        let span = Camera::centre_span(w, h);
+        let s = settings.samples;
+        let inv = 1.0 / (s * s) as f32;
+        for idx in start..end {
+            let x = (idx % w as u64) as f32;
+            let y = (idx / w as u64) as f32;
+            let c = if s == 1 {
+                let ray = scene.camera.ray(x + 0.5, y + 0.5, w, h, span);
+                integ.radiance(scene, &ray, &mut stats)
+            } else {
+                let mut acc = Vec3A::ZERO;
+                for j in 0..s {
+                    for i in 0..s {
+                        let k = (j * s + i) as u64;
+                        let (jx, jy) = jitter(idx, k);
+                        let px = x + (i as f32 + jx) / s as f32;
+                        let py = y + (j as f32 + jy) / s as f32;
+                        let ray = scene.camera.ray(px, py, w, h, span);
+                        acc += integ.radiance(scene, &ray, &mut stats);
+                    }
+                }
+                acc * inv
+            };
+            out.extend_from_slice(&[c.x, c.y, c.z]);
+        }
+    }
+    Ok((out, stats))
+}
+
+/// SPD corner mode: each needed corner traced once per span; a corner's rays counted only in the
+/// span owning it (owner of corner (cx, cy) = pixel (min(cx, W-1), min(cy, H-1))).
+fn spd_span(
+    scene: &Scene,
+    settings: &Settings,
+    integ: &Whitted,
+    start: u64,
+    end: u64,
+    out: &mut Vec<f32>,
+    stats: &mut RayStats,
+) {
+    let (w, h) = (settings.width, settings.height);
+    let w64 = w as u64;
+    let span = Camera::corner_span(w, h);
+    let cols = w as usize + 1;
+    let y0 = start / w64;
+    let y1 = (end - 1) / w64;
+    // columns of pixel row y inside the span
+    let row_range = |y: u64| -> Option<(u64, u64)> {
+        if y < y0 || y > y1 {
+            return None;
+        }
+        let a = if y == y0 { start % w64 } else { 0 };
+        let b = if y == y1 { (end - 1) % w64 } else { w64 - 1 };
+        Some((a, b))
+    };
+    let mut top: Vec<Option<Vec3A>> = vec![None; cols];
+    let mut bottom: Vec<Option<Vec3A>> = vec![None; cols];
+    let fill = |row: &mut Vec<Option<Vec3A>>, cy: u64, a: u64, b: u64, stats: &mut RayStats| {
+        for cx in a..=b + 1 {
+            let Some(slot) = row.get_mut(cx as usize) else { continue };
+            if slot.is_some() {
+                continue;
+            }
+            let ray = scene.camera.ray(cx as f32, cy as f32, w, h, span);
+            let owner = cy.min(h as u64 - 1) * w64 + cx.min(w64 - 1);
+            let c = if owner >= start && owner < end {
+                integ.radiance(scene, &ray, stats)
+            } else {
+                let mut scratch = RayStats::default();
+                integ.radiance(scene, &ray, &mut scratch)
+            };
+            *slot = Some(c);
+        }
+    };
+    for y in y0..=y1 {
+        let Some((a, b)) = row_range(y) else { continue };
+        // corners of row y (top) are shared with pixel row y-1, which already filled them
+        fill(&mut top, y, a, b, stats);
+        fill(&mut bottom, y + 1, a, b, stats);
+        for x in a..=b {
+            let x = x as usize;
+            let get = |r: &Vec<Option<Vec3A>>, i: usize| r.get(i).copied().flatten().unwrap_or(Vec3A::ZERO);
+            let c = (get(&top, x) + get(&top, x + 1) + get(&bottom, x) + get(&bottom, x + 1)) * 0.25;
+            out.extend_from_slice(&[c.x, c.y, c.z]);
+        }
+        std::mem::swap(&mut top, &mut bottom);
+        bottom.iter_mut().for_each(|s| *s = None);
+    }
+}
+
+/// Whole image with `threads` OS threads (rows handed out in chunks by an atomic counter).
+/// Identical bits to [`trace_span`] over all pixels.
+pub fn render_image(scene: &Scene, settings: &Settings, threads: usize) -> Result<(Vec<f32>, RayStats), Error> {
+    settings.validate()?;
+    let (w, h) = (settings.width as u64, settings.height as u64);
+    let threads = threads.clamp(1, 256);
+    // SPD mode re-traces one corner row per chunk, so use taller chunks there
+    let rows_per_chunk = if settings.spd { 16 } else { 2 }.min(h.max(1));
+    let chunks = h.div_ceil(rows_per_chunk) as usize;
+    let next = AtomicUsize::new(0);
+    let results: Vec<Result<Vec<(usize, Vec<f32>, RayStats)>, Error>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let c = next.fetch_add(1, Ordering::Relaxed);
+                        if c >= chunks {
+                            break;
+                        }
+                        let y = c as u64 * rows_per_chunk;
+                        let rows = rows_per_chunk.min(h - y);
+                        let (px, st) = trace_span(scene, settings, y * w, rows * w)?;
+                        mine.push((c, px, st));
+                    }
+                    Ok(mine)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(Error::InvalidArgument("a render thread panicked".into())))
+            })
+            .collect()
+    });
+    let mut image = vec![0.0f32; (w * h * 3) as usize];
+    let mut stats = RayStats::default();
+    let chunk_len = (rows_per_chunk * w * 3) as usize;
+    for r in results {
+        for (c, px, st) in r? {
+            let off = c * chunk_len;
+            if let Some(dst) = image.get_mut(off..off + px.len()) {
+                dst.copy_from_slice(&px);
+            }
+            stats += st;
+        }
+    }
+    Ok((image, stats))
+}

@@ -1,0 +1,469 @@
+//! The scene: camera, background, lights, materials, primitives and their BVH.
+
+use crate::bvh::Bvh;
+use crate::camera::Camera;
+use crate::geometry::{hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
+use crate::light::Light;
+use crate::limits;
+use crate::material::Material;
+use crate::ray::Ray;
+use crate::Error;
+use glam::Vec3A;
+use std::path::Path;
+
+/// Scene file formats, chosen by extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Eric Haines' Neutral File Format (`.nff`), see [`crate::nff`].
+    Nff,
+    /// RingTracer's native TOML scene format (`.toml`), see [`crate::toml_scene`].
+    Toml,
+    /// A Wavefront OBJ mesh (`.obj`) shown with a default camera and light, see [`crate::obj`].
+    Obj,
+}
+
+impl Format {
+    /// Picks the format from the file extension (case-insensitive).
+    pub fn from_path(path: &str) -> Result<Format, Error> {
+        let ext = Path::new(path)
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("nff") => Ok(Format::Nff),
+            Some("toml") => Ok(Format::Toml),
+            Some("obj") => Ok(Format::Obj),
+            _ => Err(Error::Unsupported(format!(
+                "{path}: unknown scene format (expected a .nff, .toml or .obj file)"
+            ))),
+        }
+    }
+}
+
+/// Per-primitive shading data, in BVH order.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PrimInfo {
+    pub material: u32,
+    /// Index into `patch_normals`, or `u32::MAX`.
+    pub normals: u32,
+}
+
+const NO_NORMALS: u32 = u32::MAX;
+
+/// An infinite two-sided plane (native format only; kept outside the BVH).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Plane {
+    pub normal: Vec3A,
+    pub d: f32,
+    pub material: u32,
+}
+
+/// The closest intersection found by [`Scene::intersect`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit-direction) ray.
+    pub t: f32,
+    /// Primitive index: `0..primitive_count()`; bounded primitives first (in BVH order), then planes.
+    pub prim: u32,
+}
+
+/// Local surface description at a hit.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Surface {
+    pub p: Vec3A,
+    /// Geometric normal, primitive's own orientation.
+    pub ng: Vec3A,
+    /// Shading normal, in the same hemisphere as `ng`.
+    pub ns: Vec3A,
+    pub material: u32,
+}
+
+/// A ready-to-render scene. Immutable, `Send + Sync`.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub(crate) camera: Camera,
+    pub(crate) resolution: (u32, u32),
+    pub(crate) background: Vec3A,
+    pub(crate) ambient: Vec3A,
+    pub(crate) lights: Vec<Light>,
+    pub(crate) materials: Vec<Material>,
+    pub(crate) geom: Geometry,
+    pub(crate) info: Vec<PrimInfo>,
+    pub(crate) patch_normals: Vec<[Vec3A; 3]>,
+    pub(crate) planes: Vec<Plane>,
+    pub(crate) bvh: Bvh,
+    pub(crate) epsilon: f32,
+    pub(crate) bounds: Aabb,
+}
+
+impl Scene {
+    /// Parse scene bytes. `name` is used in error messages (the file name). `resolve` loads files
+    /// the scene references (OBJ meshes, MTL) by the relative path written in the scene; it
+    /// returns their bytes or an error string.
+    pub fn parse(
+        bytes: &[u8],
+        format: Format,
+        name: &str,
+        resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    ) -> Result<Scene, Error> {
+        limits::check("scene file size in bytes", bytes.len() as u64, limits::MAX_FILE_BYTES)?;
+        match format {
+            Format::Nff => crate::nff::parse(bytes, name),
+            Format::Toml => crate::toml_scene::parse(bytes, name, resolve),
+            Format::Obj => crate::obj::parse_scene(bytes, name, resolve),
+        }
+    }
+
+    /// Convenience: read file, resolve references relative to its directory.
+    pub fn load(path: &Path) -> Result<Scene, Error> {
+        let shown = path.display().to_string();
+        let format = Format::from_path(&shown)?;
+        let bytes = read_limited(path)?;
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or(shown);
+        let resolve = move |rel: &str| -> Result<Vec<u8>, String> {
+            read_limited(&dir.join(rel)).map_err(|e| e.to_string())
+        };
+        Scene::parse(&bytes, format, &name, &resolve)
+    }
+
+    /// Default image size from the scene.
+    pub fn resolution(&self) -> (u32, u32) {
+        self.resolution
+    }
+
+    /// Number of primitives (after meshes are expanded to triangles; degenerate ones dropped).
+    pub fn primitive_count(&self) -> usize {
+        self.geom.shapes.len() + self.planes.len()
+    }
+
+    /// Number of lights.
+    pub fn light_count(&self) -> usize {
+        self.lights.len()
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Bounding box of the bounded primitives (planes excluded).
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// Closest hit along `ray` with `0 < t < tmax`.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
+        let mut prim = u32::MAX;
+        let shapes = &self.geom.shapes;
+        let geom = &self.geom;
+        let mut best = self.bvh.traverse(ray, tmax, |first, count, tmax| {
+            let mut tm = tmax;
+            if let Some(range) = shapes.get(first..first + count) {
+                for (k, s) in range.iter().enumerate() {
+                    if let Some(t) = geom.hit(s, ray, 0.0, tm) {
+                        tm = t;
+                        prim = (first + k) as u32;
+                    }
+                }
+            }
+            tm
+        });
+        for (k, pl) in self.planes.iter().enumerate() {
+            let dn = pl.normal.dot(ray.dir);
+            if dn != 0.0 {
+                let t = (pl.d - pl.normal.dot(ray.origin)) / dn;
+                if t > 0.0 && t < best {
+                    best = t;
+                    prim = (shapes.len() + k) as u32;
+                }
+            }
+        }
+        if prim == u32::MAX {
+            None
+        } else {
+            Some(Hit { t: best, prim })
+        }
+    }
+
+    /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
+    #[inline]
+    pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
+        let shapes = &self.geom.shapes;
+        let geom = &self.geom;
+        let r = self.bvh.traverse(ray, tmax, |first, count, tmax| {
+            if let Some(range) = shapes.get(first..first + count) {
+                for s in range {
+                    if geom.hit(s, ray, 0.0, tmax).is_some() {
+                        return -1.0;
+                    }
+                }
+            }
+            tmax
+        });
+        if r < 0.0 {
+            return true;
+        }
+        self.planes.iter().any(|pl| {
+            let dn = pl.normal.dot(ray.dir);
+            dn != 0.0 && {
+                let t = (pl.d - pl.normal.dot(ray.origin)) / dn;
+                t > 0.0 && t < tmax
+            }
+        })
+    }
+
+    /// Surface data at a hit.
+    #[inline]
+    pub(crate) fn surface(&self, hit: &Hit, ray: &Ray) -> Surface {
+        let p = ray.at(hit.t);
+        let i = hit.prim as usize;
+        if let Some(shape) = self.geom.shapes.get(i) {
+            let ng = self.geom.geometric_normal(shape, p);
+            let info = self.info.get(i).copied().unwrap_or(PrimInfo {
+                material: 0,
+                normals: NO_NORMALS,
+            });
+            let mut ns = ng;
+            if info.normals != NO_NORMALS {
+                if let (Shape::Triangle { v0, e1, e2 }, Some(nn)) =
+                    (shape, self.patch_normals.get(info.normals as usize))
+                {
+                    let (u, v) = hit_triangle(*v0, *e1, *e2, ray, f32::NEG_INFINITY, f32::INFINITY)
+                        .map_or((1.0 / 3.0, 1.0 / 3.0), |h| (h.1, h.2));
+                    let n = nn[0] * (1.0 - u - v) + nn[1] * u + nn[2] * v;
+                    if let Some(n) = n.try_normalize() {
+                        ns = if n.dot(ng) < 0.0 { -n } else { n };
+                    }
+                }
+            }
+            Surface {
+                p,
+                ng,
+                ns,
+                material: info.material,
+            }
+        } else {
+            let k = i.saturating_sub(self.geom.shapes.len());
+            let (ng, material) = self
+                .planes
+                .get(k)
+                .map_or((Vec3A::Z, 0), |pl| (pl.normal, pl.material));
+            Surface {
+                p,
+                ng,
+                ns: ng,
+                material,
+            }
+        }
+    }
+
+    pub(crate) fn material(&self, index: u32) -> Material {
+        self.materials.get(index as usize).copied().unwrap_or_default()
+    }
+}
+
+pub(crate) fn read_limited(path: &Path) -> Result<Vec<u8>, Error> {
+    let file = path.display().to_string();
+    let io = |e: std::io::Error| Error::Io {
+        file: file.clone(),
+        message: e.to_string(),
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    limits::check("file size in bytes", meta.len(), limits::MAX_FILE_BYTES)?;
+    std::fs::read(path).map_err(io)
+}
+
+/// Collects scene contents, then builds the BVH.
+#[derive(Debug)]
+pub(crate) struct SceneBuilder {
+    pub camera: Option<Camera>,
+    pub resolution: (u32, u32),
+    pub background: Vec3A,
+    /// Ambient intensity; `None` = SPD formula from the light count.
+    pub ambient: Option<Vec3A>,
+    pub lights: Vec<Light>,
+    pub materials: Vec<Material>,
+    geom: Geometry,
+    info: Vec<PrimInfo>,
+    patch_normals: Vec<[Vec3A; 3]>,
+    planes: Vec<Plane>,
+    poly_bounds: Vec<Aabb>,
+}
+
+impl SceneBuilder {
+    pub fn new() -> SceneBuilder {
+        SceneBuilder {
+            camera: None,
+            resolution: (512, 512),
+            background: Vec3A::ZERO,
+            ambient: None,
+            lights: Vec::new(),
+            materials: Vec::new(),
+            geom: Geometry::default(),
+            info: Vec::new(),
+            patch_normals: Vec::new(),
+            planes: Vec::new(),
+            poly_bounds: Vec::new(),
+        }
+    }
+
+    /// Adds a material, reusing the last one if identical; returns its index.
+    pub fn material(&mut self, m: Material) -> u32 {
+        if self.materials.last() == Some(&m) {
+            return (self.materials.len() - 1) as u32;
+        }
+        self.materials.push(m);
+        (self.materials.len() - 1) as u32
+    }
+
+    pub fn primitive_count(&self) -> usize {
+        self.geom.shapes.len() + self.planes.len()
+    }
+
+    fn room(&self) -> Result<(), Error> {
+        limits::check(
+            "primitive count",
+            self.primitive_count() as u64 + 1,
+            limits::MAX_PRIMITIVES as u64,
+        )
+    }
+
+    fn push(&mut self, s: Shape, material: u32, normals: u32) {
+        self.geom.shapes.push(s);
+        self.info.push(PrimInfo { material, normals });
+    }
+
+    pub fn sphere(&mut self, c: Vec3A, r: f32, material: u32) -> Result<(), Error> {
+        self.room()?;
+        if r != 0.0 {
+            self.push(
+                Shape::Sphere {
+                    center: c,
+                    radius: r.abs(),
+                    inside: r < 0.0,
+                },
+                material,
+                NO_NORMALS,
+            );
+        }
+        Ok(())
+    }
+
+    /// Adds a triangle (dropped if degenerate); `normals` are per-vertex shading normals.
+    pub fn triangle(&mut self, v: [Vec3A; 3], normals: Option<[Vec3A; 3]>, material: u32) -> Result<(), Error> {
+        self.room()?;
+        let e1 = v[1] - v[0];
+        let e2 = v[2] - v[0];
+        if e1.cross(e2).length_squared() == 0.0 {
+            return Ok(());
+        }
+        let ni = match normals {
+            Some(n) => {
+                self.patch_normals.push(n);
+                (self.patch_normals.len() - 1) as u32
+            }
+            None => NO_NORMALS,
+        };
+        self.push(Shape::Triangle { v0: v[0], e1, e2 }, material, ni);
+        Ok(())
+    }
+
+    /// Adds a polygon (triangles become [`Shape::Triangle`]); degenerate polygons are dropped.
+    pub fn polygon(&mut self, verts: &[Vec3A], material: u32) -> Result<(), Error> {
+        if let [a, b, c] = verts {
+            return self.triangle([*a, *b, *c], None, material);
+        }
+        self.room()?;
+        let first = self.geom.poly_verts.len() as u32;
+        if let Some(p) = make_polygon(verts, first, &mut self.geom.poly_verts) {
+            let k = self.geom.polys.len() as u32;
+            self.geom.polys.push(p);
+            self.poly_bounds
+                .push(verts.iter().fold(Aabb::EMPTY, |b, v| b.grow(*v)));
+            self.push(Shape::Polygon(k), material, NO_NORMALS);
+        }
+        Ok(())
+    }
+
+    pub fn cone(&mut self, base: Vec3A, r0: f32, apex: Vec3A, r1: f32, material: u32) -> Result<(), Error> {
+        self.room()?;
+        if let Some(c) = make_cone(base, r0, apex, r1) {
+            let k = self.geom.cones.len() as u32;
+            self.geom.cones.push(c);
+            self.push(Shape::Cone(k), material, NO_NORMALS);
+        }
+        Ok(())
+    }
+
+    /// Adds an infinite plane; `None` if the normal is zero.
+    pub fn plane(&mut self, point: Vec3A, normal: Vec3A, material: u32) -> Result<Option<()>, Error> {
+        self.room()?;
+        let Some(n) = normal.try_normalize() else {
+            return Ok(None);
+        };
+        self.planes.push(Plane {
+            normal: n,
+            d: n.dot(point),
+            material,
+        });
+        Ok(Some(()))
+    }
+
+    /// Builds the BVH and the final scene. `camera` must be set.
+    pub fn build(mut self) -> Scene {
+        let boxes: Vec<Aabb> = self
+            .geom
+            .shapes
+            .iter()
+            .map(|s| self.geom.bounds(s, &self.poly_bounds))
+            .collect();
+        let (bvh, order) = Bvh::build(&boxes);
+        let shapes: Vec<Shape> = order
+            .iter()
+            .filter_map(|&i| self.geom.shapes.get(i as usize).copied())
+            .collect();
+        let info: Vec<PrimInfo> = order
+            .iter()
+            .filter_map(|&i| self.info.get(i as usize).copied())
+            .collect();
+        self.geom.shapes = shapes;
+        let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+        let camera = self.camera.unwrap_or_else(|| {
+            Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
+                from: Vec3A::Z,
+                forward: -Vec3A::Z,
+                right: Vec3A::X,
+                up: Vec3A::Y,
+                tan_half: 0.5,
+            })
+        });
+        let extent = bounds.grow(camera.from).diagonal();
+        let epsilon = (extent * 1e-5).max(1e-6);
+        let ambient = self
+            .ambient
+            .unwrap_or(Vec3A::splat(crate::light::spd_intensity(self.lights.len())));
+        if self.materials.is_empty() {
+            self.materials.push(Material::default());
+        }
+        Scene {
+            camera,
+            resolution: self.resolution,
+            background: self.background,
+            ambient,
+            lights: self.lights,
+            materials: self.materials,
+            geom: self.geom,
+            info,
+            patch_normals: self.patch_normals,
+            planes: self.planes,
+            bvh,
+            epsilon,
+            bounds,
+        }
+    }
+}

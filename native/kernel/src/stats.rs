@@ -1,0 +1,49 @@
+//! Ray statistics in the SPD's categories.
+
+use std::ops::{Add, AddAssign};
+
+/// Counts of rays traced, in the categories of the SPD ray-count table.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayStats {
+    /// Eye (camera) rays shot.
+    pub eye: u64,
+    /// Eye rays that hit an object (not the background).
+    pub eye_hits: u64,
+    /// Reflection rays spawned (by reflective and transmitting surfaces, including on total internal reflection).
+    pub reflected: u64,
+    /// Refraction rays spawned.
+    pub refracted: u64,
+    /// Shadow rays actually cast towards lights.
+    pub shadow: u64,
+}
+
+impl RayStats {
+    /// Sum of two statistics.
+    pub fn add(self, other: RayStats) -> RayStats {
+        RayStats {
+            eye: self.eye + other.eye,
+            eye_hits: self.eye_hits + other.eye_hits,
+            reflected: self.reflected + other.reflected,
+            refracted: self.refracted + other.refracted,
+            shadow: self.shadow + other.shadow,
+        }
+    }
+
+    /// All rays of every kind.
+    pub fn total(&self) -> u64 {
+        self.eye + self.reflected + self.refracted + self.shadow
+    }
+}
+
+impl Add for RayStats {
+    type Output = RayStats;
+    fn add(self, other: RayStats) -> RayStats {
+        RayStats::add(self, other)
+    }
+}
+
+impl AddAssign for RayStats {
+    fn add_assign(&mut self, other: RayStats) {
+        *self = RayStats::add(*self, other);
+    }
+}

@@ -1,0 +1,600 @@
+//! RingTracer's native scene format (TOML).
+//!
+//! Unknown keys are errors; errors carry `file:line`. All numbers must be finite. Colours are
+//! linear RGB triples. Example with every feature:
+//!
+//! ```toml
+//! background = [0.45, 0.65, 0.95]   # top-level keys come before the first [table]
+//! ambient = 0.15                    # number or [r, g, b]; default sqrt(n)/(2n) for n lights
+//!
+//! [camera]
+//! from = [0.0, 1.5, 6.0]
+//! at = [0.0, 1.0, 0.0]
+//! up = [0.0, 1.0, 0.0]      # default +y
+//! fov = 45.0                # degrees, NFF convention (see crate::camera); default 45
+//! width = 640               # default 640
+//! height = 480              # default 480
+//!
+//! [[lights]]
+//! position = [5.0, 8.0, 6.0]
+//! color = [0.9, 0.9, 0.9]   # default: sqrt(n)/(2n) white
+//!
+//! [materials.glass]
+//! color = [1.0, 1.0, 1.0]   # default white
+//! kd = 0.0                  # default 1
+//! ks = 0.15                 # default 0
+//! shine = 80.0              # default 20
+//! t = 0.85                  # default 0
+//! ior = 1.5                 # default 1
+//!
+//! [materials.floor]
+//! color = [1.0, 0.1, 0.1]
+//! checker = { color2 = [1.0, 1.0, 0.1], scale = 1.0 }
+//!
+//! [[objects]]
+//! type = "sphere"
+//! center = [0.0, 1.0, 0.0]
+//! radius = 1.0
+//! material = "glass"        # every object: optional, default white diffuse
+//!
+//! [[objects]]
+//! type = "plane"            # infinite, kept outside the BVH
+//! point = [0.0, 0.0, 0.0]
+//! normal = [0.0, 1.0, 0.0]
+//! material = "floor"
+//!
+//! [[objects]]
+//! type = "triangle"
+//! vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+//! normals = [[0, 0, 1], [0, 0, 1], [0, 0, 1]]   # optional, smooth shading
+//!
+//! [[objects]]
+//! type = "polygon"          # planar, convex or concave, CCW seen from the front
+//! vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]
+//!
+//! [[objects]]
+//! type = "cone"             # no end caps; negative radii: inside only
+//! base = [2, 0, 0]
+//! base_radius = 0.5
+//! apex = [2, 1, 0]
+//! apex_radius = 0.1
+//!
+//! [[objects]]
+//! type = "cylinder"
+//! base = [-2, 0, 0]
+//! apex = [-2, 1, 0]
+//! radius = 0.3
+//!
+//! [[objects]]
+//! type = "mesh"
+//! file = "meshes/teapot.obj"        # resolved relative to the scene file
+//! translate = [0, 0, -3]            # transform = translate * rotate_y * scale ...
+//! scale = 0.5                       # number or [sx, sy, sz]
+//! rotate_y_degrees = 30
+//! # matrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0]]   # ... or a 3x4 / 4x4 row-major matrix instead
+//! smooth = true                     # use the OBJ's vertex normals (default true)
+//! material = "glass"                # overrides the MTL colours
+//! ```
+
+use crate::camera::Camera;
+use crate::light::{spd_intensity, Light};
+use crate::limits;
+use crate::material::{Checker, Material};
+use crate::scene::{Scene, SceneBuilder};
+use crate::Error;
+use glam::{Affine3A, Mat3A, Vec3A};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use toml::Spanned;
+
+type V3 = [f32; 3];
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneDef {
+    camera: Spanned<CameraDef>,
+    #[serde(default)]
+    background: Option<Spanned<V3>>,
+    #[serde(default)]
+    ambient: Option<Spanned<Scalar3>>,
+    #[serde(default)]
+    lights: Vec<Spanned<LightDef>>,
+    #[serde(default)]
+    materials: BTreeMap<String, Spanned<MaterialDef>>,
+    #[serde(default)]
+    objects: Vec<Spanned<ObjectDef>>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(untagged)]
+enum Scalar3 {
+    One(f32),
+    Three(V3),
+}
+
+impl Scalar3 {
+    fn vec(self) -> Vec3A {
+        match self {
+            Scalar3::One(v) => Vec3A::splat(v),
+            Scalar3::Three(v) => Vec3A::from_array(v),
+        }
+    }
+}
+
+fn up_y() -> V3 {
+    [0.0, 1.0, 0.0]
+}
+fn fov45() -> f32 {
+    45.0
+}
+fn w640() -> u32 {
+    640
+}
+fn h480() -> u32 {
+    480
+}
+fn one3() -> V3 {
+    [1.0; 3]
+}
+fn one() -> f32 {
+    1.0
+}
+fn twenty() -> f32 {
+    20.0
+}
+fn yes() -> bool {
+    true
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraDef {
+    from: V3,
+    at: V3,
+    #[serde(default = "up_y")]
+    up: V3,
+    #[serde(default = "fov45")]
+    fov: f32,
+    #[serde(default = "w640")]
+    width: u32,
+    #[serde(default = "h480")]
+    height: u32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LightDef {
+    position: V3,
+    #[serde(default)]
+    color: Option<V3>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CheckerDef {
+    color2: V3,
+    #[serde(default = "one")]
+    scale: f32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialDef {
+    #[serde(default = "one3")]
+    color: V3,
+    #[serde(default = "one")]
+    kd: f32,
+    #[serde(default)]
+    ks: f32,
+    #[serde(default = "twenty")]
+    shine: f32,
+    #[serde(default)]
+    t: f32,
+    #[serde(default = "one")]
+    ior: f32,
+    #[serde(default)]
+    checker: Option<CheckerDef>,
+}
+
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+enum ObjectDef {
+    Sphere {
+        center: V3,
+        radius: f32,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Plane {
+        point: V3,
+        normal: V3,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Triangle {
+        vertices: [V3; 3],
+        #[serde(default)]
+        normals: Option<[V3; 3]>,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Polygon {
+        vertices: Vec<V3>,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Cone {
+        base: V3,
+        base_radius: f32,
+        apex: V3,
+        apex_radius: f32,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Cylinder {
+        base: V3,
+        apex: V3,
+        radius: f32,
+        #[serde(default)]
+        material: Option<String>,
+    },
+    Mesh {
+        file: String,
+        #[serde(default)]
+        translate: Option<V3>,
+        #[serde(default)]
+        scale: Option<Scalar3>,
+        #[serde(default)]
+        rotate_y_degrees: Option<f32>,
+        #[serde(default)]
+        matrix: Option<Vec<Vec<f32>>>,
+        #[serde(default)]
+        material: Option<String>,
+        #[serde(default = "yes")]
+        smooth: bool,
+    },
+}
+
+fn line_of(src: &[u8], offset: usize) -> usize {
+    1 + src
+        .get(..offset.min(src.len()))
+        .map_or(0, |s| s.iter().filter(|&&c| c == b'\n').count())
+}
+
+struct Ctx<'a> {
+    src: &'a [u8],
+    file: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, msg: impl Into<String>) -> Error {
+        Error::parse(self.file, line_of(self.src, span.start), msg)
+    }
+
+    fn finite(&self, span: &Range<usize>, what: &str, vals: &[f32]) -> Result<(), Error> {
+        if vals.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err(self.err(span.clone(), format!("{what} must be finite numbers")))
+        }
+    }
+
+    fn v3(&self, span: &Range<usize>, what: &str, v: V3) -> Result<Vec3A, Error> {
+        self.finite(span, what, &v)?;
+        Ok(Vec3A::from_array(v))
+    }
+}
+
+/// Parses a TOML scene.
+pub fn parse(
+    bytes: &[u8],
+    file: &str,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+) -> Result<Scene, Error> {
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        Error::parse(file, line_of(bytes, e.valid_up_to()), "the file is not valid UTF-8")
+    })?;
+    let def: SceneDef = toml::from_str(text).map_err(|e| {
+        let line = e.span().map_or(1, |s| line_of(bytes, s.start));
+        Error::parse(file, line, e.message().trim().to_string())
+    })?;
+    let cx = Ctx { src: bytes, file };
+    let mut b = SceneBuilder::new();
+
+    let cspan = def.camera.span();
+    let c = def.camera.into_inner();
+    let from = cx.v3(&cspan, "camera 'from'", c.from)?;
+    let at = cx.v3(&cspan, "camera 'at'", c.at)?;
+    let up = cx.v3(&cspan, "camera 'up'", c.up)?;
+    cx.finite(&cspan, "camera 'fov'", &[c.fov])?;
+    b.camera = Some(Camera::new(from, at, up, c.fov).ok_or_else(|| {
+        cx.err(
+            cspan.clone(),
+            "degenerate camera: 'from' equals 'at', 'up' is parallel to the view direction, or 'fov' is not in (0, 180)",
+        )
+    })?);
+    limits::check_resolution(c.width, c.height)
+        .map_err(|e| cx.err(cspan.clone(), format!("camera resolution: {e}")))?;
+    b.resolution = (c.width, c.height);
+
+    if let Some(bg) = def.background {
+        b.background = cx.v3(&bg.span(), "background", *bg.get_ref())?;
+    }
+    if let Some(a) = def.ambient {
+        let v = a.get_ref().vec();
+        cx.finite(&a.span(), "ambient", &v.to_array())?;
+        b.ambient = Some(v);
+    }
+    limits::check("light count", def.lights.len() as u64, limits::MAX_LIGHTS as u64)?;
+    let n = def.lights.len();
+    for l in &def.lights {
+        let span = l.span();
+        let l = l.get_ref();
+        let position = cx.v3(&span, "light 'position'", l.position)?;
+        let color = match l.color {
+            Some(c) => cx.v3(&span, "light 'color'", c)?,
+            None => Vec3A::splat(spd_intensity(n)),
+        };
+        b.lights.push(Light { position, color });
+    }
+
+    let mut names: BTreeMap<&str, u32> = BTreeMap::new();
+    let default_mat = b.material(Material::default());
+    for (name, m) in &def.materials {
+        let span = m.span();
+        let m = m.get_ref();
+        let what = format!("material '{name}'");
+        cx.finite(&span, &what, &[m.kd, m.ks, m.shine, m.t, m.ior])?;
+        let checker = match &m.checker {
+            Some(ch) => {
+                if !(ch.scale.is_finite() && ch.scale > 0.0) {
+                    return Err(cx.err(span, format!("{what}: checker scale must be > 0")));
+                }
+                Some(Checker {
+                    color2: cx.v3(&span, &what, ch.color2)?,
+                    scale: ch.scale,
+                })
+            }
+            None => None,
+        };
+        let mat = Material {
+            color: cx.v3(&span, &what, m.color)?,
+            kd: m.kd,
+            ks: m.ks,
+            shine: m.shine,
+            t: m.t,
+            ior: m.ior,
+            checker,
+        };
+        let idx = b.material(mat);
+        names.insert(name.as_str(), idx);
+    }
+
+    for o in &def.objects {
+        let span = o.span();
+        let find = |m: &Option<String>| -> Result<u32, Error> {
+            match m {
+                None => Ok(default_mat),
+                Some(n) => names
+                    .get(n.as_str())
+                    .copied()
+                    .ok_or_else(|| cx.err(span.clone(), format!("unknown material '{n}'"))),
+            }
+        };
+        let lim = |e: Error| cx.err(span.clone(), e.to_string());
+        match o.get_ref() {
+            ObjectDef::Sphere {
+                center,
+                radius,
+                material,
+            } => {
+                let c = cx.v3(&span, "sphere 'center'", *center)?;
+                cx.finite(&span, "sphere 'radius'", &[*radius])?;
+                b.sphere(c, *radius, find(material)?).map_err(lim)?;
+            }
+            ObjectDef::Plane {
+                point,
+                normal,
+                material,
+            } => {
+                let p = cx.v3(&span, "plane 'point'", *point)?;
+                let n = cx.v3(&span, "plane 'normal'", *normal)?;
+                if b.plane(p, n, find(material)?).map_err(lim)?.is_none() {
+                    return Err(cx.err(span, "plane 'normal' must not be zero"));
+                }
+            }
+            ObjectDef::Triangle {
+                vertices,
+                normals,
+                material,
+            } => {
+                let v = [
+                    cx.v3(&span, "triangle 'vertices'", vertices[0])?,
+                    cx.v3(&span, "triangle 'vertices'", vertices[1])?,
+                    cx.v3(&span, "triangle 'vertices'", vertices[2])?,
+                ];
+                let n = match normals {
+                    Some(n) => Some([
+                        cx.v3(&span, "triangle 'normals'", n[0])?.normalize_or(Vec3A::Z),
+                        cx.v3(&span, "triangle 'normals'", n[1])?.normalize_or(Vec3A::Z),
+                        cx.v3(&span, "triangle 'normals'", n[2])?.normalize_or(Vec3A::Z),
+                    ]),
+                    None => None,
+                };
+                b.triangle(v, n, find(material)?).map_err(lim)?;
+            }
+            ObjectDef::Polygon { vertices, material } => {
+                if vertices.len() < 3 {
+                    return Err(cx.err(
+                        span,
+                        format!("polygon needs at least 3 vertices, got {}", vertices.len()),
+                    ));
+                }
+                limits::check(
+                    "polygon vertex count",
+                    vertices.len() as u64,
+                    limits::MAX_POLYGON_VERTICES as u64,
+                )
+                .map_err(lim)?;
+                let vs = vertices
+                    .iter()
+                    .map(|v| cx.v3(&span, "polygon 'vertices'", *v))
+                    .collect::<Result<Vec<_>, _>>()?;
+                b.polygon(&vs, find(material)?).map_err(lim)?;
+            }
+            ObjectDef::Cone {
+                base,
+                base_radius,
+                apex,
+                apex_radius,
+                material,
+            } => {
+                let b0 = cx.v3(&span, "cone 'base'", *base)?;
+                let a0 = cx.v3(&span, "cone 'apex'", *apex)?;
+                cx.finite(&span, "cone radii", &[*base_radius, *apex_radius])?;
+                b.cone(b0, *base_radius, a0, *apex_radius, find(material)?)
+                    .map_err(lim)?;
+            }
+            ObjectDef::Cylinder {
+                base,
+                apex,
+                radius,
+                material,
+            } => {
+                let b0 = cx.v3(&span, "cylinder 'base'", *base)?;
+                let a0 = cx.v3(&span, "cylinder 'apex'", *apex)?;
+                cx.finite(&span, "cylinder 'radius'", &[*radius])?;
+                b.cone(b0, *radius, a0, *radius, find(material)?).map_err(lim)?;
+            }
+            ObjectDef::Mesh {
+                file: mesh_file,
+                translate,
+                scale,
+                rotate_y_degrees,
+                matrix,
+                material,
+                smooth,
+            } => {
+                let xf = if let Some(m) = matrix {
+                    if translate.is_some() || scale.is_some() || rotate_y_degrees.is_some() {
+                        return Err(cx.err(
+                            span,
+                            "mesh: give either 'matrix' or 'translate'/'scale'/'rotate_y_degrees', not both",
+                        ));
+                    }
+                    matrix_transform(m).ok_or_else(|| {
+                        cx.err(
+                            span.clone(),
+                            "mesh 'matrix' must be 3x4 or 4x4 (rows) of finite numbers with last row 0 0 0 1",
+                        )
+                    })?
+                } else {
+                    let t = cx.v3(&span, "mesh 'translate'", translate.unwrap_or([0.0; 3]))?;
+                    let s = scale.map_or(Vec3A::ONE, Scalar3::vec);
+                    cx.finite(&span, "mesh 'scale'", &s.to_array())?;
+                    let r = rotate_y_degrees.unwrap_or(0.0);
+                    cx.finite(&span, "mesh 'rotate_y_degrees'", &[r])?;
+                    Affine3A::from_translation(t.into())
+                        * Affine3A::from_rotation_y(r.to_radians())
+                        * Affine3A::from_scale(s.into())
+                };
+                if xf.matrix3.determinant() == 0.0 {
+                    return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
+                }
+                let data = resolve(mesh_file)
+                    .map_err(|e| cx.err(span.clone(), format!("cannot load mesh '{mesh_file}': {e}")))?;
+                let mat = match material {
+                    Some(_) => Some(find(material)?),
+                    None => None,
+                };
+                crate::obj::load_mesh(&data, mesh_file, resolve, xf, mat, *smooth, &mut b)
+                    .map_err(|e| cx.err(span.clone(), e.to_string()))?;
+            }
+        }
+    }
+    Ok(b.build())
+}
+
+fn matrix_transform(m: &[Vec<f32>]) -> Option<Affine3A> {
+    if !(m.len() == 3 || m.len() == 4) || m.iter().any(|r| r.len() != 4 || r.iter().any(|v| !v.is_finite())) {
+        return None;
+    }
+    if let Some(last) = m.get(3) {
+        if last.as_slice() != [0.0, 0.0, 0.0, 1.0] {
+            return None;
+        }
+    }
+    let r = |i: usize, j: usize| m[i][j];
+    let mat = Mat3A::from_cols(
+        Vec3A::new(r(0, 0), r(1, 0), r(2, 0)),
+        Vec3A::new(r(0, 1), r(1, 1), r(2, 1)),
+        Vec3A::new(r(0, 2), r(1, 2), r(2, 2)),
+    );
+    Some(Affine3A {
+        matrix3: mat,
+        translation: Vec3A::new(r(0, 3), r(1, 3), r(2, 3)),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn no_files(_: &str) -> Result<Vec<u8>, String> {
+        Err("no files in this test".into())
+    }
+
+    fn err(src: &str) -> String {
+        match parse(src.as_bytes(), "s.toml", &no_files) {
+            Ok(_) => panic!("expected error"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    const CAM: &str = "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n";
+
+    #[test]
+    fn parses_module_doc_example() {
+        let doc = include_str!("toml_scene.rs");
+        let start = doc.find("//! ```toml\n").unwrap() + 12;
+        let end = doc[start..].find("//! ```\n").unwrap() + start;
+        let src: String = doc[start..end]
+            .lines()
+            .map(|l| l.strip_prefix("//! ").unwrap_or(l.strip_prefix("//!").unwrap_or(l)))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
+        let resolve = |p: &str| -> Result<Vec<u8>, String> {
+            if p == "meshes/teapot.obj" {
+                Ok(obj.as_bytes().to_vec())
+            } else {
+                Err(format!("no {p}"))
+            }
+        };
+        let s = parse(src.as_bytes(), "doc.toml", &resolve).unwrap();
+        assert_eq!(s.resolution(), (640, 480));
+        assert_eq!(s.primitive_count(), 7);
+        assert_eq!(s.light_count(), 1);
+    }
+
+    #[test]
+    fn errors_have_lines() {
+        assert_eq!(
+            err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"nope\"\n")),
+            "s.toml:5: unknown material 'nope'"
+        );
+        let e = err(&format!("{CAM}bogus = 1\n"));
+        assert!(e.starts_with("s.toml:4: unknown field `bogus`"), "{e}");
+        let e = err(&format!("{CAM}\n\n[[objects]]\ntype = \"blob\"\n"));
+        assert!(e.starts_with("s.toml:"), "{e}");
+        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, nan]\nradius = 1\n"));
+        assert_eq!(e, "s.toml:5: sphere 'center' must be finite numbers");
+        let e = err("[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\nwidth = 100000\n");
+        assert!(e.starts_with("s.toml:1: camera resolution: image width is 100000"), "{e}");
+        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"mesh\"\nfile = \"x.obj\"\n"));
+        assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
+        let e = err("[camera]\nfrom = [0, 0, 5\n");
+        assert!(e.starts_with("s.toml:2:"), "{e}");
+    }
+}

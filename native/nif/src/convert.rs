@@ -1,0 +1,82 @@
+//! Term conversions shared by the NIFs.
+
+use ring_tracer_kernel::{Error, RayStats, Settings};
+use rustler::{Binary, Env, NifMap, OwnedBinary};
+
+/// Render settings as the Elixir side sends them: a map with atom keys.
+#[derive(NifMap)]
+pub struct SettingsTerm {
+    pub width: u32,
+    pub height: u32,
+    pub depth: u32,
+    pub cutoff: f64,
+    pub samples: u32,
+    pub spd: bool,
+}
+
+impl SettingsTerm {
+    /// The kernel's settings, validated against its limits.
+    pub fn to_kernel(&self) -> Result<Settings, String> {
+        let settings = Settings {
+            width: self.width,
+            height: self.height,
+            depth: self.depth,
+            cutoff: self.cutoff as f32,
+            samples: self.samples,
+            spd: self.spd,
+        };
+        settings.validate().map_err(|e| e.to_string())?;
+        Ok(settings)
+    }
+}
+
+/// Ray counters as a map with atom keys.
+#[derive(NifMap)]
+pub struct RayStatsTerm {
+    pub eye: u64,
+    pub eye_hits: u64,
+    pub reflected: u64,
+    pub refracted: u64,
+    pub shadow: u64,
+}
+
+impl From<RayStats> for RayStatsTerm {
+    fn from(s: RayStats) -> Self {
+        RayStatsTerm {
+            eye: s.eye,
+            eye_hits: s.eye_hits,
+            reflected: s.reflected,
+            refracted: s.refracted,
+            shadow: s.shadow,
+        }
+    }
+}
+
+/// A kernel error as the message Elixir shows (`file:line: problem`).
+pub fn message(e: Error) -> String {
+    e.to_string()
+}
+
+/// Linear RGB floats as one binary of native-endian `f32`s, 12 bytes a pixel.
+pub fn floats_to_binary<'a>(env: Env<'a>, rgb: &[f32]) -> Result<Binary<'a>, String> {
+    let mut bin = OwnedBinary::new(std::mem::size_of_val(rgb));
+    for (dst, v) in bin.as_mut_slice().chunks_exact_mut(4).zip(rgb) {
+        dst.copy_from_slice(&v.to_ne_bytes());
+    }
+    Ok(bin.release(env))
+}
+
+/// The inverse of [`floats_to_binary`].
+pub fn binary_to_floats(bin: &Binary) -> Result<Vec<f32>, String> {
+    if bin.len() % 4 != 0 {
+        return Err(format!(
+            "pixel binary has {} bytes, not a multiple of 4",
+            bin.len()
+        ));
+    }
+    Ok(bin
+        .as_slice()
+        .chunks_exact(4)
+        .map(|c| f32::from_ne_bytes([c[0], c[1], c[2], c[3]]))
+        .collect())
+}

@@ -1,0 +1,42 @@
+//! Tracing: one atom (a span of pixels) for a grandchild, or a whole image
+//! with the kernel's own threads for benchmarks and references.
+
+use ring_tracer_kernel::{render_image as kernel_render_image, trace_span};
+use rustler::{Binary, Env, ResourceArc};
+
+use crate::convert::{floats_to_binary, message, RayStatsTerm, SettingsTerm};
+use crate::scene::SceneResource;
+
+/// Traces `count` pixels from linear index `start`: linear RGB as f32 binary.
+#[rustler::nif(schedule = "DirtyCpu")]
+fn trace_atom<'a>(
+    env: Env<'a>,
+    scene: ResourceArc<SceneResource>,
+    settings: SettingsTerm,
+    start: u64,
+    count: u64,
+) -> Result<(Binary<'a>, RayStatsTerm), String> {
+    let settings = settings.to_kernel()?;
+    let (rgb, stats) = trace_span(&scene.scene, &settings, start, count).map_err(message)?;
+    Ok((floats_to_binary(env, &rgb)?, stats.into()))
+}
+
+/// Traces the whole image with `threads` OS threads inside this one NIF call.
+#[rustler::nif(schedule = "DirtyCpu")]
+fn render_image<'a>(
+    env: Env<'a>,
+    scene: ResourceArc<SceneResource>,
+    settings: SettingsTerm,
+    threads: u32,
+) -> Result<(Binary<'a>, RayStatsTerm), String> {
+    let settings = settings.to_kernel()?;
+    let (rgb, stats) =
+        kernel_render_image(&scene.scene, &settings, threads.max(1) as usize).map_err(message)?;
+    Ok((floats_to_binary(env, &rgb)?, stats.into()))
+}
+
+/// Checks settings against the kernel's limits before a job starts.
+#[rustler::nif]
+fn validate_settings(settings: SettingsTerm) -> Result<bool, String> {
+    settings.to_kernel().map(|_| true)
+}

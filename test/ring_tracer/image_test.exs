@@ -1,0 +1,28 @@
+defmodule RingTracer.ImageTest do
+  use ExUnit.Case, async: true
+
+  alias RingTracer.Image
+
+  @tag :tmp_dir
+  test "PNG and EXR files are written by extension", %{tmp_dir: dir} do
+    pixels = for v <- [0.0, 0.5, 1.0, 2.0, 0.25, 0.0], into: <<>>, do: <<v::float-32-native>>
+    assert :ok = Image.write(Path.join(dir, "a.png"), 2, 1, pixels)
+    assert <<137, "PNG", _::binary>> = File.read!(Path.join(dir, "a.png"))
+    assert :ok = Image.write(Path.join(dir, "a.exr"), 2, 1, pixels)
+    assert <<0x76, 0x2F, 0x31, 0x01, _::binary>> = File.read!(Path.join(dir, "a.exr"))
+  end
+
+  test "sRGB encoding of linear values" do
+    pixels = for v <- [0.0, 1.0, 2.0, 0.5], into: <<>>, do: <<v::float-32-native>>
+    assert <<0, 255, 255, 188>> = Image.srgb8(pixels)
+  end
+
+  @tag :tmp_dir
+  test "unknown extensions and wrong sizes are errors", %{tmp_dir: dir} do
+    assert {:error, %RingTracer.Error{message: m}} =
+             Image.write(Path.join(dir, "a.jpg"), 1, 1, <<0::96>>)
+
+    assert m =~ "a.jpg"
+    assert {:error, %RingTracer.Error{}} = Image.write(Path.join(dir, "b.png"), 2, 2, <<0::96>>)
+  end
+end

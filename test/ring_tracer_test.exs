@@ -1,0 +1,133 @@
+defmodule RingTracerTest do
+  use ExUnit.Case, async: false
+  doctest RingTracer
+
+  alias RingTracer.TestScenes
+
+  @scene "balls_s1.nff"
+
+  defp job_processes do
+    for sup <- [RingTracer.Jobs, RingTracer.Children],
+        {_, pid, _, _} <- DynamicSupervisor.which_children(sup),
+        do: pid
+  end
+
+  describe "determinism" do
+    setup do
+      {:ok, reference: TestScenes.reference(@scene, 40, 30)}
+    end
+
+    for n <- [1, 2, 3, 7], k <- [1, 5, 64] do
+      test "N=#{n}, K=#{k} gives the single-process image", %{reference: reference} do
+        {:ok, result} =
+          RingTracer.render(TestScenes.path(@scene),
+            children: unquote(n),
+            atoms: unquote(k),
+            width: 40,
+            height: 30
+          )
+
+        assert result.pixels == reference
+        assert Enum.sum(Enum.map(result.children, & &1.traced)) == unquote(n * k)
+      end
+    end
+
+    test "property: any N, K and image size gives the single-process image" do
+      gen =
+        {:proper_types.integer(1, 9), :proper_types.integer(1, 12), :proper_types.integer(1, 23),
+         :proper_types.integer(1, 17)}
+
+      RingTracer.PropErCase.check(
+        gen,
+        fn {n, k, w, h} ->
+          {:ok, result} =
+            RingTracer.render(TestScenes.path(@scene), children: n, atoms: k, width: w, height: h)
+
+          result.pixels == TestScenes.reference(@scene, w, h)
+        end,
+        40
+      )
+    end
+  end
+
+  test "every atom is traced exactly once and the stats add up" do
+    {:ok, result} =
+      RingTracer.render(TestScenes.path(@scene), children: 4, atoms: 8, width: 64, height: 48)
+
+    stats = result.children
+    assert length(stats) == 4
+    assert Enum.sum(Enum.map(stats, & &1.traced)) == 32
+    assert Enum.sum(Enum.map(stats, & &1.given)) == Enum.sum(Enum.map(stats, & &1.received))
+
+    # Every consumed offer is exactly one hand-over.
+    assert Enum.sum(Enum.map(stats, & &1.offers_consumed)) ==
+             Enum.sum(Enum.map(stats, & &1.handovers))
+
+    # Every child sent at least one offer, and its last one came back.
+    assert Enum.all?(stats, &(&1.offers_sent >= 1))
+
+    for c <- stats, do: assert(c.traced == c.own - c.given + c.received)
+    assert result.rays.eye == 64 * 48
+  end
+
+  test "delayed hand-overs still give the complete, identical image" do
+    reference = TestScenes.reference(@scene, 48, 32)
+
+    {:ok, result} =
+      RingTracer.render(TestScenes.path(@scene),
+        children: 5,
+        atoms: 6,
+        width: 48,
+        height: 32,
+        handover_delay: 40
+      )
+
+    assert result.pixels == reference
+    assert Enum.sum(Enum.map(result.children, & &1.traced)) == 30
+  end
+
+  test "no process of a job is left after it ends" do
+    before = length(Process.list())
+
+    {:ok, _} =
+      RingTracer.render(TestScenes.path(@scene), children: 6, atoms: 3, width: 20, height: 10)
+
+    assert job_processes() == []
+    assert length(Process.list()) <= before + 1
+  end
+
+  test "a missing scene is an error naming the file" do
+    assert {:error, %RingTracer.Error{reason: :file, message: message}} =
+             RingTracer.render("no/such.nff")
+
+    assert message =~ "no/such.nff"
+  end
+
+  test "an invalid scene is an error naming file and line" do
+    path =
+      TestScenes.tmp_scene(
+        "bad.nff",
+        "b 0 0 0\nv\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8 8\np 2\n0 0 0\n1 0 0\n"
+      )
+
+    assert {:error, %RingTracer.Error{reason: :invalid_scene, message: message}} =
+             RingTracer.render(path)
+
+    assert message =~ "bad.nff:9"
+  end
+
+  test "bad options are errors, not crashes" do
+    assert {:error, %RingTracer.Error{reason: :invalid_option}} =
+             RingTracer.render(TestScenes.path(@scene), children: 0)
+
+    assert {:error, %RingTracer.Error{reason: :invalid_option}} =
+             RingTracer.render(TestScenes.path(@scene), colour: :red)
+
+    assert {:error, %RingTracer.Error{reason: :invalid_option}} =
+             RingTracer.render(TestScenes.path(@scene), width: 100_000, height: 100_000)
+  end
+
+  test "render! raises RingTracer.Error" do
+    assert_raise RingTracer.Error, ~r/no\/such/, fn -> RingTracer.render!("no/such.nff") end
+  end
+end

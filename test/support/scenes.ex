@@ -1,0 +1,28 @@
+defmodule RingTracer.TestScenes do
+  @moduledoc "Scenes and references shared by the tests."
+
+  alias RingTracer.{Native, Scene, Settings}
+
+  @doc "Absolute path of a scene in priv/scenes."
+  @spec path(String.t()) :: String.t()
+  def path(name), do: Path.expand(Path.join(["priv", "scenes", name]))
+
+  @doc "The single-process reference image: the kernel's own whole-image render."
+  @spec reference(String.t(), pos_integer(), pos_integer(), keyword()) :: binary()
+  def reference(name, width, height, opts \\ []) do
+    scene = Scene.load!(path(name))
+    settings = struct(%Settings{width: width, height: height}, opts)
+    {:ok, {pixels, _rays}} = Native.render_image(scene.ref, Settings.to_native(settings), 1)
+    pixels
+  end
+
+  @doc "Writes a scene file with `contents` to a temporary directory and returns its path."
+  @spec tmp_scene(String.t(), String.t()) :: String.t()
+  def tmp_scene(name, contents) do
+    dir = Path.join(System.tmp_dir!(), "ring_tracer_test_#{System.unique_integer([:positive])}")
+    File.mkdir_p!(dir)
+    path = Path.join(dir, name)
+    File.write!(path, contents)
+    path
+  end
+end
