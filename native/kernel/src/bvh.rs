@@ -188,7 +188,12 @@ impl Bvh {
     /// Visits leaves front to back; `visit(first, count, tmax) -> new tmax`. Stops when a visit
     /// returns a negative value (used for any-hit queries).
     #[inline(always)]
-    pub fn traverse(&self, ray: &Ray, mut tmax: f32, mut visit: impl FnMut(usize, usize, f32) -> f32) -> f32 {
+    pub fn traverse(
+        &self,
+        ray: &Ray,
+        mut tmax: f32,
+        mut visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
         let Some(root) = self.nodes.first() else {
             return tmax;
         };
@@ -207,7 +212,8 @@ impl Bvh {
                 }
             } else {
                 let first = node.first() as usize;
-                let (Some(c0), Some(c1)) = (self.nodes.get(first), self.nodes.get(first + 1)) else {
+                let (Some(c0), Some(c1)) = (self.nodes.get(first), self.nodes.get(first + 1))
+                else {
                     return tmax;
                 };
                 let d0 = c0.hit(ray, tmax);
@@ -255,7 +261,11 @@ mod tests {
     fn build_covers_all_primitives_once() {
         let boxes: Vec<Aabb> = (0..1000)
             .map(|i| {
-                let p = Vec3A::new((i % 10) as f32, ((i / 10) % 10) as f32, (i / 100) as f32 * 3.0);
+                let p = Vec3A::new(
+                    (i % 10) as f32,
+                    ((i / 10) % 10) as f32,
+                    (i / 100) as f32 * 3.0,
+                );
                 Aabb {
                     min: p,
                     max: p + Vec3A::splat(0.5),

@@ -41,7 +41,9 @@ pub fn encode_png(width: u32, height: u32, rgb: &[f32]) -> Result<Vec<u8>, Error
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut w = enc.write_header().map_err(|e| Error::Image(e.to_string()))?;
+        let mut w = enc
+            .write_header()
+            .map_err(|e| Error::Image(e.to_string()))?;
         w.write_image_data(&bytes)
             .map_err(|e| Error::Image(e.to_string()))?;
         w.finish().map_err(|e| Error::Image(e.to_string()))?;

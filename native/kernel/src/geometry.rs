@@ -198,7 +198,13 @@ pub(crate) fn hit_triangle(
 }
 
 #[inline]
-fn hit_polygon(p: &PolygonData, verts: &[[f32; 2]], ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
+fn hit_polygon(
+    p: &PolygonData,
+    verts: &[[f32; 2]],
+    ray: &Ray,
+    tmin: f32,
+    tmax: f32,
+) -> Option<f32> {
     let dn = p.normal.dot(ray.dir);
     if dn == 0.0 {
         return None;
@@ -302,7 +308,9 @@ impl Geometry {
     #[inline(always)]
     pub fn hit(&self, shape: &Shape, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
         match *shape {
-            Shape::Triangle { v0, e1, e2 } => hit_triangle(v0, e1, e2, ray, tmin, tmax).map(|h| h.0),
+            Shape::Triangle { v0, e1, e2 } => {
+                hit_triangle(v0, e1, e2, ray, tmin, tmax).map(|h| h.0)
+            }
             Shape::Sphere {
                 center,
                 radius,
@@ -377,7 +385,11 @@ impl Geometry {
 
 /// Builds polygon data from 3D vertices; `None` if the polygon is degenerate (zero area).
 /// The normal comes from Newell's method, which follows the CCW winding for any simple polygon.
-pub(crate) fn make_polygon(verts: &[Vec3A], first: u32, out2d: &mut Vec<[f32; 2]>) -> Option<PolygonData> {
+pub(crate) fn make_polygon(
+    verts: &[Vec3A],
+    first: u32,
+    out2d: &mut Vec<[f32; 2]>,
+) -> Option<PolygonData> {
     if verts.len() < 3 {
         return None;
     }
@@ -444,19 +456,56 @@ mod tests {
     #[test]
     fn sphere_hits_and_misses() {
         let c = Vec3A::new(0.0, 0.0, -5.0);
-        let t = hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        let t = hit_sphere(
+            c,
+            1.0,
+            false,
+            &ray([0.0; 3], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY,
+        );
         assert!((t.unwrap() - 4.0).abs() < 1e-5);
         // from inside: far root
-        let t = hit_sphere(c, 1.0, false, &ray([0.0, 0.0, -5.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        let t = hit_sphere(
+            c,
+            1.0,
+            false,
+            &ray([0.0, 0.0, -5.0], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY,
+        );
         assert!((t.unwrap() - 1.0).abs() < 1e-5);
         // miss beside
-        assert!(hit_sphere(c, 1.0, false, &ray([1.01, 0.0, 0.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(hit_sphere(
+            c,
+            1.0,
+            false,
+            &ray([1.01, 0.0, 0.0], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY
+        )
+        .is_none());
         // behind
-        assert!(hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, 1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(hit_sphere(
+            c,
+            1.0,
+            false,
+            &ray([0.0; 3], [0.0, 0.0, 1.0]),
+            0.0,
+            f32::INFINITY
+        )
+        .is_none());
         // tmax respected
         assert!(hit_sphere(c, 1.0, false, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, 3.9).is_none());
         // inside-only sphere is invisible from outside until the far side
-        let t = hit_sphere(c, 1.0, true, &ray([0.0; 3], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        let t = hit_sphere(
+            c,
+            1.0,
+            true,
+            &ray([0.0; 3], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY,
+        );
         assert!((t.unwrap() - 6.0).abs() < 1e-5);
     }
 
@@ -471,14 +520,45 @@ mod tests {
     #[test]
     fn polygon_hits_and_misses() {
         // unit square in z=0, CCW seen from +z
-        let (g, s) = poly(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]);
-        let t = g.hit(&s, &ray([0.5, 0.5, 2.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY);
+        let (g, s) = poly(&[
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ]);
+        let t = g.hit(
+            &s,
+            &ray([0.5, 0.5, 2.0], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY,
+        );
         assert!((t.unwrap() - 2.0).abs() < 1e-6);
-        assert!(g.hit(&s, &ray([1.5, 0.5, 2.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(g
+            .hit(
+                &s,
+                &ray([1.5, 0.5, 2.0], [0.0, 0.0, -1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_none());
         // from behind too (two-sided intersection)
-        assert!(g.hit(&s, &ray([0.5, 0.5, -2.0], [0.0, 0.0, 1.0]), 0.0, f32::INFINITY).is_some());
+        assert!(g
+            .hit(
+                &s,
+                &ray([0.5, 0.5, -2.0], [0.0, 0.0, 1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_some());
         // parallel
-        assert!(g.hit(&s, &ray([0.5, 0.5, 2.0], [1.0, 0.0, 0.0]), 0.0, f32::INFINITY).is_none());
+        assert!(g
+            .hit(
+                &s,
+                &ray([0.5, 0.5, 2.0], [1.0, 0.0, 0.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_none());
         assert!((g.geometric_normal(&s, Vec3A::ZERO) - Vec3A::Z).length() < 1e-6);
         // concave "L" shape: the notch is outside
         let (g, s) = poly(&[
@@ -489,9 +569,30 @@ mod tests {
             [1.0, 2.0, 0.0],
             [0.0, 2.0, 0.0],
         ]);
-        assert!(g.hit(&s, &ray([1.5, 1.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
-        assert!(g.hit(&s, &ray([0.5, 1.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_some());
-        assert!(g.hit(&s, &ray([1.5, 0.5, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_some());
+        assert!(g
+            .hit(
+                &s,
+                &ray([1.5, 1.5, 1.0], [0.0, 0.0, -1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_none());
+        assert!(g
+            .hit(
+                &s,
+                &ray([0.5, 1.5, 1.0], [0.0, 0.0, -1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_some());
+        assert!(g
+            .hit(
+                &s,
+                &ray([1.5, 0.5, 1.0], [0.0, 0.0, -1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_some());
     }
 
     #[test]
@@ -499,27 +600,73 @@ mod tests {
         let v0 = Vec3A::new(0.0, 0.0, 0.0);
         let e1 = Vec3A::new(1.0, 0.0, 0.0);
         let e2 = Vec3A::new(0.0, 1.0, 0.0);
-        let h = hit_triangle(v0, e1, e2, &ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).unwrap();
+        let h = hit_triangle(
+            v0,
+            e1,
+            e2,
+            &ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY,
+        )
+        .unwrap();
         assert!((h.0 - 1.0).abs() < 1e-6 && (h.1 - 0.25).abs() < 1e-6 && (h.2 - 0.25).abs() < 1e-6);
-        assert!(hit_triangle(v0, e1, e2, &ray([0.6, 0.6, 1.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(hit_triangle(
+            v0,
+            e1,
+            e2,
+            &ray([0.6, 0.6, 1.0], [0.0, 0.0, -1.0]),
+            0.0,
+            f32::INFINITY
+        )
+        .is_none());
     }
 
     #[test]
     fn cylinder_and_cone() {
         let mut g = Geometry::default();
-        g.cones.push(make_cone(Vec3A::ZERO, 1.0, Vec3A::new(0.0, 0.0, 2.0), 1.0).unwrap());
+        g.cones
+            .push(make_cone(Vec3A::ZERO, 1.0, Vec3A::new(0.0, 0.0, 2.0), 1.0).unwrap());
         let s = Shape::Cone(0);
-        let t = g.hit(&s, &ray([5.0, 0.0, 1.0], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).unwrap();
+        let t = g
+            .hit(
+                &s,
+                &ray([5.0, 0.0, 1.0], [-1.0, 0.0, 0.0]),
+                0.0,
+                f32::INFINITY,
+            )
+            .unwrap();
         assert!((t - 4.0).abs() < 1e-5);
         let n = g.geometric_normal(&s, Vec3A::new(1.0, 0.0, 1.0));
         assert!((n - Vec3A::X).length() < 1e-5);
         // above the top: miss; down the open axis: miss (no caps)
-        assert!(g.hit(&s, &ray([5.0, 0.0, 2.5], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).is_none());
-        assert!(g.hit(&s, &ray([0.0, 0.0, 5.0], [0.0, 0.0, -1.0]), 0.0, f32::INFINITY).is_none());
+        assert!(g
+            .hit(
+                &s,
+                &ray([5.0, 0.0, 2.5], [-1.0, 0.0, 0.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_none());
+        assert!(g
+            .hit(
+                &s,
+                &ray([0.0, 0.0, 5.0], [0.0, 0.0, -1.0]),
+                0.0,
+                f32::INFINITY
+            )
+            .is_none());
         // cone: radius 1 at z=0 to 0 at z=1; at z=0.5 the radius is 0.5
-        g.cones.push(make_cone(Vec3A::ZERO, 1.0, Vec3A::Z, 0.0).unwrap());
+        g.cones
+            .push(make_cone(Vec3A::ZERO, 1.0, Vec3A::Z, 0.0).unwrap());
         let s = Shape::Cone(1);
-        let t = g.hit(&s, &ray([5.0, 0.0, 0.5], [-1.0, 0.0, 0.0]), 0.0, f32::INFINITY).unwrap();
+        let t = g
+            .hit(
+                &s,
+                &ray([5.0, 0.0, 0.5], [-1.0, 0.0, 0.0]),
+                0.0,
+                f32::INFINITY,
+            )
+            .unwrap();
         assert!((t - 4.5).abs() < 1e-5);
         let n = g.geometric_normal(&s, Vec3A::new(0.5, 0.0, 0.5));
         assert!((n - Vec3A::new(1.0, 0.0, 1.0).normalize()).length() < 1e-5);

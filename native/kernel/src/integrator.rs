@@ -57,7 +57,15 @@ impl Whitted {
         self.cutoff <= 0.0 || weight >= self.cutoff
     }
 
-    fn trace(&self, scene: &Scene, ray: &Ray, depth: u32, weight: f32, stats: &mut RayStats, eye: bool) -> Vec3A {
+    fn trace(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        depth: u32,
+        weight: f32,
+        stats: &mut RayStats,
+        eye: bool,
+    ) -> Vec3A {
         let Some(hit) = scene.intersect(ray, f32::INFINITY) else {
             return scene.background;
         };
@@ -69,7 +77,11 @@ impl Whitted {
         let d = ray.dir;
         let entering = d.dot(s.ng) < 0.0;
         // normals turned towards the viewer
-        let (nf, ngf) = if entering { (s.ns, s.ng) } else { (-s.ns, -s.ng) };
+        let (nf, ngf) = if entering {
+            (s.ns, s.ng)
+        } else {
+            (-s.ns, -s.ng)
+        };
         let eps = scene.epsilon;
         let c = m.color_at(s.p);
         let mut out = scene.ambient * c;

@@ -48,5 +48,9 @@ pub fn check_resolution(width: u32, height: u32) -> Result<(), Error> {
     }
     check("image width", width as u64, MAX_SIDE as u64)?;
     check("image height", height as u64, MAX_SIDE as u64)?;
-    check("image pixel count", width as u64 * height as u64, MAX_PIXELS)
+    check(
+        "image pixel count",
+        width as u64 * height as u64,
+        MAX_PIXELS,
+    )
 }

@@ -74,10 +74,7 @@ impl<'a> Lexer<'a> {
 
     fn number(&mut self, what: &str, entity_line: usize) -> Result<f32, Error> {
         let Some((tok, line)) = self.next() else {
-            return Err(self.err(
-                entity_line,
-                format!("file ended in the middle of {what}"),
-            ));
+            return Err(self.err(entity_line, format!("file ended in the middle of {what}")));
         };
         let text = String::from_utf8_lossy(tok);
         match text.parse::<f32>() {
@@ -135,8 +132,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
             b"b" => b.background = lx.vec3("background colour 'b'", line)?,
             b"l" => {
                 let position = lx.vec3("light 'l'", line)?;
-                limits::check("light count", b.lights.len() as u64 + 1, limits::MAX_LIGHTS as u64)
-                    .map_err(|e| lx.err(line, e.to_string()))?;
+                limits::check(
+                    "light count",
+                    b.lights.len() as u64 + 1,
+                    limits::MAX_LIGHTS as u64,
+                )
+                .map_err(|e| lx.err(line, e.to_string()))?;
                 let color = if lx.peek().is_some_and(is_number) {
                     lx.vec3("light colour", line)?
                 } else {
@@ -162,7 +163,8 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
             b"s" => {
                 let c = lx.vec3("sphere 's'", line)?;
                 let r = lx.number("sphere 's'", line)?;
-                b.sphere(c, r, material).map_err(|e| lx.err(line, e.to_string()))?;
+                b.sphere(c, r, material)
+                    .map_err(|e| lx.err(line, e.to_string()))?;
             }
             b"c" => {
                 let what = "cone/cylinder 'c'";
@@ -339,13 +341,22 @@ mod tests {
             err(&format!("{HEAD}s 0 0 1e39 1\n")),
             "t.nff:8: number '1e39' in sphere 's' is not finite"
         );
-        assert!(err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 100000 10\n")
-            .starts_with("t.nff:6: resolution 100000 10: image width is 100000"));
-        assert!(err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 16384 16384\n")
-            .starts_with("t.nff:6: resolution 16384 16384: image pixel count"));
-        assert!(err(&format!("{HEAD}p 99999999999\n")).starts_with("t.nff:8: polygon 'p' has 99999999999 vertices"));
-        assert_eq!(err("s 0 0 0 1\n"), "t.nff:1: no viewpoint: the file has no 'v' entity");
-        assert!(err("v\nfrom 0 0 0\nat 0 0 0\nup 0 1 0\nangle 45\n").starts_with("t.nff:1: degenerate view"));
+        assert!(
+            err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 100000 10\n")
+                .starts_with("t.nff:6: resolution 100000 10: image width is 100000")
+        );
+        assert!(
+            err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 16384 16384\n")
+                .starts_with("t.nff:6: resolution 16384 16384: image pixel count")
+        );
+        assert!(err(&format!("{HEAD}p 99999999999\n"))
+            .starts_with("t.nff:8: polygon 'p' has 99999999999 vertices"));
+        assert_eq!(
+            err("s 0 0 0 1\n"),
+            "t.nff:1: no viewpoint: the file has no 'v' entity"
+        );
+        assert!(err("v\nfrom 0 0 0\nat 0 0 0\nup 0 1 0\nangle 45\n")
+            .starts_with("t.nff:1: degenerate view"));
         assert_eq!(
             err(&format!("{HEAD}p 3\n0 0 0\n1 0 0\n")),
             "t.nff:8: file ended in the middle of polygon 'p'"
@@ -358,7 +369,14 @@ mod tests {
 
     #[test]
     fn never_panics_on_garbage() {
-        let inputs: [&[u8]; 6] = [b"", b"\xff\xfe v", b"v from", b"pp 3 1 2 3", b"l 1 2 3 4", b"#\n#\n"];
+        let inputs: [&[u8]; 6] = [
+            b"",
+            b"\xff\xfe v",
+            b"v from",
+            b"pp 3 1 2 3",
+            b"l 1 2 3 4",
+            b"#\n#\n",
+        ];
         for i in inputs {
             let _ = parse(i, "g.nff");
         }

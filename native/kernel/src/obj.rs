@@ -39,7 +39,11 @@ pub(crate) fn load_mesh(
     smooth: bool,
     b: &mut SceneBuilder,
 ) -> Result<Aabb, Error> {
-    limits::check("mesh file size in bytes", bytes.len() as u64, limits::MAX_FILE_BYTES)?;
+    limits::check(
+        "mesh file size in bytes",
+        bytes.len() as u64,
+        limits::MAX_FILE_BYTES,
+    )?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -62,7 +66,11 @@ pub(crate) fn load_mesh(
         Err(_) => return Err(Error::scene(name, "invalid OBJ (the OBJ reader failed)")),
     };
     let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
-    limits::check("mesh triangle count", total as u64, limits::MAX_MESH_TRIANGLES as u64)?;
+    limits::check(
+        "mesh triangle count",
+        total as u64,
+        limits::MAX_MESH_TRIANGLES as u64,
+    )?;
     let default_mat = match material {
         Some(m) => m,
         None => b.material(grey()),
@@ -104,11 +112,15 @@ pub(crate) fn load_mesh(
                 .ok_or_else(|| Error::scene(name, "vertex index out of range"))?;
             let v = Vec3A::new(p[0], p[1], p[2]);
             if !v.is_finite() {
-                return Err(Error::scene(name, "vertex coordinate is not a finite number"));
+                return Err(Error::scene(
+                    name,
+                    "vertex coordinate is not a finite number",
+                ));
             }
             Ok(xf.transform_point3a(v))
         };
-        let has_normals = smooth && nxf_ok && !m.normals.is_empty() && m.normal_indices.len() == m.indices.len();
+        let has_normals =
+            smooth && nxf_ok && !m.normals.is_empty() && m.normal_indices.len() == m.indices.len();
         let nrm = |i: u32| -> Option<Vec3A> {
             let i = i as usize * 3;
             let p = m.normals.get(i..i + 3)?;

@@ -57,7 +57,11 @@ impl Settings {
         if self.samples == 0 {
             return Err(Error::InvalidArgument("samples must be at least 1".into()));
         }
-        limits::check("samples per pixel side", self.samples as u64, limits::MAX_SAMPLES as u64)?;
+        limits::check(
+            "samples per pixel side",
+            self.samples as u64,
+            limits::MAX_SAMPLES as u64,
+        )?;
         if !(self.cutoff.is_finite() && self.cutoff >= 0.0) {
             return Err(Error::InvalidArgument(format!(
                 "cutoff must be a finite number >= 0, got {}",
@@ -116,7 +120,12 @@ fn check_span(settings: &Settings, start: u64, count: u64) -> Result<u64, Error>
 /// y=0 is the TOP row). Returns linear-light RGB f32, 3 floats per pixel, and the ray
 /// statistics. A pure function of (scene, settings, pixel index): the same pixel gives
 /// bit-identical values whatever span it is traced in.
-pub fn trace_span(scene: &Scene, settings: &Settings, start: u64, count: u64) -> Result<(Vec<f32>, RayStats), Error> {
+pub fn trace_span(
+    scene: &Scene,
+    settings: &Settings,
+    start: u64,
+    count: u64,
+) -> Result<(Vec<f32>, RayStats), Error> {
     let end = check_span(settings, start, count)?;
     let mut out = Vec::with_capacity(count as usize * 3);
     let mut stats = RayStats::default();
@@ -187,7 +196,9 @@ fn spd_span(
     let mut bottom: Vec<Option<Vec3A>> = vec![None; cols];
     let fill = |row: &mut Vec<Option<Vec3A>>, cy: u64, a: u64, b: u64, stats: &mut RayStats| {
         for cx in a..=b + 1 {
-            let Some(slot) = row.get_mut(cx as usize) else { continue };
+            let Some(slot) = row.get_mut(cx as usize) else {
+                continue;
+            };
             if slot.is_some() {
                 continue;
             }
@@ -209,8 +220,11 @@ fn spd_span(
         fill(&mut bottom, y + 1, a, b, stats);
         for x in a..=b {
             let x = x as usize;
-            let get = |r: &Vec<Option<Vec3A>>, i: usize| r.get(i).copied().flatten().unwrap_or(Vec3A::ZERO);
-            let c = (get(&top, x) + get(&top, x + 1) + get(&bottom, x) + get(&bottom, x + 1)) * 0.25;
+            let get = |r: &Vec<Option<Vec3A>>, i: usize| {
+                r.get(i).copied().flatten().unwrap_or(Vec3A::ZERO)
+            };
+            let c =
+                (get(&top, x) + get(&top, x + 1) + get(&bottom, x) + get(&bottom, x + 1)) * 0.25;
             out.extend_from_slice(&[c.x, c.y, c.z]);
         }
         std::mem::swap(&mut top, &mut bottom);
@@ -220,7 +234,11 @@ fn spd_span(
 
 /// Whole image with `threads` OS threads (rows handed out in chunks by an atomic counter).
 /// Identical bits to [`trace_span`] over all pixels.
-pub fn render_image(scene: &Scene, settings: &Settings, threads: usize) -> Result<(Vec<f32>, RayStats), Error> {
+pub fn render_image(
+    scene: &Scene,
+    settings: &Settings,
+    threads: usize,
+) -> Result<(Vec<f32>, RayStats), Error> {
     settings.validate()?;
     let (w, h) = (settings.width as u64, settings.height as u64);
     let threads = threads.clamp(1, 256);
@@ -250,8 +268,9 @@ pub fn render_image(scene: &Scene, settings: &Settings, threads: usize) -> Resul
         handles
             .into_iter()
             .map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| Err(Error::InvalidArgument("a render thread panicked".into())))
+                h.join().unwrap_or_else(|_| {
+                    Err(Error::InvalidArgument("a render thread panicked".into()))
+                })
             })
             .collect()
     });

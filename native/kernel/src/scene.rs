@@ -106,7 +106,11 @@ impl Scene {
         name: &str,
         resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
     ) -> Result<Scene, Error> {
-        limits::check("scene file size in bytes", bytes.len() as u64, limits::MAX_FILE_BYTES)?;
+        limits::check(
+            "scene file size in bytes",
+            bytes.len() as u64,
+            limits::MAX_FILE_BYTES,
+        )?;
         match format {
             Format::Nff => crate::nff::parse(bytes, name),
             Format::Toml => crate::toml_scene::parse(bytes, name, resolve),
@@ -263,7 +267,10 @@ impl Scene {
     }
 
     pub(crate) fn material(&self, index: u32) -> Material {
-        self.materials.get(index as usize).copied().unwrap_or_default()
+        self.materials
+            .get(index as usize)
+            .copied()
+            .unwrap_or_default()
     }
 }
 
@@ -355,7 +362,12 @@ impl SceneBuilder {
     }
 
     /// Adds a triangle (dropped if degenerate); `normals` are per-vertex shading normals.
-    pub fn triangle(&mut self, v: [Vec3A; 3], normals: Option<[Vec3A; 3]>, material: u32) -> Result<(), Error> {
+    pub fn triangle(
+        &mut self,
+        v: [Vec3A; 3],
+        normals: Option<[Vec3A; 3]>,
+        material: u32,
+    ) -> Result<(), Error> {
         self.room()?;
         let e1 = v[1] - v[0];
         let e2 = v[2] - v[0];
@@ -390,7 +402,14 @@ impl SceneBuilder {
         Ok(())
     }
 
-    pub fn cone(&mut self, base: Vec3A, r0: f32, apex: Vec3A, r1: f32, material: u32) -> Result<(), Error> {
+    pub fn cone(
+        &mut self,
+        base: Vec3A,
+        r0: f32,
+        apex: Vec3A,
+        r1: f32,
+        material: u32,
+    ) -> Result<(), Error> {
         self.room()?;
         if let Some(c) = make_cone(base, r0, apex, r1) {
             let k = self.geom.cones.len() as u32;
@@ -401,7 +420,12 @@ impl SceneBuilder {
     }
 
     /// Adds an infinite plane; `None` if the normal is zero.
-    pub fn plane(&mut self, point: Vec3A, normal: Vec3A, material: u32) -> Result<Option<()>, Error> {
+    pub fn plane(
+        &mut self,
+        point: Vec3A,
+        normal: Vec3A,
+        material: u32,
+    ) -> Result<Option<()>, Error> {
         self.room()?;
         let Some(n) = normal.try_normalize() else {
             return Ok(None);

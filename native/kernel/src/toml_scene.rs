@@ -293,7 +293,11 @@ pub fn parse(
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
 ) -> Result<Scene, Error> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
-        Error::parse(file, line_of(bytes, e.valid_up_to()), "the file is not valid UTF-8")
+        Error::parse(
+            file,
+            line_of(bytes, e.valid_up_to()),
+            "the file is not valid UTF-8",
+        )
     })?;
     let def: SceneDef = toml::from_str(text).map_err(|e| {
         let line = e.span().map_or(1, |s| line_of(bytes, s.start));
@@ -326,7 +330,11 @@ pub fn parse(
         cx.finite(&a.span(), "ambient", &v.to_array())?;
         b.ambient = Some(v);
     }
-    limits::check("light count", def.lights.len() as u64, limits::MAX_LIGHTS as u64)?;
+    limits::check(
+        "light count",
+        def.lights.len() as u64,
+        limits::MAX_LIGHTS as u64,
+    )?;
     let n = def.lights.len();
     for l in &def.lights {
         let span = l.span();
@@ -416,9 +424,12 @@ pub fn parse(
                 ];
                 let n = match normals {
                     Some(n) => Some([
-                        cx.v3(&span, "triangle 'normals'", n[0])?.normalize_or(Vec3A::Z),
-                        cx.v3(&span, "triangle 'normals'", n[1])?.normalize_or(Vec3A::Z),
-                        cx.v3(&span, "triangle 'normals'", n[2])?.normalize_or(Vec3A::Z),
+                        cx.v3(&span, "triangle 'normals'", n[0])?
+                            .normalize_or(Vec3A::Z),
+                        cx.v3(&span, "triangle 'normals'", n[1])?
+                            .normalize_or(Vec3A::Z),
+                        cx.v3(&span, "triangle 'normals'", n[2])?
+                            .normalize_or(Vec3A::Z),
                     ]),
                     None => None,
                 };
@@ -465,7 +476,8 @@ pub fn parse(
                 let b0 = cx.v3(&span, "cylinder 'base'", *base)?;
                 let a0 = cx.v3(&span, "cylinder 'apex'", *apex)?;
                 cx.finite(&span, "cylinder 'radius'", &[*radius])?;
-                b.cone(b0, *radius, a0, *radius, find(material)?).map_err(lim)?;
+                b.cone(b0, *radius, a0, *radius, find(material)?)
+                    .map_err(lim)?;
             }
             ObjectDef::Mesh {
                 file: mesh_file,
@@ -502,8 +514,9 @@ pub fn parse(
                 if xf.matrix3.determinant() == 0.0 {
                     return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
                 }
-                let data = resolve(mesh_file)
-                    .map_err(|e| cx.err(span.clone(), format!("cannot load mesh '{mesh_file}': {e}")))?;
+                let data = resolve(mesh_file).map_err(|e| {
+                    cx.err(span.clone(), format!("cannot load mesh '{mesh_file}': {e}"))
+                })?;
                 let mat = match material {
                     Some(_) => Some(find(material)?),
                     None => None,
@@ -517,7 +530,10 @@ pub fn parse(
 }
 
 fn matrix_transform(m: &[Vec<f32>]) -> Option<Affine3A> {
-    if !(m.len() == 3 || m.len() == 4) || m.iter().any(|r| r.len() != 4 || r.iter().any(|v| !v.is_finite())) {
+    if !(m.len() == 3 || m.len() == 4)
+        || m.iter()
+            .any(|r| r.len() != 4 || r.iter().any(|v| !v.is_finite()))
+    {
         return None;
     }
     if let Some(last) = m.get(3) {
@@ -561,7 +577,10 @@ mod tests {
         let end = doc[start..].find("//! ```\n").unwrap() + start;
         let src: String = doc[start..end]
             .lines()
-            .map(|l| l.strip_prefix("//! ").unwrap_or(l.strip_prefix("//!").unwrap_or(l)))
+            .map(|l| {
+                l.strip_prefix("//! ")
+                    .unwrap_or(l.strip_prefix("//!").unwrap_or(l))
+            })
             .collect::<Vec<_>>()
             .join("\n");
         let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
@@ -588,11 +607,18 @@ mod tests {
         assert!(e.starts_with("s.toml:4: unknown field `bogus`"), "{e}");
         let e = err(&format!("{CAM}\n\n[[objects]]\ntype = \"blob\"\n"));
         assert!(e.starts_with("s.toml:"), "{e}");
-        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, nan]\nradius = 1\n"));
+        let e = err(&format!(
+            "{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, nan]\nradius = 1\n"
+        ));
         assert_eq!(e, "s.toml:5: sphere 'center' must be finite numbers");
         let e = err("[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\nwidth = 100000\n");
-        assert!(e.starts_with("s.toml:1: camera resolution: image width is 100000"), "{e}");
-        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"mesh\"\nfile = \"x.obj\"\n"));
+        assert!(
+            e.starts_with("s.toml:1: camera resolution: image width is 100000"),
+            "{e}"
+        );
+        let e = err(&format!(
+            "{CAM}\n[[objects]]\ntype = \"mesh\"\nfile = \"x.obj\"\n"
+        ));
         assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
         let e = err("[camera]\nfrom = [0, 0, 5\n");
         assert!(e.starts_with("s.toml:2:"), "{e}");
