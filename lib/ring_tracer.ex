@@ -32,7 +32,13 @@ defmodule RingTracer do
     * `:samples` — S x S stratified samples per pixel (default 1)
     * `:spd` — SPD testing procedure: rays through pixel corners, no
       cut-off (default false)
+    * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
+      (see `RingTracer.Strategy`)
+    * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
+      makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — nodes to place children on, round robin (default: this node)
+    * `:progress` — a pid that gets `{RingTracer, job_id, {:progress, done,
+      total}}` as atoms arrive
     * `:timeout` — milliseconds, or `:infinity` (default)
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
@@ -77,15 +83,59 @@ defmodule RingTracer do
     end
   end
 
-  defp run(scene, settings, opts) do
+  @doc """
+  Runs the same parent, children and strategies on the simulated kernel
+  (`RingTracer.Kernel.Simulated`): each atom sleeps for its cost instead of
+  being traced, so rings of hundreds or thousands of children fit on one
+  machine. The image is black; the statistics are what matters.
+
+  ## Options
+
+  Those of `render/2` that concern the job (`:children`, `:atoms`,
+  `:strategy`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
+  microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
+
+      iex> {:ok, result} = RingTracer.simulate(children: 16, atoms: 4, costs: 1000)
+      iex> length(result.atoms)
+      64
+  """
+  @spec simulate(keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
+  def simulate(opts \\ []) do
+    {costs, opts} = Keyword.pop(opts, :costs, 2000)
+
+    with {:ok, opts} <- Options.validate(opts) do
+      n = opts[:children] * opts[:atoms]
+      settings = %Settings{width: n, height: 1}
+      source = RingTracer.Scene.Source.new("simulated", "sim", "", %{})
+      run(source, settings, {RingTracer.Kernel.Simulated, costs: costs}, :infinity, opts)
+    end
+  end
+
+  defp run(%Scene{} = scene, settings, opts) do
+    run(
+      scene.source,
+      settings,
+      {RingTracer.Kernel.Native, []},
+      :erlang.system_info(:dirty_cpu_schedulers_online),
+      opts
+    )
+  end
+
+  defp run(source, settings, kernel, capacity_cap, opts) do
+    {:ok, strategy} = RingTracer.Strategy.module(opts[:strategy])
+
     spec = %Spec{
       id: make_ref(),
-      source: scene.source,
+      source: source,
       settings: settings,
       layout: Layout.new(settings.width, settings.height, opts[:children], opts[:atoms]),
       caller: self(),
       nodes: opts[:nodes],
-      handover_delay: opts[:handover_delay]
+      handover_delay: opts[:handover_delay],
+      strategy: strategy,
+      kernel: kernel,
+      speeds: opts[:speeds],
+      progress: opts[:progress]
     }
 
     {:ok, parent} = Parent.start(spec)
@@ -98,7 +148,7 @@ defmodule RingTracer do
         end
 
         case reply do
-          {:ok, raw} -> {:ok, Result.new(settings, raw)}
+          {:ok, raw} -> {:ok, Result.new(settings, opts[:strategy], capacity_cap, raw)}
           {:error, message} -> {:error, Error.new(:render_failed, message)}
         end
 

@@ -18,7 +18,10 @@ defmodule RingTracer.Options do
     spd: {:boolean, false},
     nodes: {:nodes, []},
     timeout: {:timeout, :infinity},
-    handover_delay: {:non_neg_integer, 0}
+    handover_delay: {:non_neg_integer, 0},
+    strategy: {:strategy, :ring},
+    speeds: {:speeds, []},
+    progress: {:pid, nil}
   ]
 
   @max_children 100_000
@@ -101,6 +104,22 @@ defmodule RingTracer.Options do
   end
 
   defp check(:nodes, _), do: {:error, "a list of node names (atoms)"}
+
+  defp check(:strategy, v) do
+    if v in RingTracer.Strategy.names(),
+      do: :ok,
+      else: {:error, "one of #{inspect(RingTracer.Strategy.names())}"}
+  end
+
+  defp check(:speeds, v) when is_list(v) do
+    if Enum.all?(v, &(is_number(&1) and &1 >= 1)),
+      do: :ok,
+      else: {:error, "a list of slowdown factors >= 1"}
+  end
+
+  defp check(:speeds, _), do: {:error, "a list of slowdown factors >= 1"}
+  defp check(:pid, v) when is_pid(v), do: :ok
+  defp check(:pid, _), do: {:error, "a pid"}
 
   defp invalid(key, what, value),
     do:

@@ -4,47 +4,114 @@ defmodule RingTracer.Result do
 
     * `:pixels` — `width * height * 3` native-endian 32-bit floats, row-major
       from the top-left, linear light (write it with `RingTracer.Image`);
-    * `:elapsed_us` — the job's wall time, from starting the parent to the
-      last atom, in microseconds;
+    * `:elapsed_us` — the makespan: from starting the parent to the last
+      child stopped, in microseconds;
+    * `:ideal_us` — total trace work divided by total capacity (see
+      `ideal_us/3`);
     * `:children` — one map per child, in ring order: `:index`, `:node`,
-      atoms `:own`, `:given`, `:received`, `:handovers` (hand-over messages received), `:traced`, help offers
-      `:offers_sent`, `:offers_passed`, `:offers_consumed`,
-      `:grandchild_restarts`, `:busy_us` (time its grandchild spent tracing)
-      and `:rays`;
+      `:speed`, atoms `:own`, `:given`, `:received`, `:handovers` (hand-over
+      messages received), `:traced`, offers `:offers_sent`, `:offers_passed`,
+      `:offers_consumed` (for `:steal`, requests sent, refused and granted),
+      `:grandchild_restarts`, `:busy_us` (wall time its grandchild spent on
+      atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,
+      `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`;
+    * `:atoms` — one map per atom: `:atom`, `:owner` (the child whose strip
+      it is), `:child` (who traced it), `:start_us`, `:end_us`, `:trace_us`;
+    * `:events` — protocol events in time order: `:kind` (`:offer`, `:pass`,
+      `:give`, `:returned`, `:steal`, `:refuse`), `:from`, `:to`, `:at_us`;
+    * `:messages` — messages between the job's processes, counted at the
+      sender, by kind (`:result`, `:handover`, `:offer`, `:control`):
+      `%{count: n, bytes: b}` (bytes in the external term format);
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
-      `:reflected`, `:refracted`, `:shadow`.
+      `:reflected`, `:refracted`, `:shadow`;
+    * `:strategy` — the strategy's name.
   """
 
   @enforce_keys [:width, :height, :pixels, :elapsed_us, :children, :rays, :settings]
-  defstruct [:width, :height, :pixels, :elapsed_us, :children, :rays, :settings]
+  defstruct [
+    :width,
+    :height,
+    :pixels,
+    :elapsed_us,
+    :ideal_us,
+    :children,
+    :atoms,
+    :events,
+    :messages,
+    :rays,
+    :settings,
+    :strategy,
+    duplicates: 0
+  ]
 
   @type t :: %__MODULE__{
           width: pos_integer(),
           height: pos_integer(),
           pixels: binary(),
           elapsed_us: non_neg_integer(),
+          ideal_us: non_neg_integer(),
           children: [map()],
+          atoms: [map()],
+          events: [map()],
+          messages: %{atom() => %{count: non_neg_integer(), bytes: non_neg_integer()}},
           rays: map(),
-          settings: RingTracer.Settings.t()
+          settings: RingTracer.Settings.t(),
+          strategy: atom(),
+          duplicates: non_neg_integer()
         }
 
   @doc false
-  @spec new(RingTracer.Settings.t(), map()) :: t()
-  def new(settings, %{pixels: pixels, elapsed_us: us, children: children}) do
+  @spec new(RingTracer.Settings.t(), atom(), non_neg_integer(), map()) :: t()
+  def new(settings, strategy, capacity_cap, raw) do
     rays =
-      Enum.reduce(children, %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0}, fn c,
-                                                                                              acc ->
+      Enum.reduce(raw.children, RingTracer.Kernel.no_rays(), fn c, acc ->
         Map.merge(acc, c.rays, fn _, a, b -> a + b end)
       end)
+
+    children = Enum.map(raw.children, &Map.put(&1, :idle_us, max(raw.elapsed_us - &1.busy_us, 0)))
 
     %__MODULE__{
       width: settings.width,
       height: settings.height,
-      pixels: pixels,
-      elapsed_us: us,
+      pixels: raw.pixels,
+      elapsed_us: raw.elapsed_us,
+      ideal_us: ideal_us(raw.atoms, Enum.map(children, & &1.speed), capacity_cap),
       children: children,
+      atoms: raw.atoms,
+      events: raw.events,
+      messages: Map.new(raw.traffic, fn {kind, {n, b}} -> {kind, %{count: n, bytes: b}} end),
       rays: rays,
-      settings: settings
+      settings: settings,
+      strategy: strategy,
+      duplicates: raw.duplicates
     }
+  end
+
+  @doc """
+  The ideal makespan: total trace work over total capacity. A child of speed
+  factor `s` has capacity `1/s`; the total is capped at `cap` (the dirty CPU
+  schedulers for the native kernel: no more atoms trace at once than that).
+
+      iex> RingTracer.Result.ideal_us([%{trace_us: 100}, %{trace_us: 300}], [1, 1], 2)
+      200
+      iex> RingTracer.Result.ideal_us([%{trace_us: 100}, %{trace_us: 300}], [1, 4], 8)
+      320
+  """
+  @spec ideal_us([map()], [number()], number()) :: non_neg_integer()
+  def ideal_us(atoms, speeds, cap) do
+    work = Enum.reduce(atoms, 0, &(&1.trace_us + &2))
+    capacity = min(Enum.reduce(speeds, 0, &(1 / &1 + &2)), cap)
+    round(work / capacity)
+  end
+
+  @doc "Messages and bytes per atom, over all kinds."
+  @spec per_atom(t()) :: %{messages: float(), bytes: float()}
+  def per_atom(%__MODULE__{messages: messages, atoms: atoms}) do
+    n = max(length(atoms), 1)
+
+    {count, bytes} =
+      Enum.reduce(messages, {0, 0}, fn {_, m}, {c, b} -> {c + m.count, b + m.bytes} end)
+
+    %{messages: count / n, bytes: bytes / n}
   end
 end

@@ -4,31 +4,31 @@ defmodule RingTracer.Job.Child do
 
   Started by the job's parent under `RingTracer.Children` on the node the
   child runs on (a supervision tree cannot span nodes; the child's life is
-  tied to its parent's by a monitor). It fetches the parsed scene from its
-  node's `RingTracer.SceneCache`, then waits for `{:ring, left}` from the
-  parent, naming its left sibling.
+  tied to its parent's by a monitor). It prepares its kernel (for the native
+  kernel: the parsed scene from its node's `RingTracer.SceneCache`), then
+  waits for `{:ring, ...}` from the parent, naming its left sibling.
 
   Then, as the paper has it:
 
     * it spawns a grandchild and keeps two atoms in its pipe (one being
       traced, one queued), so the grandchild never waits;
     * every traced atom's pixels go to the parent at once;
-    * when it holds no more atoms it sends a help offer
-      (`RingTracer.Ring.HelpOffer`) to its left sibling;
-    * an offer from a sibling is consumed (atoms handed over directly to the
-      offerer) or passed on to the left, by `RingTracer.Ring.HelpOffer.decide/2`;
-    * when its own offer comes back it is finished and waits for the
-      parent's stop message.
+    * when it holds no more atoms, its strategy (`RingTracer.Strategy`)
+      decides what to do: for the ring, send a help offer to the left;
+    * atoms handed over (`{:handover, from, atoms}`) are queued and traced.
 
-  A grandchild that dies is restarted and its atoms retried, at most
-  three times per atom; then the child reports the atom as failed to
-  the parent, which fails the job.
+  A grandchild that dies is restarted and its atoms retried, at most three
+  times per atom; then the child reports the atom as failed to the parent,
+  which fails the job.
+
+  Every message a child sends to another process of the job goes through
+  `send_counted/4`, which counts it and its size by kind: `:result`,
+  `:handover`, `:offer`, `:control`.
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.{Layout, SceneCache}
   alias RingTracer.Job.{Grandchild, Spec}
-  alias RingTracer.Ring.HelpOffer
+  alias RingTracer.Layout
 
   @pipe_depth 2
   @max_attempts 3
@@ -46,29 +46,106 @@ defmodule RingTracer.Job.Child do
   @spec start_link({Spec.t(), non_neg_integer(), pid()}) :: GenServer.on_start()
   def start_link(args), do: GenServer.start_link(__MODULE__, args)
 
+  ## Helpers for strategies
+
+  @doc "Sends `msg` to `pid`, counting it under `kind` with its external size."
+  @spec send_counted(map(), pid(), atom(), term()) :: map()
+  def send_counted(state, pid, kind, msg) do
+    send(pid, msg)
+    count(state, kind, msg)
+  end
+
+  @doc false
+  @spec count(map(), atom(), term()) :: map()
+  def count(state, kind, msg) do
+    bytes = :erlang.external_size(msg)
+
+    update_in(
+      state.traffic,
+      &Map.update(&1, kind, {1, bytes}, fn {n, b} -> {n + 1, b + bytes} end)
+    )
+  end
+
+  @doc "Adds one to stat `key`."
+  @spec bump(map(), atom()) :: map()
+  def bump(state, key), do: update_in(state.stats[key], &(&1 + 1))
+
+  @doc "Records a protocol event (offer sent, passed, consumed...) for the timeline."
+  @spec event(map(), atom(), term()) :: map()
+  def event(state, kind, to) do
+    at = System.system_time(:microsecond) - state.t0
+    %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
+  end
+
+  @doc "Takes the last `g` queued atoms (farthest from being traced) out of the queue."
+  @spec take_last(map(), non_neg_integer()) :: {[Layout.atom_id()], map()}
+  def take_last(state, g) do
+    {keep, give} = Enum.split(state.queue, length(state.queue) - g)
+    {give, %{state | queue: keep}}
+  end
+
+  @doc "Hands `atoms` over to `pid` (possibly none: a refusal)."
+  @spec hand_over(map(), pid(), [Layout.atom_id()]) :: map()
+  def hand_over(state, pid, atoms) do
+    msg = {:handover, state.index, atoms}
+    state = count(state, :handover, msg)
+
+    case state.spec.handover_delay do
+      0 -> send(pid, msg)
+      ms -> Process.send_after(pid, msg, ms)
+    end
+
+    update_in(state.stats.given, &(&1 + length(atoms)))
+  end
+
+  @doc "Queues atoms handed over to this child and starts on them."
+  @spec receive_atoms(map(), [Layout.atom_id()]) :: map()
+  def receive_atoms(state, atoms) do
+    stats = %{
+      state.stats
+      | received: state.stats.received + length(atoms),
+        handovers: state.stats.handovers + 1
+    }
+
+    %{state | queue: state.queue ++ atoms, status: :working, stats: stats}
+    |> fill_pipe()
+    |> maybe_idle()
+  end
+
+  ## GenServer
+
   @impl GenServer
   def init({%Spec{} = spec, index, parent}) do
     Process.flag(:trap_exit, true)
     Process.monitor(parent)
+    {kernel, _} = spec.kernel
+    queue = spec.strategy.initial_atoms(spec.layout, index)
 
     state = %{
       spec: spec,
       index: index,
       parent: parent,
+      kernel: nil,
       left: nil,
-      scene: nil,
+      left_index: nil,
+      siblings: %{},
+      t0: 0,
       grandchild: nil,
-      queue: Layout.strip(spec.layout, index),
+      queue: queue,
       in_flight: [],
       attempts: %{},
       done: 0,
-      offer_seq: 0,
-      current_offer: nil,
       status: :waiting,
+      strategy_state: %{},
+      early: [],
+      traffic: %{},
+      events: [],
+      atoms: [],
       stats: %{
         index: index,
         node: node(),
-        own: spec.layout.atoms_per_child,
+        speed: speed(spec, index),
+        own: length(queue),
         given: 0,
         received: 0,
         handovers: 0,
@@ -78,39 +155,78 @@ defmodule RingTracer.Job.Child do
         offers_consumed: 0,
         grandchild_restarts: 0,
         busy_us: 0,
-        rays: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0}
+        trace_us: 0,
+        first_atom_us: nil,
+        last_atom_us: nil,
+        rays: RingTracer.Kernel.no_rays()
       }
     }
 
-    {:ok, state, {:continue, :scene}}
+    {:ok, state, {:continue, {:prepare, kernel}}}
   end
 
   @impl GenServer
-  def handle_continue(:scene, state) do
-    case SceneCache.fetch(state.spec.source) do
-      {:ok, scene} ->
-        {:noreply, %{state | scene: scene}}
+  def handle_continue({:prepare, kernel}, state) do
+    {_, opts} = state.spec.kernel
 
-      {:error, error} ->
-        send(state.parent, {:child_failed, state.index, error.message})
+    case kernel.prepare(state.spec, opts) do
+      {:ok, context} ->
+        {:noreply, %{state | kernel: {kernel, context}}}
+
+      {:error, message} ->
+        send(state.parent, {:child_failed, state.index, message})
         {:stop, :normal, state}
     end
   end
 
   @impl GenServer
-  def handle_info({:ring, left}, state) do
-    state = %{state | left: left, status: :working} |> spawn_grandchild() |> fill_pipe()
-    {:noreply, maybe_offer(state)}
+  def handle_info({:ring, ring}, state) do
+    state =
+      %{
+        state
+        | left: ring.left,
+          left_index: ring.left_index,
+          siblings: ring.siblings,
+          t0: ring.t0,
+          status: :working
+      }
+      |> spawn_grandchild()
+      |> fill_pipe()
+      |> maybe_idle()
+
+    {:noreply, state}
   end
 
-  def handle_info({:traced, gc, atom, pixels, rays, us}, %{grandchild: gc} = state) do
-    send(state.parent, {:atom_done, state.index, atom, pixels, rays, us})
+  def handle_info({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
+    state =
+      send_counted(
+        state,
+        state.parent,
+        :result,
+        {:atom_done, state.index, atom, pixels, rays, timing.trace_us}
+      )
+
+    started = timing.started_at - state.t0
+    ended = timing.ended_at - state.t0
+    s = state.stats
 
     stats = %{
-      state.stats
-      | traced: state.stats.traced + 1,
-        busy_us: state.stats.busy_us + us,
-        rays: Map.merge(state.stats.rays, rays, fn _, a, b -> a + b end)
+      s
+      | traced: s.traced + 1,
+        busy_us: s.busy_us + (ended - started),
+        trace_us: s.trace_us + timing.trace_us,
+        first_atom_us: s.first_atom_us || started,
+        last_atom_us: ended,
+        rays: Map.merge(s.rays, rays, fn _, a, b -> a + b end)
+    }
+
+    record = %{
+      atom: atom,
+      owner: Layout.owner(state.spec.layout, atom),
+      child: state.index,
+      start_us: started,
+      end_us: ended,
+      trace_us: timing.trace_us
     }
 
     state = %{
@@ -118,68 +234,26 @@ defmodule RingTracer.Job.Child do
       | in_flight: List.delete(state.in_flight, atom),
         attempts: Map.delete(state.attempts, atom),
         done: state.done + 1,
-        stats: stats
+        stats: stats,
+        atoms: [record | state.atoms]
     }
 
-    {:noreply, state |> fill_pipe() |> maybe_offer()}
+    {:noreply, state |> fill_pipe() |> maybe_idle()}
   end
 
   def handle_info({:atom_failed, gc, atom, message}, %{grandchild: gc} = state) do
     {:noreply, retry(state, [atom], message)}
   end
 
-  def handle_info({:help_offer, %HelpOffer{} = offer}, state) do
-    view = %{
-      index: state.index,
-      remaining: length(state.queue),
-      in_flight: length(state.in_flight),
-      done: state.done,
-      offer_seq: state.current_offer
-    }
-
-    case HelpOffer.decide(view, offer) do
-      :returned ->
-        {:noreply, %{state | status: :finished, current_offer: nil}}
-
-      :drop ->
-        {:noreply, state}
-
-      :pass ->
-        send(state.left, {:help_offer, offer})
-        {:noreply, update_in(state.stats.offers_passed, &(&1 + 1))}
-
-      {:give, g} ->
-        {keep, give} = HelpOffer.split_queue(state.queue, g)
-        hand_over(state, offer.pid, {:handover, state.index, give})
-
-        stats = %{
-          state.stats
-          | given: state.stats.given + g,
-            offers_consumed: state.stats.offers_consumed + 1
-        }
-
-        {:noreply, %{state | queue: keep, stats: stats}}
-    end
-  end
-
-  def handle_info({:handover, _from, atoms}, state) do
-    state = %{
-      state
-      | queue: state.queue ++ atoms,
-        status: :working,
-        current_offer: nil,
-        stats: %{
-          state.stats
-          | received: state.stats.received + length(atoms),
-            handovers: state.stats.handovers + 1
-        }
-    }
-
-    {:noreply, state |> fill_pipe() |> maybe_offer()}
-  end
-
   def handle_info({:stop, parent}, %{parent: parent} = state) do
-    send(parent, {:child_stopped, state.index, state.stats})
+    report = %{
+      stats: state.stats,
+      traffic: state.traffic,
+      events: Enum.reverse(state.events),
+      atoms: Enum.reverse(state.atoms)
+    }
+
+    send(parent, {:child_stopped, state.index, report})
     {:stop, :normal, state}
   end
 
@@ -188,17 +262,27 @@ defmodule RingTracer.Job.Child do
   end
 
   def handle_info({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
-    state = %{
-      state
-      | grandchild: nil,
-        stats: %{state.stats | grandchild_restarts: state.stats.grandchild_restarts + 1}
-    }
+    state = %{state | grandchild: nil} |> bump(:grandchild_restarts)
 
     {:noreply,
      retry(spawn_grandchild(state), state.in_flight, "grandchild exited: #{inspect(reason)}")}
   end
 
-  def handle_info(_other, state), do: {:noreply, state}
+  def handle_info(msg, %{left: nil} = state),
+    do: {:noreply, %{state | early: [msg | state.early]}}
+
+  def handle_info(msg, state) do
+    case state.spec.strategy.handle_message(msg, state) do
+      {:ok, state} ->
+        {:noreply, state}
+
+      :unhandled ->
+        case msg do
+          {:handover, _from, atoms} when is_list(atoms) -> {:noreply, receive_atoms(state, atoms)}
+          _ -> {:noreply, state}
+        end
+    end
+  end
 
   @impl GenServer
   def terminate(_reason, state) do
@@ -222,21 +306,17 @@ defmodule RingTracer.Job.Child do
 
     case failed do
       nil ->
-        state = ensure_grandchild(state)
+        state = if state.grandchild, do: state, else: spawn_grandchild(state)
         Enum.each(atoms, &send(state.grandchild, {:trace, &1}))
         state
 
       {atom, message} ->
-        send(state.parent, {:atom_failed, state.index, atom, message})
-        state
+        send_counted(state, state.parent, :control, {:atom_failed, state.index, atom, message})
     end
   end
 
-  defp ensure_grandchild(%{grandchild: nil} = state), do: spawn_grandchild(state)
-  defp ensure_grandchild(state), do: state
-
   defp spawn_grandchild(state) do
-    gc = Grandchild.start_link(state.scene.ref, state.spec.settings, state.spec.layout)
+    gc = Grandchild.start_link(state.kernel, state.spec.layout, state.stats.speed)
     %{state | grandchild: gc}
   end
 
@@ -258,24 +338,11 @@ defmodule RingTracer.Job.Child do
 
   defp fill_pipe(state), do: state
 
-  defp maybe_offer(%{queue: [], in_flight: [], status: :working} = state) do
-    seq = state.offer_seq + 1
-    offer = %HelpOffer{origin: state.index, pid: self(), done: state.done, seq: seq}
-    send(state.left, {:help_offer, offer})
+  defp maybe_idle(%{queue: [], in_flight: [], status: :working} = state),
+    do: state.spec.strategy.idle(state)
 
-    %{
-      state
-      | offer_seq: seq,
-        current_offer: seq,
-        status: :offered,
-        stats: %{state.stats | offers_sent: state.stats.offers_sent + 1}
-    }
-  end
+  defp maybe_idle(state), do: state
 
-  defp maybe_offer(state), do: state
-
-  defp hand_over(%{spec: %Spec{handover_delay: 0}}, pid, msg), do: send(pid, msg)
-
-  defp hand_over(%{spec: %Spec{handover_delay: ms}}, pid, msg),
-    do: Process.send_after(pid, msg, ms)
+  defp speed(%Spec{speeds: []}, _index), do: 1
+  defp speed(%Spec{speeds: speeds}, index), do: Enum.at(speeds, rem(index, length(speeds)))
 end

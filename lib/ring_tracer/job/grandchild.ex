@@ -1,54 +1,54 @@
 defmodule RingTracer.Job.Grandchild do
   @moduledoc """
   A grandchild: spawned and linked by a child on the child's node, it traces
-  one atom at a time through the NIF (on a dirty CPU scheduler) and sends the
-  atom's pixels back to its child.
+  one atom at a time through the job's kernel (`RingTracer.Kernel`; the
+  native one runs on a dirty CPU scheduler) and sends the atom's pixels back
+  to its child.
 
   Its mailbox is the paper's pipe: the child keeps the next atom queued in it,
   so the grandchild never waits while its child still has atoms.
 
+  A child with speed factor `s > 1` emulates a machine `s` times slower: after
+  each atom its grandchild sleeps `(s - 1)` times the atom's trace time,
+  burning no CPU.
+
   Messages in: `{:trace, atom}`. Messages out, to the child:
-  `{:traced, self(), atom, pixels, rays, microseconds}` or
-  `{:atom_failed, self(), atom, message}` when the kernel returns an error or
-  raises.
+  `{:traced, self(), atom, pixels, rays, timing}` (timing: `:trace_us`,
+  `:started_at`, `:ended_at` in system microseconds) or
+  `{:atom_failed, self(), atom, message}`.
   """
 
-  alias RingTracer.{Layout, Native, Settings}
+  alias RingTracer.Layout
 
   @doc "Spawns a grandchild linked to the calling child."
-  @spec start_link(reference(), Settings.t(), Layout.t()) :: pid()
-  def start_link(scene_ref, %Settings{} = settings, %Layout{} = layout) do
+  @spec start_link({module(), term()}, Layout.t(), number()) :: pid()
+  def start_link(kernel, %Layout{} = layout, speed) do
     child = self()
-    native = Settings.to_native(settings)
-    spawn_link(fn -> loop(child, scene_ref, native, layout) end)
+    spawn_link(fn -> loop(child, kernel, layout, speed) end)
   end
 
-  defp loop(child, scene_ref, native, layout) do
+  defp loop(child, kernel, layout, speed) do
     receive do
       {:trace, atom} ->
-        send(child, trace(scene_ref, native, layout, atom))
-        loop(child, scene_ref, native, layout)
+        send(child, trace(kernel, layout, speed, atom))
+        loop(child, kernel, layout, speed)
     end
   end
 
   @doc false
-  @spec trace(reference(), map(), Layout.t(), non_neg_integer()) :: tuple()
-  def trace(scene_ref, native, layout, atom) do
+  @spec trace({module(), term()}, Layout.t(), number(), non_neg_integer()) :: tuple()
+  def trace({kernel, context}, layout, speed, atom) do
     {first, count} = Layout.span(layout, atom)
-    t0 = System.monotonic_time(:microsecond)
+    started = System.system_time(:microsecond)
 
-    result =
-      try do
-        Native.trace_atom(scene_ref, native, first, count)
-      rescue
-        e -> {:error, Exception.message(e)}
-      end
+    case kernel.trace(context, first, count, atom) do
+      {:ok, pixels, rays, us} ->
+        if speed > 1, do: Process.sleep(round((speed - 1) * us / 1000))
+        timing = %{trace_us: us, started_at: started, ended_at: System.system_time(:microsecond)}
+        {:traced, self(), atom, pixels, rays, timing}
 
-    us = System.monotonic_time(:microsecond) - t0
-
-    case result do
-      {:ok, {pixels, rays}} -> {:traced, self(), atom, pixels, rays, us}
-      {:error, message} -> {:atom_failed, self(), atom, message}
+      {:error, message} ->
+        {:atom_failed, self(), atom, message}
     end
   end
 end

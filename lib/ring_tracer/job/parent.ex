@@ -7,17 +7,17 @@ defmodule RingTracer.Job.Parent do
   not the ring's tokens, is the termination test, because atoms handed over
   between children may still be in flight when an offer returns. An atom
   that arrives twice is counted once. On completion the parent sends each
-  child the stop message, waits until every child has stopped (a child kills
-  its grandchild first), sends the result to the caller and stops: no process
-  of the job outlives it.
+  child the stop message, waits until every child has stopped and reported
+  its statistics (a child kills its grandchild first), sends the result to
+  the caller and stops: no process of the job outlives it.
 
   If the caller dies, the job stops. If a child dies or an atom fails for
   good, the job fails with the reason.
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Layout
   alias RingTracer.Job.{Child, Spec}
+  alias RingTracer.Layout
 
   @doc false
   @spec start(Spec.t()) :: DynamicSupervisor.on_start_child()
@@ -29,18 +29,27 @@ defmodule RingTracer.Job.Parent do
   @spec start_link(Spec.t()) :: GenServer.on_start()
   def start_link(spec), do: GenServer.start_link(__MODULE__, spec)
 
+  @doc "Sends `msg` to `pid`, counting it under `kind` (see `RingTracer.Job.Child.send_counted/4`)."
+  @spec send_counted(map(), pid(), atom(), term()) :: map()
+  def send_counted(state, pid, kind, msg), do: Child.send_counted(state, pid, kind, msg)
+
   @impl GenServer
   def init(%Spec{} = spec) do
     Process.monitor(spec.caller)
+    {:module, _} = Code.ensure_loaded(spec.strategy)
 
     state = %{
       spec: spec,
       started: System.monotonic_time(:microsecond),
+      t0: System.system_time(:microsecond),
       children: %{},
       monitors: %{},
       results: %{},
       missing: Layout.atom_count(spec.layout),
-      stopping: nil
+      stopping: nil,
+      strategy_state: nil,
+      traffic: %{},
+      duplicates: 0
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -57,8 +66,11 @@ defmodule RingTracer.Job.Parent do
         node = Enum.at(nodes, rem(i, length(nodes)))
 
         case Child.start(node, state.spec, i, self()) do
-          {:ok, pid} -> {:cont, {:ok, [{i, pid} | acc]}}
-          other -> {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}"}}
+          {:ok, pid} ->
+            {:cont, {:ok, [{i, pid} | acc]}}
+
+          other ->
+            {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}", acc}}
         end
       end)
 
@@ -66,25 +78,43 @@ defmodule RingTracer.Job.Parent do
       {:ok, list} ->
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
+        state = %{state | children: children, monitors: monitors}
 
-        for {i, pid} <- children do
-          send(pid, {:ring, Map.fetch!(children, rem(i - 1 + n, n))})
-        end
+        state =
+          Enum.reduce(children, state, fn {i, pid}, st ->
+            left = rem(i - 1 + n, n)
 
-        {:noreply, %{state | children: children, monitors: monitors}}
+            ring = %{
+              left: Map.fetch!(children, left),
+              left_index: left,
+              siblings: children,
+              t0: st.t0
+            }
 
-      {:error, message} ->
-        fail(state, message)
+            send_counted(st, pid, :control, {:ring, ring})
+          end)
+
+        state =
+          if function_exported?(state.spec.strategy, :parent_start, 1),
+            do: state.spec.strategy.parent_start(state),
+            else: state
+
+        {:noreply, state}
+
+      {:error, message, list} ->
+        for {_i, pid} <- list, do: Process.exit(pid, :kill)
+        send(state.spec.caller, {RingTracer, state.spec.id, {:error, message}})
+        {:stop, :normal, state}
     end
   end
 
   @impl GenServer
-  def handle_info({:atom_done, _child, atom, pixels, _rays, _us}, %{stopping: nil} = state) do
+  def handle_info({:atom_done, child, atom, pixels, _rays, _us}, %{stopping: nil} = state) do
     {_first, count} = Layout.span(state.spec.layout, atom)
 
     cond do
       Map.has_key?(state.results, atom) ->
-        {:noreply, state}
+        {:noreply, %{state | duplicates: state.duplicates + 1}}
 
       byte_size(pixels) != count * 12 ->
         fail(
@@ -99,7 +129,18 @@ defmodule RingTracer.Job.Parent do
             missing: state.missing - 1
         }
 
-        if state.missing == 0, do: stop_children(state), else: {:noreply, state}
+        progress(state)
+
+        cond do
+          state.missing == 0 ->
+            stop_children(state)
+
+          function_exported?(state.spec.strategy, :parent_atom_done, 2) ->
+            {:noreply, state.spec.strategy.parent_atom_done(state, child)}
+
+          true ->
+            {:noreply, state}
+        end
     end
   end
 
@@ -111,10 +152,10 @@ defmodule RingTracer.Job.Parent do
     fail(state, "child #{child} failed: #{message}")
   end
 
-  def handle_info({:child_stopped, index, stats}, %{stopping: stopping} = state)
+  def handle_info({:child_stopped, index, report}, %{stopping: stopping} = state)
       when is_map(stopping) do
-    state = %{state | stopping: %{stopping | stats: Map.put(stopping.stats, index, stats)}}
-    {:noreply, state}
+    {:noreply,
+     %{state | stopping: %{stopping | reports: Map.put(stopping.reports, index, report)}}}
   end
 
   def handle_info({:DOWN, ref, :process, _pid, reason}, state) do
@@ -136,15 +177,23 @@ defmodule RingTracer.Job.Parent do
 
   def handle_info(_other, state), do: {:noreply, state}
 
-  defp stop_children(state) do
-    for {_i, pid} <- state.children, do: send(pid, {:stop, self()})
-    state = %{state | stopping: %{outcome: :ok, stats: %{}}}
-    if state.monitors == %{}, do: finish(state), else: {:noreply, state}
+  defp progress(%{spec: %Spec{progress: nil}}), do: :ok
+
+  defp progress(%{spec: spec} = state) do
+    total = Layout.atom_count(spec.layout)
+    send(spec.progress, {RingTracer, spec.id, {:progress, total - state.missing, total}})
   end
 
-  defp fail(state, message) do
-    for {_i, pid} <- state.children, do: send(pid, {:stop, self()})
-    state = %{state | stopping: %{outcome: {:error, message}, stats: %{}}}
+  defp stop_children(state), do: stopping(state, :ok)
+  defp fail(state, message), do: stopping(state, {:error, message})
+
+  defp stopping(state, outcome) do
+    state =
+      Enum.reduce(state.children, state, fn {_i, pid}, st ->
+        send_counted(st, pid, :control, {:stop, self()})
+      end)
+
+    state = %{state | stopping: %{outcome: outcome, reports: %{}}}
     if state.monitors == %{}, do: finish(state), else: {:noreply, state}
   end
 
@@ -157,8 +206,17 @@ defmodule RingTracer.Job.Parent do
     %{spec: spec, stopping: stopping} = state
     elapsed = System.monotonic_time(:microsecond) - state.started
 
+    reports = for i <- 0..(spec.layout.children - 1), do: Map.get(stopping.reports, i)
+
+    outcome =
+      case {stopping.outcome, Enum.find_index(reports, &is_nil/1)} do
+        {:ok, nil} -> :ok
+        {:ok, i} -> {:error, "child #{i} stopped without reporting its statistics"}
+        {error, _} -> error
+      end
+
     reply =
-      case stopping.outcome do
+      case outcome do
         :ok ->
           pixels =
             spec.layout
@@ -166,8 +224,21 @@ defmodule RingTracer.Job.Parent do
             |> Enum.map(&Map.fetch!(state.results, &1))
             |> IO.iodata_to_binary()
 
-          children = for i <- 0..(spec.layout.children - 1), do: Map.get(stopping.stats, i)
-          {:ok, %{pixels: pixels, elapsed_us: elapsed, children: children}}
+          traffic =
+            Enum.reduce(reports, state.traffic, fn r, acc ->
+              Map.merge(acc, r.traffic, fn _, {n1, b1}, {n2, b2} -> {n1 + n2, b1 + b2} end)
+            end)
+
+          {:ok,
+           %{
+             pixels: pixels,
+             elapsed_us: elapsed,
+             children: Enum.map(reports, & &1.stats),
+             atoms: reports |> Enum.flat_map(& &1.atoms) |> Enum.sort_by(& &1.atom),
+             events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
+             traffic: traffic,
+             duplicates: state.duplicates
+           }}
 
         {:error, message} ->
           {:error, message}

@@ -9,7 +9,19 @@ defmodule RingTracer.Job.Spec do
   alias RingTracer.Scene.Source
 
   @enforce_keys [:id, :source, :settings, :layout, :caller]
-  defstruct [:id, :source, :settings, :layout, :caller, nodes: [], handover_delay: 0]
+  defstruct [
+    :id,
+    :source,
+    :settings,
+    :layout,
+    :caller,
+    nodes: [],
+    handover_delay: 0,
+    strategy: RingTracer.Strategy.Ring,
+    kernel: {RingTracer.Kernel.Native, []},
+    speeds: [],
+    progress: nil
+  ]
 
   @type t :: %__MODULE__{
           id: reference(),
@@ -18,6 +30,10 @@ defmodule RingTracer.Job.Spec do
           layout: Layout.t(),
           caller: pid(),
           nodes: [node()],
-          handover_delay: non_neg_integer()
+          handover_delay: non_neg_integer(),
+          strategy: module(),
+          kernel: {module(), keyword()},
+          speeds: [number()],
+          progress: pid() | nil
         }
 end

@@ -1,0 +1,31 @@
+defmodule RingTracer.Kernel do
+  @moduledoc """
+  What a grandchild calls to trace an atom. Two implementations share the
+  same parent, children and strategies:
+
+    * `RingTracer.Kernel.Native` — the Rust ray tracer, through the NIF;
+    * `RingTracer.Kernel.Simulated` — a cost model that sleeps for each atom's
+      cost instead of tracing, so that hundreds of children fit on one machine.
+
+  A job's spec names the kernel as `{module, options}`.
+  """
+
+  alias RingTracer.Job.Spec
+
+  @typedoc "Whatever `prepare/2` returns, passed back to `trace/4`."
+  @type context :: term()
+
+  @doc "Prepares tracing on the calling process's node (e.g. fetches the parsed scene)."
+  @callback prepare(Spec.t(), keyword()) :: {:ok, context()} | {:error, String.t()}
+
+  @doc """
+  Traces `count` pixels from `first`, atom number `atom`: linear RGB as
+  native-endian f32 triples, ray counters, and the microseconds of work.
+  """
+  @callback trace(context(), non_neg_integer(), non_neg_integer(), non_neg_integer()) ::
+              {:ok, binary(), map(), non_neg_integer()} | {:error, String.t()}
+
+  @doc "Zeroed ray counters."
+  @spec no_rays() :: map()
+  def no_rays, do: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0}
+end

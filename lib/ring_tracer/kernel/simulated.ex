@@ -1,0 +1,37 @@
+defmodule RingTracer.Kernel.Simulated do
+  @moduledoc """
+  A cost model in place of the ray tracer: each atom "costs" some
+  microseconds, and tracing it is sleeping that long (no CPU burnt), then
+  returning black pixels of the right size. The same parent, children and
+  strategies run on it, so a ring of 1024 children fits on a small machine.
+
+  ## Options
+
+    * `:costs` — per-atom costs in microseconds: a tuple indexed by atom (for
+      instance the `:trace_us` of a real render's `:atoms`), or a function
+      `atom -> microseconds`, or one integer for every atom (default 2000).
+  """
+  @behaviour RingTracer.Kernel
+
+  @impl RingTracer.Kernel
+  def prepare(_spec, opts), do: {:ok, Keyword.get(opts, :costs, 2000)}
+
+  @impl RingTracer.Kernel
+  def trace(costs, _first, count, atom) do
+    us = cost(costs, atom)
+    t0 = System.monotonic_time(:microsecond)
+    Process.sleep(div(us + 500, 1000))
+    elapsed = System.monotonic_time(:microsecond) - t0
+    {:ok, :binary.copy(<<0::96>>, count), RingTracer.Kernel.no_rays(), elapsed}
+  end
+
+  @doc "The cost in microseconds of `atom` under `costs`."
+  @spec cost(
+          tuple() | (non_neg_integer() -> non_neg_integer()) | non_neg_integer(),
+          non_neg_integer()
+        ) ::
+          non_neg_integer()
+  def cost(costs, atom) when is_tuple(costs), do: elem(costs, rem(atom, tuple_size(costs)))
+  def cost(costs, atom) when is_function(costs, 1), do: costs.(atom)
+  def cost(costs, _atom) when is_integer(costs), do: costs
+end

@@ -1,0 +1,119 @@
+defmodule RingTracer.StrategyTest do
+  use ExUnit.Case, async: false
+  doctest RingTracer.Strategy
+
+  alias RingTracer.TestScenes
+
+  @scene "balls_s1.nff"
+
+  test "every strategy gives the byte-identical image, with speeds too" do
+    reference = TestScenes.reference(@scene, 40, 30)
+
+    for strategy <- RingTracer.Strategy.names(), speeds <- [[], [1, 3, 1]] do
+      {:ok, result} =
+        RingTracer.render(TestScenes.path(@scene),
+          strategy: strategy,
+          speeds: speeds,
+          children: 3,
+          atoms: 6,
+          width: 40,
+          height: 30
+        )
+
+      assert result.pixels == reference, "#{strategy} #{inspect(speeds)}"
+      assert length(result.atoms) == 18
+      assert Enum.sort(Enum.map(result.atoms, & &1.atom)) == Enum.to_list(0..17)
+      assert result.messages.result.count == 18
+    end
+  end
+
+  test "static never hands atoms over; master hands every atom out; ring counts balance" do
+    path = TestScenes.path(@scene)
+
+    {:ok, static} =
+      RingTracer.render(path, strategy: :static, children: 3, atoms: 4, width: 30, height: 20)
+
+    assert Enum.all?(static.atoms, &(&1.owner == &1.child))
+    refute Map.has_key?(static.messages, :handover)
+
+    {:ok, master} =
+      RingTracer.render(path, strategy: :master, children: 3, atoms: 4, width: 30, height: 20)
+
+    assert master.messages.handover.count == 12
+
+    {:ok, ring} =
+      RingTracer.render(path,
+        strategy: :ring,
+        children: 3,
+        atoms: 4,
+        width: 30,
+        height: 20,
+        speeds: [1, 1, 6]
+      )
+
+    given = Enum.sum(Enum.map(ring.children, & &1.given))
+    assert given == Enum.sum(Enum.map(ring.children, & &1.received))
+
+    assert Map.get(ring.messages, :handover, %{count: 0}).count ==
+             Enum.sum(Enum.map(ring.children, & &1.offers_consumed))
+
+    assert ring.messages.offer.count ==
+             Enum.sum(Enum.map(ring.children, &(&1.offers_sent + &1.offers_passed)))
+  end
+
+  test "a slow child is helped by the ring: it traces fewer atoms than it owns" do
+    {:ok, result} =
+      RingTracer.render(TestScenes.path("balls_s2.nff"),
+        children: 4,
+        atoms: 12,
+        width: 96,
+        height: 96,
+        speeds: [1, 1, 6, 1]
+      )
+
+    slow = Enum.at(result.children, 2)
+    assert slow.given > 0
+    assert slow.traced < slow.own
+  end
+
+  test "message counts in the stats equal the sends a tracer observes" do
+    :erlang.trace(:new_processes, true, [:send])
+
+    {:ok, result} =
+      RingTracer.render(TestScenes.path(@scene),
+        children: 4,
+        atoms: 6,
+        width: 40,
+        height: 30,
+        speeds: [1, 5, 1, 1]
+      )
+
+    :erlang.trace(:new_processes, false, [:send])
+    observed = collect_sends(%{})
+    assert observed[:result] == result.messages.result.count
+    assert Map.get(observed, :offer, 0) == Map.get(result.messages, :offer, %{count: 0}).count
+
+    assert Map.get(observed, :handover, 0) ==
+             Map.get(result.messages, :handover, %{count: 0}).count
+  end
+
+  defp collect_sends(acc) do
+    receive do
+      {:trace, _from, :send, msg, _to} -> collect_sends(Map.update(acc, kind(msg), 1, &(&1 + 1)))
+    after
+      200 -> acc
+    end
+  end
+
+  defp kind({:atom_done, _, _, _, _, _}), do: :result
+  defp kind({:help_offer, _}), do: :offer
+  defp kind({:handover, _, _}), do: :handover
+  defp kind(_), do: :other
+
+  @tag :slow
+  test "a 1024-child simulated ring finishes with every atom once" do
+    {:ok, result} = RingTracer.simulate(children: 1024, atoms: 4, costs: 2000, speeds: [1, 2, 3])
+    assert length(result.atoms) == 4096
+    assert Enum.sort(Enum.map(result.atoms, & &1.atom)) == Enum.to_list(0..4095)
+  end
+end
