@@ -25,10 +25,14 @@ defmodule RingTracer.MixProject do
 
   def application do
     [
-      extra_applications: [:logger, :crypto],
+      # Debian's erlang-jiffy writes --stats JSON; PropEr and xmerl serve the tests.
+      extra_applications: [:logger, :crypto, :jiffy] ++ test_applications(Mix.env()),
       mod: {RingTracer.Application, []}
     ]
   end
+
+  defp test_applications(:test), do: [:proper, :xmerl]
+  defp test_applications(_), do: []
 
   defp elixirc_paths(:test), do: ["lib", "test/support"]
   defp elixirc_paths(_), do: ["lib"]

@@ -84,6 +84,61 @@ defmodule RingTracer do
   end
 
   @doc """
+  Starts a render and returns at once with a handle. The calling process then
+  gets `{RingTracer, id, {:progress, done, total}}` as atoms arrive and
+  finally `{RingTracer, id, {:ok, result}}` or `{RingTracer, id, {:error,
+  error}}`, where `id` is the handle's `:id`. Same options as `render/2`.
+
+      iex> {:ok, job} = RingTracer.render_async("priv/scenes/tetra_s1.nff", width: 16, height: 16, children: 2, atoms: 2)
+      iex> id = job.id
+      iex> receive do {RingTracer, ^id, {:ok, result}} -> byte_size(result.pixels) end
+      16 * 16 * 12
+  """
+  @spec render_async(Path.t(), keyword()) :: {:ok, %{id: reference(), pid: pid()}}
+  def render_async(path, opts \\ []) when is_binary(path) do
+    caller = self()
+    id = make_ref()
+
+    pid =
+      spawn(fn ->
+        ref = Process.monitor(caller)
+        forwarder = self()
+        job = Task.async(fn -> render(path, Keyword.put(opts, :progress, forwarder)) end)
+        forward(caller, id, ref, job)
+      end)
+
+    {:ok, %{id: id, pid: pid}}
+  end
+
+  defp forward(caller, id, ref, job) do
+    receive do
+      {RingTracer, _, {:progress, _, _} = progress} ->
+        send(caller, {RingTracer, id, progress})
+        forward(caller, id, ref, job)
+
+      {task_ref, result} when task_ref == job.ref ->
+        send(caller, {RingTracer, id, result})
+
+      {:DOWN, ^ref, _, _, _} ->
+        exit(:shutdown)
+    end
+  end
+
+  @doc """
+  Cancels a render started with `render_async/2`: the job's parent, children
+  and grandchildren stop. Returns `:ok` (also when the job had finished).
+  """
+  @spec cancel(%{pid: pid()}) :: :ok
+  def cancel(%{pid: pid}) do
+    ref = Process.monitor(pid)
+    Process.exit(pid, :shutdown)
+
+    receive do
+      {:DOWN, ^ref, _, _, _} -> :ok
+    end
+  end
+
+  @doc """
   Runs the same parent, children and strategies on the simulated kernel
   (`RingTracer.Kernel.Simulated`): each atom sleeps for its cost instead of
   being traced, so rings of hundreds or thousands of children fit on one

@@ -3,6 +3,15 @@ defmodule Mix.Tasks.RingTracer.Bench do
   @moduledoc """
   Benchmarks that print figures side by side from one run.
 
+      mix ring_tracer.bench balance [--size 256] [--atoms 16] [--quick]
+
+  `balance` renders the same atoms with every strategy (`static`, `master`,
+  `ring`, `steal`) on real scenes (4 equal children; 4 with one 4x slower; 8
+  with speeds 1..8; SPD tetra and teapot, whose empty background makes static
+  strips unequal) and on the simulated kernel with 64, 256 and 1024
+  children, and prints makespan / ideal, idle %, and messages and bytes per
+  atom (counted at the sender; bytes include the pixels).
+
       mix ring_tracer.bench kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R]
                                    [--size 512] [--threads 2] [--children 8] [--atoms 16]
 
@@ -20,6 +29,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
   alias RingTracer.{Native, Scene, SceneCache, Settings}
 
+  @sim_atoms 64
   @spd ~w(balls_s4 gears_s4 mount_s6 rings_s7 teapot_s12 tetra_s6 tree_s11)
 
   @impl Mix.Task
@@ -100,9 +110,87 @@ defmodule Mix.Tasks.RingTracer.Bench do
     print_table(header, rows)
   end
 
+  def run(["balance" | argv]) do
+    {opts, _, _} =
+      OptionParser.parse(argv, strict: [size: :integer, atoms: :integer, quick: :boolean])
+
+    Mix.Task.run("app.start")
+    size = opts[:size] || 256
+    k = opts[:atoms] || 16
+    sims = if opts[:quick], do: [64], else: [64, 256, 1024]
+
+    Mix.shell().info(
+      "strategy x scenario: makespan/ideal, idle %, messages and bytes per atom " <>
+        "(#{size}x#{size}, #{k} atoms per child; #{:erlang.system_info(:dirty_cpu_schedulers_online)} dirty CPU schedulers)"
+    )
+
+    real = [
+      {"4 equal", "priv/scenes/balls_s2.nff", children: 4, speeds: []},
+      {"4, one 4x slower", "priv/scenes/balls_s2.nff", children: 4, speeds: [1, 1, 4, 1]},
+      {"8, speeds 1..8", "priv/scenes/balls_s2.nff", children: 8, speeds: Enum.to_list(1..8)},
+      {"tetra, 4 equal", "priv/scenes/spd/tetra_s6.nff", children: 4, speeds: []},
+      {"teapot, 4 equal", "priv/scenes/spd/teapot_s12.nff", children: 4, speeds: []}
+    ]
+
+    rows =
+      for {label, path, job} <- real, strategy <- RingTracer.Strategy.names() do
+        {:ok, result} =
+          RingTracer.render(
+            path,
+            [strategy: strategy, atoms: k, width: size, height: size] ++ job
+          )
+
+        balance_row(label, strategy, result)
+      end
+
+    sim_rows =
+      for n <- sims, strategy <- RingTracer.Strategy.names() do
+        # Speeds from 1 to 4 (a fixed pseudo-random draw) and atom costs of
+        # 2 to 8 ms varying across the image, as a real scene's do.
+        :rand.seed(:exsss, {n, 1, 2})
+        speeds = for _ <- 1..n, do: Enum.random([1, 1, 1, 2, 2, 3, 4])
+        costs = List.to_tuple(for a <- 0..(n * @sim_atoms - 1), do: 2_000 + rem(a * 7919, 6_000))
+
+        {:ok, result} =
+          RingTracer.simulate(
+            strategy: strategy,
+            children: n,
+            atoms: @sim_atoms,
+            speeds: speeds,
+            costs: costs
+          )
+
+        balance_row("simulated N=#{n}", strategy, result)
+      end
+
+    print_table(
+      ~w(scenario strategy makespan_ms ideal_ms makespan/ideal idle% msgs/atom bytes/atom),
+      rows ++ sim_rows
+    )
+  end
+
   def run(_),
     do:
-      Mix.raise("usage: mix ring_tracer.bench kernel [options]  (see mix help ring_tracer.bench)")
+      Mix.raise(
+        "usage: mix ring_tracer.bench kernel|balance [options]  (see mix help ring_tracer.bench)"
+      )
+
+  defp balance_row(label, strategy, result) do
+    n = length(result.children)
+    idle = Enum.sum(Enum.map(result.children, & &1.idle_us)) / max(n * result.elapsed_us, 1)
+    per = RingTracer.Result.per_atom(result)
+
+    [
+      label,
+      Atom.to_string(strategy),
+      fmt(result.elapsed_us / 1000),
+      fmt(result.ideal_us / 1000),
+      fmt(result.elapsed_us / max(result.ideal_us, 1)),
+      fmt(idle * 100),
+      fmt(per.messages),
+      fmt(per.bytes)
+    ]
+  end
 
   # Runs `fun` `runs` times; the median of its time (or, if it returns an
   # integer of microseconds, that) with the last value it returned.

@@ -17,6 +17,15 @@ defmodule Mix.Tasks.RingTracer.Render do
     * `--cutoff C` — adaptive cut-off weight (default 1/255, 0 disables)
     * `--samples S` — S x S samples per pixel (default 1)
     * `--spd` — the SPD testing procedure (pixel corners, no cut-off)
+    * `--strategy S` — `ring` (default), `static`, `master` or `steal`
+    * `--speeds 1,1,4,1` — slowdown factor of each child (cyclic)
+    * `--stats FILE` — the job's statistics as `.json` or `.csv`
+    * `--timeline FILE.svg` — one lane per child, every atom a bar coloured
+      by its original owner, help offers as arrows
+    * `--ownership FILE.png` — the image tinted by the child that traced each atom
+
+  A progress bar (atoms done / total, rate, ETA) goes to stderr when it is a
+  terminal.
 
   Prints where it wrote the image, the job's time, the ray counts and a line
   per child.
@@ -32,7 +41,12 @@ defmodule Mix.Tasks.RingTracer.Render do
     depth: :integer,
     cutoff: :float,
     samples: :integer,
-    spd: :boolean
+    spd: :boolean,
+    strategy: :string,
+    speeds: :string,
+    stats: :string,
+    timeline: :string,
+    ownership: :string
   ]
 
   @impl Mix.Task
@@ -52,14 +66,97 @@ defmodule Mix.Tasks.RingTracer.Render do
     out = opts[:out] || Mix.raise("--out FILE is required (a .png or .exr file)")
     Mix.Task.run("app.start")
 
-    render_opts = Keyword.drop(opts, [:out])
+    render_opts =
+      opts
+      |> Keyword.drop([:out, :stats, :timeline, :ownership])
+      |> parse_strategy()
+      |> parse_speeds()
 
-    with {:ok, result} <- RingTracer.render(scene, render_opts),
-         :ok <- RingTracer.Image.write(result, out) do
+    with {:ok, result} <- render(scene, render_opts),
+         :ok <- RingTracer.Image.write(result, out),
+         :ok <- maybe_write(opts[:stats], &RingTracer.Report.Stats.write(result, &1)),
+         :ok <- maybe_write(opts[:timeline], &RingTracer.Report.Timeline.write(result, &1)),
+         :ok <- maybe_write(opts[:ownership], &RingTracer.Report.Ownership.write(result, &1)) do
       report(out, result)
+
+      for {key, path} <- opts,
+          key in [:stats, :timeline, :ownership],
+          do: Mix.shell().info("wrote #{path}")
     else
       {:error, %RingTracer.Error{message: message}} -> Mix.raise(message)
     end
+  end
+
+  defp maybe_write(nil, _fun), do: :ok
+  defp maybe_write(path, fun), do: fun.(path)
+
+  defp parse_strategy(opts) do
+    case opts[:strategy] do
+      nil ->
+        opts
+
+      name ->
+        case Enum.find(RingTracer.Strategy.names(), &(Atom.to_string(&1) == name)) do
+          nil ->
+            Mix.raise(
+              "--strategy must be one of #{Enum.join(RingTracer.Strategy.names(), ", ")}, got: #{name}"
+            )
+
+          strategy ->
+            Keyword.put(opts, :strategy, strategy)
+        end
+    end
+  end
+
+  defp parse_speeds(opts) do
+    case opts[:speeds] do
+      nil ->
+        opts
+
+      text ->
+        speeds =
+          for part <- String.split(text, ",", trim: true) do
+            case Float.parse(String.trim(part)) do
+              {f, ""} -> if f == trunc(f), do: trunc(f), else: f
+              _ -> Mix.raise("--speeds takes numbers separated by commas, got: #{text}")
+            end
+          end
+
+        Keyword.put(opts, :speeds, speeds)
+    end
+  end
+
+  # Renders asynchronously so that progress can be shown on a terminal.
+  defp render(scene, opts) do
+    {:ok, job} = RingTracer.render_async(scene, opts)
+    tty? = match?({:ok, _}, :io.columns(:standard_error))
+    await(job.id, tty?, System.monotonic_time(:millisecond))
+  end
+
+  defp await(id, tty?, t0) do
+    receive do
+      {RingTracer, ^id, {:progress, done, total}} ->
+        if tty?, do: progress(done, total, t0)
+        await(id, tty?, t0)
+
+      {RingTracer, ^id, result} ->
+        if tty?, do: IO.write(:stderr, "\r\e[K")
+        result
+    end
+  end
+
+  defp progress(done, total, t0) do
+    elapsed = max(System.monotonic_time(:millisecond) - t0, 1) / 1000
+    rate = done / elapsed
+    eta = if rate > 0, do: (total - done) / rate, else: 0.0
+    width = 30
+    filled = div(done * width, max(total, 1))
+    bar = String.duplicate("#", filled) <> String.duplicate("-", width - filled)
+
+    IO.write(
+      :stderr,
+      "\r[#{bar}] #{done}/#{total} atoms  #{:erlang.float_to_binary(rate, decimals: 1)}/s  ETA #{:erlang.float_to_binary(eta, decimals: 1)} s"
+    )
   end
 
   defp report(out, result) do

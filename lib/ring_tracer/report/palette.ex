@@ -8,7 +8,7 @@ defmodule RingTracer.Report.Palette do
   well separated hues.
 
       iex> RingTracer.Report.Palette.hex(0)
-      "#d94040"
+      "#d84141"
       iex> RingTracer.Report.Palette.hex(0) == RingTracer.Report.Palette.hex(1)
       false
   """
@@ -42,7 +42,12 @@ defmodule RingTracer.Report.Palette do
   end
 
   defp byte_hex(c) do
-    c |> Kernel.*(255) |> round() |> Integer.to_string(16) |> String.pad_leading(2, "0") |> String.downcase()
+    c
+    |> Kernel.*(255)
+    |> round()
+    |> Integer.to_string(16)
+    |> String.pad_leading(2, "0")
+    |> String.downcase()
   end
 
   defp to_linear(c) when c <= 0.04045, do: c / 12.92

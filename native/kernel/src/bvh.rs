@@ -42,25 +42,6 @@ impl Node {
     pub fn count(&self) -> u32 {
         self.b.w.to_bits()
     }
-    /// Entry distance of the ray into the box, if it enters before `tmax`.
-    #[inline(always)]
-    pub fn hit(&self, ray: &Ray, tmax: f32) -> f32 {
-        let t0 = (Vec3A::from_vec4(self.a) - ray.origin) * ray.inv_dir;
-        let t1 = (Vec3A::from_vec4(self.b) - ray.origin) * ray.inv_dir;
-        let tnear = t0.min(t1).max_element().max(0.0);
-        let tfar = t0.max(t1).min_element().min(tmax);
-        if tnear <= tfar {
-            tnear
-        } else {
-            f32::INFINITY
-        }
-    }
-}
-
-/// The hierarchy.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Bvh {
-    pub nodes: Vec<Node>,
 }
 
 #[derive(Clone, Copy)]
@@ -69,186 +50,337 @@ struct Bin {
     count: u32,
 }
 
+/// Binary binned-SAH build; returns the nodes and the primitive order.
+fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
+    let n = boxes.len();
+    let mut order: Vec<u32> = (0..n as u32).collect();
+    if n == 0 {
+        return (Vec::new(), order);
+    }
+    let centroids: Vec<Vec3A> = boxes.iter().map(|b| b.centre()).collect();
+    let mut nodes = Vec::with_capacity(2 * n);
+    nodes.push(Node::new(Aabb::EMPTY, 0, 0));
+    // (node index, start, end, depth)
+    let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
+    while let Some((ni, start, end, depth)) = work.pop() {
+        let idx = &mut order[start..end];
+        let mut bounds = Aabb::EMPTY;
+        let mut cb = Aabb::EMPTY;
+        for &i in idx.iter() {
+            bounds = bounds.union(boxes[i as usize]);
+            cb = cb.grow(centroids[i as usize]);
+        }
+        let count = end - start;
+        let make_leaf = |nodes: &mut Vec<Node>| {
+            nodes[ni] = Node::new(bounds, start as u32, count as u32);
+        };
+        if count <= 2 || depth >= MAX_DEPTH {
+            make_leaf(&mut nodes);
+            continue;
+        }
+        let ext = cb.max - cb.min;
+        // best split over all three axes
+        let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bin
+        for axis in 0..3 {
+            let e = ext[axis];
+            if e <= 0.0 {
+                continue;
+            }
+            let lo = cb.min[axis];
+            let scale = BINS as f32 / e * 0.999_99;
+            let mut bins = [Bin {
+                bounds: Aabb::EMPTY,
+                count: 0,
+            }; BINS];
+            for &i in idx.iter() {
+                let b = (((centroids[i as usize][axis] - lo) * scale) as usize).min(BINS - 1);
+                bins[b].count += 1;
+                bins[b].bounds = bins[b].bounds.union(boxes[i as usize]);
+            }
+            let mut right_area = [0.0f32; BINS];
+            let mut right_count = [0u32; BINS];
+            let mut acc = Aabb::EMPTY;
+            let mut c = 0;
+            for k in (1..BINS).rev() {
+                acc = acc.union(bins[k].bounds);
+                c += bins[k].count;
+                right_area[k] = acc.half_area();
+                right_count[k] = c;
+            }
+            let mut acc = Aabb::EMPTY;
+            let mut c = 0;
+            for k in 0..BINS - 1 {
+                acc = acc.union(bins[k].bounds);
+                c += bins[k].count;
+                let rc = right_count[k + 1];
+                if c == 0 || rc == 0 {
+                    continue;
+                }
+                let cost = acc.half_area() * c as f32 + right_area[k + 1] * rc as f32;
+                if cost < best.0 {
+                    best = (cost, axis, k);
+                }
+            }
+        }
+        let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
+        let split_cost = TRAVERSAL_COST + best.0 / parent_area;
+        let mid;
+        if best.0.is_finite() && (split_cost < count as f32 || count > MAX_LEAF) {
+            let (axis, bin) = (best.1, best.2);
+            let lo = cb.min[axis];
+            let scale = BINS as f32 / ext[axis] * 0.999_99;
+            // in-place partition
+            let mut l = 0;
+            let mut r = idx.len();
+            while l < r {
+                let c = centroids[idx[l] as usize][axis];
+                let b = (((c - lo) * scale) as usize).min(BINS - 1);
+                if b <= bin {
+                    l += 1;
+                } else {
+                    r -= 1;
+                    idx.swap(l, r);
+                }
+            }
+            mid = start + l;
+        } else if count > MAX_LEAF {
+            // centroids coincide: split by position in the array to bound leaf size
+            mid = start + count / 2;
+        } else {
+            make_leaf(&mut nodes);
+            continue;
+        }
+        if mid == start || mid == end {
+            make_leaf(&mut nodes);
+            continue;
+        }
+        let left = nodes.len();
+        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
+        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
+        nodes[ni] = Node::new(bounds, left as u32, 0);
+        work.push((left + 1, mid, end, depth + 1));
+        work.push((left, start, mid, depth + 1));
+    }
+    (nodes, order)
+}
+
+/// Reusable traversal stack (one per thread; avoids allocation and zeroing per ray).
+#[derive(Clone, Debug, Default)]
+pub struct Scratch {
+    stack: Vec<(u32, u32, f32)>,
+}
+
+impl Scratch {
+    /// A scratch area with room for typical traversals.
+    pub fn new() -> Scratch {
+        Scratch {
+            stack: Vec::with_capacity(256),
+        }
+    }
+}
+
+/// Marks an unused child slot of a [`Node4`].
+const EMPTY: u32 = u32::MAX;
+
+/// A 4-wide node: the boxes of up to four children in SoA layout, tested together with SIMD.
+/// `count[i] == 0`: child `i` is the node `child[i]`; `count[i] == EMPTY`: unused slot (its box
+/// is empty, so it is never hit); otherwise a leaf of `count[i]` primitives from `child[i]`.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub(crate) struct Node4 {
+    lo: [Vec4; 3],
+    hi: [Vec4; 3],
+    child: [u32; 4],
+    count: [u32; 4],
+}
+
+/// Per-ray constants for the 4-wide box test.
+struct RayPre {
+    /// Per axis: (near-plane selector is `hi`?).
+    neg: [bool; 3],
+    inv: [Vec4; 3],
+    oinv: [Vec4; 3],
+}
+
+impl RayPre {
+    #[inline(always)]
+    fn new(ray: &Ray) -> RayPre {
+        let o = ray.origin;
+        let i = ray.inv_dir;
+        RayPre {
+            neg: [i.x < 0.0, i.y < 0.0, i.z < 0.0],
+            inv: [Vec4::splat(i.x), Vec4::splat(i.y), Vec4::splat(i.z)],
+            oinv: [
+                Vec4::splat(o.x * i.x),
+                Vec4::splat(o.y * i.y),
+                Vec4::splat(o.z * i.z),
+            ],
+        }
+    }
+}
+
+impl Node4 {
+    /// Entry distances of the four children and the mask of those entered before `tmax`.
+    #[inline(always)]
+    fn hit(&self, r: &RayPre, tmax: f32) -> (Vec4, u32) {
+        let mut tn = Vec4::ZERO;
+        let mut tf = Vec4::splat(tmax);
+        for a in 0..3 {
+            let (n, f) = if r.neg[a] {
+                (self.hi[a], self.lo[a])
+            } else {
+                (self.lo[a], self.hi[a])
+            };
+            tn = tn.max(n * r.inv[a] - r.oinv[a]);
+            tf = tf.min(f * r.inv[a] - r.oinv[a]);
+        }
+        (tn, tn.cmple(tf).bitmask())
+    }
+}
+
+/// The hierarchy: a binary SAH tree collapsed into 4-wide nodes.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Bvh {
+    pub nodes: Vec<Node4>,
+}
+
 impl Bvh {
     /// Builds over primitive boxes; returns the hierarchy and the primitive order (new position ->
     /// old index).
     pub fn build(boxes: &[Aabb]) -> (Bvh, Vec<u32>) {
-        let n = boxes.len();
-        let mut order: Vec<u32> = (0..n as u32).collect();
-        if n == 0 {
-            return (Bvh { nodes: Vec::new() }, order);
-        }
-        let centroids: Vec<Vec3A> = boxes.iter().map(|b| b.centre()).collect();
-        let mut nodes = Vec::with_capacity(2 * n);
-        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-        // (node index, start, end, depth)
-        let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
-        while let Some((ni, start, end, depth)) = work.pop() {
-            let idx = &mut order[start..end];
-            let mut bounds = Aabb::EMPTY;
-            let mut cb = Aabb::EMPTY;
-            for &i in idx.iter() {
-                bounds = bounds.union(boxes[i as usize]);
-                cb = cb.grow(centroids[i as usize]);
-            }
-            let count = end - start;
-            let make_leaf = |nodes: &mut Vec<Node>| {
-                nodes[ni] = Node::new(bounds, start as u32, count as u32);
+        let (bin, order) = build_binary(boxes);
+        let mut nodes = Vec::with_capacity(bin.len() / 2 + 1);
+        if let Some(root) = bin.first() {
+            let bounds = |n: &Node| Aabb {
+                min: Vec3A::from_vec4(n.a),
+                max: Vec3A::from_vec4(n.b),
             };
-            if count <= 2 || depth >= MAX_DEPTH {
-                make_leaf(&mut nodes);
-                continue;
-            }
-            let ext = cb.max - cb.min;
-            // best split over all three axes
-            let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bin
-            for axis in 0..3 {
-                let e = ext[axis];
-                if !(e > 0.0) {
-                    continue;
-                }
-                let lo = cb.min[axis];
-                let scale = BINS as f32 / e * 0.999_99;
-                let mut bins = [Bin {
-                    bounds: Aabb::EMPTY,
-                    count: 0,
-                }; BINS];
-                for &i in idx.iter() {
-                    let b = (((centroids[i as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                    bins[b].count += 1;
-                    bins[b].bounds = bins[b].bounds.union(boxes[i as usize]);
-                }
-                let mut right_area = [0.0f32; BINS];
-                let mut right_count = [0u32; BINS];
-                let mut acc = Aabb::EMPTY;
-                let mut c = 0;
-                for k in (1..BINS).rev() {
-                    acc = acc.union(bins[k].bounds);
-                    c += bins[k].count;
-                    right_area[k] = acc.half_area();
-                    right_count[k] = c;
-                }
-                let mut acc = Aabb::EMPTY;
-                let mut c = 0;
-                for k in 0..BINS - 1 {
-                    acc = acc.union(bins[k].bounds);
-                    c += bins[k].count;
-                    let rc = right_count[k + 1];
-                    if c == 0 || rc == 0 {
-                        continue;
-                    }
-                    let cost = acc.half_area() * c as f32 + right_area[k + 1] * rc as f32;
-                    if cost < best.0 {
-                        best = (cost, axis, k);
+            // (binary node, Node4 slot to fill)
+            nodes.push(Node4::empty());
+            let mut work = vec![(0usize, 0usize)];
+            let _ = root;
+            while let Some((bi, slot)) = work.pop() {
+                // gather up to four children by opening the largest interior child
+                let mut kids: Vec<usize> = Vec::with_capacity(4);
+                if bin[bi].count() > 0 {
+                    kids.push(bi);
+                } else {
+                    let f = bin[bi].first() as usize;
+                    kids.extend([f, f + 1]);
+                    while kids.len() < 4 {
+                        let best = kids
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, &k)| bin.get(k).is_some_and(|n| n.count() == 0))
+                            .max_by(|a, b| {
+                                bounds(&bin[*a.1])
+                                    .half_area()
+                                    .total_cmp(&bounds(&bin[*b.1]).half_area())
+                            })
+                            .map(|(i, _)| i);
+                        let Some(i) = best else { break };
+                        let k = kids.swap_remove(i);
+                        let f = bin[k].first() as usize;
+                        kids.extend([f, f + 1]);
                     }
                 }
-            }
-            let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-            let split_cost = TRAVERSAL_COST + best.0 / parent_area;
-            let mid;
-            if best.0.is_finite() && (split_cost < count as f32 || count > MAX_LEAF) {
-                let (axis, bin) = (best.1, best.2);
-                let lo = cb.min[axis];
-                let scale = BINS as f32 / ext[axis] * 0.999_99;
-                // in-place partition
-                let mut l = 0;
-                let mut r = idx.len();
-                while l < r {
-                    let c = centroids[idx[l] as usize][axis];
-                    let b = (((c - lo) * scale) as usize).min(BINS - 1);
-                    if b <= bin {
-                        l += 1;
+                let mut n4 = Node4::empty();
+                for (i, &k) in kids.iter().enumerate() {
+                    let Some(n) = bin.get(k) else { continue };
+                    let b = bounds(n);
+                    for a in 0..3 {
+                        n4.lo[a][i] = b.min[a];
+                        n4.hi[a][i] = b.max[a];
+                    }
+                    if n.count() > 0 {
+                        n4.child[i] = n.first();
+                        n4.count[i] = n.count();
                     } else {
-                        r -= 1;
-                        idx.swap(l, r);
+                        let ni = nodes.len();
+                        nodes.push(Node4::empty());
+                        n4.child[i] = ni as u32;
+                        n4.count[i] = 0;
+                        work.push((k, ni));
                     }
                 }
-                mid = start + l;
-            } else if count > MAX_LEAF {
-                // centroids coincide: split by position in the array to bound leaf size
-                mid = start + count / 2;
-            } else {
-                make_leaf(&mut nodes);
-                continue;
+                nodes[slot] = n4;
             }
-            if mid == start || mid == end {
-                make_leaf(&mut nodes);
-                continue;
-            }
-            let left = nodes.len();
-            nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-            nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-            nodes[ni] = Node::new(bounds, left as u32, 0);
-            work.push((left + 1, mid, end, depth + 1));
-            work.push((left, start, mid, depth + 1));
         }
         (Bvh { nodes }, order)
     }
 
-    /// Visits leaves front to back; `visit(first, count, tmax) -> new tmax`. Stops when a visit
-    /// returns a negative value (used for any-hit queries).
+    /// Visits leaves, `visit(first, count, tmax) -> new tmax`. With `ORDERED`, children are
+    /// visited nearest first. Stops when a visit returns a negative value (any-hit queries).
     #[inline(always)]
-    pub fn traverse(
+    pub fn traverse<const ORDERED: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
+        scratch: &mut Scratch,
         mut visit: impl FnMut(usize, usize, f32) -> f32,
     ) -> f32 {
-        let Some(root) = self.nodes.first() else {
-            return tmax;
-        };
-        if root.hit(ray, tmax) == f32::INFINITY {
+        if self.nodes.is_empty() {
             return tmax;
         }
-        let mut stack = [(0u32, 0.0f32); MAX_DEPTH + 4];
-        let mut sp = 0usize;
-        let mut node = root;
-        loop {
-            let count = node.count();
+        let pre = RayPre::new(ray);
+        let stack = &mut scratch.stack;
+        stack.clear();
+        stack.push((0, 0, 0.0));
+        while let Some((child, count, dist)) = stack.pop() {
+            if dist > tmax {
+                continue;
+            }
             if count > 0 {
-                tmax = visit(node.first() as usize, count as usize, tmax);
+                if count == EMPTY {
+                    continue;
+                }
+                tmax = visit(child as usize, count as usize, tmax);
                 if tmax < 0.0 {
                     return tmax;
                 }
-            } else {
-                let first = node.first() as usize;
-                let (Some(c0), Some(c1)) = (self.nodes.get(first), self.nodes.get(first + 1))
-                else {
-                    return tmax;
-                };
-                let d0 = c0.hit(ray, tmax);
-                let d1 = c1.hit(ray, tmax);
-                let (near, dn, df, fi) = if d0 <= d1 {
-                    (c0, d0, d1, first + 1)
-                } else {
-                    (c1, d1, d0, first)
-                };
-                if dn != f32::INFINITY {
-                    if df != f32::INFINITY && sp < stack.len() {
-                        stack[sp] = (fi as u32, df);
-                        sp += 1;
-                    }
-                    node = near;
-                    continue;
-                }
+                continue;
             }
-            // pop the next node that can still hold a closer hit
-            loop {
-                if sp == 0 {
-                    return tmax;
-                }
-                sp -= 1;
-                let (i, d) = stack[sp];
-                if d <= tmax {
-                    match self.nodes.get(i as usize) {
-                        Some(n) => {
-                            node = n;
-                            break;
-                        }
-                        None => return tmax,
-                    }
-                }
+            let Some(node) = self.nodes.get(child as usize) else {
+                continue;
+            };
+            let (tn, mut mask) = node.hit(&pre, tmax);
+            if mask == 0 {
+                continue;
             }
+            if !ORDERED || mask.count_ones() == 1 {
+                while mask != 0 {
+                    let i = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    stack.push((node.child[i], node.count[i], tn[i]));
+                }
+                continue;
+            }
+            // sort hit children far to near, so the nearest ends on top of the stack
+            let base = stack.len();
+            while mask != 0 {
+                let i = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let e = (node.child[i], node.count[i], tn[i]);
+                stack.push(e);
+                let mut j = stack.len() - 1;
+                while j > base && stack[j - 1].2 < e.2 {
+                    stack[j] = stack[j - 1];
+                    j -= 1;
+                }
+                stack[j] = e;
+            }
+        }
+        tmax
+    }
+}
+
+impl Node4 {
+    fn empty() -> Node4 {
+        Node4 {
+            lo: [Vec4::INFINITY; 3],
+            hi: [Vec4::NEG_INFINITY; 3],
+            child: [0; 4],
+            count: [EMPTY; 4],
         }
     }
 }
@@ -257,9 +389,8 @@ impl Bvh {
 mod tests {
     use super::*;
 
-    #[test]
-    fn build_covers_all_primitives_once() {
-        let boxes: Vec<Aabb> = (0..1000)
+    fn grid() -> Vec<Aabb> {
+        (0..1000)
             .map(|i| {
                 let p = Vec3A::new(
                     (i % 10) as f32,
@@ -271,20 +402,59 @@ mod tests {
                     max: p + Vec3A::splat(0.5),
                 }
             })
-            .collect();
-        let (bvh, order) = Bvh::build(&boxes);
-        assert!(bvh.nodes.len() < 2 * boxes.len());
+            .collect()
+    }
+
+    #[test]
+    fn build_covers_all_primitives_once() {
+        let boxes = grid();
+        let (bin, order) = build_binary(&boxes);
+        assert!(bin.len() < 2 * boxes.len());
+        assert_eq!(std::mem::size_of::<Node>(), 32);
         let mut seen = vec![0u32; boxes.len()];
-        for n in &bvh.nodes {
+        for n in &bin {
             for k in n.first()..n.first() + n.count() {
                 seen[order[k as usize] as usize] += 1;
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
-        assert_eq!(std::mem::size_of::<Node>(), 32);
+        let (bvh, order) = Bvh::build(&boxes);
+        let mut seen = vec![0u32; boxes.len()];
+        for n in &bvh.nodes {
+            for i in 0..4 {
+                if n.count[i] != EMPTY && n.count[i] > 0 {
+                    for k in n.child[i]..n.child[i] + n.count[i] {
+                        seen[order[k as usize] as usize] += 1;
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&c| c == 1));
+        assert_eq!(std::mem::size_of::<Node4>(), 128);
         // identical boxes still give bounded leaves
         let same = vec![boxes[0]; 100];
-        let (bvh, _) = Bvh::build(&same);
-        assert!(bvh.nodes.iter().all(|n| n.count() as usize <= MAX_LEAF));
+        let (bin, _) = build_binary(&same);
+        assert!(bin.iter().all(|n| n.count() as usize <= MAX_LEAF));
+    }
+
+    #[test]
+    fn traversal_finds_every_box_along_a_line() {
+        let boxes = grid();
+        let (bvh, order) = Bvh::build(&boxes);
+        let mut scratch = Scratch::new();
+        // a ray along +z through column (3, 4) meets the 10 boxes of that column
+        let ray = Ray::new(Vec3A::new(3.25, 4.25, -5.0), Vec3A::Z);
+        let mut found = Vec::new();
+        bvh.traverse::<false>(&ray, f32::INFINITY, &mut scratch, |f, c, t| {
+            for k in f..f + c {
+                let b = boxes[order[k] as usize];
+                if b.min.x <= 3.25 && b.max.x >= 3.25 && b.min.y <= 4.25 && b.max.y >= 4.25 {
+                    found.push(order[k]);
+                }
+            }
+            t
+        });
+        found.sort();
+        assert_eq!(found, (0..10).map(|z| z * 100 + 43).collect::<Vec<u32>>());
     }
 }

@@ -24,6 +24,7 @@
 //!   the tree) is below `cutoff` is not spawned; `cutoff = 0` disables this (SPD rule 8), and
 //!   then even zero-weight reflection rays of transmitters are traced, as the SPD counts them.
 
+use crate::bvh::Scratch;
 use crate::ray::{reflect, refract, Ray};
 use crate::scene::Scene;
 use crate::stats::RayStats;
@@ -31,8 +32,15 @@ use glam::Vec3A;
 
 /// Computes the radiance arriving along a ray.
 pub trait Integrator: Sync {
-    /// Radiance along an eye ray (linear RGB); updates `stats`.
-    fn radiance(&self, scene: &Scene, ray: &Ray, stats: &mut RayStats) -> Vec3A;
+    /// Radiance along an eye ray (linear RGB); updates `stats`. `scratch` is a per-thread
+    /// traversal stack, reused across calls.
+    fn radiance(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        scratch: &mut Scratch,
+        stats: &mut RayStats,
+    ) -> Vec3A;
 }
 
 /// Whitted-style recursive ray tracing.
@@ -45,9 +53,15 @@ pub struct Whitted {
 }
 
 impl Integrator for Whitted {
-    fn radiance(&self, scene: &Scene, ray: &Ray, stats: &mut RayStats) -> Vec3A {
+    fn radiance(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        scratch: &mut Scratch,
+        stats: &mut RayStats,
+    ) -> Vec3A {
         stats.eye += 1;
-        self.trace(scene, ray, 1, 1.0, stats, true)
+        self.trace(scene, ray, 1, 1.0, scratch, stats, true)
     }
 }
 
@@ -57,16 +71,18 @@ impl Whitted {
         self.cutoff <= 0.0 || weight >= self.cutoff
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn trace(
         &self,
         scene: &Scene,
         ray: &Ray,
         depth: u32,
         weight: f32,
+        scratch: &mut Scratch,
         stats: &mut RayStats,
         eye: bool,
     ) -> Vec3A {
-        let Some(hit) = scene.intersect(ray, f32::INFINITY) else {
+        let Some(hit) = scene.intersect_with(ray, f32::INFINITY, scratch) else {
             return scene.background;
         };
         if eye {
@@ -99,7 +115,7 @@ impl Whitted {
                 continue;
             }
             stats.shadow += 1;
-            if scene.occluded(&Ray::new(above, l), dist - eps) {
+            if scene.occluded_with(&Ray::new(above, l), dist - eps, scratch) {
                 continue;
             }
             out += c * light.color * (m.kd * ndl);
@@ -121,7 +137,9 @@ impl Whitted {
                     if self.spawn(weight * m.t) {
                         stats.refracted += 1;
                         let r = Ray::new(s.p - ngf * eps, tdir);
-                        out += self.trace(scene, &r, depth + 1, weight * m.t, stats, false) * m.t;
+                        out +=
+                            self.trace(scene, &r, depth + 1, weight * m.t, scratch, stats, false)
+                                * m.t;
                     }
                 }
                 None => refl_w += m.t,
@@ -130,7 +148,8 @@ impl Whitted {
         if self.spawn(weight * refl_w) {
             stats.reflected += 1;
             let r = Ray::new(above, refl_dir);
-            out += self.trace(scene, &r, depth + 1, weight * refl_w, stats, false) * refl_w;
+            out +=
+                self.trace(scene, &r, depth + 1, weight * refl_w, scratch, stats, false) * refl_w;
         }
         out
     }

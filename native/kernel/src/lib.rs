@@ -35,6 +35,7 @@ pub mod scene;
 pub mod stats;
 pub mod toml_scene;
 
+pub use bvh::Scratch;
 pub use camera::Camera;
 pub use error::Error;
 pub use film::{encode_png, to_srgb8, write_image};

@@ -6,6 +6,7 @@
 //! [`render_image`] with any thread count give bit-identical pixels, and ray statistics that sum
 //! to the same totals.
 
+use crate::bvh::Scratch;
 use crate::camera::Camera;
 use crate::integrator::{Integrator, Whitted};
 use crate::limits;
@@ -133,8 +134,18 @@ pub fn trace_span(
         return Ok((out, stats));
     }
     let integ = settings.integrator();
+    let mut scratch = Scratch::new();
     if settings.spd {
-        spd_span(scene, settings, &integ, start, end, &mut out, &mut stats);
+        spd_span(
+            scene,
+            settings,
+            &integ,
+            start,
+            end,
+            &mut scratch,
+            &mut out,
+            &mut stats,
+        );
     } else {
         let (w, h) = (settings.width, settings.height);
         let span = Camera::centre_span(w, h);
@@ -145,7 +156,7 @@ pub fn trace_span(
             let y = (idx / w as u64) as f32;
             let c = if s == 1 {
                 let ray = scene.camera.ray(x + 0.5, y + 0.5, w, h, span);
-                integ.radiance(scene, &ray, &mut stats)
+                integ.radiance(scene, &ray, &mut scratch, &mut stats)
             } else {
                 let mut acc = Vec3A::ZERO;
                 for j in 0..s {
@@ -155,7 +166,7 @@ pub fn trace_span(
                         let px = x + (i as f32 + jx) / s as f32;
                         let py = y + (j as f32 + jy) / s as f32;
                         let ray = scene.camera.ray(px, py, w, h, span);
-                        acc += integ.radiance(scene, &ray, &mut stats);
+                        acc += integ.radiance(scene, &ray, &mut scratch, &mut stats);
                     }
                 }
                 acc * inv
@@ -174,6 +185,7 @@ fn spd_span(
     integ: &Whitted,
     start: u64,
     end: u64,
+    scratch: &mut Scratch,
     out: &mut Vec<f32>,
     stats: &mut RayStats,
 ) {
@@ -194,7 +206,12 @@ fn spd_span(
     };
     let mut top: Vec<Option<Vec3A>> = vec![None; cols];
     let mut bottom: Vec<Option<Vec3A>> = vec![None; cols];
-    let fill = |row: &mut Vec<Option<Vec3A>>, cy: u64, a: u64, b: u64, stats: &mut RayStats| {
+    let fill = |row: &mut Vec<Option<Vec3A>>,
+                cy: u64,
+                a: u64,
+                b: u64,
+                scratch: &mut Scratch,
+                stats: &mut RayStats| {
         for cx in a..=b + 1 {
             let Some(slot) = row.get_mut(cx as usize) else {
                 continue;
@@ -205,10 +222,10 @@ fn spd_span(
             let ray = scene.camera.ray(cx as f32, cy as f32, w, h, span);
             let owner = cy.min(h as u64 - 1) * w64 + cx.min(w64 - 1);
             let c = if owner >= start && owner < end {
-                integ.radiance(scene, &ray, stats)
+                integ.radiance(scene, &ray, scratch, stats)
             } else {
-                let mut scratch = RayStats::default();
-                integ.radiance(scene, &ray, &mut scratch)
+                let mut scratch_stats = RayStats::default();
+                integ.radiance(scene, &ray, scratch, &mut scratch_stats)
             };
             *slot = Some(c);
         }
@@ -216,8 +233,8 @@ fn spd_span(
     for y in y0..=y1 {
         let Some((a, b)) = row_range(y) else { continue };
         // corners of row y (top) are shared with pixel row y-1, which already filled them
-        fill(&mut top, y, a, b, stats);
-        fill(&mut bottom, y + 1, a, b, stats);
+        fill(&mut top, y, a, b, scratch, stats);
+        fill(&mut bottom, y + 1, a, b, scratch, stats);
         for x in a..=b {
             let x = x as usize;
             let get = |r: &Vec<Option<Vec3A>>, i: usize| {
@@ -231,6 +248,9 @@ fn spd_span(
         bottom.iter_mut().for_each(|s| *s = None);
     }
 }
+
+/// A finished chunk of rows: (chunk index, pixels, statistics).
+type Chunk = (usize, Vec<f32>, RayStats);
 
 /// Whole image with `threads` OS threads (rows handed out in chunks by an atomic counter).
 /// Identical bits to [`trace_span`] over all pixels.
@@ -246,7 +266,7 @@ pub fn render_image(
     let rows_per_chunk = if settings.spd { 16 } else { 2 }.min(h.max(1));
     let chunks = h.div_ceil(rows_per_chunk) as usize;
     let next = AtomicUsize::new(0);
-    let results: Vec<Result<Vec<(usize, Vec<f32>, RayStats)>, Error>> = std::thread::scope(|s| {
+    let results: Vec<Result<Vec<Chunk>, Error>> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
             .map(|_| {
                 s.spawn(|| {

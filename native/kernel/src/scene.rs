@@ -1,6 +1,6 @@
 //! The scene: camera, background, lights, materials, primitives and their BVH.
 
-use crate::bvh::Bvh;
+use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
 use crate::geometry::{hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
 use crate::light::Light;
@@ -160,23 +160,30 @@ impl Scene {
     }
 
     /// Closest hit along `ray` with `0 < t < tmax`.
-    #[inline]
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
+        self.intersect_with(ray, tmax, &mut Scratch::new())
+    }
+
+    /// [`Scene::intersect`] reusing a traversal stack (for hot loops: one `Scratch` per thread).
+    #[inline]
+    pub fn intersect_with(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<Hit> {
         let mut prim = u32::MAX;
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
-        let mut best = self.bvh.traverse(ray, tmax, |first, count, tmax| {
-            let mut tm = tmax;
-            if let Some(range) = shapes.get(first..first + count) {
-                for (k, s) in range.iter().enumerate() {
-                    if let Some(t) = geom.hit(s, ray, 0.0, tm) {
-                        tm = t;
-                        prim = (first + k) as u32;
+        let mut best = self
+            .bvh
+            .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
+                let mut tm = tmax;
+                if let Some(range) = shapes.get(first..first + count) {
+                    for (k, s) in range.iter().enumerate() {
+                        if let Some(t) = geom.hit(s, ray, 0.0, tm) {
+                            tm = t;
+                            prim = (first + k) as u32;
+                        }
                     }
                 }
-            }
-            tm
-        });
+                tm
+            });
         for (k, pl) in self.planes.iter().enumerate() {
             let dn = pl.normal.dot(ray.dir);
             if dn != 0.0 {
@@ -195,20 +202,27 @@ impl Scene {
     }
 
     /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
-    #[inline]
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
+        self.occluded_with(ray, tmax, &mut Scratch::new())
+    }
+
+    /// [`Scene::occluded`] reusing a traversal stack.
+    #[inline]
+    pub fn occluded_with(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> bool {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
-        let r = self.bvh.traverse(ray, tmax, |first, count, tmax| {
-            if let Some(range) = shapes.get(first..first + count) {
-                for s in range {
-                    if geom.hit(s, ray, 0.0, tmax).is_some() {
-                        return -1.0;
+        let r = self
+            .bvh
+            .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
+                if let Some(range) = shapes.get(first..first + count) {
+                    for s in range {
+                        if geom.hit(s, ray, 0.0, tmax).is_some() {
+                            return -1.0;
+                        }
                     }
                 }
-            }
-            tmax
-        });
+                tmax
+            });
         if r < 0.0 {
             return true;
         }
@@ -488,6 +502,43 @@ impl SceneBuilder {
             bvh,
             epsilon,
             bounds,
+        }
+    }
+}
+#[cfg(test)]
+mod tmp_stats {
+    use super::*;
+    #[test]
+    fn tmp_counts() {
+        for f in ["rings_s7", "gears_s4", "balls_s4", "tree_s11"] {
+            let scene = Scene::load(Path::new(&format!("/work/shared/scenes/spd/{f}.nff"))).unwrap();
+            let cam = scene.camera;
+            let (mut leaves, mut prims, mut rays, mut blocked) = (0u64, 0u64, 0u64, 0u64);
+            let mut sc = Scratch::new();
+            for y in (0..512).step_by(4) {
+                for x in (0..512).step_by(4) {
+                    let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, 512, 512, 511.0);
+                    let Some(h) = scene.intersect(&r, f32::INFINITY) else { continue };
+                    let s = scene.surface(&h, &r);
+                    let n = if s.ng.dot(r.dir) < 0.0 { s.ng } else { -s.ng };
+                    for l in &scene.lights {
+                        let to = l.position - s.p;
+                        let d = to.length();
+                        let sr = Ray::new(s.p + n * scene.epsilon, to / d);
+                        rays += 1;
+                        let res = scene.bvh.traverse::<false>(&sr, d, &mut sc, |first, count, tmax| {
+                            leaves += 1;
+                            for s in &scene.geom.shapes[first..first + count] {
+                                prims += 1;
+                                if scene.geom.hit(s, &sr, 0.0, tmax).is_some() { return -1.0; }
+                            }
+                            tmax
+                        });
+                        if res < 0.0 { blocked += 1; }
+                    }
+                }
+            }
+            println!("{f}: shadow rays {rays} blocked {blocked}; per ray: leaves {:.2} prims {:.2}", leaves as f64 / rays as f64, prims as f64 / rays as f64);
         }
     }
 }

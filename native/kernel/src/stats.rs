@@ -18,7 +18,8 @@ pub struct RayStats {
 }
 
 impl RayStats {
-    /// Sum of two statistics.
+    /// Sum of two statistics (also available as `+` and `+=`).
+    #[allow(clippy::should_implement_trait)]
     pub fn add(self, other: RayStats) -> RayStats {
         RayStats {
             eye: self.eye + other.eye,

@@ -2,12 +2,16 @@
 //! with the kernel's own threads for benchmarks and references.
 
 use ring_tracer_kernel::{render_image as kernel_render_image, trace_span};
+use std::time::Instant;
+
 use rustler::{Binary, Env, ResourceArc};
 
 use crate::convert::{floats_to_binary, message, RayStatsTerm, SettingsTerm};
 use crate::scene::SceneResource;
 
-/// Traces `count` pixels from linear index `start`: linear RGB as f32 binary.
+/// Traces `count` pixels from linear index `start`: linear RGB as f32
+/// binary, the ray counters, and the microseconds spent tracing (measured
+/// here, so time spent waiting for a dirty scheduler is not counted).
 #[rustler::nif(schedule = "DirtyCpu")]
 fn trace_atom<'a>(
     env: Env<'a>,
@@ -15,10 +19,12 @@ fn trace_atom<'a>(
     settings: SettingsTerm,
     start: u64,
     count: u64,
-) -> Result<(Binary<'a>, RayStatsTerm), String> {
+) -> Result<(Binary<'a>, RayStatsTerm, u64), String> {
     let settings = settings.to_kernel()?;
+    let t0 = Instant::now();
     let (rgb, stats) = trace_span(&scene.scene, &settings, start, count).map_err(message)?;
-    Ok((floats_to_binary(env, &rgb)?, stats.into()))
+    let micros = t0.elapsed().as_micros() as u64;
+    Ok((floats_to_binary(env, &rgb)?, stats.into(), micros))
 }
 
 /// Traces the whole image with `threads` OS threads inside this one NIF call.

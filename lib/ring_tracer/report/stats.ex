@@ -1,0 +1,172 @@
+defmodule RingTracer.Report.Stats do
+  @moduledoc """
+  Numbers about a render (`RingTracer.Result`), as a map, JSON or CSV.
+
+  `summary/1` gives the makespan and the ideal makespan, their ratio, the
+  idle share, messages and bytes by kind and per atom, the per-child stats,
+  image size, atom count and ray counters. `write/2` writes the summary as
+  JSON (`.json`) or the per-child table as CSV (`.csv`).
+  """
+
+  alias RingTracer.{Error, Result}
+
+  @child_columns [
+    :index,
+    :node,
+    :speed,
+    :own,
+    :given,
+    :received,
+    :handovers,
+    :traced,
+    :offers_sent,
+    :offers_passed,
+    :offers_consumed,
+    :grandchild_restarts,
+    :busy_us,
+    :trace_us,
+    :idle_us,
+    :first_atom_us,
+    :last_atom_us
+  ]
+
+  @doc """
+  A summary of `result`:
+
+    * `:strategy`, `:width`, `:height`, `:atoms` (count), `:children_count`;
+    * `:makespan_us`, `:ideal_us`, `:ratio` (makespan / ideal, `nil` when the
+      ideal is 0), `:idle_pct` (the children's summed idle time as a
+      percentage of `children * makespan`);
+    * `:messages` — `%{kind => %{count: n, bytes: b}}` as in the result,
+      `:messages_total` — `%{count: n, bytes: b}`, `:per_atom` —
+      `%{messages: x, bytes: y, by_kind: %{kind => %{count: x, bytes: y}}}`;
+    * `:children` — the per-child maps, `:node` as a string;
+    * `:rays` — the ray counters; `:duplicates`.
+  """
+  @spec summary(Result.t()) :: map()
+  def summary(%Result{} = result) do
+    children = result.children || []
+    atoms = length(result.atoms || [])
+    messages = result.messages || %{}
+    n = length(children)
+    makespan = result.elapsed_us || 0
+    ideal = result.ideal_us || 0
+    idle = Enum.reduce(children, 0, &((&1[:idle_us] || 0) + &2))
+    per = max(atoms, 1)
+
+    {count, bytes} =
+      Enum.reduce(messages, {0, 0}, fn {_, m}, {c, b} -> {c + m.count, b + m.bytes} end)
+
+    %{
+      strategy: result.strategy,
+      width: result.width,
+      height: result.height,
+      atoms: atoms,
+      children_count: n,
+      makespan_us: makespan,
+      ideal_us: ideal,
+      ratio: if(ideal > 0, do: makespan / ideal, else: nil),
+      idle_pct: if(n > 0 and makespan > 0, do: 100 * idle / (n * makespan), else: 0.0),
+      messages: messages,
+      messages_total: %{count: count, bytes: bytes},
+      per_atom: %{
+        messages: count / per,
+        bytes: bytes / per,
+        by_kind:
+          Map.new(messages, fn {k, m} -> {k, %{count: m.count / per, bytes: m.bytes / per}} end)
+      },
+      children: Enum.map(children, &Map.update(&1, :node, nil, fn node -> to_string(node) end)),
+      rays: result.rays,
+      duplicates: result.duplicates
+    }
+  end
+
+  @doc """
+  Writes the summary of `result` to `path`: `.json` writes `summary/1` as
+  pretty-printed JSON, `.csv` one row per child under a header (ray counters
+  as `rays_<kind>` columns).
+
+  Returns `{:error, %RingTracer.Error{reason: :file}}` for any other
+  extension or when the file cannot be written.
+  """
+  @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
+  def write(%Result{} = result, path) when is_binary(path) do
+    case String.downcase(Path.extname(path)) do
+      ".json" ->
+        with {:ok, json} <- encode_json(summary(result), path), do: write_file(path, [json, "\n"])
+
+      ".csv" ->
+        write_file(path, csv(result))
+
+      ext ->
+        {:error,
+         Error.new(:file, "#{path}: unknown stats format #{inspect(ext)}; use .json or .csv")}
+    end
+  end
+
+  @doc """
+  The per-child CSV of `result` (header and one line per child) as iodata.
+  """
+  @spec csv(Result.t()) :: iodata()
+  def csv(%Result{children: children}) do
+    children = children || []
+
+    ray_keys =
+      children |> Enum.flat_map(&Map.keys(&1[:rays] || %{})) |> Enum.uniq() |> Enum.sort()
+
+    header = Enum.map(@child_columns, &Atom.to_string/1) ++ Enum.map(ray_keys, &"rays_#{&1}")
+
+    rows =
+      Enum.map(children, fn child ->
+        Enum.map(@child_columns, &child[&1]) ++ Enum.map(ray_keys, &(child[:rays] || %{})[&1])
+      end)
+
+    Enum.map([header | rows], fn row -> [Enum.map_join(row, ",", &field/1), "\n"] end)
+  end
+
+  defp field(nil), do: ""
+  defp field(x) when is_float(x), do: :erlang.float_to_binary(x, [:compact, decimals: 6])
+  defp field(x) when is_integer(x), do: Integer.to_string(x)
+
+  defp field(x) do
+    s = to_string(x)
+
+    if String.contains?(s, [",", "\"", "\n", "\r"]),
+      do: ~s("#{String.replace(s, "\"", "\"\"")}"),
+      else: s
+  end
+
+  # jiffy is Debian's erlang-jiffy (an application listed in mix.exs, not a
+  # hex dependency); bin/ringtracer installs it.
+  defp encode_json(term, path) do
+    if Code.ensure_loaded?(:jiffy) do
+      {:ok, :jiffy.encode(json(term), [:pretty])}
+    else
+      {:error,
+       Error.new(:file, "#{path}: cannot write JSON, Debian's erlang-jiffy is not installed")}
+    end
+  end
+
+  # Terms jiffy encodes: binary keys, no tuples, nil as null.
+  defp json(nil), do: :null
+  defp json(b) when is_boolean(b), do: b
+  defp json(a) when is_atom(a), do: Atom.to_string(a)
+  defp json(x) when is_number(x) or is_binary(x), do: x
+  defp json(%{} = map), do: Map.new(map, fn {k, v} -> {key(k), json(v)} end)
+  defp json(list) when is_list(list), do: Enum.map(list, &json/1)
+  defp json(tuple) when is_tuple(tuple), do: tuple |> Tuple.to_list() |> json()
+  defp json(other), do: inspect(other)
+
+  defp key(k) when is_binary(k), do: k
+  defp key(k) when is_atom(k) or is_number(k), do: to_string(k)
+  defp key(k), do: inspect(k)
+
+  defp write_file(path, data) do
+    with :ok <- File.mkdir_p(Path.dirname(path)),
+         :ok <- File.write(path, data) do
+      :ok
+    else
+      {:error, reason} -> {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+end
