@@ -168,13 +168,16 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
     stack: Vec<(u32, u32, f32)>,
+    /// Last occluder found per shadow-cache slot (`u32::MAX` = none).
+    pub(crate) shadow_cache: Vec<u32>,
 }
 
 impl Scratch {
     /// A scratch area with room for typical traversals.
     pub fn new() -> Scratch {
         Scratch {
-            stack: Vec::with_capacity(256),
+            stack: vec![(0, 0, 0.0); 256],
+            shadow_cache: Vec::new(),
         }
     }
 }
@@ -324,9 +327,14 @@ impl Bvh {
         }
         let pre = RayPre::new(ray);
         let stack = &mut scratch.stack;
-        stack.clear();
-        stack.push((0, 0, 0.0));
-        while let Some((child, count, dist)) = stack.pop() {
+        if stack.len() < 64 {
+            stack.resize(256, (0, 0, 0.0));
+        }
+        stack[0] = (0, 0, 0.0);
+        let mut sp = 1usize;
+        while sp > 0 {
+            sp -= 1;
+            let (child, count, dist) = stack[sp];
             if dist > tmax {
                 continue;
             }
@@ -347,27 +355,33 @@ impl Bvh {
             if mask == 0 {
                 continue;
             }
-            if !ORDERED || mask.count_ones() == 1 {
+            // room for four more entries
+            if sp + 4 > stack.len() {
+                let n = stack.len() * 2;
+                stack.resize(n, (0, 0, 0.0));
+            }
+            if !ORDERED || mask & (mask - 1) == 0 {
                 while mask != 0 {
-                    let i = mask.trailing_zeros() as usize;
+                    let i = mask.trailing_zeros() as usize & 3;
                     mask &= mask - 1;
-                    stack.push((node.child[i], node.count[i], tn[i]));
+                    stack[sp] = (node.child[i], node.count[i], tn[i]);
+                    sp += 1;
                 }
                 continue;
             }
-            // sort hit children far to near, so the nearest ends on top of the stack
-            let base = stack.len();
+            // insert hit children far to near, so the nearest ends on top of the stack
+            let base = sp;
             while mask != 0 {
-                let i = mask.trailing_zeros() as usize;
+                let i = mask.trailing_zeros() as usize & 3;
                 mask &= mask - 1;
                 let e = (node.child[i], node.count[i], tn[i]);
-                stack.push(e);
-                let mut j = stack.len() - 1;
+                let mut j = sp;
                 while j > base && stack[j - 1].2 < e.2 {
                     stack[j] = stack[j - 1];
                     j -= 1;
                 }
                 stack[j] = e;
+                sp += 1;
             }
         }
         tmax

@@ -364,22 +364,51 @@ impl Geometry {
             Shape::Polygon(k) => poly_bounds.get(k as usize).copied().unwrap_or(Aabb::EMPTY),
             Shape::Cone(k) => match self.cones.get(k as usize) {
                 None => Aabb::EMPTY,
-                Some(c) => {
-                    let e = (Vec3A::ONE - c.axis * c.axis).max(Vec3A::ZERO);
-                    let e = Vec3A::new(e.x.sqrt(), e.y.sqrt(), e.z.sqrt());
-                    let r1 = c.r0 + c.slope * c.height;
-                    let apex = c.base + c.axis * c.height;
-                    Aabb {
-                        min: c.base - e * c.r0,
-                        max: c.base + e * c.r0,
-                    }
-                    .union(Aabb {
-                        min: apex - e * r1,
-                        max: apex + e * r1,
-                    })
-                }
+                Some(c) => c.segment_bounds(0.0, c.height),
             },
         }
+    }
+
+    /// Boxes that together bound a shape; long oblique cones/cylinders are cut into up to 16
+    /// pieces along their axis, whose boxes are much tighter than one box around the whole.
+    /// The BVH references the shape once per piece.
+    pub fn split_bounds(&self, shape: &Shape, poly_bounds: &[Aabb], out: &mut Vec<Aabb>) {
+        out.clear();
+        if let Shape::Cone(k) = *shape {
+            if let Some(c) = self.cones.get(k as usize) {
+                let rmax = c.r0.max(c.r0 + c.slope * c.height).max(1e-30);
+                let oblique = c.axis.abs().max_element() < 0.99;
+                let pieces = if oblique {
+                    (c.height / (16.0 * rmax)).ceil().clamp(1.0, 16.0) as usize
+                } else {
+                    1
+                };
+                for i in 0..pieces {
+                    let s0 = c.height * i as f32 / pieces as f32;
+                    let s1 = c.height * (i + 1) as f32 / pieces as f32;
+                    out.push(c.segment_bounds(s0, s1));
+                }
+                return;
+            }
+        }
+        out.push(self.bounds(shape, poly_bounds));
+    }
+}
+
+impl ConeData {
+    /// Box around the part of the surface with axial coordinate in `[s0, s1]`.
+    pub fn segment_bounds(&self, s0: f32, s1: f32) -> Aabb {
+        let e = (Vec3A::ONE - self.axis * self.axis).max(Vec3A::ZERO);
+        let e = Vec3A::new(e.x.sqrt(), e.y.sqrt(), e.z.sqrt());
+        let disc = |s: f32| {
+            let c = self.base + self.axis * s;
+            let r = (self.r0 + self.slope * s).max(0.0);
+            Aabb {
+                min: c - e * r,
+                max: c + e * r,
+            }
+        };
+        disc(s0).union(disc(s1))
     }
 }
 
@@ -670,5 +699,145 @@ mod tests {
         assert!((t - 4.5).abs() < 1e-5);
         let n = g.geometric_normal(&s, Vec3A::new(0.5, 0.0, 0.5));
         assert!((n - Vec3A::new(1.0, 0.0, 1.0).normalize()).length() < 1e-5);
+    }
+}
+
+/// Largest polygon that is triangulated (ear clipping is quadratic); larger ones keep the
+/// crossing test.
+pub(crate) const MAX_EAR_CLIP: usize = 1024;
+
+/// Triangulates a simple planar polygon (convex or concave) by ear clipping in the projection
+/// that drops the normal's dominant axis. Returns vertex-index triples in the polygon's own
+/// winding, or `None` if the polygon is not simple (then the caller keeps the crossing test).
+/// Zero-area ears (collinear vertices) are clipped without emitting a triangle.
+pub(crate) fn ear_clip(verts: &[Vec3A], normal: Vec3A) -> Option<Vec<[usize; 3]>> {
+    let n = verts.len();
+    if !(3..=MAX_EAR_CLIP).contains(&n) {
+        return None;
+    }
+    let an = normal.abs();
+    let (u, v) = if an.x >= an.y && an.x >= an.z {
+        (1u8, 2u8)
+    } else if an.y >= an.z {
+        (2, 0)
+    } else {
+        (0, 1)
+    };
+    let p: Vec<[f32; 2]> = verts.iter().map(|q| [comp(*q, u), comp(*q, v)]).collect();
+    // orientation of the projection
+    let mut area = 0.0f32;
+    for i in 0..n {
+        let a = p[i];
+        let b = p[(i + 1) % n];
+        area += a[0] * b[1] - b[0] * a[1];
+    }
+    if area == 0.0 {
+        return None;
+    }
+    let sign = area.signum();
+    let cross = |a: [f32; 2], b: [f32; 2], c: [f32; 2]| -> f32 {
+        ((b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])) * sign
+    };
+    let inside = |q: [f32; 2], a: [f32; 2], b: [f32; 2], c: [f32; 2]| -> bool {
+        let d1 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) * sign;
+        let d2 = ((c[0] - b[0]) * (q[1] - b[1]) - (c[1] - b[1]) * (q[0] - b[0])) * sign;
+        let d3 = ((a[0] - c[0]) * (q[1] - c[1]) - (a[1] - c[1]) * (q[0] - c[0])) * sign;
+        d1 >= 0.0 && d2 >= 0.0 && d3 >= 0.0
+    };
+    let mut idx: Vec<usize> = (0..n).collect();
+    let mut out = Vec::with_capacity(n - 2);
+    let mut i = 0;
+    let mut since_clip = 0;
+    while idx.len() > 3 {
+        let m = idx.len();
+        let (ia, ib, ic) = (idx[(i + m - 1) % m], idx[i % m], idx[(i + 1) % m]);
+        let (a, b, c) = (p[ia], p[ib], p[ic]);
+        let cr = cross(a, b, c);
+        let is_ear = if cr == 0.0 {
+            true
+        } else if cr > 0.0 {
+            !idx.iter().any(|&k| {
+                k != ia
+                    && k != ib
+                    && k != ic
+                    && p[k] != a
+                    && p[k] != b
+                    && p[k] != c
+                    && inside(p[k], a, b, c)
+            })
+        } else {
+            false
+        };
+        if is_ear {
+            if cr != 0.0 {
+                out.push([ia, ib, ic]);
+            }
+            idx.remove(i % m);
+            since_clip = 0;
+            if i >= idx.len() {
+                i = 0;
+            }
+        } else {
+            i = (i + 1) % m;
+            since_clip += 1;
+            if since_clip > m {
+                return None;
+            }
+        }
+    }
+    if let [a, b, c] = idx[..] {
+        if cross(p[a], p[b], p[c]) != 0.0 {
+            out.push([a, b, c]);
+        }
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod ear_tests {
+    use super::*;
+
+    fn area(vs: &[Vec3A], tris: &[[usize; 3]]) -> f32 {
+        tris.iter()
+            .map(|t| (vs[t[1]] - vs[t[0]]).cross(vs[t[2]] - vs[t[0]]).z * 0.5)
+            .sum()
+    }
+
+    #[test]
+    fn concave_polygon_triangulates_exactly() {
+        // "L" shape of area 3, CCW
+        let vs: Vec<Vec3A> = [[0., 0.], [2., 0.], [2., 1.], [1., 1.], [1., 2.], [0., 2.]]
+            .iter()
+            .map(|a| Vec3A::new(a[0], a[1], 0.0))
+            .collect();
+        let t = ear_clip(&vs, Vec3A::Z).unwrap();
+        assert_eq!(t.len(), 4);
+        assert!((area(&vs, &t) - 3.0).abs() < 1e-6);
+        // every triangle keeps the winding (positive z area)
+        assert!(t
+            .iter()
+            .all(|t| (vs[t[1]] - vs[t[0]]).cross(vs[t[2]] - vs[t[0]]).z > 0.0));
+        // a gear-like star: 2k points alternating radius
+        let k = 72;
+        let star: Vec<Vec3A> = (0..2 * k)
+            .map(|i| {
+                let a = i as f32 / (2 * k) as f32 * std::f32::consts::TAU;
+                let r = if i % 2 == 0 { 1.0 } else { 0.8 };
+                Vec3A::new(r * a.cos(), r * a.sin(), 0.5)
+            })
+            .collect();
+        let t = ear_clip(&star, Vec3A::Z).unwrap();
+        assert_eq!(t.len(), 2 * k - 2);
+        let mut want = 0.0;
+        for i in 0..star.len() {
+            let a = star[i];
+            let b = star[(i + 1) % star.len()];
+            want += (a.x * b.y - b.x * a.y) * 0.5;
+        }
+        assert!((area(&star, &t) - want).abs() < 1e-4);
+        // clockwise input keeps its (clockwise) winding
+        let rev: Vec<Vec3A> = vs.iter().rev().copied().collect();
+        let t = ear_clip(&rev, -Vec3A::Z).unwrap();
+        assert!((area(&rev, &t) + 3.0).abs() < 1e-6);
     }
 }

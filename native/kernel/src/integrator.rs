@@ -103,7 +103,7 @@ impl Whitted {
         let mut out = scene.ambient * c;
         let above = s.p + ngf * eps;
         let refl_dir = reflect(d, nf);
-        for light in &scene.lights {
+        for (li, light) in scene.lights.iter().enumerate() {
             let to = light.position - s.p;
             let dist = to.length();
             if dist <= 0.0 {
@@ -115,7 +115,8 @@ impl Whitted {
                 continue;
             }
             stats.shadow += 1;
-            if scene.occluded_with(&Ray::new(above, l), dist - eps, scratch) {
+            let slot = li * 8 + depth.min(7) as usize;
+            if scene.occluded_cached(&Ray::new(above, l), dist - eps, scratch, slot) {
                 continue;
             }
             out += c * light.color * (m.kd * ndl);

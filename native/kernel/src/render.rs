@@ -179,6 +179,7 @@ pub fn trace_span(
 
 /// SPD corner mode: each needed corner traced once per span; a corner's rays counted only in the
 /// span owning it (owner of corner (cx, cy) = pixel (min(cx, W-1), min(cy, H-1))).
+#[allow(clippy::too_many_arguments)]
 fn spd_span(
     scene: &Scene,
     settings: &Settings,

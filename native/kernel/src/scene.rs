@@ -2,7 +2,7 @@
 
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
-use crate::geometry::{hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
+use crate::geometry::{ear_clip, hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
 use crate::light::Light;
 use crate::limits;
 use crate::material::Material;
@@ -63,7 +63,8 @@ pub(crate) struct Plane {
 pub struct Hit {
     /// Distance along the (unit-direction) ray.
     pub t: f32,
-    /// Primitive index: `0..primitive_count()`; bounded primitives first (in BVH order), then planes.
+    /// Internal primitive index, `0..internal_primitive_count()`: bounded primitives first (in
+    /// BVH order), then planes.
     pub prim: u32,
 }
 
@@ -94,6 +95,7 @@ pub struct Scene {
     pub(crate) bvh: Bvh,
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
+    pub(crate) source_count: usize,
 }
 
 impl Scene {
@@ -139,8 +141,15 @@ impl Scene {
         self.resolution
     }
 
-    /// Number of primitives (after meshes are expanded to triangles; degenerate ones dropped).
+    /// Number of primitives as the scene describes them (a polygon counts once even though it
+    /// is triangulated internally; mesh triangles count one each; degenerate ones are dropped).
     pub fn primitive_count(&self) -> usize {
+        self.source_count
+    }
+
+    /// Number of internal primitives (triangles after polygon triangulation, spheres, cones,
+    /// planes); [`Hit::prim`] indexes these.
+    pub fn internal_primitive_count(&self) -> usize {
         self.geom.shapes.len() + self.planes.len()
     }
 
@@ -209,14 +218,35 @@ impl Scene {
     /// [`Scene::occluded`] reusing a traversal stack.
     #[inline]
     pub fn occluded_with(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> bool {
+        self.occluded_cached(ray, tmax, scratch, usize::MAX)
+    }
+
+    /// Any-hit query with a shadow cache: `slot` (e.g. light and tree depth) remembers the last
+    /// occluder found, which is tested first. The answer does not depend on the cache.
+    pub(crate) fn occluded_cached(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+        slot: usize,
+    ) -> bool {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
+        if let Some(&c) = scratch.shadow_cache.get(slot) {
+            if let Some(s) = shapes.get(c as usize) {
+                if geom.hit(s, ray, 0.0, tmax).is_some() {
+                    return true;
+                }
+            }
+        }
+        let mut found = u32::MAX;
         let r = self
             .bvh
             .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
                 if let Some(range) = shapes.get(first..first + count) {
-                    for s in range {
+                    for (k, s) in range.iter().enumerate() {
                         if geom.hit(s, ray, 0.0, tmax).is_some() {
+                            found = (first + k) as u32;
                             return -1.0;
                         }
                     }
@@ -224,6 +254,14 @@ impl Scene {
                 tmax
             });
         if r < 0.0 {
+            if slot != usize::MAX && slot < 1 << 20 {
+                if scratch.shadow_cache.len() <= slot {
+                    scratch.shadow_cache.resize(slot + 1, u32::MAX);
+                }
+                if let Some(c) = scratch.shadow_cache.get_mut(slot) {
+                    *c = found;
+                }
+            }
             return true;
         }
         self.planes.iter().any(|pl| {
@@ -314,6 +352,8 @@ pub(crate) struct SceneBuilder {
     patch_normals: Vec<[Vec3A; 3]>,
     planes: Vec<Plane>,
     poly_bounds: Vec<Aabb>,
+    /// Primitives as the scene file counts them (a triangulated polygon is one).
+    source_count: usize,
 }
 
 impl SceneBuilder {
@@ -330,6 +370,7 @@ impl SceneBuilder {
             patch_normals: Vec::new(),
             planes: Vec::new(),
             poly_bounds: Vec::new(),
+            source_count: 0,
         }
     }
 
@@ -343,13 +384,13 @@ impl SceneBuilder {
     }
 
     pub fn primitive_count(&self) -> usize {
-        self.geom.shapes.len() + self.planes.len()
+        self.source_count
     }
 
     fn room(&self) -> Result<(), Error> {
         limits::check(
             "primitive count",
-            self.primitive_count() as u64 + 1,
+            (self.geom.shapes.len() + self.planes.len()) as u64 + 1,
             limits::MAX_PRIMITIVES as u64,
         )
     }
@@ -371,12 +412,27 @@ impl SceneBuilder {
                 material,
                 NO_NORMALS,
             );
+            self.source_count += 1;
         }
         Ok(())
     }
 
     /// Adds a triangle (dropped if degenerate); `normals` are per-vertex shading normals.
     pub fn triangle(
+        &mut self,
+        v: [Vec3A; 3],
+        normals: Option<[Vec3A; 3]>,
+        material: u32,
+    ) -> Result<(), Error> {
+        let before = self.geom.shapes.len();
+        self.triangle_inner(v, normals, material)?;
+        if self.geom.shapes.len() > before {
+            self.source_count += 1;
+        }
+        Ok(())
+    }
+
+    fn triangle_inner(
         &mut self,
         v: [Vec3A; 3],
         normals: Option<[Vec3A; 3]>,
@@ -405,6 +461,27 @@ impl SceneBuilder {
             return self.triangle([*a, *b, *c], None, material);
         }
         self.room()?;
+        // triangulate: triangles are much cheaper to test and bound than large polygons
+        let mut scratch = Vec::new();
+        if let Some(p) = make_polygon(verts, 0, &mut scratch) {
+            if let Some(tris) = ear_clip(verts, p.normal) {
+                let before = self.geom.shapes.len();
+                for t in tris {
+                    let (Some(a), Some(b), Some(c)) =
+                        (verts.get(t[0]), verts.get(t[1]), verts.get(t[2]))
+                    else {
+                        continue;
+                    };
+                    self.triangle_inner([*a, *b, *c], None, material)?;
+                }
+                if self.geom.shapes.len() > before {
+                    self.source_count += 1;
+                }
+                return Ok(());
+            }
+        } else {
+            return Ok(());
+        }
         let first = self.geom.poly_verts.len() as u32;
         if let Some(p) = make_polygon(verts, first, &mut self.geom.poly_verts) {
             let k = self.geom.polys.len() as u32;
@@ -412,6 +489,7 @@ impl SceneBuilder {
             self.poly_bounds
                 .push(verts.iter().fold(Aabb::EMPTY, |b, v| b.grow(*v)));
             self.push(Shape::Polygon(k), material, NO_NORMALS);
+            self.source_count += 1;
         }
         Ok(())
     }
@@ -429,6 +507,7 @@ impl SceneBuilder {
             let k = self.geom.cones.len() as u32;
             self.geom.cones.push(c);
             self.push(Shape::Cone(k), material, NO_NORMALS);
+            self.source_count += 1;
         }
         Ok(())
     }
@@ -449,25 +528,32 @@ impl SceneBuilder {
             d: n.dot(point),
             material,
         });
+        self.source_count += 1;
         Ok(Some(()))
     }
 
     /// Builds the BVH and the final scene. `camera` must be set.
     pub fn build(mut self) -> Scene {
-        let boxes: Vec<Aabb> = self
-            .geom
-            .shapes
-            .iter()
-            .map(|s| self.geom.bounds(s, &self.poly_bounds))
-            .collect();
+        // BVH references: (shape index, box); oblique cones get several tight boxes
+        let mut boxes: Vec<Aabb> = Vec::with_capacity(self.geom.shapes.len());
+        let mut owner: Vec<u32> = Vec::with_capacity(self.geom.shapes.len());
+        let mut tmp = Vec::new();
+        for (i, s) in self.geom.shapes.iter().enumerate() {
+            self.geom.split_bounds(s, &self.poly_bounds, &mut tmp);
+            for b in &tmp {
+                boxes.push(*b);
+                owner.push(i as u32);
+            }
+        }
         let (bvh, order) = Bvh::build(&boxes);
+        let src = |r: &u32| owner.get(*r as usize).copied();
         let shapes: Vec<Shape> = order
             .iter()
-            .filter_map(|&i| self.geom.shapes.get(i as usize).copied())
+            .filter_map(|r| src(r).and_then(|i| self.geom.shapes.get(i as usize).copied()))
             .collect();
         let info: Vec<PrimInfo> = order
             .iter()
-            .filter_map(|&i| self.info.get(i as usize).copied())
+            .filter_map(|r| src(r).and_then(|i| self.info.get(i as usize).copied()))
             .collect();
         self.geom.shapes = shapes;
         let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
@@ -502,43 +588,7 @@ impl SceneBuilder {
             bvh,
             epsilon,
             bounds,
-        }
-    }
-}
-#[cfg(test)]
-mod tmp_stats {
-    use super::*;
-    #[test]
-    fn tmp_counts() {
-        for f in ["rings_s7", "gears_s4", "balls_s4", "tree_s11"] {
-            let scene = Scene::load(Path::new(&format!("/work/shared/scenes/spd/{f}.nff"))).unwrap();
-            let cam = scene.camera;
-            let (mut leaves, mut prims, mut rays, mut blocked) = (0u64, 0u64, 0u64, 0u64);
-            let mut sc = Scratch::new();
-            for y in (0..512).step_by(4) {
-                for x in (0..512).step_by(4) {
-                    let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, 512, 512, 511.0);
-                    let Some(h) = scene.intersect(&r, f32::INFINITY) else { continue };
-                    let s = scene.surface(&h, &r);
-                    let n = if s.ng.dot(r.dir) < 0.0 { s.ng } else { -s.ng };
-                    for l in &scene.lights {
-                        let to = l.position - s.p;
-                        let d = to.length();
-                        let sr = Ray::new(s.p + n * scene.epsilon, to / d);
-                        rays += 1;
-                        let res = scene.bvh.traverse::<false>(&sr, d, &mut sc, |first, count, tmax| {
-                            leaves += 1;
-                            for s in &scene.geom.shapes[first..first + count] {
-                                prims += 1;
-                                if scene.geom.hit(s, &sr, 0.0, tmax).is_some() { return -1.0; }
-                            }
-                            tmax
-                        });
-                        if res < 0.0 { blocked += 1; }
-                    }
-                }
-            }
-            println!("{f}: shadow rays {rays} blocked {blocked}; per ray: leaves {:.2} prims {:.2}", leaves as f64 / rays as f64, prims as f64 / rays as f64);
+            source_count: self.source_count,
         }
     }
 }

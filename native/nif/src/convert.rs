@@ -68,7 +68,7 @@ pub fn floats_to_binary<'a>(env: Env<'a>, rgb: &[f32]) -> Result<Binary<'a>, Str
 
 /// The inverse of [`floats_to_binary`].
 pub fn binary_to_floats(bin: &Binary) -> Result<Vec<f32>, String> {
-    if bin.len() % 4 != 0 {
+    if !bin.len().is_multiple_of(4) {
         return Err(format!(
             "pixel binary has {} bytes, not a multiple of 4",
             bin.len()

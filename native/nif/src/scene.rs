@@ -77,7 +77,9 @@ fn scene_parse<'a>(
             let path = PathBuf::from(dir).join(rel);
             std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?
         } else {
-            return Err(format!("{rel}: referenced file was not shipped with the scene"));
+            return Err(format!(
+                "{rel}: referenced file was not shipped with the scene"
+            ));
         };
         if let Ok(mut used) = used.lock() {
             used.push((rel.to_string(), data.clone()));
