@@ -11,7 +11,7 @@
 //! seed), each with 1 and 2 threads.
 
 use ring_tracer_kernel::glam::Vec3A;
-use ring_tracer_kernel::{obj, render_image, Camera, Ray, Scene, Settings};
+use ring_tracer_kernel::{obj, render_image, Camera, Ray, Scene, Scratch, Settings};
 use std::path::Path;
 use std::time::Instant;
 
@@ -103,13 +103,17 @@ fn cast(scene: &Scene, rays: &[Ray], threads: usize) -> (f64, u64) {
             .map(|_| {
                 s.spawn(|| {
                     let mut hits = 0u64;
+                    let mut scratch = Scratch::new();
                     loop {
                         let c = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         let Some(part) = rays.chunks(chunk).nth(c) else {
                             break;
                         };
                         for r in part {
-                            if scene.intersect(r, f32::INFINITY).is_some() {
+                            if scene
+                                .intersect_with(r, f32::INFINITY, &mut scratch)
+                                .is_some()
+                            {
                                 hits += 1;
                             }
                         }

@@ -1,9 +1,19 @@
-//! Bounding volume hierarchy: binned SAH build, flattened 32-byte nodes, ordered traversal.
+//! Bounding volume hierarchy: binned SAH build, 4-wide flattened nodes, ordered traversal.
 //!
-//! Nodes are stored in one array; the two children of an interior node are adjacent
-//! (`first`, `first + 1`), so a node needs only its box, one index and a count. Leaves reference
-//! a contiguous range of the primitive array, which the scene reorders to BVH order after the
-//! build. Memory is O(primitives): at most `2n - 1` nodes.
+//! Build: a binary tree with binned SAH (16 bins on each axis, iterative, depth-capped) in
+//! 32-byte nodes (box + first/count packed in the w lanes, children adjacent). It is then
+//! collapsed into 4-wide nodes (`Node4`: the four child boxes in SoA layout, 128 bytes, i.e.
+//! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
+//! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
+//! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
+//!
+//! Traversal tests the four child boxes at once with SSE (`Vec4`), using per-ray precomputed
+//! reciprocal direction and near/far plane selection (no min/max per axis). For closest-hit
+//! queries the children that are hit are handled nearest first: leaves are intersected
+//! immediately, the nearest inner child is descended into, the others are stacked with their
+//! entry distance and skipped later if a closer hit was found. Shadow rays use the unordered
+//! any-hit variant, which stops at the first occluder. The stack lives in a reusable
+//! [`Scratch`], so no allocation happens per ray.
 
 use crate::geometry::Aabb;
 use crate::ray::Ray;
@@ -13,10 +23,38 @@ use glam::{Vec3A, Vec4};
 const BINS: usize = 16;
 /// Leaves never hold more than this unless the primitives cannot be separated.
 const MAX_LEAF: usize = 8;
-/// Build depth cap; traversal stacks are sized from it.
+/// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
 pub(crate) const MAX_DEPTH: usize = 60;
 /// Cost of one traversal step relative to one primitive test.
 const TRAVERSAL_COST: f32 = 1.0;
+
+/// Test-only instrumentation: node visits, leaf visits, tuning overrides.
+#[cfg(test)]
+pub(crate) mod probe {
+    use std::cell::Cell;
+    thread_local! {
+        pub static NODES: Cell<u64> = const { Cell::new(0) };
+        pub static TCOST: Cell<f32> = const { Cell::new(super::TRAVERSAL_COST) };
+        pub static LEAF_MIN: Cell<usize> = const { Cell::new(2) };
+    }
+}
+
+#[cfg(test)]
+fn traversal_cost() -> f32 {
+    probe::TCOST.with(|c| c.get())
+}
+#[cfg(not(test))]
+fn traversal_cost() -> f32 {
+    TRAVERSAL_COST
+}
+#[cfg(test)]
+fn leaf_min() -> usize {
+    probe::LEAF_MIN.with(|c| c.get())
+}
+#[cfg(not(test))]
+fn leaf_min() -> usize {
+    2
+}
 
 /// A flattened node: `a = (min, first)`, `b = (max, count)` with the integers stored as f32 bits.
 /// `count == 0` marks an interior node whose children are `first` and `first + 1`.
@@ -74,7 +112,7 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
         let make_leaf = |nodes: &mut Vec<Node>| {
             nodes[ni] = Node::new(bounds, start as u32, count as u32);
         };
-        if count <= 2 || depth >= MAX_DEPTH {
+        if count <= leaf_min() || depth >= MAX_DEPTH {
             make_leaf(&mut nodes);
             continue;
         }
@@ -123,7 +161,7 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
             }
         }
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-        let split_cost = TRAVERSAL_COST + best.0 / parent_area;
+        let split_cost = traversal_cost() + best.0 / parent_area;
         let mid;
         if best.0.is_finite() && (split_cost < count as f32 || count > MAX_LEAF) {
             let (axis, bin) = (best.1, best.2);
@@ -173,10 +211,10 @@ pub struct Scratch {
 }
 
 impl Scratch {
-    /// A scratch area with room for typical traversals.
+    /// An empty scratch area (allocates on first use, then grows as needed and is reused).
     pub fn new() -> Scratch {
         Scratch {
-            stack: vec![(0, 0, 0.0); 256],
+            stack: Vec::new(),
             shadow_cache: Vec::new(),
         }
     }
@@ -312,8 +350,10 @@ impl Bvh {
         (Bvh { nodes }, order)
     }
 
-    /// Visits leaves, `visit(first, count, tmax) -> new tmax`. With `ORDERED`, children are
-    /// visited nearest first. Stops when a visit returns a negative value (any-hit queries).
+    /// Visits leaves, `visit(first, count, tmax) -> new tmax`. With `ORDERED`, the children hit
+    /// at each node are handled nearest first: leaves are visited at once, the nearest inner
+    /// child is descended into and the others are stacked. Stops when a visit returns a negative
+    /// value (any-hit queries).
     #[inline(always)]
     pub fn traverse<const ORDERED: bool>(
         &self,
@@ -327,64 +367,85 @@ impl Bvh {
         }
         let pre = RayPre::new(ray);
         let stack = &mut scratch.stack;
-        if stack.len() < 64 {
-            stack.resize(256, (0, 0, 0.0));
-        }
-        stack[0] = (0, 0, 0.0);
-        let mut sp = 1usize;
-        while sp > 0 {
-            sp -= 1;
-            let (child, count, dist) = stack[sp];
-            if dist > tmax {
-                continue;
-            }
-            if count > 0 {
-                if count == EMPTY {
-                    continue;
+        let mut sp = 0usize;
+        let mut cur = 0u32;
+        loop {
+            if let Some(node) = self.nodes.get(cur as usize) {
+                #[cfg(test)]
+                probe::NODES.with(|c| c.set(c.get() + 1));
+                let (tn, mut mask) = node.hit(&pre, tmax);
+                let tn = tn.to_array();
+                if mask & mask.wrapping_sub(1) == 0 {
+                    // zero or one child hit: the common case, no sorting or stacking
+                    if mask != 0 {
+                        let i = mask.trailing_zeros() as usize & 3;
+                        let count = node.count[i];
+                        if count == 0 {
+                            cur = node.child[i];
+                            continue;
+                        }
+                        if count != EMPTY {
+                            tmax = visit(node.child[i] as usize, count as usize, tmax);
+                            if tmax < 0.0 {
+                                return tmax;
+                            }
+                        }
+                    }
+                } else {
+                    // several children: leaves at once, inner nodes nearest first
+                    let mut it = [0.0f32; 4];
+                    let mut ic = [0u32; 4];
+                    let mut ni = 0usize;
+                    while mask != 0 {
+                        let i = mask.trailing_zeros() as usize & 3;
+                        mask &= mask - 1;
+                        let count = node.count[i];
+                        if count == 0 {
+                            // insertion keeps (it, ic) sorted far to near
+                            let mut j = ni;
+                            while ORDERED && j > 0 && it[(j - 1) & 3] < tn[i] {
+                                it[j & 3] = it[(j - 1) & 3];
+                                ic[j & 3] = ic[(j - 1) & 3];
+                                j -= 1;
+                            }
+                            it[j & 3] = tn[i];
+                            ic[j & 3] = node.child[i];
+                            ni += 1;
+                        } else if count != EMPTY && tn[i] <= tmax {
+                            tmax = visit(node.child[i] as usize, count as usize, tmax);
+                            if tmax < 0.0 {
+                                return tmax;
+                            }
+                        }
+                    }
+                    if ni > 0 {
+                        if stack.len() < sp + 4 {
+                            stack.resize(sp + 64, (0, 0, 0.0));
+                        }
+                        for j in 0..ni - 1 {
+                            if let Some(slot) = stack.get_mut(sp) {
+                                *slot = (ic[j & 3], 0, it[j & 3]);
+                                sp += 1;
+                            }
+                        }
+                        cur = ic[(ni - 1) & 3];
+                        continue;
+                    }
                 }
-                tmax = visit(child as usize, count as usize, tmax);
-                if tmax < 0.0 {
+            }
+            // pop the next inner node that may still hold a closer hit
+            loop {
+                if sp == 0 {
                     return tmax;
                 }
-                continue;
-            }
-            let Some(node) = self.nodes.get(child as usize) else {
-                continue;
-            };
-            let (tn, mut mask) = node.hit(&pre, tmax);
-            if mask == 0 {
-                continue;
-            }
-            // room for four more entries
-            if sp + 4 > stack.len() {
-                let n = stack.len() * 2;
-                stack.resize(n, (0, 0, 0.0));
-            }
-            if !ORDERED || mask & (mask - 1) == 0 {
-                while mask != 0 {
-                    let i = mask.trailing_zeros() as usize & 3;
-                    mask &= mask - 1;
-                    stack[sp] = (node.child[i], node.count[i], tn[i]);
-                    sp += 1;
+                sp -= 1;
+                let (c, _, d) = stack[sp];
+                if d <= tmax {
+                    cur = c;
+                    break;
                 }
-                continue;
-            }
-            // insert hit children far to near, so the nearest ends on top of the stack
-            let base = sp;
-            while mask != 0 {
-                let i = mask.trailing_zeros() as usize & 3;
-                mask &= mask - 1;
-                let e = (node.child[i], node.count[i], tn[i]);
-                let mut j = sp;
-                while j > base && stack[j - 1].2 < e.2 {
-                    stack[j] = stack[j - 1];
-                    j -= 1;
-                }
-                stack[j] = e;
-                sp += 1;
             }
         }
-        tmax
     }
 }
 

@@ -32,8 +32,17 @@ impl Camera {
         if !(angle_deg > 0.0 && angle_deg < 180.0) {
             return None;
         }
-        let forward = (at - from).try_normalize()?;
-        let right = forward.cross(up).try_normalize()?;
+        // pre-scale so that huge (but finite) vectors normalise without overflow
+        let unit = |v: Vec3A| {
+            let m = v.abs().max_element();
+            if m > 0.0 && m.is_finite() {
+                (v / m).try_normalize()
+            } else {
+                None
+            }
+        };
+        let forward = unit(at - from)?;
+        let right = unit(forward.cross(unit(up)?))?;
         let up = right.cross(forward);
         Some(Camera {
             from,

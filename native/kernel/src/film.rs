@@ -4,8 +4,41 @@ use crate::Error;
 use std::path::Path;
 
 /// sRGB transfer curve of one linear value, clamped to [0, 1] (NaN becomes 0), rounded to 8 bits.
+/// Fast: a binary search in the 255 exact decision thresholds of [`srgb8_exact`], which gives
+/// identical results.
 #[inline]
 pub fn srgb8(v: f32) -> u8 {
+    let t = thresholds();
+    // number of thresholds <= v; NaN compares false everywhere and maps to 0
+    t.partition_point(|&th| th <= v) as u8
+}
+
+/// Linear values at which the 8-bit sRGB code steps up: `srgb8_exact(t[k]) == k + 1` and
+/// `srgb8_exact` of the next smaller float is `k`.
+fn thresholds() -> &'static [f32; 255] {
+    static T: std::sync::OnceLock<[f32; 255]> = std::sync::OnceLock::new();
+    T.get_or_init(|| {
+        let mut t = [0.0f32; 255];
+        for (k, slot) in t.iter_mut().enumerate() {
+            let want = k as u8 + 1;
+            // bisection on the bit patterns of non-negative floats (monotonic in value)
+            let (mut lo, mut hi) = (0u32, 1.0f32.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if srgb8_exact(f32::from_bits(mid)) >= want {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            *slot = f32::from_bits(lo);
+        }
+        t
+    })
+}
+
+/// Reference sRGB encoding with `powf` (see [`srgb8`]).
+pub fn srgb8_exact(v: f32) -> u8 {
     let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
     let s = if v <= 0.003_130_8 {
         12.92 * v
@@ -87,6 +120,27 @@ pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_srgb_matches_exact() {
+        let mut v = -0.01f32;
+        while v < 1.01 {
+            assert_eq!(srgb8(v), srgb8_exact(v), "{v}");
+            v += 1.0e-6;
+        }
+        for k in thresholds() {
+            for x in [
+                f32::from_bits(k.to_bits() - 1),
+                *k,
+                f32::from_bits(k.to_bits() + 1),
+            ] {
+                assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
+            }
+        }
+        for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -0.0] {
+            assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
+        }
+    }
 
     #[test]
     fn srgb_curve() {

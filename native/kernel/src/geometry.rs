@@ -379,7 +379,7 @@ impl Geometry {
                 let rmax = c.r0.max(c.r0 + c.slope * c.height).max(1e-30);
                 let oblique = c.axis.abs().max_element() < 0.99;
                 let pieces = if oblique {
-                    (c.height / (16.0 * rmax)).ceil().clamp(1.0, 16.0) as usize
+                    (c.height / (4.0 * rmax)).ceil().clamp(1.0, 16.0) as usize
                 } else {
                     1
                 };

@@ -116,7 +116,7 @@ impl Whitted {
             }
             stats.shadow += 1;
             let slot = li * 8 + depth.min(7) as usize;
-            if scene.occluded_cached(&Ray::new(above, l), dist - eps, scratch, slot) {
+            if scene.occluded_cached(&Ray::from_unit(above, l), dist - eps, scratch, slot) {
                 continue;
             }
             out += c * light.color * (m.kd * ndl);
@@ -148,7 +148,7 @@ impl Whitted {
         }
         if self.spawn(weight * refl_w) {
             stats.reflected += 1;
-            let r = Ray::new(above, refl_dir);
+            let r = Ray::from_unit(above, refl_dir);
             out +=
                 self.trace(scene, &r, depth + 1, weight * refl_w, scratch, stats, false) * refl_w;
         }

@@ -1,6 +1,6 @@
 //! Documented upper bounds, all checked before anything is allocated.
 //!
-//! Every bound is a `pub const`; an [`Error::Limit`](crate::Error::Limit) names the quantity, the
+//! Every bound is a `pub const`; an [`Error::Limit`] names the quantity, the
 //! requested value, the bound and how to raise it (change the constant here and rebuild).
 
 use crate::Error;

@@ -76,6 +76,13 @@ impl<'a> Lexer<'a> {
         let Some((tok, line)) = self.next() else {
             return Err(self.err(entity_line, format!("file ended in the middle of {what}")));
         };
+        if let Some(v) = std::str::from_utf8(tok)
+            .ok()
+            .and_then(|t| t.parse::<f32>().ok())
+            .filter(|v| v.is_finite())
+        {
+            return Ok(v);
+        }
         let text = String::from_utf8_lossy(tok);
         match text.parse::<f32>() {
             Ok(v) if v.is_finite() => Ok(v),

@@ -30,6 +30,21 @@ impl Ray {
         }
     }
 
+    /// Builds a ray from a direction already of unit length (not re-normalised).
+    #[inline]
+    pub fn from_unit(origin: Vec3A, dir: Vec3A) -> Ray {
+        let safe = Vec3A::select(
+            dir.abs().cmplt(Vec3A::splat(1e-20)),
+            Vec3A::splat(1e-20).copysign(dir),
+            dir,
+        );
+        Ray {
+            origin,
+            dir,
+            inv_dir: safe.recip(),
+        }
+    }
+
     /// The point at distance `t`.
     #[inline]
     pub fn at(&self, t: f32) -> Vec3A {

@@ -151,9 +151,15 @@ pub fn trace_span(
         let span = Camera::centre_span(w, h);
         let s = settings.samples;
         let inv = 1.0 / (s * s) as f32;
+        let (mut px_x, mut px_y) = (start % w as u64, start / w as u64);
         for idx in start..end {
-            let x = (idx % w as u64) as f32;
-            let y = (idx / w as u64) as f32;
+            let x = px_x as f32;
+            let y = px_y as f32;
+            px_x += 1;
+            if px_x == w as u64 {
+                px_x = 0;
+                px_y += 1;
+            }
             let c = if s == 1 {
                 let ray = scene.camera.ray(x + 0.5, y + 0.5, w, h, span);
                 integ.radiance(scene, &ray, &mut scratch, &mut stats)

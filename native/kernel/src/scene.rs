@@ -168,7 +168,8 @@ impl Scene {
         self.bounds
     }
 
-    /// Closest hit along `ray` with `0 < t < tmax`.
+    /// Closest hit along `ray` with `0 < t < tmax`. Convenience form; loops should keep one
+    /// [`Scratch`] per thread and call [`Scene::intersect_with`].
     pub fn intersect(&self, ray: &Ray, tmax: f32) -> Option<Hit> {
         self.intersect_with(ray, tmax, &mut Scratch::new())
     }
@@ -179,12 +180,16 @@ impl Scene {
         let mut prim = u32::MAX;
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
+        let mut mailbox = Mailbox::default();
         let mut best = self
             .bvh
             .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
                 let mut tm = tmax;
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
+                        if mailbox.seen(s) {
+                            continue;
+                        }
                         if let Some(t) = geom.hit(s, ray, 0.0, tm) {
                             tm = t;
                             prim = (first + k) as u32;
@@ -240,11 +245,15 @@ impl Scene {
             }
         }
         let mut found = u32::MAX;
+        let mut mailbox = Mailbox::default();
         let r = self
             .bvh
             .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
+                        if mailbox.seen(s) {
+                            continue;
+                        }
                         if geom.hit(s, ray, 0.0, tmax).is_some() {
                             found = (first + k) as u32;
                             return -1.0;
@@ -335,6 +344,30 @@ pub(crate) fn read_limited(path: &Path) -> Result<Vec<u8>, Error> {
     let meta = std::fs::metadata(path).map_err(io)?;
     limits::check("file size in bytes", meta.len(), limits::MAX_FILE_BYTES)?;
     std::fs::read(path).map_err(io)
+}
+
+/// Remembers the last cones tested along one ray: long oblique cones are referenced by several
+/// BVH leaves, and a repeated test can never find anything new (the search interval only
+/// shrinks).
+#[derive(Default)]
+struct Mailbox {
+    recent: [u32; 2],
+    used: bool,
+}
+
+impl Mailbox {
+    #[inline(always)]
+    fn seen(&mut self, s: &Shape) -> bool {
+        let Shape::Cone(k) = *s else { return false };
+        let key = k.wrapping_add(1);
+        if self.used && (self.recent[0] == key || self.recent[1] == key) {
+            return true;
+        }
+        self.used = true;
+        self.recent[1] = self.recent[0];
+        self.recent[0] = key;
+        false
+    }
 }
 
 /// Collects scene contents, then builds the BVH.
@@ -589,6 +622,107 @@ impl SceneBuilder {
             epsilon,
             bounds,
             source_count: self.source_count,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tuning {
+    use super::*;
+    use crate::bvh::probe;
+
+    /// Deterministic traversal cost (node visits / primitive tests per ray) on the SPD scenes,
+    /// for tuning the BVH build: `cargo test --release -p ring_tracer_kernel bvh_cost_report --
+    /// --ignored --nocapture`. Not a check; add (traversal cost, leaf size) variants to compare.
+    #[test]
+    #[ignore]
+    fn bvh_cost_report() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../priv/scenes/spd");
+        let variants: Vec<(f32, usize)> = vec![(1.0, 2)];
+        for (tc, lm) in variants {
+            probe::TCOST.with(|c| c.set(tc));
+            probe::LEAF_MIN.with(|c| c.set(lm));
+            let mut line = format!("tc {tc} leafmin {lm}:");
+            for f in [
+                "balls_s4",
+                "gears_s4",
+                "mount_s6",
+                "rings_s7",
+                "teapot_s12",
+                "tetra_s6",
+                "tree_s11",
+            ] {
+                let scene = Scene::load(&dir.join(format!("{f}.nff"))).unwrap();
+                let cam = scene.camera;
+                let mut sc = Scratch::new();
+                let (mut prims, mut rays) = (0u64, 0u64);
+                probe::NODES.with(|c| c.set(0));
+                for y in (0..512).step_by(3) {
+                    for x in (0..512).step_by(3) {
+                        let r = cam.ray(x as f32 + 0.5, y as f32 + 0.5, 512, 512, 511.0);
+                        rays += 1;
+                        let mut hitp = None;
+                        let mut tbest = f32::INFINITY;
+                        scene.bvh.traverse::<true>(
+                            &r,
+                            f32::INFINITY,
+                            &mut sc,
+                            |first, count, tmax| {
+                                let mut tm = tmax;
+                                for (k, s) in
+                                    scene.geom.shapes[first..first + count].iter().enumerate()
+                                {
+                                    prims += 1;
+                                    if let Some(t) = scene.geom.hit(s, &r, 0.0, tm) {
+                                        tm = t;
+                                        hitp = Some(first + k);
+                                        tbest = t;
+                                    }
+                                }
+                                tm
+                            },
+                        );
+                        let Some(hp) = hitp else { continue };
+                        let h = Hit {
+                            t: tbest,
+                            prim: hp as u32,
+                        };
+                        let su = scene.surface(&h, &r);
+                        let n = if su.ng.dot(r.dir) < 0.0 {
+                            su.ng
+                        } else {
+                            -su.ng
+                        };
+                        for l in &scene.lights {
+                            let to = l.position - su.p;
+                            let d = to.length();
+                            if n.dot(to) <= 0.0 {
+                                continue;
+                            }
+                            let sr = Ray::new(su.p + n * scene.epsilon, to / d);
+                            rays += 1;
+                            scene
+                                .bvh
+                                .traverse::<false>(&sr, d, &mut sc, |first, count, tmax| {
+                                    for s in &scene.geom.shapes[first..first + count] {
+                                        prims += 1;
+                                        if scene.geom.hit(s, &sr, 0.0, tmax).is_some() {
+                                            return -1.0;
+                                        }
+                                    }
+                                    tmax
+                                });
+                        }
+                    }
+                }
+                let nodes = probe::NODES.with(|c| c.get());
+                line += &format!(
+                    " {f} n{:.1}/p{:.1}",
+                    nodes as f64 / rays as f64,
+                    prims as f64 / rays as f64
+                );
+            }
+            println!("{line}");
         }
     }
 }
