@@ -74,7 +74,8 @@ defmodule RingTracer do
       depth: opts[:depth],
       cutoff: opts[:cutoff] / 1,
       samples: opts[:samples],
-      spd: opts[:spd]
+      spd: opts[:spd],
+      fail_pixel: opts[:fail_pixel]
     }
 
     case Native.validate_settings(Settings.to_native(settings)) do
@@ -162,7 +163,8 @@ defmodule RingTracer do
       n = opts[:children] * opts[:atoms]
       settings = %Settings{width: n, height: 1}
       source = RingTracer.Scene.Source.new("simulated", "sim", "", %{})
-      run(source, settings, {RingTracer.Kernel.Simulated, costs: costs}, :infinity, opts)
+      kernel = {RingTracer.Kernel.Simulated, costs: RingTracer.Kernel.Simulated.pack(costs)}
+      run(source, settings, kernel, :infinity, opts)
     end
   end
 

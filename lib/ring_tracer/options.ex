@@ -21,7 +21,8 @@ defmodule RingTracer.Options do
     handover_delay: {:non_neg_integer, 0},
     strategy: {:strategy, :ring},
     speeds: {:speeds, []},
-    progress: {:pid, nil}
+    progress: {:pid, nil},
+    fail_pixel: {:non_neg_integer, nil}
   ]
 
   @max_children 100_000

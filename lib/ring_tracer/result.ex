@@ -4,8 +4,9 @@ defmodule RingTracer.Result do
 
     * `:pixels` — `width * height * 3` native-endian 32-bit floats, row-major
       from the top-left, linear light (write it with `RingTracer.Image`);
-    * `:elapsed_us` — the makespan: from starting the parent to the last
-      child stopped, in microseconds;
+    * `:elapsed_us` — the makespan: from starting the parent (children
+      included) to the moment the parent holds every atom, in microseconds;
+    * `:teardown_us` — from then until every child had stopped and reported;
     * `:ideal_us` — total trace work divided by total capacity (see
       `ideal_us/3`);
     * `:children` — one map per child, in ring order: `:index`, `:node`,
@@ -24,7 +25,11 @@ defmodule RingTracer.Result do
       `%{count: n, bytes: b}` (bytes in the external term format);
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
       `:reflected`, `:refracted`, `:shadow`;
-    * `:strategy` — the strategy's name.
+    * `:strategy` — the strategy's name;
+    * `:duplicates` — atom results that arrived more than once (counted once);
+    * `:failures` — children that died mid-job: `:child`, `:reason`, `:at_us`
+      (their entry in `:children` has `:failed` set and zero counts);
+    * `:redone` — atoms handed out again by the parent after a failure.
   """
 
   @enforce_keys [:width, :height, :pixels, :elapsed_us, :children, :rays, :settings]
@@ -33,6 +38,7 @@ defmodule RingTracer.Result do
     :height,
     :pixels,
     :elapsed_us,
+    :teardown_us,
     :ideal_us,
     :children,
     :atoms,
@@ -41,7 +47,9 @@ defmodule RingTracer.Result do
     :rays,
     :settings,
     :strategy,
-    duplicates: 0
+    duplicates: 0,
+    failures: [],
+    redone: 0
   ]
 
   @type t :: %__MODULE__{
@@ -49,6 +57,7 @@ defmodule RingTracer.Result do
           height: pos_integer(),
           pixels: binary(),
           elapsed_us: non_neg_integer(),
+          teardown_us: non_neg_integer(),
           ideal_us: non_neg_integer(),
           children: [map()],
           atoms: [map()],
@@ -57,7 +66,9 @@ defmodule RingTracer.Result do
           rays: map(),
           settings: RingTracer.Settings.t(),
           strategy: atom(),
-          duplicates: non_neg_integer()
+          duplicates: non_neg_integer(),
+          failures: [map()],
+          redone: non_neg_integer()
         }
 
   @doc false
@@ -75,6 +86,7 @@ defmodule RingTracer.Result do
       height: settings.height,
       pixels: raw.pixels,
       elapsed_us: raw.elapsed_us,
+      teardown_us: raw.teardown_us,
       ideal_us: ideal_us(raw.atoms, Enum.map(children, & &1.speed), capacity_cap),
       children: children,
       atoms: raw.atoms,
@@ -83,7 +95,9 @@ defmodule RingTracer.Result do
       rays: rays,
       settings: settings,
       strategy: strategy,
-      duplicates: raw.duplicates
+      duplicates: raw.duplicates,
+      failures: raw.failures,
+      redone: raw.redone
     }
   end
 

@@ -128,7 +128,7 @@ defmodule RingTracer.Job.Child do
       kernel: nil,
       left: nil,
       left_index: nil,
-      siblings: %{},
+      siblings: {},
       t0: 0,
       grandchild: nil,
       queue: queue,
@@ -136,6 +136,9 @@ defmodule RingTracer.Job.Child do
       attempts: %{},
       done: 0,
       status: :waiting,
+      notify_idle: false,
+      idle_notified: false,
+      dead: [],
       strategy_state: %{},
       early: [],
       traffic: %{},
@@ -180,7 +183,14 @@ defmodule RingTracer.Job.Child do
   end
 
   @impl GenServer
-  def handle_info({:ring, ring}, state) do
+  def handle_info(msg, state) do
+    case handle(msg, state) do
+      {:noreply, state} -> {:noreply, notify_idle(state)}
+      other -> other
+    end
+  end
+
+  defp handle({:ring, ring}, state) do
     state =
       %{
         state
@@ -197,7 +207,7 @@ defmodule RingTracer.Job.Child do
     {:noreply, state}
   end
 
-  def handle_info({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
+  defp handle({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
     state =
       send_counted(
         state,
@@ -241,11 +251,11 @@ defmodule RingTracer.Job.Child do
     {:noreply, state |> fill_pipe() |> maybe_idle()}
   end
 
-  def handle_info({:atom_failed, gc, atom, message}, %{grandchild: gc} = state) do
+  defp handle({:atom_failed, gc, atom, message}, %{grandchild: gc} = state) do
     {:noreply, retry(state, [atom], message)}
   end
 
-  def handle_info({:stop, parent}, %{parent: parent} = state) do
+  defp handle({:stop, parent}, %{parent: parent} = state) do
     report = %{
       stats: state.stats,
       traffic: state.traffic,
@@ -257,21 +267,43 @@ defmodule RingTracer.Job.Child do
     {:stop, :normal, state}
   end
 
-  def handle_info({:DOWN, _ref, :process, parent, _reason}, %{parent: parent} = state) do
+  defp handle({:DOWN, _ref, :process, parent, _reason}, %{parent: parent} = state) do
     {:stop, :normal, state}
   end
 
-  def handle_info({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
+  defp handle({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
     state = %{state | grandchild: nil} |> bump(:grandchild_restarts)
 
     {:noreply,
      retry(spawn_grandchild(state), state.in_flight, "grandchild exited: #{inspect(reason)}")}
   end
 
-  def handle_info(msg, %{left: nil} = state),
+  defp handle({:ring_changed, ring}, state) do
+    state = %{
+      state
+      | left: ring.left,
+        left_index: ring.left_index,
+        dead: ring.dead,
+        notify_idle: true,
+        idle_notified: false
+    }
+
+    state =
+      case state.status do
+        # Our offer may have died with a sibling: send a fresh one.
+        :offered -> maybe_idle(%{state | status: :working})
+        # The sibling we asked may be gone; the others still trace what they hold.
+        :stealing -> %{state | status: :finished}
+        _ -> state
+      end
+
+    {:noreply, state}
+  end
+
+  defp handle(msg, %{left: nil} = state),
     do: {:noreply, %{state | early: [msg | state.early]}}
 
-  def handle_info(msg, state) do
+  defp handle(msg, state) do
     case state.spec.strategy.handle_message(msg, state) do
       {:ok, state} ->
         {:noreply, state}
@@ -342,6 +374,17 @@ defmodule RingTracer.Job.Child do
     do: state.spec.strategy.idle(state)
 
   defp maybe_idle(state), do: state
+
+  # After a failure the parent wants to know when each child has nothing
+  # left, so that it can hand out the atoms that were lost.
+  defp notify_idle(%{notify_idle: true, idle_notified: false, status: status} = state)
+       when status in [:finished, :waiting] do
+    state = send_counted(state, state.parent, :control, {:child_idle, state.index})
+    %{state | idle_notified: true}
+  end
+
+  defp notify_idle(%{status: :working} = state), do: %{state | idle_notified: false}
+  defp notify_idle(state), do: state
 
   defp speed(%Spec{speeds: []}, _index), do: 1
   defp speed(%Spec{speeds: speeds}, index), do: Enum.at(speeds, rem(index, length(speeds)))

@@ -41,6 +41,7 @@ defmodule RingTracer.Job.Parent do
     state = %{
       spec: spec,
       started: System.monotonic_time(:microsecond),
+      completed: nil,
       t0: System.system_time(:microsecond),
       children: %{},
       monitors: %{},
@@ -49,7 +50,11 @@ defmodule RingTracer.Job.Parent do
       stopping: nil,
       strategy_state: nil,
       traffic: %{},
-      duplicates: 0
+      duplicates: 0,
+      dead: %{},
+      idle: MapSet.new(),
+      recovering: false,
+      redone: 0
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -79,6 +84,7 @@ defmodule RingTracer.Job.Parent do
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
         state = %{state | children: children, monitors: monitors}
+        siblings = List.to_tuple(for i <- 0..(n - 1), do: Map.fetch!(children, i))
 
         state =
           Enum.reduce(children, state, fn {i, pid}, st ->
@@ -87,7 +93,7 @@ defmodule RingTracer.Job.Parent do
             ring = %{
               left: Map.fetch!(children, left),
               left_index: left,
-              siblings: children,
+              siblings: siblings,
               t0: st.t0
             }
 
@@ -170,12 +176,79 @@ defmodule RingTracer.Job.Parent do
         cond do
           state.stopping != nil and monitors == %{} -> finish(state)
           state.stopping != nil -> {:noreply, state}
-          true -> fail(state, "child #{index} exited: #{inspect(reason)}")
+          true -> child_lost(state, index, reason)
         end
     end
   end
 
+  def handle_info({:child_idle, index}, %{stopping: nil} = state) do
+    state = %{state | idle: MapSet.put(state.idle, index)}
+    {:noreply, maybe_reassign(state)}
+  end
+
   def handle_info(_other, state), do: {:noreply, state}
+
+  # A child (or its whole node) is gone. The ring is re-linked around the gap,
+  # every child is told (a child whose offer may have died with the sibling
+  # sends a fresh one: the lost token is regenerated), and from now on
+  # children say when they are idle. When every living child is idle, the
+  # atoms that never arrived are handed out again.
+  defp child_lost(state, index, reason) do
+    children = Map.delete(state.children, index)
+
+    failure = %{
+      child: index,
+      reason: inspect(reason),
+      at_us: System.monotonic_time(:microsecond) - state.started
+    }
+
+    state = %{
+      state
+      | children: children,
+        dead: Map.put(state.dead, index, failure),
+        recovering: true,
+        idle: MapSet.new()
+    }
+
+    if children == %{} do
+      fail(state, "every child exited; the last, child #{index}: #{inspect(reason)}")
+    else
+      {:noreply, relink(state)}
+    end
+  end
+
+  defp relink(state) do
+    live = state.children |> Map.keys() |> Enum.sort()
+    lefts = Enum.zip(live, [List.last(live) | Enum.drop(live, -1)])
+
+    Enum.reduce(lefts, state, fn {i, left}, st ->
+      ring = %{left: Map.fetch!(st.children, left), left_index: left, dead: Map.keys(st.dead)}
+      send_counted(st, Map.fetch!(st.children, i), :control, {:ring_changed, ring})
+    end)
+  end
+
+  defp maybe_reassign(%{recovering: true, missing: missing} = state) when missing > 0 do
+    live = Map.keys(state.children)
+
+    if Enum.all?(live, &MapSet.member?(state.idle, &1)) do
+      lost = Enum.reject(Layout.atoms(state.spec.layout), &Map.has_key?(state.results, &1))
+      chunk = max(div(length(lost) + length(live) - 1, length(live)), 1)
+
+      state =
+        lost
+        |> Enum.chunk_every(chunk)
+        |> Enum.zip(Enum.sort(live))
+        |> Enum.reduce(state, fn {atoms, i}, st ->
+          send_counted(st, Map.fetch!(st.children, i), :handover, {:handover, :parent, atoms})
+        end)
+
+      %{state | idle: MapSet.new(), redone: state.redone + length(lost)}
+    else
+      state
+    end
+  end
+
+  defp maybe_reassign(state), do: state
 
   defp progress(%{spec: %Spec{progress: nil}}), do: :ok
 
@@ -184,7 +257,9 @@ defmodule RingTracer.Job.Parent do
     send(spec.progress, {RingTracer, spec.id, {:progress, total - state.missing, total}})
   end
 
-  defp stop_children(state), do: stopping(state, :ok)
+  defp stop_children(state),
+    do: stopping(%{state | completed: System.monotonic_time(:microsecond)}, :ok)
+
   defp fail(state, message), do: stopping(state, {:error, message})
 
   defp stopping(state, outcome) do
@@ -202,11 +277,45 @@ defmodule RingTracer.Job.Parent do
     {:stop, :normal, state}
   end
 
+  defp dead_report(i, failure) do
+    stats = %{
+      index: i,
+      node: nil,
+      speed: 1,
+      failed: failure.reason,
+      own: 0,
+      given: 0,
+      received: 0,
+      handovers: 0,
+      traced: 0,
+      offers_sent: 0,
+      offers_passed: 0,
+      offers_consumed: 0,
+      grandchild_restarts: 0,
+      busy_us: 0,
+      trace_us: 0,
+      first_atom_us: nil,
+      last_atom_us: nil,
+      rays: RingTracer.Kernel.no_rays()
+    }
+
+    %{stats: stats, traffic: %{}, events: [], atoms: []}
+  end
+
   defp finish(state) do
     %{spec: spec, stopping: stopping} = state
-    elapsed = System.monotonic_time(:microsecond) - state.started
+    now = System.monotonic_time(:microsecond)
+    # The makespan ends when the image is complete; stopping the children and
+    # collecting their reports afterwards is reported apart.
+    elapsed = (state.completed || now) - state.started
 
-    reports = for i <- 0..(spec.layout.children - 1), do: Map.get(stopping.reports, i)
+    reports =
+      for i <- 0..(spec.layout.children - 1) do
+        case state.dead do
+          %{^i => failure} -> dead_report(i, failure)
+          _ -> Map.get(stopping.reports, i)
+        end
+      end
 
     outcome =
       case {stopping.outcome, Enum.find_index(reports, &is_nil/1)} do
@@ -233,11 +342,14 @@ defmodule RingTracer.Job.Parent do
            %{
              pixels: pixels,
              elapsed_us: elapsed,
+             teardown_us: now - state.completed,
              children: Enum.map(reports, & &1.stats),
              atoms: reports |> Enum.flat_map(& &1.atoms) |> Enum.sort_by(& &1.atom),
              events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
              traffic: traffic,
-             duplicates: state.duplicates
+             duplicates: state.duplicates,
+             failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
+             redone: state.redone
            }}
 
         {:error, message} ->

@@ -7,14 +7,33 @@ defmodule RingTracer.Kernel.Simulated do
 
   ## Options
 
-    * `:costs` — per-atom costs in microseconds: a tuple indexed by atom (for
-      instance the `:trace_us` of a real render's `:atoms`), or a function
-      `atom -> microseconds`, or one integer for every atom (default 2000).
+    * `:costs` — per-atom costs in microseconds: a list or tuple indexed by
+      atom (for instance the `:trace_us` of a real render's `:atoms`), a
+      binary of native-endian unsigned 32-bit integers (what `RingTracer.simulate/1`
+      turns a list or tuple into, so that 1024 children share one copy), a
+      function `atom -> microseconds`, or one integer for every atom
+      (default 2000).
   """
   @behaviour RingTracer.Kernel
 
   @impl RingTracer.Kernel
   def prepare(_spec, opts), do: {:ok, Keyword.get(opts, :costs, 2000)}
+
+  @doc """
+  Costs in their shared form: a list or tuple becomes one binary (referenced,
+  not copied, by every process on the node).
+
+      iex> costs = RingTracer.Kernel.Simulated.pack([5, 7])
+      iex> {RingTracer.Kernel.Simulated.cost(costs, 1), RingTracer.Kernel.Simulated.cost(costs, 2)}
+      {7, 5}
+  """
+  @spec pack(term()) :: term()
+  def pack(costs) when is_tuple(costs), do: pack(Tuple.to_list(costs))
+
+  def pack(costs) when is_list(costs),
+    do: for(c <- costs, into: <<>>, do: <<c::unsigned-native-32>>)
+
+  def pack(costs), do: costs
 
   @impl RingTracer.Kernel
   def trace(costs, _first, count, atom) do
@@ -31,6 +50,12 @@ defmodule RingTracer.Kernel.Simulated do
           non_neg_integer()
         ) ::
           non_neg_integer()
+  def cost(costs, atom) when is_binary(costs) do
+    offset = rem(atom, div(byte_size(costs), 4)) * 4
+    <<_::binary-size(offset), us::unsigned-native-32, _::binary>> = costs
+    us
+  end
+
   def cost(costs, atom) when is_tuple(costs), do: elem(costs, rem(atom, tuple_size(costs)))
   def cost(costs, atom) when is_function(costs, 1), do: costs.(atom)
   def cost(costs, _atom) when is_integer(costs), do: costs

@@ -23,14 +23,14 @@ defmodule RingTracer.Strategy.Steal do
         _ -> shuffled_siblings(child)
       end
 
-    case victims do
+    case Enum.reject(victims, &(&1 in child.dead)) do
       [] ->
         %{child | status: :finished, strategy_state: %{victims: []}}
 
       [victim | rest] ->
         child
         |> Child.send_counted(
-          Map.fetch!(child.siblings, victim),
+          elem(child.siblings, victim),
           :offer,
           {:steal, self(), child.index}
         )
@@ -63,6 +63,10 @@ defmodule RingTracer.Strategy.Steal do
 
   defp shuffled_siblings(child) do
     :rand.seed(:exsss, {child.index + 1, 7, 13})
-    child.siblings |> Map.keys() |> List.delete(child.index) |> Enum.shuffle()
+
+    0..(tuple_size(child.siblings) - 1)
+    |> Enum.to_list()
+    |> List.delete(child.index)
+    |> Enum.shuffle()
   end
 end

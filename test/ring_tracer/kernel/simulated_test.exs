@@ -1,0 +1,4 @@
+defmodule RingTracer.Kernel.SimulatedTest do
+  use ExUnit.Case, async: true
+  doctest RingTracer.Kernel.Simulated
+end
