@@ -36,7 +36,13 @@ defmodule RingTracer do
       (see `RingTracer.Strategy`)
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
-    * `:nodes` — nodes to place children on, round robin (default: this node)
+    * `:nodes` — other nodes to place children on, round robin with this
+      one (default: none). Each is connected to and checked first: it must
+      run `:ring_tracer` (e.g. `mix ring_tracer.worker`) with the same cookie
+    * `:local` — with `:nodes`, whether this node hosts children too
+      (default true)
+    * `:children_per_node` — with `:nodes`, that many children on each node
+      instead of `:children` round robin
     * `:progress` — a pid that gets `{RingTracer, job_id, {:progress, done,
       total}}` as atoms arrive
     * `:timeout` — milliseconds, or `:infinity` (default)
@@ -47,6 +53,7 @@ defmodule RingTracer do
   @spec render(Path.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
   def render(path, opts \\ []) when is_binary(path) do
     with {:ok, opts} <- Options.validate(opts),
+         :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- Scene.load(path),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)

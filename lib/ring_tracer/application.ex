@@ -9,7 +9,9 @@ defmodule RingTracer.Application do
     children = [
       RingTracer.SceneCache,
       {DynamicSupervisor, name: Names.jobs(), strategy: :one_for_one},
-      {DynamicSupervisor, name: Names.children(), strategy: :one_for_one}
+      {DynamicSupervisor, name: Names.children(), strategy: :one_for_one},
+      %{id: :pg, start: {:pg, :start_link, [RingTracer.Cluster.scope()]}},
+      RingTracer.Cluster
     ]
 
     Supervisor.start_link(children, strategy: :one_for_one, name: RingTracer.Supervisor)

@@ -12,6 +12,7 @@ defmodule RingTracer.Error do
   | `:file` | a file could not be read or written |
   | `:invalid_scene` | the scene failed to parse (message names file and line) |
   | `:render_failed` | the job could not complete (a crash, a timeout) |
+  | `:node_unavailable` | a node given in `:nodes` cannot host children |
   """
   defexception [:reason, :message]
 

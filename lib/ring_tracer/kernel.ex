@@ -19,6 +19,13 @@ defmodule RingTracer.Kernel do
   @callback prepare(Spec.t(), keyword()) :: {:ok, context()} | {:error, String.t()}
 
   @doc """
+  Prepares `node` for the job's children, from the parent, once per node
+  (e.g. ships and parses the scene there). Returns the bytes shipped.
+  """
+  @callback prepare_node(Spec.t(), keyword(), node()) ::
+              {:ok, non_neg_integer()} | {:error, String.t()}
+
+  @doc """
   Traces `count` pixels from `first`, atom number `atom`: linear RGB as
   native-endian f32 triples, ray counters, and the microseconds of work.
   """

@@ -22,7 +22,9 @@ defmodule RingTracer.Options do
     strategy: {:strategy, :ring},
     speeds: {:speeds, []},
     progress: {:pid, nil},
-    fail_pixel: {:non_neg_integer, nil}
+    fail_pixel: {:non_neg_integer, nil},
+    children_per_node: {:pos_integer, nil},
+    local: {:boolean, true}
   ]
 
   @max_children 100_000
@@ -65,12 +67,41 @@ defmodule RingTracer.Options do
        Error.new(:invalid_option, "options must be a keyword list, got: #{inspect(other)}")}
 
   defp finish(opts) do
-    opts = Keyword.update!(opts, :children, &(&1 || System.schedulers_online()))
+    opts = place(opts)
 
     if opts[:children] > @max_children do
       {:error, invalid(:children, "at most #{@max_children}", opts[:children])}
     else
       {:ok, opts}
+    end
+  end
+
+  # Nodes: the local node first unless `local: false`, then the others; with
+  # `:children_per_node` the ring has that many children on each, in a row,
+  # otherwise `:children` are dealt round robin. `:nodes` becomes one node
+  # per child.
+  defp place(opts) do
+    nodes =
+      case opts[:nodes] do
+        [] -> []
+        others -> Enum.uniq(if(opts[:local], do: [node()], else: []) ++ others)
+      end
+
+    cond do
+      nodes == [] ->
+        Keyword.update!(opts, :children, &(&1 || System.schedulers_online()))
+
+      cpn = opts[:children_per_node] ->
+        placement = for n <- nodes, _ <- 1..cpn, do: n
+        Keyword.merge(opts, children: length(placement), nodes: placement)
+
+      true ->
+        n = opts[:children] || System.schedulers_online() * length(nodes)
+
+        Keyword.merge(opts,
+          children: n,
+          nodes: for(i <- 0..(n - 1), do: Enum.at(nodes, rem(i, length(nodes))))
+        )
     end
   end
 

@@ -29,7 +29,9 @@ defmodule RingTracer.Result do
     * `:duplicates` — atom results that arrived more than once (counted once);
     * `:failures` — children that died mid-job: `:child`, `:reason`, `:at_us`
       (their entry in `:children` has `:failed` set and zero counts);
-    * `:redone` — atoms handed out again by the parent after a failure.
+    * `:redone` — atoms handed out again by the parent after a failure;
+    * `:nodes` — per node: `:children`, atoms `:traced` there, and
+      `:scene_bytes` shipped to it (0 for the parent's own node).
   """
 
   @enforce_keys [:width, :height, :pixels, :elapsed_us, :children, :rays, :settings]
@@ -49,7 +51,8 @@ defmodule RingTracer.Result do
     :strategy,
     duplicates: 0,
     failures: [],
-    redone: 0
+    redone: 0,
+    nodes: %{}
   ]
 
   @type t :: %__MODULE__{
@@ -68,7 +71,8 @@ defmodule RingTracer.Result do
           strategy: atom(),
           duplicates: non_neg_integer(),
           failures: [map()],
-          redone: non_neg_integer()
+          redone: non_neg_integer(),
+          nodes: %{node() => map()}
         }
 
   @doc false
@@ -97,7 +101,8 @@ defmodule RingTracer.Result do
       strategy: strategy,
       duplicates: raw.duplicates,
       failures: raw.failures,
-      redone: raw.redone
+      redone: raw.redone,
+      nodes: raw.nodes
     }
   end
 

@@ -35,6 +35,18 @@ defmodule RingTracer.SceneCache do
     end
   end
 
+  @doc """
+  Parses `source` on this node unless it is cached already: what a job's
+  parent calls once per node (through `:erpc`) before starting children there.
+  """
+  @spec preload(Source.t()) :: :ok | {:error, String.t()}
+  def preload(source) do
+    case fetch(source) do
+      {:ok, _} -> :ok
+      {:error, error} -> {:error, error.message}
+    end
+  end
+
   @doc "Puts an already parsed scene in the cache (the caller's node parses to validate)."
   @spec put(Scene.t()) :: :ok
   def put(%Scene{} = scene), do: GenServer.call(__MODULE__, {:put, scene})
@@ -61,6 +73,12 @@ defmodule RingTracer.SceneCache do
     case :ets.lookup(@table, hash) do
       [{^hash, scene, _}] ->
         {:reply, {:ok, scene}, touch(state, hash)}
+
+      [] when source.bytes == nil ->
+        message =
+          "scene #{source.name} is not cached on #{node()} and was shipped without its bytes"
+
+        {:reply, {:error, RingTracer.Error.new(:invalid_scene, message)}, state}
 
       [] ->
         case Scene.from_source(source) do

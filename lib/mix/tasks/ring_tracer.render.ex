@@ -24,6 +24,15 @@ defmodule Mix.Tasks.RingTracer.Render do
       by its original owner, help offers as arrows
     * `--ownership FILE.png` — the image tinted by the child that traced each atom
 
+  Across nodes (see `mix ring_tracer.worker` to start them):
+
+    * `--nodes a@host,b@host` — also place children on these nodes (round robin)
+    * `--children-per-node C` — C children on each node instead
+    * `--no-local` — no children on this node
+    * `--sname NAME` / `--name NAME@HOST`, `--cookie C` — this node's name and
+      cookie (a short name is made up when `--nodes` is given without one; a
+      node started with `elixir --sname X --cookie C -S mix ...` is used as is)
+
   A progress bar (atoms done / total, rate, ETA) goes to stderr when it is a
   terminal.
 
@@ -46,7 +55,13 @@ defmodule Mix.Tasks.RingTracer.Render do
     speeds: :string,
     stats: :string,
     timeline: :string,
-    ownership: :string
+    ownership: :string,
+    nodes: :string,
+    children_per_node: :integer,
+    local: :boolean,
+    sname: :string,
+    name: :string,
+    cookie: :string
   ]
 
   @impl Mix.Task
@@ -64,11 +79,13 @@ defmodule Mix.Tasks.RingTracer.Render do
       end
 
     out = opts[:out] || Mix.raise("--out FILE is required (a .png or .exr file)")
+    if opts[:nodes], do: RingTracer.Distribution.start!(opts, generate: true)
     Mix.Task.run("app.start")
 
     render_opts =
       opts
-      |> Keyword.drop([:out, :stats, :timeline, :ownership])
+      |> Keyword.drop([:out, :stats, :timeline, :ownership, :sname, :name, :cookie])
+      |> parse_nodes()
       |> parse_strategy()
       |> parse_speeds()
 
@@ -89,6 +106,20 @@ defmodule Mix.Tasks.RingTracer.Render do
 
   defp maybe_write(nil, _fun), do: :ok
   defp maybe_write(path, fun), do: fun.(path)
+
+  defp parse_nodes(opts) do
+    case opts[:nodes] do
+      nil ->
+        opts
+
+      text ->
+        Keyword.put(
+          opts,
+          :nodes,
+          text |> String.split(",", trim: true) |> Enum.map(&String.to_atom(String.trim(&1)))
+        )
+    end
+  end
 
   defp parse_strategy(opts) do
     case opts[:strategy] do
@@ -174,7 +205,7 @@ defmodule Mix.Tasks.RingTracer.Render do
 
     for c <- result.children do
       Mix.shell().info(
-        "  child #{c.index}: own #{c.own} given #{c.given} received #{c.received} " <>
+        "  child #{c.index}#{if c.node != node(), do: " on #{c.node}"}: own #{c.own} given #{c.given} received #{c.received} " <>
           "traced #{c.traced}; offers sent #{c.offers_sent} passed #{c.offers_passed} " <>
           "consumed #{c.offers_consumed}"
       )

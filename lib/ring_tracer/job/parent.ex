@@ -54,7 +54,8 @@ defmodule RingTracer.Job.Parent do
       dead: %{},
       idle: MapSet.new(),
       recovering: false,
-      redone: 0
+      redone: 0,
+      node_bytes: %{}
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -62,22 +63,42 @@ defmodule RingTracer.Job.Parent do
 
   @impl GenServer
   def handle_continue(:start_ring, state) do
-    %Spec{layout: layout, nodes: nodes} = state.spec
-    nodes = if nodes == [], do: [node()], else: nodes
+    %Spec{layout: layout, nodes: nodes, kernel: {kernel, kernel_opts}} = state.spec
     n = layout.children
+    placement = placement(nodes, n)
+    # The scene travels once per node; children get its hash and name only.
+    child_spec = %{state.spec | source: RingTracer.Scene.Source.strip(state.spec.source)}
 
-    started =
-      Enum.reduce_while(0..(n - 1), {:ok, []}, fn i, {:ok, acc} ->
-        node = Enum.at(nodes, rem(i, length(nodes)))
-
-        case Child.start(node, state.spec, i, self()) do
-          {:ok, pid} ->
-            {:cont, {:ok, [{i, pid} | acc]}}
-
-          other ->
-            {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}", acc}}
+    prepared =
+      placement
+      |> Enum.uniq()
+      |> Enum.reduce_while({:ok, %{}}, fn node, {:ok, acc} ->
+        case kernel.prepare_node(state.spec, kernel_opts, node) do
+          {:ok, bytes} -> {:cont, {:ok, Map.put(acc, node, bytes)}}
+          {:error, message} -> {:halt, {:error, message}}
         end
       end)
+
+    started =
+      case prepared do
+        {:ok, _} ->
+          placement
+          |> Enum.with_index()
+          |> Enum.reduce_while({:ok, []}, fn {node, i}, {:ok, acc} ->
+            case Child.start(node, child_spec, i, self()) do
+              {:ok, pid} ->
+                {:cont, {:ok, [{i, pid} | acc]}}
+
+              other ->
+                {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}", acc}}
+            end
+          end)
+
+        {:error, message} ->
+          {:error, "could not prepare the job: #{message}", []}
+      end
+
+    state = %{state | node_bytes: elem(prepared, 1)}
 
     case started do
       {:ok, list} ->
@@ -277,6 +298,27 @@ defmodule RingTracer.Job.Parent do
     {:stop, :normal, state}
   end
 
+  # `nodes` is one node per child, or a list to place children on round robin.
+  defp placement([], n), do: List.duplicate(node(), n)
+  defp placement(nodes, n) when length(nodes) == n, do: nodes
+  defp placement(nodes, n), do: for(i <- 0..(n - 1), do: Enum.at(nodes, rem(i, length(nodes))))
+
+  defp node_summary(state, reports) do
+    placement = placement(state.spec.nodes, state.spec.layout.children)
+
+    placement
+    |> Enum.zip(reports)
+    |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
+    |> Map.new(fn {node, rs} ->
+      {node,
+       %{
+         children: length(rs),
+         traced: Enum.sum(Enum.map(rs, & &1.stats.traced)),
+         scene_bytes: Map.get(state.node_bytes, node, 0)
+       }}
+    end)
+  end
+
   defp dead_report(i, failure) do
     stats = %{
       index: i,
@@ -349,7 +391,8 @@ defmodule RingTracer.Job.Parent do
              traffic: traffic,
              duplicates: state.duplicates,
              failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
-             redone: state.redone
+             redone: state.redone,
+             nodes: node_summary(state, reports)
            }}
 
         {:error, message} ->

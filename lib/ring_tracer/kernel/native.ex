@@ -17,6 +17,20 @@ defmodule RingTracer.Kernel.Native do
   end
 
   @impl RingTracer.Kernel
+  def prepare_node(spec, _opts, node) when node == node() do
+    with :ok <- SceneCache.preload(spec.source), do: {:ok, 0}
+  end
+
+  def prepare_node(spec, _opts, node) do
+    case :erpc.call(node, SceneCache, :preload, [spec.source], 60_000) do
+      :ok -> {:ok, RingTracer.Scene.Source.size(spec.source)}
+      {:error, message} -> {:error, "#{node}: #{message}"}
+    end
+  rescue
+    e in ErlangError -> {:error, "#{node}: #{Exception.message(e)}"}
+  end
+
+  @impl RingTracer.Kernel
   def trace({scene, native}, first, count, _atom) do
     case Native.trace_atom(scene.ref, native, first, count) do
       {:ok, {pixels, rays, us}} -> {:ok, pixels, rays, us}

@@ -36,6 +36,9 @@ defmodule RingTracer.Kernel.Simulated do
   def pack(costs), do: costs
 
   @impl RingTracer.Kernel
+  def prepare_node(_spec, _opts, _node), do: {:ok, 0}
+
+  @impl RingTracer.Kernel
   def trace(costs, _first, count, atom) do
     us = cost(costs, atom)
     t0 = System.monotonic_time(:microsecond)

@@ -11,7 +11,7 @@ defmodule RingTracer.Scene.Source do
   @type t :: %__MODULE__{
           name: String.t(),
           format: String.t(),
-          bytes: binary(),
+          bytes: binary() | nil,
           includes: %{String.t() => binary()},
           hash: binary()
         }
@@ -29,6 +29,13 @@ defmodule RingTracer.Scene.Source do
 
     %__MODULE__{name: name, format: format, bytes: bytes, includes: includes, hash: hash}
   end
+
+  @doc """
+  The source without its contents: what children receive, once the scene is
+  cached on their node, so that the bytes travel once per node, not per child.
+  """
+  @spec strip(t()) :: t()
+  def strip(%__MODULE__{} = source), do: %{source | bytes: nil, includes: %{}}
 
   @doc "Total bytes shipped with this source."
   @spec size(t()) :: non_neg_integer()

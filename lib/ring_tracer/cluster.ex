@@ -1,0 +1,111 @@
+defmodule RingTracer.Cluster do
+  @moduledoc """
+  The nodes a job can place children on.
+
+  Every node that runs `:ring_tracer` joins the `:pg` group `:workers` of the
+  scope `RingTracer.PG` with its `RingTracer.Children` supervisor, so
+  `members/0` lists them across the cluster (`Registry` is node-local). This
+  process also watches node events with `:net_kernel.monitor_nodes/1` and
+  logs them; jobs themselves learn of a lost node from their monitors (a
+  monitor on a process of a node that drops fires with `:noconnection`).
+
+  `check/1` is the pre-flight test a job runs before any work starts: each
+  node must be reachable, run the application, and have loaded the NIF.
+  """
+  use GenServer
+  require Logger
+
+  alias RingTracer.Error
+
+  @scope RingTracer.PG
+  @group :workers
+
+  @doc false
+  @spec child_spec(term()) :: Supervisor.child_spec()
+  def child_spec(_), do: %{id: __MODULE__, start: {__MODULE__, :start_link, []}}
+
+  @doc false
+  @spec start_link() :: GenServer.on_start()
+  def start_link, do: GenServer.start_link(__MODULE__, [], name: __MODULE__)
+
+  @doc "The `:pg` scope RingTracer uses."
+  @spec scope() :: atom()
+  def scope, do: @scope
+
+  @doc "Nodes that run `:ring_tracer` and are connected to this one (this node included)."
+  @spec members() :: [node()]
+  def members do
+    @scope |> :pg.get_members(@group) |> Enum.map(&node/1) |> Enum.uniq() |> Enum.sort()
+  end
+
+  @doc """
+  Connects to `nodes` and checks that each can host children. Returns `:ok`
+  or an error naming the first node that cannot, and why.
+
+      iex> RingTracer.Cluster.check([node()])
+      :ok
+  """
+  @spec check([node()]) :: :ok | {:error, Error.t()}
+  def check(nodes) do
+    Enum.reduce_while(nodes, :ok, fn n, :ok ->
+      case check_node(n) do
+        :ok -> {:cont, :ok}
+        {:error, message} -> {:halt, {:error, Error.new(:node_unavailable, message)}}
+      end
+    end)
+  end
+
+  defp check_node(n) when n == node(), do: :ok
+
+  defp check_node(n) do
+    cond do
+      not Node.alive?() ->
+        {:error,
+         "cannot use node #{n}: this node is not distributed; start it with --sname NAME (and --cookie C)"}
+
+      not Node.connect(n) ->
+        {:error,
+         "cannot reach node #{n}: is it running (mix ring_tracer.worker --sname ...), " <>
+           "with the same cookie, and is epmd reachable?"}
+
+      true ->
+        remote_check(n)
+    end
+  end
+
+  defp remote_check(n) do
+    apps = :erpc.call(n, Application, :started_applications, [], 5_000)
+
+    cond do
+      not Enum.any?(apps, &(elem(&1, 0) == :ring_tracer)) ->
+        {:error, "node #{n} does not run :ring_tracer; start it with mix ring_tracer.worker"}
+
+      not is_integer(:erpc.call(n, RingTracer.Native, :scene_live_count, [], 5_000)) ->
+        {:error, "node #{n} has not loaded RingTracer's NIF"}
+
+      true ->
+        :ok
+    end
+  rescue
+    e in ErlangError ->
+      {:error, "node #{n} lacks RingTracer's code or NIF: #{Exception.message(e)}"}
+  end
+
+  @impl GenServer
+  def init([]) do
+    :ok = :pg.join(@scope, @group, Process.whereis(RingTracer.Children))
+    :ok = :net_kernel.monitor_nodes(true)
+    {:ok, %{}}
+  end
+
+  @impl GenServer
+  def handle_info({:nodeup, n}, state) do
+    Logger.debug("RingTracer: node #{n} up")
+    {:noreply, state}
+  end
+
+  def handle_info({:nodedown, n}, state) do
+    Logger.info("RingTracer: node #{n} down; jobs with children there re-link their rings")
+    {:noreply, state}
+  end
+end

@@ -1,0 +1,124 @@
+defmodule RingTracer.DistributedTest do
+  use ExUnit.Case, async: false
+
+  @moduletag :distributed
+  @moduletag timeout: 120_000
+
+  alias RingTracer.LocalCluster, as: Peers
+  alias RingTracer.TestScenes
+
+  @scene "balls_s2.nff"
+  @size [width: 96, height: 72]
+
+  setup_all do
+    {p1, n1} = Peers.start("w1")
+    {p2, n2} = Peers.start("w2")
+    on_exit(fn -> Enum.each([p1, p2], &Peers.stop/1) end)
+    {:ok, nodes: [n1, n2], reference: TestScenes.reference(@scene, 96, 72)}
+  end
+
+  test "a 3-node render is byte-identical to a 1-node render", %{
+    nodes: nodes,
+    reference: reference
+  } do
+    {:ok, result} =
+      RingTracer.render(TestScenes.path(@scene), [nodes: nodes, children: 6, atoms: 8] ++ @size)
+
+    assert result.pixels == reference
+    assert Enum.sort(Map.keys(result.nodes)) == Enum.sort([node() | nodes])
+    assert Enum.all?(Map.values(result.nodes), &(&1.children == 2))
+    # The scene's bytes went once to each other node.
+    size = File.stat!(TestScenes.path(@scene)).size
+    for n <- nodes, do: assert(result.nodes[n].scene_bytes == size)
+    assert Enum.sort(RingTracer.Cluster.members()) |> Enum.count() >= 3
+  end
+
+  test "children per node, and the local node left out", %{nodes: nodes, reference: reference} do
+    {:ok, result} =
+      RingTracer.render(
+        TestScenes.path(@scene),
+        [nodes: nodes, local: false, children_per_node: 3, atoms: 4] ++ @size
+      )
+
+    assert result.pixels == reference
+    assert Enum.sort(Map.keys(result.nodes)) == Enum.sort(nodes)
+    assert length(result.children) == 6
+  end
+
+  for seed <- 1..3 do
+    test "killing a remote child mid-render still gives the identical image (seed #{seed})", %{
+      nodes: nodes,
+      reference: reference
+    } do
+      :rand.seed(:exsss, {unquote(seed), 1, 1})
+      [n1 | _] = nodes
+
+      {:ok, result} =
+        render_then(nodes, fn ->
+          kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
+          {_, pid, _, _} = Enum.random(kids)
+          Process.exit(pid, :kill)
+        end)
+
+      assert result.pixels == reference
+      assert length(result.failures) == 1
+    end
+  end
+
+  test "losing a whole peer node mid-render still gives the identical image", %{
+    reference: reference
+  } do
+    for seed <- 1..3 do
+      :rand.seed(:exsss, {seed, 2, 2})
+      {p3, n3} = Peers.start("doomed")
+      {p4, n4} = Peers.start("spare")
+
+      {:ok, result} = render_then([n3, n4], fn -> :peer.stop(p3) end)
+      assert result.pixels == reference
+      assert length(result.failures) >= 1
+      assert Enum.all?(result.failures, &(&1.reason =~ "noconnection"))
+      Peers.stop(p4)
+    end
+  end
+
+  test "an unreachable node is a clear error before any work starts" do
+    assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
+             RingTracer.render(TestScenes.path(@scene), nodes: [:nobody@nowhere])
+
+    assert message =~ "nobody@nowhere"
+  end
+
+  test "a node without the project's code is a clear error" do
+    {peer, bare} = Peers.start("bare", code: false)
+
+    assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
+             RingTracer.render(TestScenes.path(@scene), nodes: [bare])
+
+    assert message =~ Atom.to_string(bare)
+    Peers.stop(peer)
+  end
+
+  # Renders on `nodes` (and this node); after a random number of atoms, runs `kill`.
+  defp render_then(nodes, kill) do
+    {:ok, job} =
+      RingTracer.render_async(
+        TestScenes.path(@scene),
+        [nodes: nodes, children: 6, atoms: 10, speeds: [3]] ++ @size
+      )
+
+    id = job.id
+    at = Enum.random(1..40)
+    await(id, at, kill)
+  end
+
+  defp await(id, at, kill) do
+    receive do
+      {RingTracer, ^id, {:progress, done, _}} ->
+        if done == at, do: kill.()
+        await(id, at, kill)
+
+      {RingTracer, ^id, result} ->
+        result
+    end
+  end
+end
