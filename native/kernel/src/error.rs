@@ -33,15 +33,21 @@ pub enum Error {
         message: String,
     },
     /// A documented upper bound (see [`crate::limits`]) was exceeded; checked before allocating.
-    #[error("{what} is {value}, above the limit of {max} ({hint})")]
+    /// Reads e.g. `ray depth is 1000, more than the limit of 64 (limits::MAX_DEPTH); raise the
+    /// constant in native/kernel/src/limits.rs and rebuild`.
+    #[error("{what} is {value}{unit}, more than the limit of {max} (limits::{constant}); {hint}")]
     Limit {
-        /// Which quantity.
-        what: &'static str,
+        /// Which quantity (e.g. `ray depth`, `resolution 100000x100000`).
+        what: String,
         /// The requested value.
         value: u64,
+        /// Unit after the value, with its leading space (`" pixels"`), or empty.
+        unit: &'static str,
         /// The largest accepted value.
         max: u64,
-        /// How to raise the bound.
+        /// Name of the constant in [`crate::limits`] holding `max`.
+        constant: &'static str,
+        /// How to get past the bound.
         hint: &'static str,
     },
     /// A valid request the kernel does not implement (e.g. an unknown file extension).

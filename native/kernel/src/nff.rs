@@ -143,6 +143,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     "light count",
                     b.lights.len() as u64 + 1,
                     limits::MAX_LIGHTS as u64,
+                    "MAX_LIGHTS",
                 )
                 .map_err(|e| lx.err(line, e.to_string()))?;
                 let color = if lx.peek().is_some_and(is_number) {
@@ -190,15 +191,14 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     let kind = if patch { "patch" } else { "polygon" };
                     return Err(lx.err(nline, format!("{kind} needs at least 3 vertices, got {n}")));
                 }
-                if n > limits::MAX_POLYGON_VERTICES as u64 {
-                    return Err(lx.err(
-                        nline,
-                        format!(
-                            "{what} has {n} vertices, above the limit of {} (raise MAX_POLYGON_VERTICES in native/kernel/src/limits.rs)",
-                            limits::MAX_POLYGON_VERTICES
-                        ),
-                    ));
-                }
+                // checked before reading (and storing) any vertex
+                limits::check(
+                    format!("the vertex count of {what}"),
+                    n,
+                    limits::MAX_POLYGON_VERTICES as u64,
+                    "MAX_POLYGON_VERTICES",
+                )
+                .map_err(|e| lx.err(nline, e.to_string()))?;
                 verts.clear();
                 normals.clear();
                 for _ in 0..n {
@@ -268,12 +268,9 @@ fn parse_view(lx: &mut Lexer, b: &mut SceneBuilder, line: usize) -> Result<(), E
             _ => {
                 let (w, _) = lx.integer("'resolution'", kline)?;
                 let (h, hline) = lx.integer("'resolution'", kline)?;
-                let (w32, h32) = (w.min(u32::MAX as u64) as u32, h.min(u32::MAX as u64) as u32);
-                limits::check_resolution(w32, h32)
-                    .and_then(|_| limits::check("image width", w, limits::MAX_SIDE as u64))
-                    .and_then(|_| limits::check("image height", h, limits::MAX_SIDE as u64))
-                    .map_err(|e| lx.err(hline, format!("resolution {w} {h}: {e}")))?;
-                resolution = (w32, h32);
+                // u64 as read, so nothing is truncated before the check
+                limits::check_resolution(w, h).map_err(|e| lx.err(hline, e.to_string()))?;
+                resolution = (w as u32, h as u32);
             }
         }
     }
@@ -348,16 +345,23 @@ mod tests {
             err(&format!("{HEAD}s 0 0 1e39 1\n")),
             "t.nff:8: number '1e39' in sphere 's' is not finite"
         );
-        assert!(
-            err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 100000 10\n")
-                .starts_with("t.nff:6: resolution 100000 10: image width is 100000")
+        assert_eq!(
+            err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 100000 10\n"),
+            "t.nff:6: image width is 100000 pixels, more than the limit of 16384 \
+             (limits::MAX_SIDE); render in tiles or raise the constant in \
+             native/kernel/src/limits.rs"
         );
         assert!(
             err("v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 16384 16384\n")
-                .starts_with("t.nff:6: resolution 16384 16384: image pixel count")
+                .starts_with(
+                    "t.nff:6: resolution 16384x16384 is 268435456 pixels, more than the limit \
+                     of 67108864 (limits::MAX_PIXELS)"
+                )
         );
-        assert!(err(&format!("{HEAD}p 99999999999\n"))
-            .starts_with("t.nff:8: polygon 'p' has 99999999999 vertices"));
+        assert!(err(&format!("{HEAD}p 99999999999\n")).starts_with(
+            "t.nff:8: the vertex count of polygon 'p' is 99999999999, more than the limit of \
+             1048576 (limits::MAX_POLYGON_VERTICES); raise the constant"
+        ));
         assert_eq!(
             err("s 0 0 0 1\n"),
             "t.nff:1: no viewpoint: the file has no 'v' entity"

@@ -39,10 +39,20 @@ pub(crate) fn load_mesh(
     smooth: bool,
     b: &mut SceneBuilder,
 ) -> Result<Aabb, Error> {
-    limits::check(
-        "mesh file size in bytes",
+    limits::check_with(
+        format!("the size of mesh {name}"),
         bytes.len() as u64,
+        " bytes",
         limits::MAX_FILE_BYTES,
+        "MAX_FILE_BYTES",
+        limits::RAISE,
+    )?;
+    // an upper bound from the face lines, before the OBJ reader allocates anything
+    limits::check(
+        format!("the triangle count of mesh {name} (from its face lines)"),
+        limits::obj_triangle_bound(bytes),
+        limits::MAX_MESH_TRIANGLES as u64,
+        "MAX_MESH_TRIANGLES",
     )?;
     let opts = tobj::LoadOptions {
         triangulate: true,
@@ -67,9 +77,10 @@ pub(crate) fn load_mesh(
     };
     let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
     limits::check(
-        "mesh triangle count",
+        format!("the triangle count of mesh {name}"),
         total as u64,
         limits::MAX_MESH_TRIANGLES as u64,
+        "MAX_MESH_TRIANGLES",
     )?;
     let default_mat = match material {
         Some(m) => m,

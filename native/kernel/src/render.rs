@@ -32,6 +32,8 @@ pub struct Settings {
     /// SPD corner mode (SPD testing procedure): rays through the (W+1)x(H+1) pixel corners, the
     /// four corners of a pixel averaged; forces depth 5, no cut-off and one sample.
     pub spd: bool,
+    /// test hook: tracing this pixel panics; None in normal use
+    pub fail_pixel: Option<u64>,
 }
 
 impl Settings {
@@ -45,6 +47,7 @@ impl Settings {
             cutoff: 1.0 / 255.0,
             samples: 1,
             spd: false,
+            fail_pixel: None,
         }
     }
 
@@ -54,7 +57,12 @@ impl Settings {
         if self.depth == 0 {
             return Err(Error::InvalidArgument("depth must be at least 1".into()));
         }
-        limits::check("ray depth", self.depth as u64, limits::MAX_DEPTH as u64)?;
+        limits::check(
+            "ray depth",
+            self.depth as u64,
+            limits::MAX_DEPTH as u64,
+            "MAX_DEPTH",
+        )?;
         if self.samples == 0 {
             return Err(Error::InvalidArgument("samples must be at least 1".into()));
         }
@@ -62,6 +70,7 @@ impl Settings {
             "samples per pixel side",
             self.samples as u64,
             limits::MAX_SAMPLES as u64,
+            "MAX_SAMPLES",
         )?;
         if !(self.cutoff.is_finite() && self.cutoff >= 0.0) {
             return Err(Error::InvalidArgument(format!(
@@ -128,6 +137,11 @@ pub fn trace_span(
     count: u64,
 ) -> Result<(Vec<f32>, RayStats), Error> {
     let end = check_span(settings, start, count)?;
+    if let Some(p) = settings.fail_pixel {
+        if (start..end).contains(&p) {
+            panic!("test hook: tracing pixel {p} (Settings::fail_pixel)");
+        }
+    }
     let mut out = Vec::with_capacity(count as usize * 3);
     let mut stats = RayStats::default();
     if count == 0 {

@@ -108,10 +108,13 @@ impl Scene {
         name: &str,
         resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
     ) -> Result<Scene, Error> {
-        limits::check(
-            "scene file size in bytes",
+        limits::check_with(
+            format!("the size of {name}"),
             bytes.len() as u64,
+            " bytes",
             limits::MAX_FILE_BYTES,
+            "MAX_FILE_BYTES",
+            limits::RAISE,
         )?;
         match format {
             Format::Nff => crate::nff::parse(bytes, name),
@@ -342,7 +345,14 @@ pub(crate) fn read_limited(path: &Path) -> Result<Vec<u8>, Error> {
         message: e.to_string(),
     };
     let meta = std::fs::metadata(path).map_err(io)?;
-    limits::check("file size in bytes", meta.len(), limits::MAX_FILE_BYTES)?;
+    limits::check_with(
+        format!("the size of {file}"),
+        meta.len(),
+        " bytes",
+        limits::MAX_FILE_BYTES,
+        "MAX_FILE_BYTES",
+        limits::RAISE,
+    )?;
     std::fs::read(path).map_err(io)
 }
 
@@ -387,6 +397,8 @@ pub(crate) struct SceneBuilder {
     poly_bounds: Vec<Aabb>,
     /// Primitives as the scene file counts them (a triangulated polygon is one).
     source_count: usize,
+    /// [`limits::MAX_PRIMITIVES`]; a field only so tests can reach the bound cheaply.
+    max_primitives: usize,
 }
 
 impl SceneBuilder {
@@ -404,6 +416,7 @@ impl SceneBuilder {
             planes: Vec::new(),
             poly_bounds: Vec::new(),
             source_count: 0,
+            max_primitives: limits::MAX_PRIMITIVES,
         }
     }
 
@@ -424,7 +437,8 @@ impl SceneBuilder {
         limits::check(
             "primitive count",
             (self.geom.shapes.len() + self.planes.len()) as u64 + 1,
-            limits::MAX_PRIMITIVES as u64,
+            self.max_primitives as u64,
+            "MAX_PRIMITIVES",
         )
     }
 
@@ -724,5 +738,39 @@ mod tuning {
             }
             println!("{line}");
         }
+    }
+}
+
+#[cfg(test)]
+mod limit_tests {
+    use super::*;
+
+    /// Every way of adding a primitive checks the bound before storing anything.
+    #[test]
+    fn primitive_limit_checked_before_adding() {
+        let mut b = SceneBuilder::new();
+        b.max_primitives = 3;
+        let m = b.material(Material::default());
+        b.sphere(Vec3A::ZERO, 1.0, m).unwrap();
+        b.cone(Vec3A::ZERO, 1.0, Vec3A::Y, 0.5, m).unwrap();
+        b.plane(Vec3A::ZERO, Vec3A::Y, m).unwrap();
+        let tri = [Vec3A::ZERO, Vec3A::X, Vec3A::Y];
+        let square = [Vec3A::ZERO, Vec3A::X, Vec3A::ONE, Vec3A::Y];
+        let errors = [
+            b.sphere(Vec3A::ONE, 1.0, m).unwrap_err(),
+            b.triangle(tri, None, m).unwrap_err(),
+            b.polygon(&square, m).unwrap_err(),
+            b.cone(Vec3A::ZERO, 1.0, Vec3A::Y, 0.5, m).unwrap_err(),
+            b.plane(Vec3A::ZERO, Vec3A::X, m).unwrap_err(),
+        ];
+        for e in errors {
+            assert_eq!(
+                e.to_string(),
+                "primitive count is 4, more than the limit of 3 (limits::MAX_PRIMITIVES); \
+                 raise the constant in native/kernel/src/limits.rs and rebuild"
+            );
+        }
+        assert_eq!(b.geom.shapes.len() + b.planes.len(), 3);
+        assert_eq!(b.primitive_count(), 3);
     }
 }

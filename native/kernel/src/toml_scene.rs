@@ -334,7 +334,15 @@ pub fn parse(
         "light count",
         def.lights.len() as u64,
         limits::MAX_LIGHTS as u64,
-    )?;
+        "MAX_LIGHTS",
+    )
+    .map_err(|e| {
+        let first_extra = def
+            .lights
+            .get(limits::MAX_LIGHTS)
+            .map_or(0..0, |l| l.span());
+        cx.err(first_extra, e.to_string())
+    })?;
     let n = def.lights.len();
     for l in &def.lights {
         let span = l.span();
@@ -446,6 +454,7 @@ pub fn parse(
                     "polygon vertex count",
                     vertices.len() as u64,
                     limits::MAX_POLYGON_VERTICES as u64,
+                    "MAX_POLYGON_VERTICES",
                 )
                 .map_err(lim)?;
                 let vs = vertices

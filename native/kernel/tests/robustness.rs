@@ -156,7 +156,7 @@ fn limits_reported_with_bound() {
         Err(Error::Limit {
             what, value, max, ..
         }) => {
-            assert_eq!(what, "image pixel count");
+            assert_eq!(what, "resolution 16384x16384");
             assert_eq!(value, 16_384 * 16_384);
             assert_eq!(max, ring_tracer_kernel::limits::MAX_PIXELS);
         }
@@ -200,4 +200,265 @@ fn cutoff_prunes_weak_branches() {
     // Ks = 0.4, T = 0.6: with cutoff 0.5 only first-level refraction survives
     assert_eq!(c.reflected, 0);
     assert!(c.refracted > 0);
+}
+
+// ---- limits: every bound is checked before allocating, and says how to raise it ----
+
+use ring_tracer_kernel::limits;
+
+fn parse_err(src: &[u8], format: Format, name: &str) -> Error {
+    match Scene::parse(src, format, name, &resolve) {
+        Ok(_) => panic!("expected an error for {name}"),
+        Err(e) => e,
+    }
+}
+
+const VIEW: &str = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\n";
+
+/// A 10-gigapixel (40 GB of f32 RGB) NFF resolution is a parse error at its line, found before
+/// any pixel buffer exists; the message names the value, the bound, the constant and the way out.
+#[test]
+fn limit_nff_resolution_total_pixels() {
+    let src = format!("{VIEW}resolution 100000 100000\ns 0 0 0 1\n");
+    let e = parse_err(src.as_bytes(), Format::Nff, "big.nff");
+    assert_eq!(
+        e.to_string(),
+        "big.nff:6: resolution 100000x100000 is 10000000000 pixels, more than the limit of \
+         67108864 (limits::MAX_PIXELS); render in tiles or raise the constant in \
+         native/kernel/src/limits.rs"
+    );
+    // values beyond u32 and u64 products are not truncated or overflowed into something small
+    let src = format!("{VIEW}resolution 4294967296 1\n");
+    let e = parse_err(src.as_bytes(), Format::Nff, "wrap.nff").to_string();
+    assert!(
+        e.starts_with("wrap.nff:6: resolution 4294967296x1 is 4294967296 pixels"),
+        "{e}"
+    );
+    let src = format!("{VIEW}resolution 18446744073709551615 18446744073709551615\n");
+    let e = parse_err(src.as_bytes(), Format::Nff, "huge.nff").to_string();
+    assert!(e.contains("limits::MAX_PIXELS"), "{e}");
+    let src = format!("{VIEW}resolution 0 10\n");
+    assert!(Scene::parse(src.as_bytes(), Format::Nff, "z.nff", &resolve).is_err());
+}
+
+#[test]
+fn limit_resolution_per_side() {
+    let src = format!("{VIEW}resolution 16385 8\n");
+    let e = parse_err(src.as_bytes(), Format::Nff, "wide.nff").to_string();
+    assert_eq!(
+        e,
+        "wide.nff:6: image width is 16385 pixels, more than the limit of 16384 \
+         (limits::MAX_SIDE); render in tiles or raise the constant in native/kernel/src/limits.rs"
+    );
+    let toml = "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\nwidth = 8\nheight = 70000\n";
+    let e = parse_err(toml.as_bytes(), Format::Toml, "tall.toml").to_string();
+    assert!(
+        e.starts_with("tall.toml:1: camera resolution: image height is 70000"),
+        "{e}"
+    );
+    assert!(e.contains("(limits::MAX_SIDE)"), "{e}");
+    let scene = Scene::parse(NFF.as_bytes(), Format::Nff, "a.nff", &resolve).unwrap();
+    let s = Settings {
+        width: limits::MAX_SIDE + 1,
+        height: 1,
+        ..Settings::for_scene(&scene)
+    };
+    assert!(matches!(
+        trace_span(&scene, &s, 0, 1),
+        Err(Error::Limit {
+            constant: "MAX_SIDE",
+            ..
+        })
+    ));
+    let s = Settings {
+        width: 9000,
+        height: 9000,
+        ..Settings::for_scene(&scene)
+    };
+    // render_image would need 972 MB: refused before allocating
+    assert!(matches!(
+        render_image(&scene, &s, 1),
+        Err(Error::Limit {
+            constant: "MAX_PIXELS",
+            value: 81_000_000,
+            ..
+        })
+    ));
+}
+
+#[test]
+fn limit_samples_and_depth() {
+    let scene = Scene::parse(NFF.as_bytes(), Format::Nff, "a.nff", &resolve).unwrap();
+    let base = Settings::for_scene(&scene);
+    let s = Settings {
+        samples: limits::MAX_SAMPLES + 1,
+        ..base.clone()
+    };
+    assert_eq!(
+        s.validate().unwrap_err().to_string(),
+        "samples per pixel side is 17, more than the limit of 16 (limits::MAX_SAMPLES); raise \
+         the constant in native/kernel/src/limits.rs and rebuild"
+    );
+    let s = Settings {
+        depth: limits::MAX_DEPTH + 1,
+        ..base.clone()
+    };
+    assert_eq!(
+        trace_span(&scene, &s, 0, 1).unwrap_err().to_string(),
+        "ray depth is 65, more than the limit of 64 (limits::MAX_DEPTH); raise the constant in \
+         native/kernel/src/limits.rs and rebuild"
+    );
+    let ok = Settings {
+        samples: limits::MAX_SAMPLES,
+        depth: limits::MAX_DEPTH,
+        ..base
+    };
+    assert!(ok.validate().is_ok());
+}
+
+#[test]
+fn limit_polygon_vertices() {
+    // the count is checked before a single vertex is read or stored
+    let n = limits::MAX_POLYGON_VERTICES + 1;
+    for entity in ["p", "pp"] {
+        let src = format!("{VIEW}resolution 4 4\n{entity} {n}\n0 0 0\n");
+        let e = parse_err(src.as_bytes(), Format::Nff, "poly.nff").to_string();
+        assert!(e.starts_with("poly.nff:7: the vertex count of "), "{e}");
+        assert!(
+            e.contains("is 1048577, more than the limit of 1048576 (limits::MAX_POLYGON_VERTICES)"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn limit_light_count() {
+    let mut src = format!("{VIEW}resolution 4 4\n");
+    for _ in 0..limits::MAX_LIGHTS {
+        src.push_str("l 0 0 1\n");
+    }
+    assert!(Scene::parse(src.as_bytes(), Format::Nff, "lights.nff", &resolve).is_ok());
+    src.push_str("l 0 0 1\n");
+    let e = parse_err(src.as_bytes(), Format::Nff, "lights.nff").to_string();
+    assert_eq!(
+        e,
+        format!(
+            "lights.nff:{}: light count is 65537, more than the limit of 65536 \
+             (limits::MAX_LIGHTS); raise the constant in native/kernel/src/limits.rs and rebuild",
+            limits::MAX_LIGHTS + 7
+        )
+    );
+}
+
+/// 20 000 001 face vertices on one line: refused by the scan of the face lines before the OBJ
+/// reader would allocate ~240 MB of indices.
+#[test]
+fn limit_mesh_triangles() {
+    let n = limits::MAX_MESH_TRIANGLES + 1;
+    let mut obj = Vec::with_capacity(2 * n + 32);
+    obj.extend_from_slice(b"v 0 0 0\nf");
+    for _ in 0..n {
+        obj.extend_from_slice(b" 1");
+    }
+    obj.push(b'\n');
+    let e = parse_err(&obj, Format::Obj, "big.obj").to_string();
+    assert_eq!(
+        e,
+        "the triangle count of mesh big.obj (from its face lines) is 20000001, more than the \
+         limit of 20000000 (limits::MAX_MESH_TRIANGLES); raise the constant in \
+         native/kernel/src/limits.rs and rebuild"
+    );
+    // the same through a TOML mesh reference
+    let toml = "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n[[objects]]\ntype = \"mesh\"\nfile = \"big.obj\"\n";
+    let big = move |_: &str| -> Result<Vec<u8>, String> { Ok(obj.clone()) };
+    let e = Scene::parse(toml.as_bytes(), Format::Toml, "m.toml", &big)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("(limits::MAX_MESH_TRIANGLES)"), "{e}");
+}
+
+/// A sparse file one byte over the bound: refused from its metadata, never read.
+#[test]
+fn limit_file_size() {
+    let dir = std::env::temp_dir().join(format!("rt_limit_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let big = dir.join("huge.nff");
+    let f = std::fs::File::create(&big).unwrap();
+    f.set_len(limits::MAX_FILE_BYTES + 1).unwrap();
+    drop(f);
+    let e = Scene::load(&big).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            Error::Limit {
+                constant: "MAX_FILE_BYTES",
+                value: 1_073_741_825,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .contains(" bytes, more than the limit of 1073741824"),
+        "{e}"
+    );
+    // a mesh referenced by a scene goes through the same check
+    let mesh = dir.join("huge.obj");
+    std::fs::rename(&big, &mesh).unwrap();
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n[[objects]]\ntype = \"mesh\"\nfile = \"huge.obj\"\n",
+    )
+    .unwrap();
+    let e = Scene::load(&scene).unwrap_err().to_string();
+    assert!(e.contains("limits::MAX_FILE_BYTES"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+// ---- the fuzz seeds (native/fuzz/corpus/<target>/) on stable, through the fuzz driver's steps ----
+
+/// What the fuzz targets' resolver returns: a small quad mesh, or its material library.
+fn fuzz_resolve(path: &str) -> Result<Vec<u8>, String> {
+    if path.ends_with(".mtl") {
+        Ok(b"newmtl red\nKd 1 0 0\nKs 0.5 0.5 0.5\nNs 30\n".to_vec())
+    } else {
+        Ok(b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nusemtl red\nf 1//1 2//1 3//1 4//1\n".to_vec())
+    }
+}
+
+#[test]
+fn fuzz_seed_corpora_parse_and_trace() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus");
+    let mut seen = 0;
+    for (dir, format) in [
+        ("nff", Format::Nff),
+        ("toml_scene", Format::Toml),
+        ("obj", Format::Obj),
+    ] {
+        for entry in std::fs::read_dir(root.join(dir)).expect("corpus directory") {
+            let path = entry.unwrap().path();
+            let bytes = std::fs::read(&path).unwrap();
+            let scene = Scene::parse(&bytes, format, "seed", &fuzz_resolve)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let s = Settings {
+                width: 4,
+                height: 4,
+                depth: 3,
+                ..Settings::for_scene(&scene)
+            };
+            let (rgb, _) = trace_span(&scene, &s, 0, 16).unwrap();
+            assert!(rgb.iter().all(|v| v.is_finite()), "{}", path.display());
+            let spd = Settings {
+                width: 3,
+                height: 2,
+                spd: true,
+                ..s
+            };
+            trace_span(&scene, &spd, 1, 4).unwrap();
+            seen += 1;
+        }
+    }
+    assert!(seen >= 6, "only {seen} seeds");
 }

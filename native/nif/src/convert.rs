@@ -12,6 +12,8 @@ pub struct SettingsTerm {
     pub cutoff: f64,
     pub samples: u32,
     pub spd: bool,
+    /// Test hook: tracing this pixel panics (rustler turns it into an Erlang exception).
+    pub fail_pixel: Option<u64>,
 }
 
 impl SettingsTerm {
@@ -24,6 +26,7 @@ impl SettingsTerm {
             cutoff: self.cutoff as f32,
             samples: self.samples,
             spd: self.spd,
+            fail_pixel: self.fail_pixel,
         };
         settings.validate().map_err(|e| e.to_string())?;
         Ok(settings)

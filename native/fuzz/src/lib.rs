@@ -1,0 +1,48 @@
+//! Shared driver of the fuzz targets: parse arbitrary bytes as a scene and, when that succeeds,
+//! trace a few pixels at a tiny resolution so the BVH and the integrator see odd scenes too.
+
+use ring_tracer_kernel::{trace_span, Format, Scene, Settings};
+
+/// A small fixed mesh (a quad as two triangles, with normals) that every mesh reference resolves
+/// to; files ending in `.mtl` get a small material library instead.
+pub const MESH_OBJ: &[u8] = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
+vn 0 0 1\nusemtl red\nf 1//1 2//1 3//1 4//1\n";
+/// The material library returned for `.mtl` paths.
+pub const MESH_MTL: &[u8] = b"newmtl red\nKd 1 0 0\nKs 0.5 0.5 0.5\nNs 30\n";
+
+fn resolve(path: &str) -> Result<Vec<u8>, String> {
+    if path.ends_with(".mtl") {
+        Ok(MESH_MTL.to_vec())
+    } else if path.contains("missing") {
+        Err(format!("{path}: no such file"))
+    } else {
+        Ok(MESH_OBJ.to_vec())
+    }
+}
+
+/// Parses `data` as `format`; on success traces a 4x4 image at depth 3 and a 3x2 SPD image.
+pub fn run(data: &[u8], format: Format) {
+    let Ok(scene) = Scene::parse(data, format, "fuzz", &resolve) else {
+        return;
+    };
+    let base = Settings {
+        width: 4,
+        height: 4,
+        depth: 3,
+        ..Settings::for_scene(&scene)
+    };
+    let (rgb, _) = trace_span(&scene, &base, 0, 16).expect("valid span traces");
+    assert_eq!(rgb.len(), 48);
+    let jittered = Settings {
+        samples: 2,
+        ..base.clone()
+    };
+    trace_span(&scene, &jittered, 5, 3).expect("valid span traces");
+    let spd = Settings {
+        width: 3,
+        height: 2,
+        spd: true,
+        ..base
+    };
+    trace_span(&scene, &spd, 1, 4).expect("valid span traces");
+}
