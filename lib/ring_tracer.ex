@@ -196,6 +196,7 @@ defmodule RingTracer do
       caller: self(),
       nodes: opts[:nodes],
       handover_delay: opts[:handover_delay],
+      chaos: opts[:chaos],
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],

@@ -19,6 +19,7 @@ defmodule RingTracer.Options do
     nodes: {:nodes, []},
     timeout: {:timeout, :infinity},
     handover_delay: {:non_neg_integer, 0},
+    chaos: {:non_neg_integer, 0},
     strategy: {:strategy, :ring},
     speeds: {:speeds, []},
     progress: {:pid, nil},

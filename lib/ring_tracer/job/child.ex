@@ -51,9 +51,21 @@ defmodule RingTracer.Job.Child do
   @doc "Sends `msg` to `pid`, counting it under `kind` with its external size."
   @spec send_counted(map(), pid(), atom(), term()) :: map()
   def send_counted(state, pid, kind, msg) do
-    send(pid, msg)
+    deliver(state.spec, pid, msg, 0)
     count(state, kind, msg)
   end
+
+  # Sends now, or later: after `extra` ms, plus a random delay of up to the
+  # spec's `:chaos` ms (a test hook that delays and so reorders messages).
+  defp deliver(spec, pid, msg, extra) do
+    case extra + chaos_delay(spec) do
+      0 -> send(pid, msg)
+      ms -> Process.send_after(pid, msg, ms)
+    end
+  end
+
+  defp chaos_delay(%Spec{chaos: 0}), do: 0
+  defp chaos_delay(%Spec{chaos: max}), do: :rand.uniform(max + 1) - 1
 
   @doc false
   @spec count(map(), atom(), term()) :: map()
@@ -90,10 +102,7 @@ defmodule RingTracer.Job.Child do
     msg = {:handover, state.index, atoms}
     state = count(state, :handover, msg)
 
-    case state.spec.handover_delay do
-      0 -> send(pid, msg)
-      ms -> Process.send_after(pid, msg, ms)
-    end
+    deliver(state.spec, pid, msg, state.spec.handover_delay)
 
     update_in(state.stats.given, &(&1 + length(atoms)))
   end
@@ -204,7 +213,10 @@ defmodule RingTracer.Job.Child do
       |> fill_pipe()
       |> maybe_idle()
 
-    {:noreply, state}
+    # Siblings (or the parent, for :master) may have written to us before the
+    # parent's ring message came: handle those messages now, in order.
+    Enum.each(Enum.reverse(state.early), &send(self(), &1))
+    {:noreply, %{state | early: []}}
   end
 
   defp handle({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
@@ -278,7 +290,7 @@ defmodule RingTracer.Job.Child do
      retry(spawn_grandchild(state), state.in_flight, "grandchild exited: #{inspect(reason)}")}
   end
 
-  defp handle({:ring_changed, ring}, state) do
+  defp handle({:ring_changed, ring}, %{left: left} = state) when left != nil do
     state = %{
       state
       | left: ring.left,
@@ -376,9 +388,11 @@ defmodule RingTracer.Job.Child do
   defp maybe_idle(state), do: state
 
   # After a failure the parent wants to know when each child has nothing
-  # left, so that it can hand out the atoms that were lost.
+  # left, so that it can hand out the atoms that were lost. A child waiting on
+  # its offer counts as idle: the offer may have been lost with the dead child
+  # (passed to it by a sibling that had not yet heard of the death).
   defp notify_idle(%{notify_idle: true, idle_notified: false, status: status} = state)
-       when status in [:finished, :waiting] do
+       when status in [:finished, :waiting, :offered, :stealing] do
     state = send_counted(state, state.parent, :control, {:child_idle, state.index})
     %{state | idle_notified: true}
   end

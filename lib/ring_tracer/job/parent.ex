@@ -359,12 +359,17 @@ defmodule RingTracer.Job.Parent do
         end
       end
 
-    outcome =
-      case {stopping.outcome, Enum.find_index(reports, &is_nil/1)} do
-        {:ok, nil} -> :ok
-        {:ok, i} -> {:error, "child #{i} stopped without reporting its statistics"}
-        {error, _} -> error
-      end
+    # A child that died after the image was complete, before it reported,
+    # costs its statistics, not the image.
+    reports =
+      reports
+      |> Enum.with_index()
+      |> Enum.map(fn
+        {nil, i} -> dead_report(i, %{reason: "exited before reporting its statistics"})
+        {report, _} -> report
+      end)
+
+    outcome = stopping.outcome
 
     reply =
       case outcome do

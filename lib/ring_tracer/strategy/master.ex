@@ -33,11 +33,14 @@ defmodule RingTracer.Strategy.Master do
   @impl true
   def parent_atom_done(parent, index), do: hand_out(parent, index)
 
-  defp hand_out(%{strategy_state: [atom | rest]} = parent, index) do
+  # A result can arrive from a child that has died since (it was in flight):
+  # nothing is handed to the dead; the living keep asking.
+  defp hand_out(%{strategy_state: [atom | rest], children: children} = parent, index)
+       when is_map_key(children, index) do
     parent =
       Parent.send_counted(
         parent,
-        Map.fetch!(parent.children, index),
+        Map.fetch!(children, index),
         :handover,
         {:handover, :parent, [atom]}
       )

@@ -1,0 +1,124 @@
+defmodule RingTracer.ProtocolPropertyTest do
+  @moduledoc """
+  The ring protocol under adversarial schedules: random ring sizes, atoms,
+  image sizes, speeds, strategies, message delays (which reorder messages)
+  and child kills, against the real parent, children and kernel.
+
+  CI runs #{200} cases; `PROPER_NUMTESTS=5000 mix test
+  test/ring_tracer/protocol_property_test.exs --include slow` runs more.
+  """
+  use ExUnit.Case, async: false
+
+  alias RingTracer.TestScenes
+
+  @moduletag :slow
+  @moduletag timeout: :infinity
+  @scene "balls_s1.nff"
+
+  defp children do
+    for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Children),
+        is_pid(pid),
+        do: pid
+  end
+
+  defp gen do
+    import :proper_types
+
+    {integer(1, 7), integer(1, 6), integer(1, 20), integer(1, 14), list(integer(1, 3)),
+     oneof([:ring, :static, :master, :steal]), integer(0, 4), integer(0, 2),
+     integer(0, 1_000_000)}
+  end
+
+  test "property: every schedule ends with the single-process image and no process left" do
+    numtests = String.to_integer(System.get_env("PROPER_NUMTESTS", "200"))
+    references = :ets.new(:references, [:set, :public])
+
+    RingTracer.PropErCase.check(
+      gen(),
+      fn {n, k, w, h, speeds, strategy, chaos, kills, seed} = case_ ->
+        if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
+        :rand.seed(:exsss, {seed, n, k})
+        kills = min(kills, n - 1)
+
+        reference =
+          case :ets.lookup(references, {w, h}) do
+            [{_, ref}] -> ref
+            [] -> tap(TestScenes.reference(@scene, w, h), &:ets.insert(references, {{w, h}, &1}))
+          end
+
+        opts = [
+          children: n,
+          atoms: k,
+          width: w,
+          height: h,
+          speeds: speeds,
+          strategy: strategy,
+          chaos: chaos
+        ]
+
+        {:ok, job} = RingTracer.render_async(TestScenes.path(@scene), opts)
+        kill_at = Enum.take_random(1..(n * k), kills)
+        result = await(job.id, kill_at)
+
+        ok =
+          case result do
+            {:ok, r} ->
+              r.pixels == reference and length(r.failures) <= length(kill_at)
+
+            _ ->
+              false
+          end
+
+        # Give stopped processes a moment to be reaped, then look for leftovers.
+        Process.sleep(5)
+        left = {children(), DynamicSupervisor.which_children(RingTracer.Jobs)}
+
+        if System.get_env("PROPER_VERBOSE") && not (ok and left == {[], []}) do
+          summary =
+            case result do
+              {:ok, r} ->
+                {r.pixels == reference, r.failures, r.redone, byte_size(r.pixels),
+                 byte_size(reference), Enum.map(r.children, &{&1.own, &1.traced, &1.received})}
+
+              error ->
+                error
+            end
+
+          IO.inspect({left, kill_at, summary}, label: "failed case")
+        end
+
+        ok and left == {[], []}
+      end,
+      numtests
+    )
+  end
+
+  defp await(id, kill_at) do
+    receive do
+      {RingTracer, ^id, {:progress, done, _}} ->
+        if done in kill_at do
+          case children() do
+            [] -> :ok
+            kids -> Process.exit(Enum.random(kids), :kill)
+          end
+        end
+
+        await(id, kill_at)
+
+      {RingTracer, ^id, result} ->
+        result
+    after
+      # "The job ends" is part of the property: a job silent this long hangs.
+      10_000 ->
+        states =
+          for pid <- children() do
+            st = :sys.get_state(pid)
+            {st.index, st.status, st.queue, st.in_flight, st.early}
+          end
+
+        IO.inspect(states, label: "hung job's children")
+        for pid <- children(), do: Process.exit(pid, :kill)
+        {:error, :hung}
+    end
+  end
+end
