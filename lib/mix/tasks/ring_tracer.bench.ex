@@ -12,6 +12,12 @@ defmodule Mix.Tasks.RingTracer.Bench do
   children, and prints makespan / ideal, idle %, and messages and bytes per
   atom (counted at the sender; bytes include the pixels).
 
+      mix ring_tracer.bench nodes [--scene FILE] [--children 6] [--runs 3]
+
+  `nodes` starts two peer nodes on this machine and renders the same job on
+  this node alone and on all three, printing both makespans, their ratio and
+  the scene bytes each node received (shipped once per node).
+
       mix ring_tracer.bench kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R]
                                    [--size 512] [--threads 2] [--children 8] [--atoms 16]
 
@@ -174,10 +180,41 @@ defmodule Mix.Tasks.RingTracer.Bench do
     )
   end
 
+  def run(["nodes" | argv]) do
+    {opts, _, _} =
+      OptionParser.parse(argv, strict: [scene: :string, children: :integer, runs: :integer])
+
+    scene = opts[:scene] || "priv/scenes/spd/balls_s4.nff"
+    children = opts[:children] || 6
+    runs = opts[:runs] || 3
+    Mix.Task.run("app.start")
+    RingTracer.Distribution.start!([], generate: true)
+    peers = for name <- ["bench_w1", "bench_w2"], do: RingTracer.LocalCluster.start(name)
+    nodes = Enum.map(peers, &elem(&1, 1))
+
+    Mix.shell().info(
+      "#{scene}, #{children} children x 16 atoms, median of #{runs}; 3 nodes = this one and 2 peers on the same #{System.schedulers_online()} cores"
+    )
+
+    one = median_result(runs, fn -> RingTracer.render(scene, children: children) end)
+
+    three =
+      median_result(runs, fn -> RingTracer.render(scene, children: children, nodes: nodes) end)
+
+    rows =
+      for {label, r} <- [{"1 node", one}, {"3 nodes", three}] do
+        bytes = r.nodes |> Enum.map_join(" ", fn {n, s} -> "#{n}:#{s.scene_bytes}" end)
+        [label, fmt(r.elapsed_us / 1000), fmt(r.elapsed_us / one.elapsed_us), bytes]
+      end
+
+    print_table(~w(layout makespan_ms vs_1_node scene_bytes_per_node), rows)
+    Enum.each(peers, fn {peer, _} -> RingTracer.LocalCluster.stop(peer) end)
+  end
+
   def run(_),
     do:
       Mix.raise(
-        "usage: mix ring_tracer.bench kernel|balance [options]  (see mix help ring_tracer.bench)"
+        "usage: mix ring_tracer.bench kernel|balance|nodes [options]  (see mix help ring_tracer.bench)"
       )
 
   defp median_result(runs, fun) do
