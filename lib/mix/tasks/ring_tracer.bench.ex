@@ -12,6 +12,14 @@ defmodule Mix.Tasks.RingTracer.Bench do
   children, and prints makespan / ideal, idle %, and messages and bytes per
   atom (counted at the sender; bytes include the pixels).
 
+      mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
+
+  `rays` casts closest-hit rays only, in the kernel alone: 1024 x 1024
+  primary rays through a 45-degree pinhole looking at the mesh's bounding-box
+  centre from centre + (0.3, 0.3, 1.1) x its diagonal, and 1,048,576
+  incoherent rays (fixed seed); prints the BVH build time, Mrays/s with 1
+  and 2 threads, and hit counts.
+
       mix ring_tracer.bench nodes [--scene FILE] [--children 6] [--runs 3]
 
   `nodes` starts two peer nodes on this machine and renders the same job on
@@ -211,10 +219,38 @@ defmodule Mix.Tasks.RingTracer.Bench do
     Enum.each(peers, fn {peer, _} -> RingTracer.LocalCluster.stop(peer) end)
   end
 
+  def run(["rays" | meshes]) when meshes != [] do
+    # The ray-casting benchmark is the kernel's own cargo example (no BEAM
+    # in the loop): BVH build time, then Mrays/s for primary and incoherent
+    # rays with 1 and 2 threads, and the hit counts.
+    cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
+
+    args = [
+      "run",
+      "--release",
+      "-q",
+      "-p",
+      "ring_tracer_kernel",
+      "--example",
+      "bench",
+      "--",
+      "--raycast"
+    ]
+
+    {_, status} =
+      System.cmd(cargo, args ++ Enum.map(meshes, &Path.expand/1),
+        cd: "native",
+        into: IO.stream(:stdio, :line),
+        stderr_to_stdout: true
+      )
+
+    if status != 0, do: Mix.raise("the ray-casting benchmark failed (exit #{status})")
+  end
+
   def run(_),
     do:
       Mix.raise(
-        "usage: mix ring_tracer.bench kernel|balance|nodes [options]  (see mix help ring_tracer.bench)"
+        "usage: mix ring_tracer.bench kernel|balance|nodes|rays [options]  (see mix help ring_tracer.bench)"
       )
 
   defp median_result(runs, fun) do
