@@ -4,17 +4,13 @@ defmodule RingTracer.FailureTest do
 
   alias RingTracer.TestScenes
 
+  import RingTracer.TestScenes, only: [children: 0]
+
   @scene "balls_s2.nff"
   @opts [children: 4, atoms: 12, width: 96, height: 72, speeds: [3]]
 
   setup_all do
     {:ok, reference: TestScenes.reference(@scene, 96, 72)}
-  end
-
-  defp children do
-    for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Children),
-        is_pid(pid),
-        do: pid
   end
 
   defp grandchild(child) do

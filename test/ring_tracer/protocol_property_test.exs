@@ -11,15 +11,11 @@ defmodule RingTracer.ProtocolPropertyTest do
 
   alias RingTracer.TestScenes
 
+  import RingTracer.TestScenes, only: [children: 0]
+
   @moduletag :slow
   @moduletag timeout: :infinity
   @scene "balls_s1.nff"
-
-  defp children do
-    for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Children),
-        is_pid(pid),
-        do: pid
-  end
 
   defp gen do
     import :proper_types

@@ -16,6 +16,14 @@ defmodule RingTracer.TestScenes do
     pixels
   end
 
+  @doc "Every child process currently alive on this node, of any job."
+  @spec children() :: [pid()]
+  def children do
+    for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Children),
+        is_pid(pid),
+        do: pid
+  end
+
   @doc "Writes a scene file with `contents` to a temporary directory and returns its path."
   @spec tmp_scene(String.t(), String.t()) :: String.t()
   def tmp_scene(name, contents) do
