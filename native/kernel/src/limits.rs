@@ -46,6 +46,18 @@ pub(crate) const TILES: &str =
 
 /// `Err(Error::Limit)` if `value > max`. `what` names the quantity, `unit` follows the value
 /// (`" bytes"`, or `""`), `constant` is the name of the bound in this module.
+/// Checks a file's (or in-memory scene's) size against [`MAX_FILE_BYTES`].
+pub(crate) fn check_file_size(what: impl Into<String>, bytes: u64) -> Result<(), Error> {
+    check_with(
+        what,
+        bytes,
+        " bytes",
+        MAX_FILE_BYTES,
+        "MAX_FILE_BYTES",
+        RAISE,
+    )
+}
+
 pub(crate) fn check_with(
     what: impl Into<String>,
     value: u64,

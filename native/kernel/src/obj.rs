@@ -39,14 +39,7 @@ pub(crate) fn load_mesh(
     smooth: bool,
     b: &mut SceneBuilder,
 ) -> Result<Aabb, Error> {
-    limits::check_with(
-        format!("the size of mesh {name}"),
-        bytes.len() as u64,
-        " bytes",
-        limits::MAX_FILE_BYTES,
-        "MAX_FILE_BYTES",
-        limits::RAISE,
-    )?;
+    limits::check_file_size(format!("the size of mesh {name}"), bytes.len() as u64)?;
     // an upper bound from the face lines, before the OBJ reader allocates anything
     limits::check(
         format!("the triangle count of mesh {name} (from its face lines)"),

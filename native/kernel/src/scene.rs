@@ -108,14 +108,7 @@ impl Scene {
         name: &str,
         resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
     ) -> Result<Scene, Error> {
-        limits::check_with(
-            format!("the size of {name}"),
-            bytes.len() as u64,
-            " bytes",
-            limits::MAX_FILE_BYTES,
-            "MAX_FILE_BYTES",
-            limits::RAISE,
-        )?;
+        limits::check_file_size(format!("the size of {name}"), bytes.len() as u64)?;
         match format {
             Format::Nff => crate::nff::parse(bytes, name),
             Format::Toml => crate::toml_scene::parse(bytes, name, resolve),
@@ -345,14 +338,7 @@ pub(crate) fn read_limited(path: &Path) -> Result<Vec<u8>, Error> {
         message: e.to_string(),
     };
     let meta = std::fs::metadata(path).map_err(io)?;
-    limits::check_with(
-        format!("the size of {file}"),
-        meta.len(),
-        " bytes",
-        limits::MAX_FILE_BYTES,
-        "MAX_FILE_BYTES",
-        limits::RAISE,
-    )?;
+    limits::check_file_size(format!("the size of {file}"), meta.len())?;
     std::fs::read(path).map_err(io)
 }
 
