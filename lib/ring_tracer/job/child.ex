@@ -92,7 +92,7 @@ defmodule RingTracer.Job.Child do
   @doc "Takes the last `g` queued atoms (farthest from being traced) out of the queue."
   @spec take_last(map(), non_neg_integer()) :: {[Layout.atom_id()], map()}
   def take_last(state, g) do
-    {keep, give} = Enum.split(state.queue, length(state.queue) - g)
+    {keep, give} = RingTracer.Ring.HelpOffer.split_queue(state.queue, g)
     {give, %{state | queue: keep}}
   end
 
@@ -119,6 +119,30 @@ defmodule RingTracer.Job.Child do
     %{state | queue: state.queue ++ atoms, status: :working, stats: stats}
     |> fill_pipe()
     |> maybe_idle()
+  end
+
+  @doc "A child's statistics before its first atom (also what a dead child reports)."
+  @spec new_stats(non_neg_integer(), node() | nil, number(), non_neg_integer()) :: map()
+  def new_stats(index, node, speed, own) do
+    %{
+      index: index,
+      node: node,
+      speed: speed,
+      own: own,
+      given: 0,
+      received: 0,
+      handovers: 0,
+      traced: 0,
+      offers_sent: 0,
+      offers_passed: 0,
+      offers_consumed: 0,
+      grandchild_restarts: 0,
+      busy_us: 0,
+      trace_us: 0,
+      first_atom_us: nil,
+      last_atom_us: nil,
+      rays: RingTracer.Kernel.no_rays()
+    }
   end
 
   ## GenServer
@@ -153,25 +177,7 @@ defmodule RingTracer.Job.Child do
       traffic: %{},
       events: [],
       atoms: [],
-      stats: %{
-        index: index,
-        node: node(),
-        speed: speed(spec, index),
-        own: length(queue),
-        given: 0,
-        received: 0,
-        handovers: 0,
-        traced: 0,
-        offers_sent: 0,
-        offers_passed: 0,
-        offers_consumed: 0,
-        grandchild_restarts: 0,
-        busy_us: 0,
-        trace_us: 0,
-        first_atom_us: nil,
-        last_atom_us: nil,
-        rays: RingTracer.Kernel.no_rays()
-      }
+      stats: new_stats(index, node(), speed(spec, index), length(queue))
     }
 
     {:ok, state, {:continue, {:prepare, kernel}}}

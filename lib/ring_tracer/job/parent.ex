@@ -320,27 +320,7 @@ defmodule RingTracer.Job.Parent do
   end
 
   defp dead_report(i, failure) do
-    stats = %{
-      index: i,
-      node: nil,
-      speed: 1,
-      failed: failure.reason,
-      own: 0,
-      given: 0,
-      received: 0,
-      handovers: 0,
-      traced: 0,
-      offers_sent: 0,
-      offers_passed: 0,
-      offers_consumed: 0,
-      grandchild_restarts: 0,
-      busy_us: 0,
-      trace_us: 0,
-      first_atom_us: nil,
-      last_atom_us: nil,
-      rays: RingTracer.Kernel.no_rays()
-    }
-
+    stats = i |> Child.new_stats(nil, 1, 0) |> Map.put(:failed, failure.reason)
     %{stats: stats, traffic: %{}, events: [], atoms: []}
   end
 
