@@ -53,12 +53,20 @@ defmodule RingTracer.DistributedTest do
       :rand.seed(:exsss, {unquote(seed), 1, 1})
       [n1 | _] = nodes
 
+      # The victim is picked at the first atom, so the kill itself is one
+      # asynchronous signal; with every child slowed down 20x at least 30
+      # atoms (about 10 ms of work) remain when it lands, and the victim still
+      # holds atoms, so the job cannot end before its DOWN reaches the parent.
       {:ok, result} =
-        render_then(nodes, fn ->
-          kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
-          {_, pid, _, _} = Enum.random(kids)
-          Process.exit(pid, :kill)
-        end)
+        render_then(
+          nodes,
+          fn ->
+            kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
+            {_, pid, _, _} = Enum.random(kids)
+            pid
+          end,
+          &Process.exit(&1, :kill)
+        )
 
       assert result.pixels == reference
       assert length(result.failures) == 1
@@ -73,7 +81,7 @@ defmodule RingTracer.DistributedTest do
       {p3, n3} = Peers.start("doomed")
       {p4, n4} = Peers.start("spare")
 
-      {:ok, result} = render_then([n3, n4], fn -> :peer.stop(p3) end)
+      {:ok, result} = render_then([n3, n4], fn -> p3 end, &:peer.stop/1)
       assert result.pixels == reference
       assert length(result.failures) >= 1
       assert Enum.all?(result.failures, &(&1.reason =~ "noconnection"))
@@ -98,24 +106,30 @@ defmodule RingTracer.DistributedTest do
     Peers.stop(peer)
   end
 
-  # Renders on `nodes` (and this node); after a random number of atoms, runs `kill`.
-  defp render_then(nodes, kill) do
+  # Renders on `nodes` (and this node), every child slowed down 20x. At the
+  # first atom `pick` chooses a victim; after a random number of atoms (at
+  # most half of the 60) `kill` gets it.
+  defp render_then(nodes, pick, kill) do
     {:ok, job} =
       RingTracer.render_async(
         TestScenes.path(@scene),
-        [nodes: nodes, children: 6, atoms: 10, speeds: [3]] ++ @size
+        [nodes: nodes, children: 6, atoms: 10, speeds: [20]] ++ @size
       )
 
-    id = job.id
-    at = Enum.random(1..40)
-    await(id, at, kill)
+    await(job.id, Enum.random(2..30), pick, kill, nil)
   end
 
-  defp await(id, at, kill) do
+  defp await(id, at, pick, kill, victim) do
     receive do
-      {RingTracer, ^id, {:progress, done, _}} ->
-        if done == at, do: kill.()
-        await(id, at, kill)
+      {RingTracer, ^id, {:progress, 1, _}} ->
+        await(id, at, pick, kill, pick.())
+
+      {RingTracer, ^id, {:progress, ^at, _}} ->
+        kill.(victim)
+        await(id, at, pick, kill, victim)
+
+      {RingTracer, ^id, {:progress, _, _}} ->
+        await(id, at, pick, kill, victim)
 
       {RingTracer, ^id, result} ->
         result
