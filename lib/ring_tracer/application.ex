@@ -8,6 +8,7 @@ defmodule RingTracer.Application do
   def start(_type, _args) do
     children = [
       RingTracer.SceneCache,
+      RingTracer.Job.Pipe,
       {DynamicSupervisor, name: Names.jobs(), strategy: :one_for_one},
       {DynamicSupervisor, name: Names.children(), strategy: :one_for_one},
       %{id: :pg, start: {:pg, :start_link, [RingTracer.Cluster.scope()]}},

@@ -15,4 +15,8 @@ defmodule RingTracer.Names do
   def children(node \\ node())
   def children(node) when node == node(), do: RingTracer.Children
   def children(node), do: {RingTracer.Children, node}
+
+  @doc "The ETS table, on every node, where a child and its grandchild race for the queued atom."
+  @spec pipe_table() :: atom()
+  def pipe_table, do: RingTracer.Job.Pipe
 end

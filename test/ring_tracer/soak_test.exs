@@ -13,7 +13,8 @@ defmodule RingTracer.SoakTest do
       processes: length(Process.list()),
       ets: length(:ets.all()),
       memory: :erlang.memory(:total),
-      scenes: RingTracer.Native.scene_live_count()
+      scenes: RingTracer.Native.scene_live_count(),
+      pipe_entries: :ets.info(RingTracer.Names.pipe_table(), :size)
     }
   end
 
@@ -27,7 +28,9 @@ defmodule RingTracer.SoakTest do
           atoms: 4,
           width: 24,
           height: 16,
-          strategy: strategy
+          strategy: strategy,
+          # One slower child, so that queued atoms are taken back from pipes.
+          speeds: [1, 3, 1]
         )
     end
 
@@ -41,6 +44,7 @@ defmodule RingTracer.SoakTest do
     assert after_.processes == before.processes
     assert after_.ets == before.ets
     assert after_.scenes == before.scenes
+    assert after_.pipe_entries == 0
     assert after_.memory - before.memory < 2_000_000
   end
 

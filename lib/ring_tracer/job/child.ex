@@ -27,7 +27,7 @@ defmodule RingTracer.Job.Child do
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Grandchild, Spec}
+  alias RingTracer.Job.{Grandchild, Pipe, Spec}
   alias RingTracer.Layout
 
   @pipe_depth 2
@@ -89,11 +89,36 @@ defmodule RingTracer.Job.Child do
     %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
   end
 
-  @doc "Takes the last `g` queued atoms (farthest from being traced) out of the queue."
+  @doc """
+  What the child could give: `{remaining, in_flight}`, where `remaining`
+  counts the queued atoms plus the one waiting in the grandchild's pipe
+  (which `take_last/2` may still take back), and `in_flight` the one being
+  traced.
+  """
+  @spec giveable(map()) :: {non_neg_integer(), non_neg_integer()}
+  def giveable(state) do
+    waiting = if length(state.in_flight) == @pipe_depth, do: 1, else: 0
+    {length(state.queue) + waiting, length(state.in_flight) - waiting}
+  end
+
+  @doc """
+  Takes up to `g` atoms to give away, farthest from being traced first: the
+  last queued ones and then, if `g` asks for more, the atom waiting in the
+  grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
+  """
   @spec take_last(map(), non_neg_integer()) :: {[Layout.atom_id()], map()}
   def take_last(state, g) do
-    {keep, give} = RingTracer.Ring.HelpOffer.split_queue(state.queue, g)
-    {give, %{state | queue: keep}}
+    {keep, give} = RingTracer.Ring.HelpOffer.split_queue(state.queue, min(g, length(state.queue)))
+    state = %{state | queue: keep}
+
+    waiting = List.last(state.in_flight)
+
+    if g > length(give) and length(state.in_flight) == @pipe_depth and
+         Pipe.revoke(state.grandchild, waiting) do
+      {[waiting | give], %{state | in_flight: List.delete(state.in_flight, waiting)}}
+    else
+      {give, state}
+    end
   end
 
   @doc "Hands `atoms` over to `pid` (possibly none: a refusal)."
@@ -226,6 +251,8 @@ defmodule RingTracer.Job.Child do
   end
 
   defp handle({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
+    Pipe.release(gc, atom)
+
     state =
       send_counted(
         state,
@@ -290,6 +317,7 @@ defmodule RingTracer.Job.Child do
   end
 
   defp handle({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
+    Pipe.forget(gc)
     state = %{state | grandchild: nil} |> bump(:grandchild_restarts)
 
     {:noreply,
@@ -357,7 +385,12 @@ defmodule RingTracer.Job.Child do
     case failed do
       nil ->
         state = if state.grandchild, do: state, else: spawn_grandchild(state)
-        Enum.each(atoms, &send(state.grandchild, {:trace, &1}))
+
+        Enum.each(atoms, fn atom ->
+          Pipe.release(state.grandchild, atom)
+          send(state.grandchild, {:trace, atom})
+        end)
+
         state
 
       {atom, message} ->
@@ -376,7 +409,7 @@ defmodule RingTracer.Job.Child do
     Process.exit(gc, :kill)
 
     receive do
-      {:DOWN, ^ref, _, _, _} -> :ok
+      {:DOWN, ^ref, _, _, _} -> Pipe.forget(gc)
     end
   end
 

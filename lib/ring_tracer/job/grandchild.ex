@@ -12,12 +12,17 @@ defmodule RingTracer.Job.Grandchild do
   each atom its grandchild sleeps `(s - 1)` times the atom's trace time,
   burning no CPU.
 
+  Before tracing an atom it claims it (`RingTracer.Job.Pipe`): the child
+  may have taken the queued atom back to hand it to a sibling, and then the
+  grandchild skips it.
+
   Messages in: `{:trace, atom}`. Messages out, to the child:
   `{:traced, self(), atom, pixels, rays, timing}` (timing: `:trace_us`,
   `:started_at`, `:ended_at` in system microseconds) or
   `{:atom_failed, self(), atom, message}`.
   """
 
+  alias RingTracer.Job.Pipe
   alias RingTracer.Layout
 
   @doc "Spawns a grandchild linked to the calling child."
@@ -30,7 +35,8 @@ defmodule RingTracer.Job.Grandchild do
   defp loop(child, kernel, layout, speed) do
     receive do
       {:trace, atom} ->
-        send(child, trace(kernel, layout, speed, atom))
+        # The child may have taken the atom back for a sibling (`Pipe`).
+        if Pipe.claim(self(), atom), do: send(child, trace(kernel, layout, speed, atom))
         loop(child, kernel, layout, speed)
     end
   end

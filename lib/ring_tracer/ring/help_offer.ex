@@ -6,7 +6,8 @@ defmodule RingTracer.Ring.HelpOffer do
   sibling: who made it (`origin`, `pid`), how many atoms it has computed
   (`done`) and a sequence number (`seq`) so that a child can tell its current
   offer from a stale one. Only the origin's own offers carry its pid: atoms are
-  handed over directly to it, not along the ring.
+  handed over directly to it, not along the ring. `via` is the last child
+  that sent the offer on (see "Splicing" below).
 
   `decide/2` is the whole rule, pure:
 
@@ -15,23 +16,46 @@ defmodule RingTracer.Ring.HelpOffer do
     * an old offer of its own (superseded) -> `:drop`;
     * the share rule gives at least one atom -> `{:give, g}`: the token is
       consumed, and the child sends its last `g` queued atoms to the offerer;
+    * the child is idle itself, its own offer still out -> `:park`;
     * otherwise -> `:pass` to the left sibling.
 
   More than one offer can be in the ring at once (one per idle child); they
-  cross freely. An offer reaching a child that is itself idle is passed on,
-  because such a child has nothing queued.
+  cross freely.
+
+  ## Parking (our addition to the paper)
+
+  An idle child whose own offer is out has nothing to give, and its own offer
+  is ahead of the one that just reached it, asking the same siblings the same
+  question. So it keeps the newcomer instead of passing it on: when its own
+  offer is consumed it has atoms again and applies the share rule to what it
+  parked (give, or pass on); when its own offer comes back it is finished,
+  and it sends each parked offer back to its origin, which is then finished
+  too (the parker's offer visited every sibling after the parked offer was
+  made). Without parking, every child's last offer travels the whole ring:
+  N² messages at the end of a job, which with 1024 children is more than the
+  atoms themselves.
+
+  ## Splicing (our addition to the paper)
+
+  A finished child will never have atoms to give, so offers gain nothing by
+  visiting it. When one passes through it, it tells the sender (`via`) to
+  skip it: `{:ring_skip, me, my_left, my_left_index}`; a sender whose left is
+  still that child adopts the new left, and otherwise ignores the message.
+  The ring shrinks to the children that may still give; every offer still
+  visits each of them.
   """
 
   alias RingTracer.Ring.Share
 
   @enforce_keys [:origin, :pid, :done, :seq]
-  defstruct [:origin, :pid, :done, :seq]
+  defstruct [:origin, :pid, :done, :seq, :via]
 
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
           pid: pid(),
           done: non_neg_integer(),
-          seq: non_neg_integer()
+          seq: non_neg_integer(),
+          via: pid() | nil
         }
 
   @typedoc "What a child knows of itself when an offer arrives."
@@ -43,7 +67,7 @@ defmodule RingTracer.Ring.HelpOffer do
           offer_seq: non_neg_integer() | nil
         }
 
-  @type decision :: :returned | :drop | :pass | {:give, pos_integer()}
+  @type decision :: :returned | :drop | :park | :pass | {:give, pos_integer()}
 
   @doc """
   What the child described by `view` does with `offer`.
@@ -55,6 +79,8 @@ defmodule RingTracer.Ring.HelpOffer do
       {:give, 4}
       iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil}, offer)
       :pass
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, offer)
+      :park
   """
   @spec decide(view(), t()) :: decision()
   def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
@@ -63,6 +89,7 @@ defmodule RingTracer.Ring.HelpOffer do
 
   def decide(view, %__MODULE__{done: offerer_done}) do
     case Share.give(view.remaining, view.in_flight, offerer_done, view.done) do
+      0 when view.offer_seq != nil -> :park
       0 -> :pass
       g -> {:give, g}
     end

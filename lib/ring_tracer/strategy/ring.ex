@@ -4,7 +4,9 @@ defmodule RingTracer.Strategy.Ring do
   sibling with atoms to spare consumes it and hands a speed-proportional
   share directly to the offerer, or passes it on; a child whose own offer
   comes back is finished. The rules are `RingTracer.Ring.HelpOffer` and
-  `RingTracer.Ring.Share`.
+  `RingTracer.Ring.Share`; so are our two additions, parking (an idle child
+  keeps the offers that reach it until its own offer is answered) and
+  splicing (offers stop visiting finished children).
   """
   @behaviour RingTracer.Strategy
 
@@ -17,52 +19,105 @@ defmodule RingTracer.Strategy.Ring do
 
   @impl true
   def idle(child) do
-    seq = (child.strategy_state[:seq] || 0) + 1
-    offer = %HelpOffer{origin: child.index, pid: self(), done: child.done, seq: seq}
+    seq = seq(child) + 1
+    offer = %HelpOffer{origin: child.index, pid: self(), done: child.done, seq: seq, via: self()}
 
     child
     |> Child.send_counted(child.left, :offer, {:help_offer, offer})
     |> Child.event(:offer, child.left_index)
     |> Child.bump(:offers_sent)
-    |> Map.put(:strategy_state, %{seq: seq, current: seq})
+    |> put_strategy(seq: seq, current: seq)
     |> Map.put(:status, :offered)
   end
 
   @impl true
-  def handle_message({:help_offer, %HelpOffer{} = offer}, child) do
+  def handle_message({:help_offer, %HelpOffer{} = offer}, child), do: {:ok, offer(child, offer)}
+
+  def handle_message({:handover, _from, atoms}, child) when is_list(atoms) do
+    # Atoms again: the offers parked while we were idle get the share rule.
+    {parked, child} = take_parked(child)
+    child = Child.receive_atoms(child, atoms)
+    {:ok, Enum.reduce(parked, child, &offer(&2, &1))}
+  end
+
+  def handle_message({:ring_skip, gone, left, left_index}, child) do
+    if child.left == gone and left_index not in child.dead do
+      {:ok, %{child | left: left, left_index: left_index}}
+    else
+      {:ok, child}
+    end
+  end
+
+  def handle_message(_msg, _child), do: :unhandled
+
+  defp offer(child, offer) do
+    {remaining, in_flight} = Child.giveable(child)
+
     view = %{
       index: child.index,
-      remaining: length(child.queue),
-      in_flight: length(child.in_flight),
+      remaining: remaining,
+      in_flight: in_flight,
       done: child.done,
       offer_seq: if(child.status == :offered, do: child.strategy_state[:current])
     }
 
-    child =
-      case HelpOffer.decide(view, offer) do
-        :returned ->
-          child |> Child.event(:returned, child.index) |> Map.put(:status, :finished)
+    case HelpOffer.decide(view, offer) do
+      :returned ->
+        {parked, child} = take_parked(child)
 
-        :drop ->
-          child
+        child = child |> Child.event(:returned, child.index) |> Map.put(:status, :finished)
 
-        :pass ->
-          child
-          |> Child.send_counted(child.left, :offer, {:help_offer, offer})
-          |> Child.event(:pass, child.left_index)
+        # Every sibling was asked after these offers were made: their origins
+        # are finished too.
+        Enum.reduce(parked, child, fn o, c ->
+          c
+          |> Child.send_counted(o.pid, :offer, {:help_offer, o})
+          |> Child.event(:back, o.origin)
           |> Child.bump(:offers_passed)
+        end)
 
-        {:give, g} ->
-          {atoms, child} = Child.take_last(child, g)
+      :drop ->
+        child
 
-          child
-          |> Child.hand_over(offer.pid, atoms)
-          |> Child.event(:give, offer.origin)
-          |> Child.bump(:offers_consumed)
-      end
+      :park ->
+        update_in(
+          child.strategy_state,
+          &Map.update(&1, :parked, [offer], fn p -> p ++ [offer] end)
+        )
 
-    {:ok, child}
+      :pass ->
+        child = if child.status == :finished, do: splice(child, offer), else: child
+
+        child
+        |> Child.send_counted(child.left, :offer, {:help_offer, %{offer | via: self()}})
+        |> Child.event(:pass, child.left_index)
+        |> Child.bump(:offers_passed)
+
+      {:give, g} ->
+        {atoms, child} = Child.take_last(child, g)
+
+        child
+        |> Child.hand_over(offer.pid, atoms)
+        |> Child.event(:give, offer.origin)
+        |> Child.bump(:offers_consumed)
+    end
   end
 
-  def handle_message(_msg, _child), do: :unhandled
+  # A finished child asks whoever sent it an offer to skip it from now on.
+  defp splice(child, %HelpOffer{via: via}) when is_pid(via) and via != self() do
+    Child.send_counted(child, via, :control, {:ring_skip, self(), child.left, child.left_index})
+  end
+
+  defp splice(child, _offer), do: child
+
+  defp take_parked(child) do
+    {parked, rest} = Map.pop(child.strategy_state, :parked, [])
+    live = Enum.reject(parked, &(&1.origin in child.dead))
+    {live, %{child | strategy_state: rest}}
+  end
+
+  defp seq(child), do: child.strategy_state[:seq] || 0
+
+  defp put_strategy(child, kv),
+    do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}
 end

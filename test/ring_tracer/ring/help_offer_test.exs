@@ -19,8 +19,13 @@ defmodule RingTracer.Ring.HelpOfferTest do
     assert HelpOffer.decide(view(2, 3, 1, 9, nil), offer(2, 9, 4)) == :drop
   end
 
-  test "an idle child passes other children's offers on" do
-    assert HelpOffer.decide(view(1, 0, 0, 9, 3), offer(2, 9)) == :pass
+  test "an idle child with its own offer out parks other children's offers" do
+    assert HelpOffer.decide(view(1, 0, 0, 9, 3), offer(2, 9)) == :park
+  end
+
+  test "a child with nothing to spare and no offer out passes other children's offers on" do
+    assert HelpOffer.decide(view(1, 0, 0, 9, nil), offer(2, 9)) == :pass
+    assert HelpOffer.decide(view(1, 0, 2, 9, nil), offer(2, 9)) == :pass
   end
 
   test "a busy child consumes the offer and gives a speed-proportional share" do

@@ -1,0 +1,130 @@
+defmodule RingTracer.Strategy.RingTest do
+  # The ring strategy's decisions, one message at a time, on a child state
+  # built by hand: this test process plays every sibling, the parent and the
+  # grandchild, and reads what the child sends in its mailbox.
+  use ExUnit.Case, async: true
+
+  alias RingTracer.Job.{Child, Spec}
+  alias RingTracer.Ring.HelpOffer
+  alias RingTracer.Strategy.Ring
+
+  defp child(fields) do
+    me = self()
+
+    spec = %Spec{
+      id: make_ref(),
+      source: nil,
+      settings: nil,
+      layout: nil,
+      caller: me
+    }
+
+    base = %{
+      spec: spec,
+      index: 1,
+      parent: me,
+      left: me,
+      left_index: 0,
+      siblings: {me, me, me, me},
+      t0: 0,
+      grandchild: me,
+      queue: [],
+      in_flight: [],
+      done: 4,
+      status: :working,
+      dead: [],
+      strategy_state: %{},
+      traffic: %{},
+      events: [],
+      stats: Child.new_stats(1, node(), 1, 4)
+    }
+
+    Map.merge(base, Map.new(fields))
+  end
+
+  defp offer(origin, seq \\ 1, via \\ nil),
+    do: %HelpOffer{origin: origin, pid: self(), done: 4, seq: seq, via: via}
+
+  defp handle(child, msg) do
+    {:ok, child} = Ring.handle_message(msg, child)
+    child
+  end
+
+  test "an idle child parks an offer, and gives it a share once its own offer brings atoms" do
+    idle = child(status: :offered, strategy_state: %{seq: 1, current: 1})
+    parked = handle(idle, {:help_offer, offer(2)})
+
+    assert parked.strategy_state.parked == [offer(2)]
+    refute_received {:help_offer, _}
+
+    # Our own offer is answered with 6 atoms: two go to the grandchild's pipe,
+    # and the parked offerer (as fast as us) gets its share of the rest.
+    helped = handle(parked, {:handover, 0, [10, 11, 12, 13, 14, 15]})
+    assert_received {:handover, 1, given}
+    assert given != [] and Enum.all?(given, &(&1 in 12..15))
+    assert (helped.queue ++ given) |> Enum.sort() == [12, 13, 14, 15]
+    refute Map.has_key?(helped.strategy_state, :parked)
+  end
+
+  test "when its own offer comes back, a child is finished and sends parked offers home" do
+    idle = child(status: :offered, strategy_state: %{seq: 1, current: 1})
+    child = idle |> handle({:help_offer, offer(2)}) |> handle({:help_offer, offer(3)})
+
+    finished = handle(child, {:help_offer, offer(1)})
+    assert finished.status == :finished
+    assert_received {:help_offer, %HelpOffer{origin: 2}}
+    assert_received {:help_offer, %HelpOffer{origin: 3}}
+    assert finished.stats.offers_passed == 2
+  end
+
+  test "a finished child passes offers on and asks the sender to skip it" do
+    me = self()
+    sender = spawn(fn -> receive(do: (m -> send(me, {:relayed, m}))) end)
+    finished = child(status: :finished, left_index: 0)
+    passed = handle(finished, {:help_offer, offer(2, 1, sender)})
+
+    assert_receive {:relayed, {:ring_skip, ^me, ^me, 0}}
+    # The offer goes on, and names us as its last sender.
+    assert_received {:help_offer, %HelpOffer{origin: 2, via: ^me}}
+    assert passed.stats.offers_passed == 1
+  end
+
+  test "a sender adopts the skipped child's left only if that child is still its left" do
+    gone = spawn(fn -> :ok end)
+    next = spawn(fn -> :ok end)
+    c = child(left: gone, left_index: 2)
+
+    assert %{left: ^next, left_index: 3} = handle(c, {:ring_skip, gone, next, 3})
+    assert %{left: ^gone} = handle(c, {:ring_skip, self(), next, 3})
+    # Never to a child known to be dead.
+    assert %{left: ^gone} = handle(%{c | dead: [3]}, {:ring_skip, gone, next, 3})
+  end
+
+  test "the atom waiting in the grandchild's pipe is given if the grandchild has not started it" do
+    gc = spawn(fn -> Process.sleep(:infinity) end)
+    busy = child(in_flight: [5, 6], grandchild: gc)
+
+    gave = handle(busy, {:help_offer, offer(2)})
+    assert_received {:handover, 1, [6]}
+    assert gave.in_flight == [5]
+    # The grandchild, reaching atom 6 in its mailbox, will skip it.
+    refute RingTracer.Job.Pipe.claim(gc, 6)
+  end
+
+  test "an atom the grandchild has already started stays: the offer gets an empty hand-over" do
+    gc = spawn(fn -> Process.sleep(:infinity) end)
+    assert RingTracer.Job.Pipe.claim(gc, 6)
+    busy = child(in_flight: [5, 6], grandchild: gc)
+
+    kept = handle(busy, {:help_offer, offer(2)})
+    assert_received {:handover, 1, []}
+    assert kept.in_flight == [5, 6]
+    RingTracer.Job.Pipe.forget(gc)
+  end
+
+  test "a working child with nothing to spare passes the offer to its left" do
+    busy = child(in_flight: [5])
+    _ = handle(busy, {:help_offer, offer(2)})
+    assert_received {:help_offer, %HelpOffer{origin: 2}}
+  end
+end
