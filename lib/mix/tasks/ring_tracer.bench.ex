@@ -3,14 +3,15 @@ defmodule Mix.Tasks.RingTracer.Bench do
   @moduledoc """
   Benchmarks that print figures side by side from one run.
 
-      mix ring_tracer.bench balance [--size 512] [--atoms 16] [--quick]
+      mix ring_tracer.bench balance [--size 512] [--atoms 16] [--runs 3] [--quick]
 
   `balance` renders the same atoms with every strategy (`static`, `master`,
   `ring`, `steal`) on real scenes (4 equal children; 4 with one 4x slower; 8
   with speeds 1..8; SPD tetra and teapot, whose empty background makes static
   strips unequal) and on the simulated kernel with 64, 256 and 1024
   children, and prints makespan / ideal, idle %, and messages and bytes per
-  atom (counted at the sender; bytes include the pixels).
+  atom (counted at the sender; bytes include the pixels). Each real row is
+  the median (by makespan / ideal) of `--runs` renders after one warm-up.
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
 
@@ -126,7 +127,9 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
   def run(["balance" | argv]) do
     {opts, _, _} =
-      OptionParser.parse(argv, strict: [size: :integer, atoms: :integer, quick: :boolean])
+      OptionParser.parse(argv,
+        strict: [size: :integer, atoms: :integer, quick: :boolean, runs: :integer]
+      )
 
     Mix.Task.run("app.start")
     size = opts[:size] || 512
@@ -149,13 +152,16 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
     rows =
       for {label, path, job} <- real, strategy <- RingTracer.Strategy.names() do
-        {:ok, result} =
+        render = fn ->
           RingTracer.render(
             path,
             [strategy: strategy, atoms: k, width: size, height: size] ++ job
           )
+        end
 
-        balance_row(label, strategy, result)
+        # One warm-up render (scene cache, code loading), then the median of `runs`.
+        {:ok, _} = render.()
+        balance_row(label, strategy, median_result(runs, render))
       end
 
     sim_rows =
