@@ -48,6 +48,23 @@ pub fn srgb8_exact(v: f32) -> u8 {
     (s * 255.0).round().clamp(0.0, 255.0) as u8
 }
 
+/// The sRGB decoding curve: a display value in [0, 1] (clamped; NaN becomes 0) to linear light.
+///
+/// ```
+/// use ring_tracer_kernel::film::{from_srgb, srgb8};
+/// assert_eq!(from_srgb(0.0), 0.0);
+/// assert_eq!(from_srgb(1.0), 1.0);
+/// assert_eq!(srgb8(from_srgb(128.0 / 255.0)), 128);
+/// ```
+pub fn from_srgb(v: f32) -> f32 {
+    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// Converts linear RGB floats to 8-bit sRGB bytes (same length).
 pub fn to_srgb8(rgb: &[f32]) -> Vec<u8> {
     rgb.iter().map(|&v| srgb8(v)).collect()

@@ -3,7 +3,7 @@
 //! Shading at a hit (Whitted 1980 with the SPD's conventions):
 //!
 //! ```text
-//! colour = ambient * C
+//! colour = ambient * Kd * C
 //!        + sum over lights not in shadow of  Kd * C * light * max(N.L, 0)
 //!                                          + Ks * light * max(R.L, 0)^Shine
 //!        + Ks * reflected  +  T * refracted
@@ -100,7 +100,7 @@ impl Whitted {
         };
         let eps = scene.epsilon;
         let c = m.color_at(s.p);
-        let mut out = scene.ambient * c;
+        let mut out = scene.ambient * c * m.kd;
         let above = s.p + ngf * eps;
         let refl_dir = reflect(d, nf);
         for (li, light) in scene.lights.iter().enumerate() {

@@ -8,7 +8,9 @@
 //!
 //! Conventions chosen where the format leaves freedom (SPD Readme, "relative intensity"):
 //! - a light without a colour has intensity `sqrt(n) / (2 n)` for `n` lights, in all channels;
-//! - the ambient term is that same value times the surface colour (it is not scaled by Kd);
+//! - the ambient term is that same value times the surface colour and Kd (ambient light is
+//!   reflected diffusely; so a clear glass with Kd 0.1 does not glow at every interface);
+//! - colours are display values, as the SPD's own pictures show them ([`Scene::display_referred`]);
 //! - a polygon with 3 vertices becomes a triangle; larger ones (also concave, e.g. the 144-gons
 //!   of `gears`) are tested with the crossing rule; degenerate (zero-area) ones are dropped;
 //! - a `pp` patch is triangulated as a fan (SPD patches are always triangles) with its vertex
@@ -127,6 +129,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
         file,
     };
     let mut b = SceneBuilder::new();
+    b.display_referred = true;
     let mut material = b.material(Material::default());
     let mut colourless_lights = Vec::new();
     let mut verts: Vec<Vec3A> = Vec::new();

@@ -194,6 +194,9 @@ pub fn trace_span(
             out.extend_from_slice(&[c.x, c.y, c.z]);
         }
     }
+    if scene.display_referred() {
+        out.iter_mut().for_each(|v| *v = crate::film::from_srgb(*v));
+    }
     Ok((out, stats))
 }
 

@@ -96,6 +96,8 @@ pub struct Scene {
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
     pub(crate) source_count: usize,
+    /// Colours in the file are display values, as in the SPD (see [`Scene::display_referred`]).
+    pub(crate) display_referred: bool,
 }
 
 impl Scene {
@@ -147,6 +149,23 @@ impl Scene {
     /// planes); [`Hit::prim`] indexes these.
     pub fn internal_primitive_count(&self) -> usize {
         self.geom.shapes.len() + self.planes.len()
+    }
+
+    /// Whether the scene's colours are display values rather than linear light. NFF scenes are:
+    /// the SPD's renderers wrote the computed values straight to the 8-bit frame buffer, so a
+    /// colour of 0.5 meant code 128 on screen. Such a scene's traced pixels are decoded from
+    /// sRGB at the end of [`crate::trace_span`] (clamped to [0, 1] first), so that the film's
+    /// sRGB encoding gives back the SPD's values and OpenEXR holds the linear light they show.
+    pub fn display_referred(&self) -> bool {
+        self.display_referred
+    }
+
+    /// Replaces the lighting conventions: the ambient intensity, and the colour of every light.
+    /// NFF leaves both to the renderer (we follow the SPD Readme by default); this lets a scene
+    /// be rendered as another renderer lit it, e.g. the SPD's pictures (ambient 0, lights 1).
+    pub fn relight(&mut self, ambient: Vec3A, light: Vec3A) {
+        self.ambient = ambient;
+        self.lights.iter_mut().for_each(|l| l.color = light);
     }
 
     /// Number of lights.
@@ -385,6 +404,7 @@ pub(crate) struct SceneBuilder {
     source_count: usize,
     /// [`limits::MAX_PRIMITIVES`]; a field only so tests can reach the bound cheaply.
     max_primitives: usize,
+    pub display_referred: bool,
 }
 
 impl SceneBuilder {
@@ -394,6 +414,7 @@ impl SceneBuilder {
             resolution: (512, 512),
             background: Vec3A::ZERO,
             ambient: None,
+            display_referred: false,
             lights: Vec::new(),
             materials: Vec::new(),
             geom: Geometry::default(),
@@ -622,6 +643,7 @@ impl SceneBuilder {
             epsilon,
             bounds,
             source_count: self.source_count,
+            display_referred: self.display_referred,
         }
     }
 }

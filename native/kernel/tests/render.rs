@@ -15,9 +15,10 @@ fn nff(src: &str) -> Scene {
 /// 8x6 image, 45 degrees over the 6 rows (centre to centre): the 1x1 half-size square at z = 0
 /// covers exactly pixels x = 3, 4 and y = 2, 3; a small green sphere covers pixel (0, 0) only.
 /// Light at the eye: the four square pixels all see N.L = 1/sqrt(1 + 0.5 s^2) with
-/// s = 2 tan(22.5 deg) / 5, so colour = C * (0.5 ambient + 0.5 * 0.993206) = C * 0.996603
-/// = (0.996603, 0.498301, 0.249151) -> sRGB8 (255, 187, 137). Sphere (Kd 0): 0.5 * (0, 1, 0)
-/// -> (0, 188, 0). Background (0.2, 0.4, 0.6) -> (124, 170, 203).
+/// s = 2 tan(22.5 deg) / 5, so colour = C * (0.5 ambient * Kd 1 + 0.5 * 0.993206) = C * 0.996603
+/// = (0.996603, 0.498301, 0.249151). NFF colours are display values, so the 8-bit pixel is
+/// round(255 v): (254, 127, 64). The sphere has Kd 0 and Ks 0: no ambient either, black.
+/// Background (0.2, 0.4, 0.6) -> (51, 102, 153).
 const GOLDEN: &str = "b 0.2 0.4 0.6
 v
 from 0 0 5
@@ -49,11 +50,11 @@ fn golden_8x6() {
             let i = (y * 8 + x) * 3;
             let got = [px[i], px[i + 1], px[i + 2]];
             let want = if (3..=4).contains(&x) && (2..=3).contains(&y) {
-                [255, 187, 137]
+                [254, 127, 64]
             } else if x == 0 && y == 0 {
-                [0, 188, 0]
+                [0, 0, 0]
             } else {
-                [124, 170, 203]
+                [51, 102, 153]
             };
             assert_eq!(got, want, "pixel ({x}, {y})");
         }
