@@ -28,7 +28,9 @@ defmodule RingTracer.Ring.HelpOffer do
   is ahead of the one that just reached it, asking the same siblings the same
   question. So it keeps the newcomer instead of passing it on: when its own
   offer is consumed it has atoms again and applies the share rule to what it
-  parked (give, or pass on); when its own offer comes back it is finished,
+  parked (give, or send the offer on to the sibling that just gave: the ones
+  in between had nothing a moment ago, and the giver may have more); when
+  its own offer comes back it is finished,
   and it sends each parked offer back to its origin, which is then finished
   too (the parker's offer visited every sibling after the parked offer was
   made). Without parking, every child's last offer travels the whole ring:

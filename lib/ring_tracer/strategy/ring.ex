@@ -33,11 +33,11 @@ defmodule RingTracer.Strategy.Ring do
   @impl true
   def handle_message({:help_offer, %HelpOffer{} = offer}, child), do: {:ok, offer(child, offer)}
 
-  def handle_message({:handover, _from, atoms}, child) when is_list(atoms) do
+  def handle_message({:handover, from, atoms}, child) when is_list(atoms) do
     # Atoms again: the offers parked while we were idle get the share rule.
     {parked, child} = take_parked(child)
     child = Child.receive_atoms(child, atoms)
-    {:ok, Enum.reduce(parked, child, &offer(&2, &1))}
+    {:ok, Enum.reduce(parked, child, &offer(&2, &1, from))}
   end
 
   def handle_message({:ring_skip, gone, left, left_index}, child) do
@@ -50,7 +50,7 @@ defmodule RingTracer.Strategy.Ring do
 
   def handle_message(_msg, _child), do: :unhandled
 
-  defp offer(child, offer) do
+  defp offer(child, offer, released_by \\ nil) do
     {remaining, in_flight} = Child.giveable(child)
 
     view = %{
@@ -88,9 +88,15 @@ defmodule RingTracer.Strategy.Ring do
       :pass ->
         child = if child.status == :finished, do: splice(child, offer), else: child
 
+        {to, to_index} =
+          if is_integer(released_by) and released_by != child.index and
+               released_by not in child.dead,
+             do: {elem(child.siblings, released_by), released_by},
+             else: {child.left, child.left_index}
+
         child
-        |> Child.send_counted(child.left, :offer, {:help_offer, %{offer | via: self()}})
-        |> Child.event(:pass, child.left_index)
+        |> Child.send_counted(to, :offer, {:help_offer, %{offer | via: self()}})
+        |> Child.event(:pass, to_index)
         |> Child.bump(:offers_passed)
 
       {:give, g} ->

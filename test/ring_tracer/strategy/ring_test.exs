@@ -66,6 +66,24 @@ defmodule RingTracer.Strategy.RingTest do
     refute Map.has_key?(helped.strategy_state, :parked)
   end
 
+  test "parked offers it cannot serve go straight to the sibling that just gave" do
+    me = self()
+    giver = spawn(fn -> receive(do: (m -> send(me, {:relayed, m}))) end)
+
+    idle =
+      child(
+        status: :offered,
+        strategy_state: %{seq: 1, current: 1},
+        siblings: {giver, me, me, me}
+      )
+
+    parked = handle(idle, {:help_offer, offer(2)})
+
+    # One atom: it goes to the grandchild's pipe, nothing to spare.
+    _ = handle(parked, {:handover, 0, [10]})
+    assert_receive {:relayed, {:help_offer, %HelpOffer{origin: 2, via: ^me}}}
+  end
+
   test "when its own offer comes back, a child is finished and sends parked offers home" do
     idle = child(status: :offered, strategy_state: %{seq: 1, current: 1})
     child = idle |> handle({:help_offer, offer(2)}) |> handle({:help_offer, offer(3)})
