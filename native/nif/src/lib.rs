@@ -6,7 +6,8 @@
 
 mod convert;
 mod image;
+mod panic;
 mod scene;
 mod trace;
 
-rustler::init!("Elixir.RingTracer.Native");
+rustler::init!("Elixir.RingTracer.Native", load = panic::load);
