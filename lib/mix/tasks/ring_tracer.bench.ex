@@ -36,7 +36,9 @@ defmodule Mix.Tasks.RingTracer.Bench do
   `.pov` file (`povray +W512 +H512 -D -A +WT2`, when `povray` is installed and
   the `.pov` is in `--pov-dir`, by default `../shared/scenes/spd/pov`); the
   same render through the ring with `--children` children; and the ratios
-  ours/POV-Ray and ring/kernel. Times are medians of `--runs` runs (default 3).
+  ours/POV-Ray and ring/kernel. Times are medians of `--runs` runs (default 3);
+  kernel and ring renders alternate, and ring/kernel is the median of the
+  pairs' ratios, so that both see the same drift in this machine's speed.
   Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
   POV-Ray's own `Max Level 5` and ADC bailout do.
   """
@@ -91,21 +93,29 @@ defmodule Mix.Tasks.RingTracer.Bench do
         settings = %Settings{width: size, height: size}
         native = Settings.to_native(settings)
 
-        {trace_us, rays} =
-          median_run(runs, fn ->
-            {:ok, {_pixels, rays}} = Native.render_image(scene.ref, native, threads)
-            rays
-          end)
+        kernel = fn ->
+          {us, {:ok, {_pixels, rays}}} =
+            :timer.tc(fn -> Native.render_image(scene.ref, native, threads) end)
 
+          {us, rays}
+        end
+
+        ring = fn ->
+          {:ok, result} =
+            RingTracer.render(path, children: children, atoms: atoms, width: size, height: size)
+
+          result.elapsed_us
+        end
+
+        # Kernel and ring alternate, so that both see the same drift of this
+        # machine's speed; ring/kernel is the median of the pairs' ratios.
+        {:ok, _} = RingTracer.render(path, children: children, atoms: 1, width: 8, height: 8)
+        pairs = for _ <- 1..runs, do: {kernel.(), ring.()}
+        {_, rays} = pairs |> List.last() |> elem(0)
+        trace_us = median(Enum.map(pairs, fn {{k, _}, _} -> k end))
+        ring_us = median(Enum.map(pairs, fn {_, r} -> r end))
+        ring_ratio = median(Enum.map(pairs, fn {{k, _}, r} -> r / k end))
         total_rays = rays.eye + rays.reflected + rays.refracted + rays.shadow
-
-        {ring_us, _} =
-          median_run(runs, fn ->
-            {:ok, result} =
-              RingTracer.render(path, children: children, atoms: atoms, width: size, height: size)
-
-            result.elapsed_us
-          end)
 
         pov = pov_times(povray, Path.join(pov_dir, name <> ".pov"), size, threads, runs)
 
@@ -118,7 +128,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
           pov && secs(pov.trace_us),
           pov && fmt(trace_us / max(pov.trace_us, 1)),
           secs(ring_us),
-          fmt(ring_us / trace_us)
+          fmt(ring_ratio)
         ]
       end
 
@@ -284,17 +294,6 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
   # Runs `fun` `runs` times; the median of its time (or, if it returns an
   # integer of microseconds, that) with the last value it returned.
-  defp median_run(runs, fun) do
-    samples =
-      for _ <- 1..runs do
-        {us, value} = :timer.tc(fun)
-        if is_integer(value), do: {value, value}, else: {us, value}
-      end
-
-    sorted = Enum.sort_by(samples, &elem(&1, 0))
-    {elem(Enum.at(sorted, div(runs, 2)), 0), elem(List.last(samples), 1)}
-  end
-
   defp pov_times(nil, _file, _size, _threads, _runs), do: nil
 
   defp pov_times(povray, file, size, threads, runs) do
