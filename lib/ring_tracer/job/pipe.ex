@@ -20,11 +20,14 @@ defmodule RingTracer.Job.Pipe do
   grandchild died `forget/1`s everything of that grandchild.
 
   The table belongs to this process, started by the application on every
-  node (a grandchild and its child always share a node).
+  node (a grandchild and its child always share a node). A child killed
+  outright cannot forget its grandchild's entries, so this process sweeps
+  out the entries of dead grandchildren once a minute.
   """
   use GenServer
 
   @table RingTracer.Names.pipe_table()
+  @sweep_ms 60_000
 
   @doc false
   @spec start_link(term()) :: GenServer.on_start()
@@ -63,6 +66,29 @@ defmodule RingTracer.Job.Pipe do
       write_concurrency: true
     ])
 
+    schedule_sweep()
     {:ok, nil}
   end
+
+  @impl GenServer
+  def handle_info(:sweep, state) do
+    sweep()
+    schedule_sweep()
+    {:noreply, state}
+  end
+
+  @doc false
+  @spec sweep() :: :ok
+  def sweep do
+    dead =
+      :ets.foldl(
+        fn {{gc, _} = key}, acc -> if Process.alive?(gc), do: acc, else: [key | acc] end,
+        [],
+        @table
+      )
+
+    Enum.each(dead, &:ets.delete(@table, &1))
+  end
+
+  defp schedule_sweep, do: Process.send_after(self(), :sweep, @sweep_ms)
 end

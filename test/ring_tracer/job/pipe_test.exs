@@ -34,6 +34,23 @@ defmodule RingTracer.Job.PipeTest do
     assert :ets.match(RingTracer.Names.pipe_table(), {{gc, :"$1"}}) == []
   end
 
+  test "the sweep removes the entries of dead grandchildren only", %{gc: gc} do
+    dead = spawn(fn -> :ok end)
+    ref = Process.monitor(dead)
+    assert_receive {:DOWN, ^ref, _, _, _}
+    alive = spawn(fn -> Process.sleep(:infinity) end)
+
+    assert Pipe.revoke(dead, 1)
+    assert Pipe.claim(alive, 1)
+    Pipe.sweep()
+
+    table = RingTracer.Names.pipe_table()
+    assert :ets.lookup(table, {dead, 1}) == []
+    assert :ets.lookup(table, {alive, 1}) == [{{alive, 1}}]
+    Pipe.forget(alive)
+    Pipe.forget(gc)
+  end
+
   test "exactly one side wins when both race for the same atom" do
     for atom <- 1..200 do
       gc = spawn(fn -> :ok end)
