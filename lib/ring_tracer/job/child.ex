@@ -132,9 +132,17 @@ defmodule RingTracer.Job.Child do
     update_in(state.stats.given, &(&1 + length(atoms)))
   end
 
-  @doc "Queues atoms handed over to this child and starts on them."
+  @doc """
+  Queues atoms handed over to this child and starts on them. An atom it
+  already holds (queued or in its grandchild's pipe) is not queued twice:
+  after a failure the parent may hand out again an atom whose pixels are
+  still on their way, and one atom twice in a pipe would meet its own claim
+  (`RingTracer.Job.Pipe`) and be skipped.
+  """
   @spec receive_atoms(map(), [Layout.atom_id()]) :: map()
   def receive_atoms(state, atoms) do
+    atoms = Enum.reject(atoms, &(&1 in state.in_flight or &1 in state.queue))
+
     stats = %{
       state.stats
       | received: state.stats.received + length(atoms),

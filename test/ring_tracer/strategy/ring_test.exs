@@ -140,6 +140,18 @@ defmodule RingTracer.Strategy.RingTest do
     RingTracer.Job.Pipe.forget(gc)
   end
 
+  test "an atom handed over again while the child still holds it is not queued twice" do
+    # (PropEr found this: master after a kill, with delayed messages. Twice in
+    # a pipe, the second copy met the first one's claim and was skipped, and
+    # the child waited for it forever.)
+    busy = child(in_flight: [19], queue: [7])
+    again = Child.receive_atoms(busy, [19, 7, 8])
+
+    assert (again.in_flight ++ again.queue) |> Enum.sort() == [7, 8, 19]
+    assert_received {:trace, 7}
+    refute_received {:trace, 19}
+  end
+
   test "a working child with nothing to spare passes the offer to its left" do
     busy = child(in_flight: [5])
     _ = handle(busy, {:help_offer, offer(2)})
