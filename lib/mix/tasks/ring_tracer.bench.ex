@@ -12,6 +12,10 @@ defmodule Mix.Tasks.RingTracer.Bench do
   children, and prints makespan / ideal, idle %, and messages and bytes per
   atom (counted at the sender; bytes include the pixels). Each real row is
   the median (by makespan / ideal) of `--runs` renders after one warm-up.
+  For each real scenario a `floor` row runs the same atoms and speeds with
+  no protocol at all (N processes calling the kernel, taking atoms from one
+  shared counter): the distance from it to 1.0 is this machine's cost of
+  dirty NIF calls, not load balancing.
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
 
@@ -174,6 +178,31 @@ defmodule Mix.Tasks.RingTracer.Bench do
         balance_row(label, strategy, median_result(runs, render))
       end
 
+    # The floor: the same atoms and speeds with no protocol at all, N plain
+    # processes calling the kernel and taking the next atom from one
+    # `:atomics` counter. What is left between it and 1.0 is this machine's
+    # cost of running dirty NIFs, not load balancing.
+    floors =
+      for {label, path, job} <- real do
+        samples = for _ <- 0..runs, do: floor_run(path, size, job[:children], k, job[:speeds])
+        [_warm_up | timed] = samples
+        {elapsed, ideal} = Enum.at(Enum.sort_by(timed, fn {e, i} -> e / i end), div(runs, 2))
+
+        [
+          label,
+          "floor",
+          fmt(elapsed / 1000),
+          fmt(ideal / 1000),
+          fmt(elapsed / ideal),
+          "-",
+          "0",
+          "-"
+        ]
+      end
+
+    rows =
+      Enum.flat_map(real, fn {label, _, _} -> Enum.filter(rows ++ floors, &(hd(&1) == label)) end)
+
     sim_rows =
       for n <- sims, strategy <- RingTracer.Strategy.names() do
         # Speeds from 1 to 4 (a fixed pseudo-random draw) and atom costs of
@@ -275,6 +304,43 @@ defmodule Mix.Tasks.RingTracer.Bench do
     Enum.at(sorted, div(runs, 2))
   end
 
+  # {makespan_us, ideal_us} of `n` processes tracing the image's atoms, each
+  # taking the next from a shared counter, with the same slowdowns as a job.
+  defp floor_run(path, size, n, k, speeds) do
+    {:ok, scene} = RingTracer.Scene.load(path)
+    settings = %Settings{width: size, height: size}
+    context = {scene, Settings.to_native(settings)}
+    layout = RingTracer.Layout.new(size, size, n, k)
+    total = RingTracer.Layout.atom_count(layout)
+    next = :atomics.new(1, [])
+    speeds = if speeds == [], do: List.duplicate(1, n), else: speeds
+
+    {elapsed, traces} =
+      :timer.tc(fn ->
+        speeds
+        |> Enum.map(fn speed ->
+          Task.async(fn -> floor_loop(next, total, context, layout, speed, []) end)
+        end)
+        |> Enum.flat_map(&Task.await(&1, :infinity))
+      end)
+
+    cap = :erlang.system_info(:dirty_cpu_schedulers_online)
+    {elapsed, RingTracer.Result.ideal_us(traces, speeds, cap)}
+  end
+
+  defp floor_loop(next, total, context, layout, speed, acc) do
+    atom = :atomics.add_get(next, 1, 1) - 1
+
+    if atom < total do
+      {first, count} = RingTracer.Layout.span(layout, atom)
+      {:ok, _pixels, _rays, us} = RingTracer.Kernel.Native.trace(context, first, count, atom)
+      if speed > 1, do: Process.sleep(round((speed - 1) * us / 1000))
+      floor_loop(next, total, context, layout, speed, [%{trace_us: us} | acc])
+    else
+      acc
+    end
+  end
+
   defp balance_row(label, strategy, result) do
     n = length(result.children)
     idle = Enum.sum(Enum.map(result.children, & &1.idle_us)) / max(n * result.elapsed_us, 1)
@@ -292,8 +358,6 @@ defmodule Mix.Tasks.RingTracer.Bench do
     ]
   end
 
-  # Runs `fun` `runs` times; the median of its time (or, if it returns an
-  # integer of microseconds, that) with the last value it returned.
   defp pov_times(nil, _file, _size, _threads, _runs), do: nil
 
   defp pov_times(povray, file, size, threads, runs) do
