@@ -17,17 +17,7 @@ impl Ray {
     /// Builds a ray; `dir` is normalised (a zero direction becomes +z).
     #[inline]
     pub fn new(origin: Vec3A, dir: Vec3A) -> Ray {
-        let dir = dir.try_normalize().unwrap_or(Vec3A::Z);
-        let safe = Vec3A::select(
-            dir.abs().cmplt(Vec3A::splat(1e-20)),
-            Vec3A::splat(1e-20).copysign(dir),
-            dir,
-        );
-        Ray {
-            origin,
-            dir,
-            inv_dir: safe.recip(),
-        }
+        Ray::from_unit(origin, dir.try_normalize().unwrap_or(Vec3A::Z))
     }
 
     /// Builds a ray from a direction already of unit length (not re-normalised).
