@@ -164,44 +164,45 @@ defmodule Mix.Tasks.RingTracer.Bench do
       {"teapot, 4 equal", "priv/scenes/spd/teapot_s12.nff", children: 4, speeds: []}
     ]
 
+    # Per scenario: every strategy, then the floor: the same atoms and speeds
+    # with no protocol at all, N plain processes calling the kernel and taking
+    # the next atom from one `:atomics` counter. What is left between the
+    # floor and 1.0 is this machine's cost of running dirty NIFs, not load
+    # balancing. Each row: one warm-up, then the median of `runs`.
     rows =
-      for {label, path, job} <- real, strategy <- RingTracer.Strategy.names() do
-        render = fn ->
-          RingTracer.render(
-            path,
-            [strategy: strategy, atoms: k, width: size, height: size] ++ job
-          )
-        end
+      Enum.flat_map(real, fn {label, path, job} ->
+        strategies =
+          for strategy <- RingTracer.Strategy.names() do
+            render = fn ->
+              RingTracer.render(
+                path,
+                [strategy: strategy, atoms: k, width: size, height: size] ++ job
+              )
+            end
 
-        # One warm-up render (scene cache, code loading), then the median of `runs`.
-        {:ok, _} = render.()
-        balance_row(label, strategy, median_result(runs, render))
-      end
+            {:ok, _} = render.()
+            balance_row(label, strategy, median_result(runs, render))
+          end
 
-    # The floor: the same atoms and speeds with no protocol at all, N plain
-    # processes calling the kernel and taking the next atom from one
-    # `:atomics` counter. What is left between it and 1.0 is this machine's
-    # cost of running dirty NIFs, not load balancing.
-    floors =
-      for {label, path, job} <- real do
-        samples = for _ <- 0..runs, do: floor_run(path, size, job[:children], k, job[:speeds])
-        [_warm_up | timed] = samples
-        {elapsed, ideal} = Enum.at(Enum.sort_by(timed, fn {e, i} -> e / i end), div(runs, 2))
+        {:ok, scene} = RingTracer.Scene.load(path)
+        floor = fn -> floor_run(scene, size, job[:children], k, job[:speeds]) end
+        {:ok, _} = floor.()
+        f = median_result(runs, floor)
 
-        [
-          label,
-          "floor",
-          fmt(elapsed / 1000),
-          fmt(ideal / 1000),
-          fmt(elapsed / ideal),
-          "-",
-          "0",
-          "-"
-        ]
-      end
-
-    rows =
-      Enum.flat_map(real, fn {label, _, _} -> Enum.filter(rows ++ floors, &(hd(&1) == label)) end)
+        strategies ++
+          [
+            [
+              label,
+              "floor",
+              fmt(f.elapsed_us / 1000),
+              fmt(f.ideal_us / 1000),
+              fmt(f.elapsed_us / f.ideal_us),
+              "-",
+              "0",
+              "-"
+            ]
+          ]
+      end)
 
     sim_rows =
       for n <- sims, strategy <- RingTracer.Strategy.names() do
@@ -304,10 +305,9 @@ defmodule Mix.Tasks.RingTracer.Bench do
     Enum.at(sorted, div(runs, 2))
   end
 
-  # {makespan_us, ideal_us} of `n` processes tracing the image's atoms, each
+  # Makespan and ideal time of `n` processes tracing the image's atoms, each
   # taking the next from a shared counter, with the same slowdowns as a job.
-  defp floor_run(path, size, n, k, speeds) do
-    {:ok, scene} = RingTracer.Scene.load(path)
+  defp floor_run(scene, size, n, k, speeds) do
     settings = %Settings{width: size, height: size}
     context = {scene, Settings.to_native(settings)}
     layout = RingTracer.Layout.new(size, size, n, k)
@@ -325,7 +325,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
       end)
 
     cap = :erlang.system_info(:dirty_cpu_schedulers_online)
-    {elapsed, RingTracer.Result.ideal_us(traces, speeds, cap)}
+    {:ok, %{elapsed_us: elapsed, ideal_us: RingTracer.Result.ideal_us(traces, speeds, cap)}}
   end
 
   defp floor_loop(next, total, context, layout, speed, acc) do
