@@ -97,9 +97,15 @@ defmodule RingTracer.Job.Child do
   """
   @spec giveable(map()) :: {non_neg_integer(), non_neg_integer()}
   def giveable(state) do
-    waiting = if length(state.in_flight) == @pipe_depth, do: 1, else: 0
+    waiting = if waiting(state), do: 1, else: 0
     {length(state.queue) + waiting, length(state.in_flight) - waiting}
   end
+
+  # The atom queued in the grandchild's pipe behind the one being traced.
+  defp waiting(%{in_flight: in_flight}) when length(in_flight) == @pipe_depth,
+    do: List.last(in_flight)
+
+  defp waiting(_state), do: nil
 
   @doc """
   Takes up to `g` atoms to give away, farthest from being traced first: the
@@ -111,10 +117,9 @@ defmodule RingTracer.Job.Child do
     {keep, give} = RingTracer.Ring.HelpOffer.split_queue(state.queue, min(g, length(state.queue)))
     state = %{state | queue: keep}
 
-    waiting = List.last(state.in_flight)
+    waiting = waiting(state)
 
-    if g > length(give) and length(state.in_flight) == @pipe_depth and
-         Pipe.revoke(state.grandchild, waiting) do
+    if g > length(give) and waiting != nil and Pipe.revoke(state.grandchild, waiting) do
       {[waiting | give], %{state | in_flight: List.delete(state.in_flight, waiting)}}
     else
       {give, state}
