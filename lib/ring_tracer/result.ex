@@ -17,7 +17,8 @@ defmodule RingTracer.Result do
       atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,
       `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`;
     * `:atoms` — one map per atom: `:atom`, `:owner` (the child whose strip
-      it is), `:child` (who traced it), `:start_us`, `:end_us`, `:trace_us`;
+      it is), `:child` (who traced the copy the parent kept), `:start_us`,
+      `:end_us`, `:trace_us`;
     * `:events` — protocol events in time order: `:kind` (`:offer`, `:pass`,
       `:give`, `:returned`, `:steal`, `:refuse`), `:from`, `:to`, `:at_us`;
     * `:messages` — messages between the job's processes, counted at the
@@ -26,7 +27,9 @@ defmodule RingTracer.Result do
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
       `:reflected`, `:refracted`, `:shadow`;
     * `:strategy` — the strategy's name;
-    * `:duplicates` — atom results that arrived more than once (counted once);
+    * `:duplicates` — atom results that arrived after the atom's first one
+      (after a failure the parent may hand out again an atom whose pixels
+      were still on their way); the first is kept;
     * `:failures` — children that died mid-job: `:child`, `:reason`, `:at_us`
       (their entry in `:children` has `:failed` set and zero counts);
     * `:redone` — atoms handed out again by the parent after a failure;

@@ -59,7 +59,14 @@ defmodule RingTracer.ProtocolPropertyTest do
         ok =
           case result do
             {:ok, r} ->
-              r.pixels == reference and length(r.failures) <= length(kill_at)
+              # One record per atom (the copy the parent kept), all of them
+              # unless a killed child took its records with it.
+              ids = Enum.map(r.atoms, & &1.atom)
+              total = RingTracer.Layout.atom_count(RingTracer.Layout.new(w, h, n, k))
+              lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
+
+              r.pixels == reference and length(r.failures) <= length(kill_at) and
+                ids == Enum.uniq(ids) and (lost_records or length(ids) == total)
 
             _ ->
               false

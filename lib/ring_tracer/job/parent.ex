@@ -46,6 +46,7 @@ defmodule RingTracer.Job.Parent do
       children: %{},
       monitors: %{},
       results: %{},
+      traced_by: %{},
       missing: Layout.atom_count(spec.layout),
       stopping: nil,
       strategy_state: nil,
@@ -136,13 +137,18 @@ defmodule RingTracer.Job.Parent do
   end
 
   @impl GenServer
+  def handle_info({:atom_done, _child, atom, _pixels, _rays, _us}, state)
+      when is_map_key(state.results, atom) do
+    # A second copy (an atom handed out again after a failure whose first
+    # pixels were still on their way): counted, also while the job stops, so
+    # that every result message sent is either kept or counted here.
+    {:noreply, %{state | duplicates: state.duplicates + 1}}
+  end
+
   def handle_info({:atom_done, child, atom, pixels, _rays, _us}, %{stopping: nil} = state) do
     {_first, count} = Layout.span(state.spec.layout, atom)
 
     cond do
-      Map.has_key?(state.results, atom) ->
-        {:noreply, %{state | duplicates: state.duplicates + 1}}
-
       byte_size(pixels) != count * 12 ->
         fail(
           state,
@@ -153,6 +159,7 @@ defmodule RingTracer.Job.Parent do
         state = %{
           state
           | results: Map.put(state.results, atom, pixels),
+            traced_by: Map.put(state.traced_by, atom, child),
             missing: state.missing - 1
         }
 
@@ -324,6 +331,15 @@ defmodule RingTracer.Job.Parent do
     %{stats: stats, traffic: %{}, events: [], atoms: []}
   end
 
+  # One record per atom: the copy whose pixels the parent kept.
+  defp kept_atoms(reports, traced_by) do
+    reports
+    |> Enum.flat_map(& &1.atoms)
+    |> Enum.filter(&(Map.get(traced_by, &1.atom) == &1.child))
+    |> Enum.uniq_by(& &1.atom)
+    |> Enum.sort_by(& &1.atom)
+  end
+
   defp finish(state) do
     %{spec: spec, stopping: stopping} = state
     now = System.monotonic_time(:microsecond)
@@ -371,7 +387,7 @@ defmodule RingTracer.Job.Parent do
              elapsed_us: elapsed,
              teardown_us: now - state.completed,
              children: Enum.map(reports, & &1.stats),
-             atoms: reports |> Enum.flat_map(& &1.atoms) |> Enum.sort_by(& &1.atom),
+             atoms: kept_atoms(reports, state.traced_by),
              events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
              traffic: traffic,
              duplicates: state.duplicates,
