@@ -5,7 +5,8 @@ defmodule RingTracer.Ring.HelpOffer do
   A child that has traced every atom it holds sends an offer to its left
   sibling: who made it (`origin`, `pid`), how many atoms it has computed
   (`done`) and a sequence number (`seq`) so that a child can tell its current
-  offer from a stale one. Only the origin's own offers carry its pid: atoms are
+  offer from a stale one; `wrapped` is set once the offer has gone past the
+  end of the ring (from a child to one with a higher index, see "Parking"). Only the origin's own offers carry its pid: atoms are
   handed over directly to it, not along the ring. `via` is the last child
   that sent the offer on (see "Splicing" below).
 
@@ -16,7 +17,8 @@ defmodule RingTracer.Ring.HelpOffer do
     * an old offer of its own (superseded) -> `:drop`;
     * the share rule gives at least one atom -> `{:give, g}`: the token is
       consumed, and the child sends its last `g` queued atoms to the offerer;
-    * the child is idle itself, its own offer still out -> `:park`;
+    * the child is idle itself, its own offer still out, and the offer has
+      not wrapped -> `:park`;
     * otherwise -> `:pass` to the left sibling.
 
   More than one offer can be in the ring at once (one per idle child); they
@@ -37,6 +39,13 @@ defmodule RingTracer.Ring.HelpOffer do
   N² messages at the end of a job, which with 1024 children is more than the
   atoms themselves.
 
+  A wrapped offer is never parked. Two idle children could otherwise each
+  hold the other's offer and both wait, idle, to the end of the job (we saw
+  the fastest of 8 children stranded so for the last tenth of a render). A
+  cycle of parked offers needs an offer that went all the way round to a
+  child on its origin's right, so past the end of the ring; with wrapped
+  offers passed on, no cycle forms and some offer always walks on.
+
   ## Splicing (our addition to the paper)
 
   A finished child will never have atoms to give, so offers gain nothing by
@@ -50,14 +59,15 @@ defmodule RingTracer.Ring.HelpOffer do
   alias RingTracer.Ring.Share
 
   @enforce_keys [:origin, :pid, :done, :seq]
-  defstruct [:origin, :pid, :done, :seq, :via]
+  defstruct [:origin, :pid, :done, :seq, :via, wrapped: false]
 
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
           pid: pid(),
           done: non_neg_integer(),
           seq: non_neg_integer(),
-          via: pid() | nil
+          via: pid() | nil,
+          wrapped: boolean()
         }
 
   @typedoc "What a child knows of itself when an offer arrives."
@@ -83,19 +93,34 @@ defmodule RingTracer.Ring.HelpOffer do
       :pass
       iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, offer)
       :park
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, %{offer | wrapped: true})
+      :pass
   """
   @spec decide(view(), t()) :: decision()
   def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
     if seq == current, do: :returned, else: :drop
   end
 
-  def decide(view, %__MODULE__{done: offerer_done}) do
+  def decide(view, %__MODULE__{done: offerer_done, wrapped: wrapped}) do
     case Share.give(view.remaining, view.in_flight, offerer_done, view.done) do
-      0 when view.offer_seq != nil -> :park
+      0 when view.offer_seq != nil and not wrapped -> :park
       0 -> :pass
       g -> {:give, g}
     end
   end
+
+  @doc """
+  `offer` as sent on from child `from` to child `to`: marked `wrapped` if the
+  hop goes past the end of the ring (to a higher index).
+
+      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3}
+      iex> RingTracer.Ring.HelpOffer.hop(offer, 1, 0).wrapped
+      false
+      iex> RingTracer.Ring.HelpOffer.hop(offer, 0, 3).wrapped
+      true
+  """
+  @spec hop(t(), non_neg_integer(), non_neg_integer()) :: t()
+  def hop(%__MODULE__{} = offer, from, to), do: %{offer | wrapped: offer.wrapped or to > from}
 
   @doc """
   Splits the queued atoms into the ones kept and the `g` given away (the last

@@ -20,7 +20,10 @@ defmodule RingTracer.Strategy.Ring do
   @impl true
   def idle(child) do
     seq = seq(child) + 1
-    offer = %HelpOffer{origin: child.index, pid: self(), done: child.done, seq: seq, via: self()}
+
+    offer =
+      %HelpOffer{origin: child.index, pid: self(), done: child.done, seq: seq, via: self()}
+      |> HelpOffer.hop(child.index, child.left_index)
 
     child
     |> Child.send_counted(child.left, :offer, {:help_offer, offer})
@@ -95,7 +98,11 @@ defmodule RingTracer.Strategy.Ring do
              else: {child.left, child.left_index}
 
         child
-        |> Child.send_counted(to, :offer, {:help_offer, %{offer | via: self()}})
+        |> Child.send_counted(
+          to,
+          :offer,
+          {:help_offer, HelpOffer.hop(%{offer | via: self()}, child.index, to_index)}
+        )
         |> Child.event(:pass, to_index)
         |> Child.bump(:offers_passed)
 

@@ -95,6 +95,27 @@ defmodule RingTracer.Strategy.RingTest do
     assert finished.stats.offers_passed == 2
   end
 
+  test "two idle children never hold each other's offers: a wrapped offer is passed, not parked" do
+    # A ring of two: child 0's left is 1, child 1's left is 0. Both are idle
+    # with their own offer out.
+    c0 = child(index: 0, left_index: 1, status: :working, stats: Child.new_stats(0, node(), 1, 4))
+    c1 = child(index: 1, left_index: 0, status: :working)
+
+    c0 = Ring.idle(c0)
+    assert_received {:help_offer, %HelpOffer{origin: 0, wrapped: true} = from0}
+    c1 = Ring.idle(c1)
+    assert_received {:help_offer, %HelpOffer{origin: 1, wrapped: false} = from1}
+
+    # Child 1 passes child 0's offer (it went past the end of the ring)...
+    c1 = handle(c1, {:help_offer, from0})
+    refute Map.has_key?(c1.strategy_state, :parked)
+    assert_received {:help_offer, %HelpOffer{origin: 0, wrapped: true}}
+
+    # ...and child 0 parks child 1's: one of the two offers always walks on.
+    c0 = handle(c0, {:help_offer, from1})
+    assert [%HelpOffer{origin: 1}] = c0.strategy_state.parked
+  end
+
   test "a finished child passes offers on and asks the sender to skip it" do
     me = self()
     sender = spawn(fn -> receive(do: (m -> send(me, {:relayed, m}))) end)
