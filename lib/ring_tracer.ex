@@ -34,6 +34,8 @@ defmodule RingTracer do
       cut-off (default false)
     * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
       (see `RingTracer.Strategy`)
+    * `:hold_after` — ring only: hops an offer walks before it may wait at a
+      child about to run out (default 16; see `RingTracer.Ring.HelpOffer`)
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — other nodes to place children on, round robin with this
@@ -154,7 +156,7 @@ defmodule RingTracer do
 
   ## Options
 
-  Those of `render/2` that concern the job (`:children`, `:atoms`,
+  Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
   `:strategy`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
   microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
 
@@ -197,6 +199,7 @@ defmodule RingTracer do
       nodes: opts[:nodes],
       handover_delay: opts[:handover_delay],
       chaos: opts[:chaos],
+      hold_after: opts[:hold_after],
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],

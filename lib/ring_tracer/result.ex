@@ -11,7 +11,8 @@ defmodule RingTracer.Result do
       `ideal_us/3`);
     * `:children` — one map per child, in ring order: `:index`, `:node`,
       `:speed`, atoms `:own`, `:given`, `:received`, `:handovers` (hand-over
-      messages received), `:traced`, offers `:offers_sent`, `:offers_passed`,
+      messages received), `:traced`, offers `:offers_sent`, `:offers_passed`
+      (offer messages: offers passed on together count once),
       `:offers_consumed` (for `:steal`, requests sent, refused and granted),
       `:grandchild_restarts`, `:busy_us` (wall time its grandchild spent on
       atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,

@@ -79,13 +79,15 @@ defmodule RingTracer.StrategyTest do
   test "message counts in the stats equal the sends a tracer observes" do
     :erlang.trace(:new_processes, true, [:send])
 
+    # hold_after: 1, so that held offers leave in shared messages too.
     {:ok, result} =
       RingTracer.render(TestScenes.path(@scene),
-        children: 4,
+        children: 6,
         atoms: 6,
         width: 40,
         height: 30,
-        speeds: [1, 5, 1, 1]
+        speeds: [1, 5, 1, 1, 3, 1],
+        hold_after: 1
       )
 
     :erlang.trace(:new_processes, false, [:send])
@@ -107,6 +109,7 @@ defmodule RingTracer.StrategyTest do
 
   defp kind({:atom_done, _, _, _, _, _}), do: :result
   defp kind({:help_offer, _}), do: :offer
+  defp kind({:help_offers, _}), do: :offer
   defp kind({:handover, _, _}), do: :handover
   defp kind(_), do: :other
 

@@ -204,6 +204,7 @@ defmodule RingTracer.Job.Child do
       grandchild: nil,
       queue: queue,
       in_flight: [],
+      current_since: 0,
       attempts: %{},
       done: 0,
       status: :waiting,
@@ -300,6 +301,7 @@ defmodule RingTracer.Job.Child do
     state = %{
       state
       | in_flight: List.delete(state.in_flight, atom),
+        current_since: now(),
         attempts: Map.delete(state.attempts, atom),
         done: state.done + 1,
         stats: stats,
@@ -429,6 +431,7 @@ defmodule RingTracer.Job.Child do
   defp fill_pipe(%{queue: [atom | rest], in_flight: in_flight} = state)
        when length(in_flight) < @pipe_depth do
     send(state.grandchild, {:trace, atom})
+    state = if in_flight == [], do: %{state | current_since: now()}, else: state
     fill_pipe(%{state | queue: rest, in_flight: in_flight ++ [atom]})
   end
 
@@ -451,6 +454,28 @@ defmodule RingTracer.Job.Child do
 
   defp notify_idle(%{status: :working} = state), do: %{state | idle_notified: false}
   defp notify_idle(state), do: state
+
+  defp now, do: System.monotonic_time(:microsecond)
+
+  @doc """
+  The child's mean wall time per atom (slowdown included), `nil` before its
+  first atom.
+  """
+  @spec mean_atom_us(map()) :: non_neg_integer() | nil
+  def mean_atom_us(%{stats: %{traced: 0}}), do: nil
+  def mean_atom_us(%{stats: %{busy_us: busy, traced: n}}), do: div(busy, n)
+
+  @doc """
+  How long the atom its grandchild is tracing should still take, from the
+  child's mean time per atom (`nil` before its first atom).
+  """
+  @spec expected_remaining_us(map()) :: non_neg_integer() | nil
+  def expected_remaining_us(state) do
+    case mean_atom_us(state) do
+      nil -> nil
+      mean -> max(mean - (now() - state.current_since), 0)
+    end
+  end
 
   defp speed(%Spec{speeds: []}, _index), do: 1
   defp speed(%Spec{speeds: speeds}, index), do: Enum.at(speeds, rem(index, length(speeds)))

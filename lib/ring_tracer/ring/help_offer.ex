@@ -4,9 +4,12 @@ defmodule RingTracer.Ring.HelpOffer do
 
   A child that has traced every atom it holds sends an offer to its left
   sibling: who made it (`origin`, `pid`), how many atoms it has computed
-  (`done`) and a sequence number (`seq`) so that a child can tell its current
-  offer from a stale one; `wrapped` is set once the offer has gone past the
-  end of the ring (from a child to one with a higher index, see "Parking"). Only the origin's own offers carry its pid: atoms are
+  (`done`), its mean wall time per atom (`atom_us`, `nil` before its first)
+  and a sequence number (`seq`) so that a child can tell its current offer
+  from a stale one; `wrapped` is set once the offer has gone past the end of
+  the ring (from a child to one with a higher index, see "Parking"), `hops`
+  counts the siblings it has been sent to and `held` whether it has waited
+  once (see "Holding"). Only the origin's own offers carry its pid: atoms are
   handed over directly to it, not along the ring. `via` is the last child
   that sent the offer on (see "Splicing" below).
 
@@ -19,6 +22,9 @@ defmodule RingTracer.Ring.HelpOffer do
       consumed, and the child sends its last `g` queued atoms to the offerer;
     * the child is idle itself, its own offer still out, and the offer has
       not wrapped -> `:park`;
+    * the child is tracing its last atom, which should end within half of
+      one of the offerer's atoms, and the offer has walked `hold_after` hops
+      without finding work -> `:hold`;
     * otherwise -> `:pass` to the left sibling.
 
   More than one offer can be in the ring at once (one per idle child); they
@@ -46,6 +52,21 @@ defmodule RingTracer.Ring.HelpOffer do
   child on its origin's right, so past the end of the ring; with wrapped
   offers passed on, no cycle forms and some offer always walks on.
 
+  ## Holding (our addition to the paper)
+
+  Near the end of a large job most children are tracing their last atom and
+  have nothing to give; an offer walks past them one message at a time, and
+  every idle child's offer makes that walk. So an offer that has walked
+  `hold_after` hops (default 16) without finding work waits, once, at a
+  child tracing its last atom, if that atom should end within half of one of
+  the offerer's own atoms (the child's mean time per atom minus what the atom
+  has run, against the offerer's mean time per atom, `atom_us`). When the child
+  runs out it sends its own offer, and the offers it held travel with it, in
+  one message (`{:help_offers, [...]}`): several offers walk for the price
+  of one. A child never waits on a held offer, so holding makes no cycles.
+  In a ring of a few children an offer goes home long before it has walked
+  16 hops, so there it does not wait.
+
   ## Splicing (our addition to the paper)
 
   A finished child will never have atoms to give, so offers gain nothing by
@@ -59,7 +80,9 @@ defmodule RingTracer.Ring.HelpOffer do
   alias RingTracer.Ring.Share
 
   @enforce_keys [:origin, :pid, :done, :seq]
-  defstruct [:origin, :pid, :done, :seq, :via, wrapped: false]
+  defstruct [:origin, :pid, :done, :seq, :via, :atom_us, wrapped: false, hops: 0, held: false]
+
+  @hold_after 16
 
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
@@ -67,19 +90,28 @@ defmodule RingTracer.Ring.HelpOffer do
           done: non_neg_integer(),
           seq: non_neg_integer(),
           via: pid() | nil,
-          wrapped: boolean()
+          atom_us: non_neg_integer() | nil,
+          wrapped: boolean(),
+          hops: non_neg_integer(),
+          held: boolean()
         }
 
-  @typedoc "What a child knows of itself when an offer arrives."
+  @typedoc """
+  What a child knows of itself when an offer arrives; `remaining_us` (how
+  long its atom in flight should still take) and `hold_after` only matter
+  for holding.
+  """
   @type view :: %{
-          index: non_neg_integer(),
-          remaining: non_neg_integer(),
-          in_flight: non_neg_integer(),
-          done: non_neg_integer(),
-          offer_seq: non_neg_integer() | nil
+          required(:index) => non_neg_integer(),
+          required(:remaining) => non_neg_integer(),
+          required(:in_flight) => non_neg_integer(),
+          required(:done) => non_neg_integer(),
+          required(:offer_seq) => non_neg_integer() | nil,
+          optional(:remaining_us) => non_neg_integer() | nil,
+          optional(:hold_after) => pos_integer()
         }
 
-  @type decision :: :returned | :drop | :park | :pass | {:give, pos_integer()}
+  @type decision :: :returned | :drop | :park | :hold | :pass | {:give, pos_integer()}
 
   @doc """
   What the child described by `view` does with `offer`.
@@ -95,32 +127,49 @@ defmodule RingTracer.Ring.HelpOffer do
       :park
       iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, %{offer | wrapped: true})
       :pass
+      iex> far = %{offer | hops: 16, atom_us: 4_000}
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil, remaining_us: 1_500}, far)
+      :hold
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil, remaining_us: 9_000}, far)
+      :pass
   """
   @spec decide(view(), t()) :: decision()
   def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
     if seq == current, do: :returned, else: :drop
   end
 
-  def decide(view, %__MODULE__{done: offerer_done, wrapped: wrapped}) do
+  def decide(view, %__MODULE__{done: offerer_done, wrapped: wrapped} = offer) do
     case Share.give(view.remaining, view.in_flight, offerer_done, view.done) do
       0 when view.offer_seq != nil and not wrapped -> :park
-      0 -> :pass
+      0 -> if holds?(view, offer), do: :hold, else: :pass
       g -> {:give, g}
     end
   end
 
+  # Tracing its last atom, which ends within half of one of the offerer's
+  # atoms, and the offer has walked far and never waited.
+  defp holds?(view, %__MODULE__{held: held, hops: hops, atom_us: atom_us}) do
+    remaining_us = Map.get(view, :remaining_us)
+
+    view.offer_seq == nil and view.remaining == 0 and view.in_flight > 0 and not held and
+      hops >= Map.get(view, :hold_after, @hold_after) and is_integer(remaining_us) and
+      is_integer(atom_us) and 2 * remaining_us <= atom_us
+  end
+
   @doc """
-  `offer` as sent on from child `from` to child `to`: marked `wrapped` if the
-  hop goes past the end of the ring (to a higher index).
+  `offer` as sent on from child `from` to child `to`: one hop more, and
+  marked `wrapped` if the hop goes past the end of the ring (to a higher
+  index).
 
       iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3}
-      iex> RingTracer.Ring.HelpOffer.hop(offer, 1, 0).wrapped
-      false
+      iex> RingTracer.Ring.HelpOffer.hop(offer, 1, 0)
+      %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3, hops: 1, wrapped: false}
       iex> RingTracer.Ring.HelpOffer.hop(offer, 0, 3).wrapped
       true
   """
   @spec hop(t(), non_neg_integer(), non_neg_integer()) :: t()
-  def hop(%__MODULE__{} = offer, from, to), do: %{offer | wrapped: offer.wrapped or to > from}
+  def hop(%__MODULE__{} = offer, from, to),
+    do: %{offer | wrapped: offer.wrapped or to > from, hops: offer.hops + 1}
 
   @doc """
   Splits the queued atoms into the ones kept and the `g` given away (the last

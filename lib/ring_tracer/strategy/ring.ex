@@ -4,9 +4,11 @@ defmodule RingTracer.Strategy.Ring do
   sibling with atoms to spare consumes it and hands a speed-proportional
   share directly to the offerer, or passes it on; a child whose own offer
   comes back is finished. The rules are `RingTracer.Ring.HelpOffer` and
-  `RingTracer.Ring.Share`; so are our two additions, parking (an idle child
-  keeps the offers that reach it until its own offer is answered) and
-  splicing (offers stop visiting finished children).
+  `RingTracer.Ring.Share`; so are our additions: parking (an idle child
+  keeps the offers that reach it until its own offer is answered), holding
+  (in a large ring, an offer that walked far waits for a child about to run
+  out and leaves with that child's own offer, in one message) and splicing
+  (offers stop visiting finished children).
   """
   @behaviour RingTracer.Strategy
 
@@ -22,25 +24,44 @@ defmodule RingTracer.Strategy.Ring do
     seq = seq(child) + 1
 
     offer =
-      %HelpOffer{origin: child.index, pid: self(), done: child.done, seq: seq, via: self()}
+      %HelpOffer{
+        origin: child.index,
+        pid: self(),
+        done: child.done,
+        seq: seq,
+        via: self(),
+        atom_us: Child.mean_atom_us(child)
+      }
       |> HelpOffer.hop(child.index, child.left_index)
 
+    # Offers held while we traced our last atom leave with ours, in one message.
+    {held, child} = take_offers(child, :held)
+    held = Enum.map(held, &HelpOffer.hop(%{&1 | via: self()}, child.index, child.left_index))
+    msg = if held == [], do: {:help_offer, offer}, else: {:help_offers, [offer | held]}
+
     child
-    |> Child.send_counted(child.left, :offer, {:help_offer, offer})
+    |> Child.send_counted(child.left, :offer, msg)
     |> Child.event(:offer, child.left_index)
+    |> then(&Enum.reduce(held, &1, fn _, c -> Child.event(c, :pass, child.left_index) end))
     |> Child.bump(:offers_sent)
     |> put_strategy(seq: seq, current: seq)
     |> Map.put(:status, :offered)
   end
 
   @impl true
-  def handle_message({:help_offer, %HelpOffer{} = offer}, child), do: {:ok, offer(child, offer)}
+  def handle_message({:help_offer, %HelpOffer{} = offer}, child),
+    do: {:ok, child |> offer(offer) |> flush()}
+
+  def handle_message({:help_offers, offers}, child) when is_list(offers),
+    do: {:ok, offers |> Enum.reduce(child, &offer(&2, &1)) |> flush()}
 
   def handle_message({:handover, from, atoms}, child) when is_list(atoms) do
-    # Atoms again: the offers parked while we were idle get the share rule.
-    {parked, child} = take_parked(child)
+    # Atoms again: the offers parked while we were idle (or held while we
+    # traced our last atom) get the share rule.
+    {parked, child} = take_offers(child, :parked)
+    {held, child} = take_offers(child, :held)
     child = Child.receive_atoms(child, atoms)
-    {:ok, Enum.reduce(parked, child, &offer(&2, &1, from))}
+    {:ok, (parked ++ held) |> Enum.reduce(child, &offer(&2, &1, from)) |> flush()}
   end
 
   def handle_message({:ring_skip, gone, left, left_index}, child) do
@@ -61,12 +82,14 @@ defmodule RingTracer.Strategy.Ring do
       remaining: remaining,
       in_flight: in_flight,
       done: child.done,
-      offer_seq: if(child.status == :offered, do: child.strategy_state[:current])
+      offer_seq: if(child.status == :offered, do: child.strategy_state[:current]),
+      remaining_us: if(in_flight > 0, do: Child.expected_remaining_us(child)),
+      hold_after: child.spec.hold_after
     }
 
     case HelpOffer.decide(view, offer) do
       :returned ->
-        {parked, child} = take_parked(child)
+        {parked, child} = take_offers(child, :parked)
 
         child = child |> Child.event(:returned, child.index) |> Map.put(:status, :finished)
 
@@ -83,10 +106,10 @@ defmodule RingTracer.Strategy.Ring do
         child
 
       :park ->
-        update_in(
-          child.strategy_state,
-          &Map.update(&1, :parked, [offer], fn p -> p ++ [offer] end)
-        )
+        keep(child, :parked, offer)
+
+      :hold ->
+        keep(child, :held, %{offer | held: true})
 
       :pass ->
         child = if child.status == :finished, do: splice(child, offer), else: child
@@ -98,13 +121,8 @@ defmodule RingTracer.Strategy.Ring do
              else: {child.left, child.left_index}
 
         child
-        |> Child.send_counted(
-          to,
-          :offer,
-          {:help_offer, HelpOffer.hop(%{offer | via: self()}, child.index, to_index)}
-        )
+        |> keep(:outbox, {to, HelpOffer.hop(%{offer | via: self()}, child.index, to_index)})
         |> Child.event(:pass, to_index)
-        |> Child.bump(:offers_passed)
 
       {:give, g} ->
         {atoms, child} = Child.take_last(child, g)
@@ -123,10 +141,34 @@ defmodule RingTracer.Strategy.Ring do
 
   defp splice(child, _offer), do: child
 
-  defp take_parked(child) do
-    {parked, rest} = Map.pop(child.strategy_state, :parked, [])
-    live = Enum.reject(parked, &(&1.origin in child.dead))
-    {live, %{child | strategy_state: rest}}
+  defp keep(child, key, item),
+    do: update_in(child.strategy_state, &Map.update(&1, key, [item], fn l -> l ++ [item] end))
+
+  defp take(child, key) do
+    {list, rest} = Map.pop(child.strategy_state, key, [])
+    {list, %{child | strategy_state: rest}}
+  end
+
+  # Parked or held offers, less those whose origin has died since.
+  defp take_offers(child, key) do
+    {offers, child} = take(child, key)
+    {Enum.reject(offers, &(&1.origin in child.dead)), child}
+  end
+
+  # Offers passed on while handling one message leave together: one message
+  # per sibling they go to.
+  defp flush(child) do
+    {outbox, child} = take(child, :outbox)
+
+    outbox
+    |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
+    |> Enum.reduce(child, fn {to, offers}, c ->
+      msg = if match?([_], offers), do: {:help_offer, hd(offers)}, else: {:help_offers, offers}
+
+      c
+      |> Child.send_counted(to, :offer, msg)
+      |> Child.bump(:offers_passed)
+    end)
   end
 
   defp seq(child), do: child.strategy_state[:seq] || 0

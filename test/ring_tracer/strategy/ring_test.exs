@@ -30,6 +30,7 @@ defmodule RingTracer.Strategy.RingTest do
       grandchild: me,
       queue: [],
       in_flight: [],
+      current_since: 0,
       done: 4,
       status: :working,
       dead: [],
@@ -114,6 +115,46 @@ defmodule RingTracer.Strategy.RingTest do
     # ...and child 0 parks child 1's: one of the two offers always walks on.
     c0 = handle(c0, {:help_offer, from1})
     assert [%HelpOffer{origin: 1}] = c0.strategy_state.parked
+  end
+
+  test "an offer that walked far waits at a child about to run out, and leaves with its offer" do
+    # Tracing its last atom (mean 10 ms per atom, just started); the offerer
+    # needs 30 ms per atom, and its offer has walked 16 hops.
+    busy =
+      child(
+        in_flight: [5],
+        current_since: System.monotonic_time(:microsecond),
+        stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
+      )
+
+    far = %{offer(2) | hops: 16, atom_us: 30_000}
+    held = handle(busy, {:help_offer, far})
+    refute_received {:help_offer, _}
+    assert [%HelpOffer{origin: 2, held: true}] = held.strategy_state.held
+
+    # Out of atoms: its own offer and the held one go left in one message.
+    out = Ring.idle(%{held | in_flight: []})
+    assert_received {:help_offers, [%HelpOffer{origin: 1}, %HelpOffer{origin: 2, hops: 17}]}
+    refute_received {:help_offer, _}
+    assert out.traffic.offer == {1, elem(out.traffic.offer, 1)}
+    refute Map.has_key?(out.strategy_state, :held)
+  end
+
+  test "an offer does not wait twice, nor for a child far from done, nor before it walked far" do
+    busy =
+      child(
+        in_flight: [5],
+        current_since: System.monotonic_time(:microsecond),
+        stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
+      )
+
+    far = %{offer(2) | hops: 16, atom_us: 30_000}
+
+    for o <- [%{far | held: true}, %{far | atom_us: 15_000}, %{far | hops: 15}] do
+      passed = handle(busy, {:help_offer, o})
+      refute Map.has_key?(passed.strategy_state, :held)
+      assert_received {:help_offer, %HelpOffer{origin: 2}}
+    end
   end
 
   test "a finished child passes offers on and asks the sender to skip it" do
