@@ -115,7 +115,8 @@ defmodule RingTracer.StrategyTest do
 
   test "idle children park offers: the end of a 256-child job costs far fewer than N² offer messages" do
     # Without parking, every child's last offer travels the whole ring
-    # (about 12,000 offer messages here); with it, about 1,100.
+    # (about 12,000 offer messages here); with parking and holding,
+    # 1,900-2,300.
     {:ok, result} = RingTracer.simulate(children: 256, atoms: 8, costs: 5000, speeds: [1, 2, 3])
     assert length(result.atoms) == 2048
     assert result.messages.offer.count < div(256 * 256, 16)
