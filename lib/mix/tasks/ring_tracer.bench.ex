@@ -18,6 +18,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
   dirty NIF calls, not load balancing. Images are 1024x1024 by default: at
   512x512 the real jobs last 20 to 170 ms, and one atom or one scheduling
   hiccup is then several percent of the makespan even for the `floor`.
+  Under the table it checks issue 4's targets against it, each "ok" or
+  "MISSED".
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
 
@@ -234,6 +236,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
       ~w(scenario strategy makespan_ms ideal_ms makespan/ideal idle% msgs/atom bytes/atom),
       rows ++ sim_rows
     )
+
+    print_targets(Enum.map(real, &elem(&1, 0)), rows ++ sim_rows)
   end
 
   def run(["nodes" | argv]) do
@@ -406,6 +410,49 @@ defmodule Mix.Tasks.RingTracer.Bench do
   defp median(list), do: Enum.at(Enum.sort(list), div(length(list), 2))
   defp secs(us), do: fmt(us / 1_000_000)
   defp fmt(x), do: :erlang.float_to_binary(x / 1, decimals: 3)
+
+  # Issue 4's targets, read back from the table: each says "ok" or "MISSED".
+  defp print_targets(real, rows) do
+    value = fn scenario, strategy, column ->
+      case Enum.find(rows, &match?([^scenario, ^strategy | _], &1)) do
+        nil -> nil
+        row -> row |> Enum.at(column) |> Float.parse() |> elem(0)
+      end
+    end
+
+    ratio = &value.(&1, &2, 4)
+    msgs = &value.(&1, &2, 6)
+    verdict = fn ok -> if ok, do: "ok", else: "MISSED" end
+
+    sims =
+      rows |> Enum.map(&hd/1) |> Enum.filter(&String.starts_with?(&1, "simulated")) |> Enum.uniq()
+
+    lines = [
+      "ring <= 1.10 x ideal:" <>
+        Enum.map_join(real, ";", fn s ->
+          " #{s} #{fmt(ratio.(s, "ring"))} #{verdict.(ratio.(s, "ring") <= 1.10)}"
+        end),
+      "ring <= 1.15 x ideal at N=1024:" <>
+        if("simulated N=1024" in sims,
+          do:
+            " #{fmt(ratio.("simulated N=1024", "ring"))} " <>
+              verdict.(ratio.("simulated N=1024", "ring") <= 1.15),
+          else: " not run (--quick)"
+        ),
+      "static worse than ring (speeds or strips differ):" <>
+        Enum.map_join(real -- ["4 equal"], ";", fn s ->
+          " #{s} #{fmt(ratio.(s, "static"))} vs #{fmt(ratio.(s, "ring"))} " <>
+            verdict.(ratio.(s, "static") > ratio.(s, "ring"))
+        end),
+      "ring fewer messages per atom than master:" <>
+        Enum.map_join(real ++ sims, ";", fn s ->
+          " #{s} #{fmt(msgs.(s, "ring"))} vs #{fmt(msgs.(s, "master"))} " <>
+            verdict.(msgs.(s, "ring") < msgs.(s, "master"))
+        end)
+    ]
+
+    Mix.shell().info("\ntargets (issue 4):\n" <> Enum.map_join(lines, "\n", &("  " <> &1)))
+  end
 
   defp print_table(header, rows) do
     rows = Enum.map(rows, fn r -> Enum.map(r, &(&1 || "-")) end)
