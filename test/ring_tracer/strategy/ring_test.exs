@@ -117,18 +117,20 @@ defmodule RingTracer.Strategy.RingTest do
     assert [%HelpOffer{origin: 1}] = c0.strategy_state.parked
   end
 
-  test "an offer that walked far waits at a child about to run out, and leaves with its offer" do
-    # Tracing its last atom (mean 10 ms per atom, just started); the offerer
-    # needs 30 ms per atom, and its offer has walked 16 hops.
-    busy =
-      child(
-        in_flight: [5],
-        current_since: System.monotonic_time(:microsecond),
-        stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
-      )
+  # Tracing its last atom (mean 10 ms per atom, just started).
+  defp on_last_atom do
+    child(
+      in_flight: [5],
+      current_since: System.monotonic_time(:microsecond),
+      stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
+    )
+  end
 
-    far = %{offer(2) | hops: 16, atom_us: 30_000}
-    held = handle(busy, {:help_offer, far})
+  # An offer from a sibling that needs 30 ms per atom, 16 hops from home.
+  defp far_offer, do: %{offer(2) | hops: 16, atom_us: 30_000}
+
+  test "an offer that walked far waits at a child about to run out, and leaves with its offer" do
+    held = handle(on_last_atom(), {:help_offer, far_offer()})
     refute_received {:help_offer, _}
     assert [%HelpOffer{origin: 2, held: true}] = held.strategy_state.held
 
@@ -136,22 +138,15 @@ defmodule RingTracer.Strategy.RingTest do
     out = Ring.idle(%{held | in_flight: []})
     assert_received {:help_offers, [%HelpOffer{origin: 1}, %HelpOffer{origin: 2, hops: 17}]}
     refute_received {:help_offer, _}
-    assert out.traffic.offer == {1, elem(out.traffic.offer, 1)}
+    assert {1, _bytes} = out.traffic.offer
     refute Map.has_key?(out.strategy_state, :held)
   end
 
   test "an offer does not wait twice, nor for a child far from done, nor before it walked far" do
-    busy =
-      child(
-        in_flight: [5],
-        current_since: System.monotonic_time(:microsecond),
-        stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
-      )
-
-    far = %{offer(2) | hops: 16, atom_us: 30_000}
+    far = far_offer()
 
     for o <- [%{far | held: true}, %{far | atom_us: 15_000}, %{far | hops: 15}] do
-      passed = handle(busy, {:help_offer, o})
+      passed = handle(on_last_atom(), {:help_offer, o})
       refute Map.has_key?(passed.strategy_state, :held)
       assert_received {:help_offer, %HelpOffer{origin: 2}}
     end
