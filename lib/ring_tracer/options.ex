@@ -20,7 +20,7 @@ defmodule RingTracer.Options do
     timeout: {:timeout, :infinity},
     handover_delay: {:non_neg_integer, 0},
     chaos: {:non_neg_integer, 0},
-    hold_after: {:pos_integer, 16},
+    hold_after: {:pos_integer, RingTracer.Ring.HelpOffer.default_hold_after()},
     strategy: {:strategy, :ring},
     speeds: {:speeds, []},
     progress: {:pid, nil},

@@ -18,7 +18,7 @@ defmodule RingTracer.Job.Spec do
     nodes: [],
     handover_delay: 0,
     chaos: 0,
-    hold_after: 16,
+    hold_after: RingTracer.Ring.HelpOffer.default_hold_after(),
     strategy: RingTracer.Strategy.Ring,
     kernel: {RingTracer.Kernel.Native, []},
     speeds: [],

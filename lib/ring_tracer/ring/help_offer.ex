@@ -91,6 +91,10 @@ defmodule RingTracer.Ring.HelpOffer do
 
   @hold_after 16
 
+  @doc "Hops an offer walks before it may wait at a child (the `:hold_after` default)."
+  @spec default_hold_after() :: pos_integer()
+  def default_hold_after, do: @hold_after
+
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
           pid: pid(),

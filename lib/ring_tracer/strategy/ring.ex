@@ -37,10 +37,9 @@ defmodule RingTracer.Strategy.Ring do
     # Offers held while we traced our last atom leave with ours, in one message.
     {held, child} = take_offers(child, :held)
     held = Enum.map(held, &HelpOffer.hop(%{&1 | via: self()}, child.index, child.left_index))
-    msg = if held == [], do: {:help_offer, offer}, else: {:help_offers, [offer | held]}
 
     child
-    |> Child.send_counted(child.left, :offer, msg)
+    |> Child.send_counted(child.left, :offer, offers_message([offer | held]))
     |> Child.event(:offer, child.left_index)
     |> then(&Enum.reduce(held, &1, fn _, c -> Child.event(c, :pass, child.left_index) end))
     |> Child.bump(:offers_sent)
@@ -144,6 +143,10 @@ defmodule RingTracer.Strategy.Ring do
   defp keep(child, key, item),
     do: update_in(child.strategy_state, &Map.update(&1, key, [item], fn l -> l ++ [item] end))
 
+  # One offer travels alone, several in one message.
+  defp offers_message([offer]), do: {:help_offer, offer}
+  defp offers_message(offers), do: {:help_offers, offers}
+
   defp take(child, key) do
     {list, rest} = Map.pop(child.strategy_state, key, [])
     {list, %{child | strategy_state: rest}}
@@ -163,10 +166,8 @@ defmodule RingTracer.Strategy.Ring do
     outbox
     |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
     |> Enum.reduce(child, fn {to, offers}, c ->
-      msg = if match?([_], offers), do: {:help_offer, hd(offers)}, else: {:help_offers, offers}
-
       c
-      |> Child.send_counted(to, :offer, msg)
+      |> Child.send_counted(to, :offer, offers_message(offers))
       |> Child.bump(:offers_passed)
     end)
   end
