@@ -68,6 +68,8 @@ defmodule RingTracerTest do
 
     for c <- stats, do: assert(c.traced == c.own - c.given + c.received)
     assert result.rays.eye == 64 * 48
+    # Work units: one per ray, plus the boxes and primitives the rays were tested against.
+    assert result.rays.work > result.rays.eye + result.rays.shadow
   end
 
   test "delayed hand-overs still give the complete, identical image" do

@@ -27,12 +27,19 @@ defmodule RingTracer.Kernel do
 
   @doc """
   Traces `count` pixels from `first`, atom number `atom`: linear RGB as
-  native-endian f32 triples, ray counters, and the microseconds of work.
+  native-endian f32 triples, the ray counters (`no_rays/0`'s keys), and the
+  microseconds it took.
+
+  The counters' `:work` is the atom's cost in the kernel's own units, the
+  same on every machine (for the native kernel: BVH nodes visited plus
+  primitives tested plus rays). The ring's share rule measures a child's
+  speed in work per microsecond: counting atoms would mix up speed with
+  atom cost.
   """
   @callback trace(context(), non_neg_integer(), non_neg_integer(), non_neg_integer()) ::
               {:ok, binary(), map(), non_neg_integer()} | {:error, String.t()}
 
-  @doc "Zeroed ray counters."
+  @doc "Zeroed ray counters (and work units)."
   @spec no_rays() :: map()
-  def no_rays, do: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0}
+  def no_rays, do: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0, work: 0}
 end

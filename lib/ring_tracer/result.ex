@@ -26,7 +26,8 @@ defmodule RingTracer.Result do
       sender, by kind (`:result`, `:handover`, `:offer`, `:control`):
       `%{count: n, bytes: b}` (bytes in the external term format);
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
-      `:reflected`, `:refracted`, `:shadow`;
+      `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
+      units (see `RingTracer.Kernel`);
     * `:strategy` — the strategy's name;
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels

@@ -200,7 +200,7 @@ defmodule Mix.Tasks.RingTracer.Render do
 
     Mix.shell().info(
       "rays: eye #{r.eye} (hit #{r.eye_hits}), reflected #{r.reflected}, " <>
-        "refracted #{r.refracted}, shadow #{r.shadow}"
+        "refracted #{r.refracted}, shadow #{r.shadow}; #{r.work} work units"
     )
 
     for c <- result.children do

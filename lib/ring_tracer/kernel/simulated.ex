@@ -44,7 +44,9 @@ defmodule RingTracer.Kernel.Simulated do
     t0 = System.monotonic_time(:microsecond)
     Process.sleep(div(us + 500, 1000))
     elapsed = System.monotonic_time(:microsecond) - t0
-    {:ok, :binary.copy(<<0::96>>, count), RingTracer.Kernel.no_rays(), elapsed}
+    # Its work units are the model's microseconds: what the atom costs on a
+    # machine of speed 1.
+    {:ok, :binary.copy(<<0::96>>, count), %{RingTracer.Kernel.no_rays() | work: us}, elapsed}
   end
 
   @doc "The cost in microseconds of `atom` under `costs`."

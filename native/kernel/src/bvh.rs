@@ -208,6 +208,9 @@ pub struct Scratch {
     stack: Vec<(u32, u32, f32)>,
     /// Last occluder found per shadow-cache slot (`u32::MAX` = none).
     pub(crate) shadow_cache: Vec<u32>,
+    /// Work done with this scratch so far: BVH nodes visited plus primitives handed to the
+    /// leaf test (see [`crate::RayStats::work`]).
+    pub(crate) work: u64,
 }
 
 impl Scratch {
@@ -216,6 +219,7 @@ impl Scratch {
         Scratch {
             stack: Vec::new(),
             shadow_cache: Vec::new(),
+            work: 0,
         }
     }
 }
@@ -367,12 +371,14 @@ impl Bvh {
         }
         let pre = RayPre::new(ray);
         let stack = &mut scratch.stack;
+        let work = &mut scratch.work;
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {
             if let Some(node) = self.nodes.get(cur as usize) {
                 #[cfg(test)]
                 probe::NODES.with(|c| c.set(c.get() + 1));
+                *work += 1;
                 let (tn, mut mask) = node.hit(&pre, tmax);
                 let tn = tn.to_array();
                 if mask & mask.wrapping_sub(1) == 0 {
@@ -385,6 +391,7 @@ impl Bvh {
                             continue;
                         }
                         if count != EMPTY {
+                            *work += count as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
                                 return tmax;
@@ -412,6 +419,7 @@ impl Bvh {
                             ic[j & 3] = node.child[i];
                             ni += 1;
                         } else if count != EMPTY && tn[i] <= tmax {
+                            *work += count as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
                                 return tmax;

@@ -197,6 +197,7 @@ pub fn trace_span(
     if scene.display_referred() {
         out.iter_mut().for_each(|v| *v = crate::film::from_srgb(*v));
     }
+    stats.work = scratch.work + stats.total();
     Ok((out, stats))
 }
 

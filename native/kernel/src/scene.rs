@@ -213,6 +213,7 @@ impl Scene {
                 }
                 tm
             });
+        scratch.work += self.planes.len() as u64;
         for (k, pl) in self.planes.iter().enumerate() {
             let dn = pl.normal.dot(ray.dir);
             if dn != 0.0 {
@@ -253,6 +254,7 @@ impl Scene {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         if let Some(&c) = scratch.shadow_cache.get(slot) {
+            scratch.work += 1;
             if let Some(s) = shapes.get(c as usize) {
                 if geom.hit(s, ray, 0.0, tmax).is_some() {
                     return true;
@@ -288,6 +290,7 @@ impl Scene {
             }
             return true;
         }
+        scratch.work += self.planes.len() as u64;
         self.planes.iter().any(|pl| {
             let dn = pl.normal.dot(ray.dir);
             dn != 0.0 && {

@@ -1,8 +1,9 @@
-//! Ray statistics in the SPD's categories.
+//! Ray statistics in the SPD's categories, and the work they took.
 
 use std::ops::{Add, AddAssign};
 
-/// Counts of rays traced, in the categories of the SPD ray-count table.
+/// Counts of rays traced, in the categories of the SPD ray-count table, and the work units
+/// spent on them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayStats {
     /// Eye (camera) rays shot.
@@ -15,6 +16,10 @@ pub struct RayStats {
     pub refracted: u64,
     /// Shadow rays actually cast towards lights.
     pub shadow: u64,
+    /// Work units: BVH nodes visited plus primitives tested, plus one per ray. Unlike a time,
+    /// it does not depend on the machine, and it follows the time an atom takes closely,
+    /// which ray counts alone do not (a ray that misses everything is cheap).
+    pub work: u64,
 }
 
 impl RayStats {
@@ -27,6 +32,7 @@ impl RayStats {
             reflected: self.reflected + other.reflected,
             refracted: self.refracted + other.refracted,
             shadow: self.shadow + other.shadow,
+            work: self.work + other.work,
         }
     }
 

@@ -66,8 +66,37 @@ fn golden_8x6() {
             eye_hits: 5,
             reflected: 0,
             refracted: 0,
-            shadow: 5
+            shadow: 5,
+            work: stats.work
         }
+    );
+    // every ray is one unit, and the square and the sphere took box and primitive tests
+    assert!(stats.work > stats.total());
+}
+
+/// A span's work: one unit per ray plus every BVH node visited and primitive tested, so the
+/// same pixels cost more work in front of more geometry, and nothing but the rays in front of
+/// none.
+#[test]
+fn work_follows_the_geometry_rays_pass_through() {
+    let header = GOLDEN.split("f 1 0.5").next().unwrap_or_default();
+    let empty = nff(header);
+    let settings = Settings::for_scene(&empty);
+    let (_, bare) = trace_span(&empty, &settings, 0, 48).unwrap();
+    assert_eq!(bare.work, bare.total());
+    let crowded = (0..40).fold(GOLDEN.to_string(), |src, i| {
+        src + &format!(
+            "s {} {} -1 0.1\n",
+            (i % 8) as f32 * 0.6 - 2.1,
+            (i / 8) as f32 * 0.6 - 1.2
+        )
+    });
+    let (_, few) = trace_span(&nff(GOLDEN), &settings, 0, 48).unwrap();
+    let (_, many) = trace_span(&nff(&crowded), &settings, 0, 48).unwrap();
+    assert_eq!(few.eye, many.eye);
+    assert!(
+        few.work > bare.work && many.work > few.work,
+        "{bare:?} {few:?} {many:?}"
     );
 }
 
@@ -105,10 +134,13 @@ fn check_splits(settings: &Settings) {
     let (whole, whole_stats) = render_image(&scene, settings, 3).unwrap();
     let (one, one_stats) = render_image(&scene, settings, 1).unwrap();
     assert_eq!(bits(&whole), bits(&one));
+    // the same chunks whatever the thread count: the same work too
     assert_eq!(whole_stats, one_stats);
     let (span, span_stats) = trace_span(&scene, settings, 0, n).unwrap();
     assert_eq!(bits(&whole), bits(&span));
-    assert_eq!(whole_stats, span_stats);
+    // rays do not depend on the split; work does a little (the shadow cache starts empty in
+    // every span)
+    assert_eq!(rays(whole_stats), rays(span_stats));
     // arbitrary uneven splits, including single pixels and spans crossing rows
     for cuts in [
         vec![1u64, 2, 30, 31, 100, 250],
@@ -125,10 +157,15 @@ fn check_splits(settings: &Settings) {
             start = c;
         }
         assert_eq!(bits(&whole), bits(&pixels), "cuts {cuts:?}");
-        assert_eq!(whole_stats, stats, "cuts {cuts:?}");
+        assert_eq!(rays(whole_stats), rays(stats), "cuts {cuts:?}");
     }
     assert!(whole_stats.eye_hits > 0 && whole_stats.shadow > 0);
     assert!(whole_stats.reflected > 0 && whole_stats.refracted > 0);
+}
+
+/// The ray counts alone.
+fn rays(s: RayStats) -> RayStats {
+    RayStats { work: 0, ..s }
 }
 
 fn bits(v: &[f32]) -> Vec<u32> {

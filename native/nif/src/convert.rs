@@ -41,6 +41,7 @@ pub struct RayStatsTerm {
     pub reflected: u64,
     pub refracted: u64,
     pub shadow: u64,
+    pub work: u64,
 }
 
 impl From<RayStats> for RayStatsTerm {
@@ -51,6 +52,7 @@ impl From<RayStats> for RayStatsTerm {
             reflected: s.reflected,
             refracted: s.refracted,
             shadow: s.shadow,
+            work: s.work,
         }
     }
 }
