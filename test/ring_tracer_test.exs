@@ -70,6 +70,7 @@ defmodule RingTracerTest do
     assert result.rays.eye == 64 * 48
     # Work units: one per ray, plus the boxes and primitives the rays were tested against.
     assert result.rays.work > result.rays.eye + result.rays.shadow
+    assert Enum.sum(Enum.map(stats, & &1.work)) == result.rays.work
   end
 
   test "delayed hand-overs still give the complete, identical image" do

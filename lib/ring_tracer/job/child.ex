@@ -177,6 +177,7 @@ defmodule RingTracer.Job.Child do
       grandchild_restarts: 0,
       busy_us: 0,
       trace_us: 0,
+      work: 0,
       first_atom_us: nil,
       last_atom_us: nil,
       rays: RingTracer.Kernel.no_rays()
@@ -284,6 +285,7 @@ defmodule RingTracer.Job.Child do
       | traced: s.traced + 1,
         busy_us: s.busy_us + (ended - started),
         trace_us: s.trace_us + timing.trace_us,
+        work: s.work + Map.get(rays, :work, 0),
         first_atom_us: s.first_atom_us || started,
         last_atom_us: ended,
         rays: Map.merge(s.rays, rays, fn _, a, b -> a + b end)
@@ -456,6 +458,16 @@ defmodule RingTracer.Job.Child do
   defp notify_idle(state), do: state
 
   defp now, do: System.monotonic_time(:microsecond)
+
+  @doc """
+  The child's speed: kernel work units traced per microsecond its grandchild
+  spent on atoms (wall time, slowdown included), `nil` before its first atom
+  with any work. Unlike a count of atoms, it does not take a child that
+  traced cheap atoms for a fast one.
+  """
+  @spec rate(map()) :: float() | nil
+  def rate(%{stats: %{work: work, busy_us: busy}}) when work > 0 and busy > 0, do: work / busy
+  def rate(_state), do: nil
 
   @doc """
   The child's mean wall time per atom (slowdown included), `nil` before its
