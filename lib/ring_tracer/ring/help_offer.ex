@@ -3,10 +3,12 @@ defmodule RingTracer.Ring.HelpOffer do
   The help offer (the ring's token) and what a child does when one reaches it.
 
   A child that has traced every atom it holds sends an offer to its left
-  sibling: who made it (`origin`, `pid`), how many atoms it has computed
-  (`done`), its mean wall time per atom (`atom_us`, `nil` before its first)
-  and a sequence number (`seq`) so that a child can tell its current offer
-  from a stale one; `wrapped` is set once the offer has gone past the end of
+  sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
+  per busy microsecond, see `RingTracer.Ring.Share`), its mean wall time per
+  atom (`atom_us`), both `nil` before its first atom, the fastest siblings
+  heard of along its way (`heard`, see "Gossip") and a sequence number
+  (`seq`) so that a child can tell its current offer from a stale one;
+  `wrapped` is set once the offer has gone past the end of
   the ring (from a child to one with a higher index, see "Parking"), `hops`
   counts the siblings it has been sent to and `held` whether it has waited
   once (see "Holding"). Only the origin's own offers carry its pid: atoms are
@@ -26,6 +28,18 @@ defmodule RingTracer.Ring.HelpOffer do
       one of the offerer's atoms, and the offer has walked `hold_after` hops
       without finding work -> `:hold`;
     * otherwise -> `:pass` to the left sibling.
+
+  ## Gossip (our addition to the paper)
+
+  The share rule plans for one more helper than the giver and the offerer:
+  the fastest sibling the giver has heard of. Every offer carries the three
+  fastest siblings heard of on its way, each as `{rate, index, done}` (what
+  it had `done`, atoms computed, when it told its rate: the newest report
+  of a sibling wins). Its origin puts itself in; a child adds what each
+  offer that reaches it carries to what it knows, and the offers it sends
+  or passes on carry the result. Until it has heard of anyone else, a giver
+  in a ring of three or more assumes a helper as fast as the faster of
+  itself and the offerer.
 
   More than one offer can be in the ring at once (one per idle child); they
   cross freely.
@@ -86,8 +100,21 @@ defmodule RingTracer.Ring.HelpOffer do
 
   alias RingTracer.Ring.Share
 
-  @enforce_keys [:origin, :pid, :done, :seq]
-  defstruct [:origin, :pid, :done, :seq, :via, :atom_us, wrapped: false, hops: 0, held: false]
+  @enforce_keys [:origin, :pid, :seq]
+  defstruct [
+    :origin,
+    :pid,
+    :seq,
+    :via,
+    :rate,
+    :atom_us,
+    heard: [],
+    wrapped: false,
+    hops: 0,
+    held: false
+  ]
+
+  @heard 3
 
   @hold_after 16
 
@@ -98,26 +125,36 @@ defmodule RingTracer.Ring.HelpOffer do
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
           pid: pid(),
-          done: non_neg_integer(),
           seq: non_neg_integer(),
           via: pid() | nil,
+          rate: Share.rate(),
           atom_us: non_neg_integer() | nil,
+          heard: heard(),
           wrapped: boolean(),
           hops: non_neg_integer(),
           held: boolean()
         }
 
+  @typedoc "The fastest siblings heard of, fastest first: `{rate, index, done}`."
+  @type heard :: [{float(), non_neg_integer(), non_neg_integer()}]
+
   @typedoc """
-  What a child knows of itself when an offer arrives; `remaining_us` (how
-  long its atom in flight should still take) and `hold_after` only matter
-  for holding.
+  What a child knows of itself when an offer arrives: its index, queued
+  atoms it could give (`remaining`), atoms in its pipe (`in_flight`), its
+  `rate`, its current offer's `seq` if it has one out. `heard` (the fastest
+  live siblings it has heard of, the arriving offer's news included) and
+  `ring_size` (live children) pick the share rule's third helper;
+  `remaining_us` (how long its atom in flight should still take) and
+  `hold_after` only matter for holding.
   """
   @type view :: %{
           required(:index) => non_neg_integer(),
           required(:remaining) => non_neg_integer(),
           required(:in_flight) => non_neg_integer(),
-          required(:done) => non_neg_integer(),
+          required(:rate) => Share.rate(),
           required(:offer_seq) => non_neg_integer() | nil,
+          optional(:heard) => heard(),
+          optional(:ring_size) => non_neg_integer(),
           optional(:remaining_us) => non_neg_integer() | nil,
           optional(:hold_after) => pos_integer()
         }
@@ -127,21 +164,23 @@ defmodule RingTracer.Ring.HelpOffer do
   @doc """
   What the child described by `view` does with `offer`.
 
-      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 1, remaining: 0, in_flight: 0, done: 8, offer_seq: 3}, offer)
+      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), rate: 2.0, seq: 3}
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 1, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 3}, offer)
       :returned
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, done: 8, offer_seq: nil}, offer)
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil}, offer)
       {:give, 4}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil}, offer)
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil, heard: [{9.0, 5, 12}]}, offer)
+      {:give, 1}
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil}, offer)
       :pass
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, offer)
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, offer)
       :park
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, done: 8, offer_seq: 5}, %{offer | wrapped: true})
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, %{offer | wrapped: true})
       :pass
       iex> far = %{offer | hops: 16, atom_us: 4_000}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil, remaining_us: 1_500}, far)
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 1_500}, far)
       :hold
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, done: 8, offer_seq: nil, remaining_us: 9_000}, far)
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 9_000}, far)
       :pass
   """
   @spec decide(view(), t()) :: decision()
@@ -149,12 +188,48 @@ defmodule RingTracer.Ring.HelpOffer do
     if seq == current, do: :returned, else: :drop
   end
 
-  def decide(view, %__MODULE__{done: offerer_done, wrapped: wrapped} = offer) do
-    case Share.give(view.remaining, view.in_flight, offerer_done, view.done) do
+  def decide(view, %__MODULE__{rate: rate, wrapped: wrapped} = offer) do
+    case Share.give(view.remaining, view.in_flight, rate, view.rate, helper_rate(view, offer)) do
       0 when view.offer_seq != nil and not wrapped -> :park
       0 -> if holds?(view, offer), do: :hold, else: :pass
       g -> {:give, g}
     end
+  end
+
+  # The share rule's third helper: the fastest sibling heard of other than
+  # the two; none heard of, one as fast as the faster of the two if the ring
+  # has a third child at all.
+  defp helper_rate(view, offer) do
+    others =
+      for {rate, i, _} <- Map.get(view, :heard, []), i != view.index, i != offer.origin, do: rate
+
+    case others do
+      [rate | _] -> rate
+      [] -> if Map.get(view, :ring_size, 0) >= 3, do: faster(offer.rate, view.rate)
+    end
+  end
+
+  defp faster(a, b) when is_number(a) and is_number(b), do: max(a, b)
+  defp faster(a, b), do: a || b
+
+  @doc """
+  What is known of the fastest siblings, `known`, with `news` added: one
+  entry per sibling (its newest report: the highest `done`), the #{@heard}
+  fastest, fastest first. Reports without a rate are ignored.
+
+      iex> RingTracer.Ring.HelpOffer.learn([{3.0, 1, 9}, {1.0, 2, 4}], [{2.0, 4, 3}, {5.0, 2, 6}, {4.0, 1, 2}])
+      [{5.0, 2, 6}, {3.0, 1, 9}, {2.0, 4, 3}]
+  """
+  @spec learn(heard(), [{Share.rate(), non_neg_integer(), non_neg_integer()}]) :: heard()
+  def learn(known, news) do
+    (known ++ news)
+    |> Enum.filter(fn {rate, _, _} -> is_number(rate) end)
+    |> Enum.group_by(&elem(&1, 1))
+    |> Enum.map(fn {_, reports} ->
+      Enum.max_by(reports, fn {rate, _, done} -> {done, rate} end)
+    end)
+    |> Enum.sort(:desc)
+    |> Enum.take(@heard)
   end
 
   # Tracing its last atom, which ends within half of one of the offerer's
@@ -172,9 +247,9 @@ defmodule RingTracer.Ring.HelpOffer do
   marked `wrapped` if the hop goes past the end of the ring (to a higher
   index).
 
-      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3}
+      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), seq: 3}
       iex> RingTracer.Ring.HelpOffer.hop(offer, 1, 0)
-      %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), done: 8, seq: 3, hops: 1, wrapped: false}
+      %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), seq: 3, hops: 1, wrapped: false}
       iex> RingTracer.Ring.HelpOffer.hop(offer, 0, 3).wrapped
       true
   """

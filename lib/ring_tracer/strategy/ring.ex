@@ -23,20 +23,29 @@ defmodule RingTracer.Strategy.Ring do
   def idle(child) do
     seq = seq(child) + 1
 
+    rate = Child.rate(child)
+    heard = HelpOffer.learn(heard(child), [{rate, child.index, child.done}])
+
     offer =
       %HelpOffer{
         origin: child.index,
         pid: self(),
-        done: child.done,
         seq: seq,
         via: self(),
-        atom_us: Child.mean_atom_us(child)
+        rate: rate,
+        atom_us: Child.mean_atom_us(child),
+        heard: heard
       }
       |> HelpOffer.hop(child.index, child.left_index)
 
     # Offers held while we traced our last atom leave with ours, in one message.
     {held, child} = take_offers(child, :held)
-    held = Enum.map(held, &HelpOffer.hop(%{&1 | via: self()}, child.index, child.left_index))
+
+    held =
+      Enum.map(
+        held,
+        &HelpOffer.hop(%{&1 | via: self(), heard: heard}, child.index, child.left_index)
+      )
 
     child
     |> Child.send_counted(child.left, :offer, offers_message([offer | held]))
@@ -76,11 +85,19 @@ defmodule RingTracer.Strategy.Ring do
   defp offer(child, offer, released_by \\ nil) do
     {remaining, in_flight} = Child.giveable(child)
 
+    # What the offer heard goes into what we know; what we know goes on with
+    # the offer.
+    heard = HelpOffer.learn(heard(child), offer.heard)
+    child = put_strategy(child, heard: heard)
+    offer = %{offer | heard: heard}
+
     view = %{
       index: child.index,
       remaining: remaining,
       in_flight: in_flight,
-      done: child.done,
+      rate: Child.rate(child),
+      heard: Enum.reject(heard, fn {_, i, _} -> i in child.dead end),
+      ring_size: tuple_size(child.siblings) - length(child.dead),
       offer_seq: if(child.status == :offered, do: child.strategy_state[:current]),
       remaining_us: if(in_flight > 0, do: Child.expected_remaining_us(child)),
       hold_after: child.spec.hold_after
@@ -173,6 +190,8 @@ defmodule RingTracer.Strategy.Ring do
   end
 
   defp seq(child), do: child.strategy_state[:seq] || 0
+
+  defp heard(child), do: child.strategy_state[:heard] || []
 
   defp put_strategy(child, kv),
     do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}

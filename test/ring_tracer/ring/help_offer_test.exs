@@ -4,32 +4,57 @@ defmodule RingTracer.Ring.HelpOfferTest do
 
   alias RingTracer.Ring.HelpOffer
 
-  defp offer(origin, done, seq \\ 1),
-    do: %HelpOffer{origin: origin, pid: self(), done: done, seq: seq}
+  defp offer(origin, rate, seq \\ 1),
+    do: %HelpOffer{origin: origin, pid: self(), rate: rate, seq: seq}
 
-  defp view(index, remaining, in_flight, done, seq),
-    do: %{index: index, remaining: remaining, in_flight: in_flight, done: done, offer_seq: seq}
+  defp view(index, remaining, in_flight, rate, seq),
+    do: %{index: index, remaining: remaining, in_flight: in_flight, rate: rate, offer_seq: seq}
 
   test "a child's own current offer coming back means it is finished" do
-    assert HelpOffer.decide(view(2, 0, 0, 9, 4), offer(2, 9, 4)) == :returned
+    assert HelpOffer.decide(view(2, 0, 0, 9.0, 4), offer(2, 9.0, 4)) == :returned
   end
 
   test "a stale offer of one's own is dropped" do
-    assert HelpOffer.decide(view(2, 0, 0, 9, 5), offer(2, 9, 4)) == :drop
-    assert HelpOffer.decide(view(2, 3, 1, 9, nil), offer(2, 9, 4)) == :drop
+    assert HelpOffer.decide(view(2, 0, 0, 9.0, 5), offer(2, 9.0, 4)) == :drop
+    assert HelpOffer.decide(view(2, 3, 1, 9.0, nil), offer(2, 9.0, 4)) == :drop
   end
 
   test "an idle child with its own offer out parks other children's offers" do
-    assert HelpOffer.decide(view(1, 0, 0, 9, 3), offer(2, 9)) == :park
+    assert HelpOffer.decide(view(1, 0, 0, 9.0, 3), offer(2, 9.0)) == :park
   end
 
   test "a child with nothing to spare and no offer out passes other children's offers on" do
-    assert HelpOffer.decide(view(1, 0, 0, 9, nil), offer(2, 9)) == :pass
-    assert HelpOffer.decide(view(1, 0, 2, 9, nil), offer(2, 9)) == :pass
+    assert HelpOffer.decide(view(1, 0, 0, 9.0, nil), offer(2, 9.0)) == :pass
+    assert HelpOffer.decide(view(1, 0, 2, 9.0, nil), offer(2, 9.0)) == :pass
   end
 
   test "a busy child consumes the offer and gives a speed-proportional share" do
-    assert HelpOffer.decide(view(1, 12, 2, 4, nil), offer(2, 12)) == {:give, 10}
+    # Three times faster: the giver keeps one atom (done at 3/4, behind its 2
+    # in flight), the offerer gets 11 (done at 11/12).
+    assert HelpOffer.decide(view(1, 12, 2, 4.0, nil), offer(2, 12.0)) == {:give, 11}
+  end
+
+  test "the third helper is the fastest sibling heard of other than the two" do
+    slow = offer(2, 1.0)
+    base = view(1, 12, 1, 2.0, nil)
+    # Only the two heard of: as in a ring of two.
+    alone = HelpOffer.decide(%{base | remaining: 12}, slow)
+    assert alone == {:give, 4}
+    heard = Map.put(base, :heard, [{8.0, 1, 9}, {4.0, 2, 3}])
+    assert HelpOffer.decide(heard, slow) == alone
+    # A faster third sibling heard of keeps the slow offerer's share small.
+    assert HelpOffer.decide(%{heard | heard: [{8.0, 3, 9}, {2.0, 1, 5}]}, slow) == {:give, 1}
+    # None heard of, in a ring of three or more: a helper as fast as the giver.
+    assert HelpOffer.decide(Map.put(base, :ring_size, 3), slow) == {:give, 2}
+    assert HelpOffer.decide(Map.put(base, :ring_size, 2), slow) == alone
+  end
+
+  test "what is known of the fastest siblings: each one's newest report, three at most" do
+    assert HelpOffer.learn([], [{nil, 4, 0}, {2.0, 1, 3}]) == [{2.0, 1, 3}]
+    known = HelpOffer.learn([{2.0, 1, 3}], [{1.0, 1, 5}, {5.0, 2, 1}, {3.0, 3, 1}, {0.5, 4, 1}])
+    assert known == [{5.0, 2, 1}, {3.0, 3, 1}, {1.0, 1, 5}]
+    # An older report does not undo a newer one.
+    assert HelpOffer.learn(known, [{9.0, 1, 4}]) == known
   end
 
   test "the atoms given are the last ones queued" do
