@@ -1,14 +1,17 @@
 defmodule RingTracer.Strategy.Ring do
   @moduledoc """
   The paper's ring: an idle child sends a help offer to its left sibling; a
-  sibling with atoms to spare consumes it and hands a speed-proportional
-  share directly to the offerer, or passes it on; a child whose own offer
-  comes back is finished. The rules are `RingTracer.Ring.HelpOffer` and
-  `RingTracer.Ring.Share`; so are our additions: parking (an idle child
-  keeps the offers that reach it until its own offer is answered), holding
-  (in a large ring, an offer that walked far waits for a child about to run
-  out and leaves with that child's own offer, in one message) and splicing
-  (offers stop visiting finished children).
+  sibling with atoms to spare consumes it and hands a share sized to the
+  children's speeds directly to the offerer, or passes it on; a child whose
+  own offer comes back is finished. The rules are `RingTracer.Ring.HelpOffer`
+  and `RingTracer.Ring.Share`; so are our additions: speeds measured in
+  kernel work per busy microsecond, a share planned with one more helper
+  than the two children (gossip: offers carry the fastest siblings heard
+  of), parking (an idle child keeps the offers that reach it until its own
+  offer is answered), holding (in a large ring, an offer that walked far
+  waits for a child about to run out and leaves with that child's own
+  offer, in one message) and splicing (offers stop visiting finished
+  children).
   """
   @behaviour RingTracer.Strategy
 
