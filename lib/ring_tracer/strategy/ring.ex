@@ -88,9 +88,11 @@ defmodule RingTracer.Strategy.Ring do
   defp offer(child, offer, released_by \\ nil) do
     {remaining, in_flight} = Child.giveable(child)
 
-    # What the offer heard goes into what we know; what we know goes on with
-    # the offer.
-    heard = HelpOffer.learn(heard(child), offer.heard)
+    # What the offer heard goes into what we know (dead siblings left out);
+    # what we know goes on with the offer.
+    live = &Enum.reject(&1, fn {_, i, _} -> i in child.dead end)
+    heard = HelpOffer.learn(live.(heard(child)), live.(offer.heard))
+
     child = put_strategy(child, heard: heard)
     offer = %{offer | heard: heard}
 
@@ -99,7 +101,7 @@ defmodule RingTracer.Strategy.Ring do
       remaining: remaining,
       in_flight: in_flight,
       rate: Child.rate(child),
-      heard: Enum.reject(heard, fn {_, i, _} -> i in child.dead end),
+      heard: heard,
       ring_size: tuple_size(child.siblings) - length(child.dead),
       offer_seq: if(child.status == :offered, do: child.strategy_state[:current]),
       remaining_us: if(in_flight > 0, do: Child.expected_remaining_us(child)),

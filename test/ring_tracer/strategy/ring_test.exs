@@ -226,6 +226,27 @@ defmodule RingTracer.Strategy.RingTest do
     assert_received {:help_offer, %HelpOffer{origin: 1, rate: 1.0, heard: ^mine}}
   end
 
+  test "a dead sibling is never counted on as the third helper" do
+    heard = %{heard: [{50.0, 3, 9}]}
+    slow = %{offer(2) | rate: 0.5}
+
+    # Child 3, fifty times faster than us, would take all six atoms we could
+    # give: the slow offer is passed on.
+    _ =
+      handle(
+        child(in_flight: [5], queue: Enum.to_list(10..15), strategy_state: heard),
+        {:help_offer, slow}
+      )
+
+    assert_received {:help_offer, %HelpOffer{origin: 2}}
+
+    # Dead, it is forgotten; a third helper as fast as us leaves the offerer one.
+    c = child(in_flight: [5], queue: Enum.to_list(10..15), strategy_state: heard, dead: [3])
+    gave = handle(c, {:help_offer, slow})
+    assert_received {:handover, 1, [15]}
+    assert gave.strategy_state.heard == []
+  end
+
   test "a working child with nothing to spare passes the offer to its left" do
     busy = child(in_flight: [5])
     _ = handle(busy, {:help_offer, offer(2)})
