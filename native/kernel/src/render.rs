@@ -3,8 +3,9 @@
 //! Every pixel value is a pure function of (scene, settings, pixel index): sample positions come
 //! from a hash of (pixel index, sample index), SPD corner values from the corner position only,
 //! and accumulation order is fixed. Hence [`trace_span`] over any split of the image and
-//! [`render_image`] with any thread count give bit-identical pixels, and ray statistics that sum
-//! to the same totals.
+//! [`render_image`] with any thread count give bit-identical pixels, and ray counts that sum to
+//! the same totals. The work units ([`RayStats::work`]) of a split differ a little: each span
+//! starts with an empty shadow cache, and in SPD mode re-traces the corners it shares.
 
 use crate::bvh::Scratch;
 use crate::camera::Camera;
@@ -249,8 +250,11 @@ fn spd_span(
             let c = if owner >= start && owner < end {
                 integ.radiance(scene, &ray, scratch, stats)
             } else {
+                // another span's corner: its rays are counted there, but the work is done here
                 let mut scratch_stats = RayStats::default();
-                integ.radiance(scene, &ray, scratch, &mut scratch_stats)
+                let c = integ.radiance(scene, &ray, scratch, &mut scratch_stats);
+                scratch.work += scratch_stats.total();
+                c
             };
             *slot = Some(c);
         }

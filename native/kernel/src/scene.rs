@@ -254,8 +254,8 @@ impl Scene {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         if let Some(&c) = scratch.shadow_cache.get(slot) {
-            scratch.work += 1;
             if let Some(s) = shapes.get(c as usize) {
+                scratch.work += 1;
                 if geom.hit(s, ray, 0.0, tmax).is_some() {
                     return true;
                 }

@@ -16,9 +16,10 @@ pub struct RayStats {
     pub refracted: u64,
     /// Shadow rays actually cast towards lights.
     pub shadow: u64,
-    /// Work units: BVH nodes visited plus primitives tested, plus one per ray. Unlike a time,
-    /// it does not depend on the machine, and it follows the time an atom takes closely,
-    /// which ray counts alone do not (a ray that misses everything is cheap).
+    /// Work units: BVH nodes visited, plus primitives handed to the leaf tests (and planes and
+    /// shadow-cache entries tested), plus one per ray traced. Unlike a time, it does not depend
+    /// on the machine, and it follows the time a span takes closely, which ray counts alone do
+    /// not (a ray that misses everything is cheap).
     pub work: u64,
 }
 
