@@ -15,9 +15,9 @@ defmodule RingTracer.Result do
       (offer messages: offers passed on together count once),
       `:offers_consumed` (for `:steal`, requests sent, refused and granted),
       `:grandchild_restarts`, `:busy_us` (wall time its grandchild spent on
-      atoms, slowdown included), `:trace_us` (kernel time), `:work` (kernel
-      work units traced; `:work / :busy_us` is its speed), `:idle_us`,
-      `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`;
+      atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,
+      `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`
+      (its ray counters and work units: `rays.work / busy_us` is its speed);
     * `:atoms` — one map per atom: `:atom`, `:owner` (the child whose strip
       it is), `:child` (who traced the copy the parent kept), `:start_us`,
       `:end_us`, `:trace_us`;

@@ -177,7 +177,6 @@ defmodule RingTracer.Job.Child do
       grandchild_restarts: 0,
       busy_us: 0,
       trace_us: 0,
-      work: 0,
       first_atom_us: nil,
       last_atom_us: nil,
       rays: RingTracer.Kernel.no_rays()
@@ -285,7 +284,6 @@ defmodule RingTracer.Job.Child do
       | traced: s.traced + 1,
         busy_us: s.busy_us + (ended - started),
         trace_us: s.trace_us + timing.trace_us,
-        work: s.work + Map.get(rays, :work, 0),
         first_atom_us: s.first_atom_us || started,
         last_atom_us: ended,
         rays: Map.merge(s.rays, rays, fn _, a, b -> a + b end)
@@ -460,13 +458,21 @@ defmodule RingTracer.Job.Child do
   defp now, do: System.monotonic_time(:microsecond)
 
   @doc """
-  The child's speed: kernel work units traced per microsecond its grandchild
-  spent on atoms (wall time, slowdown included), `nil` before its first atom
-  with any work. Unlike a count of atoms, it does not take a child that
-  traced cheap atoms for a fast one.
+  The child's speed: kernel work units traced (its `:rays` counters'
+  `:work`) per microsecond its grandchild spent on atoms (wall time,
+  slowdown included); `nil` until it has traced work. Unlike a count of
+  atoms, it does not take a child that traced cheap atoms for a fast one.
+
+      iex> stats = RingTracer.Job.Child.new_stats(0, node(), 1, 4)
+      iex> RingTracer.Job.Child.rate(%{stats: stats})
+      nil
+      iex> RingTracer.Job.Child.rate(%{stats: %{stats | busy_us: 2_000, rays: %{stats.rays | work: 5_000}}})
+      2.5
   """
   @spec rate(map()) :: float() | nil
-  def rate(%{stats: %{work: work, busy_us: busy}}) when work > 0 and busy > 0, do: work / busy
+  def rate(%{stats: %{rays: %{work: work}, busy_us: busy}}) when work > 0 and busy > 0,
+    do: work / busy
+
   def rate(_state), do: nil
 
   @doc """

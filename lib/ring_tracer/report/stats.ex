@@ -25,7 +25,6 @@ defmodule RingTracer.Report.Stats do
     :grandchild_restarts,
     :busy_us,
     :trace_us,
-    :work,
     :idle_us,
     :first_atom_us,
     :last_atom_us

@@ -4,8 +4,9 @@ defmodule RingTracer.Ring.HelpOffer do
 
   A child that has traced every atom it holds sends an offer to its left
   sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
-  per busy microsecond, see `RingTracer.Ring.Share`), its mean wall time per
-  atom (`atom_us`), both `nil` before its first atom, the fastest siblings
+  per busy microsecond, see `RingTracer.Ring.Share`; `nil` until it has
+  traced work), its mean wall time per atom (`atom_us`, `nil` before its
+  first atom), the fastest siblings
   heard of along its way (`heard`, see "Gossip") and a sequence number
   (`seq`) so that a child can tell its current offer from a stale one;
   `wrapped` is set once the offer has gone past the end of
@@ -114,7 +115,7 @@ defmodule RingTracer.Ring.HelpOffer do
     held: false
   ]
 
-  @heard 3
+  @heard_max 3
 
   @hold_after 16
 
@@ -214,7 +215,7 @@ defmodule RingTracer.Ring.HelpOffer do
 
   @doc """
   What is known of the fastest siblings, `known`, with `news` added: one
-  entry per sibling (its newest report: the highest `done`), the #{@heard}
+  entry per sibling (its newest report: the highest `done`), the #{@heard_max}
   fastest, fastest first. Reports without a rate are ignored.
 
       iex> RingTracer.Ring.HelpOffer.learn([{3.0, 1, 9}, {1.0, 2, 4}], [{2.0, 4, 3}, {5.0, 2, 6}, {4.0, 1, 2}])
@@ -229,7 +230,7 @@ defmodule RingTracer.Ring.HelpOffer do
       Enum.max_by(reports, fn {rate, _, done} -> {done, rate} end)
     end)
     |> Enum.sort(:desc)
-    |> Enum.take(@heard)
+    |> Enum.take(@heard_max)
   end
 
   # Tracing its last atom, which ends within half of one of the offerer's

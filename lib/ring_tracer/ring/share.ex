@@ -63,38 +63,67 @@ defmodule RingTracer.Ring.Share do
   Atoms to give out of `remaining` queued ones, with `in_flight` atoms in the
   giver's pipe, the offerer's and the giver's rates and, if known, one more
   helper's.
+
+  Where the offerer and the giver are about as fast, the helper's atoms go
+  with whichever is faster by a hair: the result jumps there (from the
+  offerer's own atoms to those plus the helper's). Both places are as good,
+  so nothing is lost but the symmetry.
   """
   @spec give(non_neg_integer(), non_neg_integer(), rate(), rate(), rate()) :: non_neg_integer()
   def give(remaining, in_flight, offerer_rate, self_rate, helper_rate \\ nil)
+      when is_integer(remaining) and remaining >= 0 and is_integer(in_flight) and in_flight >= 0 do
+    if positive?(self_rate) do
+      offerer_rate = if positive?(offerer_rate), do: offerer_rate, else: self_rate
+      helper_rate = if positive?(helper_rate), do: helper_rate
 
-  def give(remaining, _in_flight, _offerer_rate, nil, _helper_rate), do: remaining
+      {_kept, to_offerer, to_helper} =
+        plan(remaining, {in_flight, self_rate}, offerer_rate, helper_rate)
 
-  def give(remaining, in_flight, offerer_rate, self_rate, helper_rate)
-      when is_integer(remaining) and remaining >= 0 and is_integer(in_flight) and
-             in_flight >= 0 and is_number(self_rate) and self_rate > 0 do
-    offerer_rate = if positive?(offerer_rate), do: offerer_rate, else: self_rate
-    helper_rate = if positive?(helper_rate), do: helper_rate
-
-    {_kept, to_offerer, to_helper} =
-      Enum.reduce(1..remaining//1, {in_flight, 0, 0}, fn _, {g, o, h} ->
-        next(g, o, h, self_rate, offerer_rate, helper_rate)
-      end)
-
-    if offerer_rate > self_rate, do: to_offerer + to_helper, else: to_offerer
+      if offerer_rate > self_rate, do: to_offerer + to_helper, else: to_offerer
+    else
+      remaining
+    end
   end
 
-  # One more atom to whoever completes it first: the giver on ties, then the
-  # offerer, then the helper.
-  defp next(g, o, h, vg, vo, vh) do
+  # The plan: atom by atom to whoever completes one more soonest, `(n + 1) /
+  # rate` (the giver first on ties, then the offerer). The atoms completed by
+  # a time `t` are `floor(t * rate)` per child (less the giver's in flight),
+  # so whole rounds are placed at once: the latest `t` that does not place
+  # more than `remaining` (bisection), then the few atoms left one by one.
+  defp plan(remaining, {start, vg}, vo, vh) do
+    rates = [vg, vo, vh || 0.0]
+
+    placed = fn t ->
+      Enum.map(Enum.zip(rates, [start, 0, 0]), fn {v, s} -> max(floor(t * v) - s, 0) end)
+    end
+
+    hi = (remaining + start + 1) / Enum.min(Enum.filter(rates, &(&1 > 0)))
+
+    [g, o, h] =
+      Enum.reduce(1..64, {0.0, hi}, fn _, {lo, hi} ->
+        mid = (lo + hi) / 2
+        if Enum.sum(placed.(mid)) <= remaining, do: {mid, hi}, else: {lo, mid}
+      end)
+      |> elem(0)
+      |> then(placed)
+
+    one_by_one(remaining - g - o - h, {g + start, o, h}, vg, vo, vh)
+  end
+
+  defp one_by_one(0, {g, o, h}, _vg, _vo, _vh), do: {g, o, h}
+
+  defp one_by_one(left, {g, o, h}, vg, vo, vh) do
     tg = (g + 1) / vg
     to = (o + 1) / vo
-    th = if vh, do: (h + 1) / vh, else: :infinity
 
-    cond do
-      tg <= to and tg <= th -> {g + 1, o, h}
-      to <= th -> {g, o + 1, h}
-      true -> {g, o, h + 1}
-    end
+    next =
+      cond do
+        tg <= to and (vh == nil or tg <= (h + 1) / vh) -> {g + 1, o, h}
+        vh == nil or to <= (h + 1) / vh -> {g, o + 1, h}
+        true -> {g, o, h + 1}
+      end
+
+    one_by_one(left - 1, next, vg, vo, vh)
   end
 
   defp positive?(rate), do: is_number(rate) and rate > 0

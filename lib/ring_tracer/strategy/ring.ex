@@ -88,10 +88,10 @@ defmodule RingTracer.Strategy.Ring do
   defp offer(child, offer, released_by \\ nil) do
     {remaining, in_flight} = Child.giveable(child)
 
-    # What the offer heard goes into what we know (dead siblings left out);
-    # what we know goes on with the offer.
-    live = &Enum.reject(&1, fn {_, i, _} -> i in child.dead end)
-    heard = HelpOffer.learn(live.(heard(child)), live.(offer.heard))
+    # What the offer heard, and our own rate, go into what we know; what we
+    # know goes on with the offer.
+    mine = {Child.rate(child), child.index, child.done}
+    heard = HelpOffer.learn(heard(child), live(child, [mine | offer.heard]))
 
     child = put_strategy(child, heard: heard)
     offer = %{offer | heard: heard}
@@ -196,7 +196,10 @@ defmodule RingTracer.Strategy.Ring do
 
   defp seq(child), do: child.strategy_state[:seq] || 0
 
-  defp heard(child), do: child.strategy_state[:heard] || []
+  # What a child has heard of the fastest siblings, dead ones left out.
+  defp heard(child), do: live(child, child.strategy_state[:heard] || [])
+
+  defp live(child, heard), do: Enum.reject(heard, fn {_, i, _} -> i in child.dead end)
 
   defp put_strategy(child, kv),
     do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}

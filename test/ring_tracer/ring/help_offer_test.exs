@@ -28,7 +28,7 @@ defmodule RingTracer.Ring.HelpOfferTest do
     assert HelpOffer.decide(view(1, 0, 2, 9.0, nil), offer(2, 9.0)) == :pass
   end
 
-  test "a busy child consumes the offer and gives a speed-proportional share" do
+  test "a busy child consumes the offer and gives a share sized to the speeds" do
     # Three times faster: the giver keeps one atom (done at 3/4, behind its 2
     # in flight), the offerer gets 11 (done at 11/12).
     assert HelpOffer.decide(view(1, 12, 2, 4.0, nil), offer(2, 12.0)) == {:give, 11}
@@ -38,7 +38,7 @@ defmodule RingTracer.Ring.HelpOfferTest do
     slow = offer(2, 1.0)
     base = view(1, 12, 1, 2.0, nil)
     # Only the two heard of: as in a ring of two.
-    alone = HelpOffer.decide(%{base | remaining: 12}, slow)
+    alone = HelpOffer.decide(base, slow)
     assert alone == {:give, 4}
     heard = Map.put(base, :heard, [{8.0, 1, 9}, {4.0, 2, 3}])
     assert HelpOffer.decide(heard, slow) == alone

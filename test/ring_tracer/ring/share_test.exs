@@ -45,6 +45,56 @@ defmodule RingTracer.Ring.ShareTest do
     assert Share.give(12, 1, 2.0, 1.0, 8.0) == 12
   end
 
+  test "a giver with no rate, or a zero one, gives all it has queued" do
+    assert Share.give(7, 2, 3.0, 0.0) == 7
+    assert Share.give(7, 2, 3.0, nil, 9.0) == 7
+  end
+
+  test "long queues are planned in whole rounds, with the same result" do
+    # Three children as fast as each other, the giver one atom ahead: the
+    # offerer's share is a third, give or take the tie order.
+    assert Share.give(1_000_000, 1, 1.0, 1.0, 1.0) == 333_334
+    assert Share.give(1_000_000, 1, 3.0, 1.0) == 750_001
+  end
+
+  # The plan as written down: one atom at a time to whoever completes one
+  # more soonest (giver, offerer, helper on ties).
+  defp reference(r, f, o, s, h) do
+    o = o || s
+
+    {_g, to_o, to_h} =
+      Enum.reduce(1..r//1, {f, 0, 0}, fn _, {g, oo, hh} ->
+        times = [{(g + 1) / s, 0}, {(oo + 1) / o, 1}] ++ if(h, do: [{(hh + 1) / h, 2}], else: [])
+
+        case Enum.min(times) do
+          {_, 0} -> {g + 1, oo, hh}
+          {_, 1} -> {g, oo + 1, hh}
+          {_, 2} -> {g, oo, hh + 1}
+        end
+      end)
+
+    if o > s, do: to_o + to_h, else: to_o
+  end
+
+  test "property: the whole-round plan gives what the atom-by-atom plan gives" do
+    rate =
+      :proper_types.oneof([
+        :proper_types.float(0.01, 100.0),
+        :proper_types.exactly(1.0),
+        :proper_types.exactly(nil)
+      ])
+
+    gen =
+      {:proper_types.integer(0, 300), :proper_types.integer(0, 2), rate,
+       :proper_types.oneof([:proper_types.float(0.01, 100.0), :proper_types.exactly(1.0)]), rate}
+
+    RingTracer.PropErCase.check(
+      gen,
+      fn {r, f, o, s, h} -> Share.give(r, f, o, s, h) == reference(r, f, o, s, h) end,
+      1000
+    )
+  end
+
   test "property: never more than queued; more to a faster offerer, fewer from a faster giver" do
     rate = :proper_types.oneof([:proper_types.float(0.01, 100.0), :proper_types.exactly(nil)])
 

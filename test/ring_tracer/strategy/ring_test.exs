@@ -38,10 +38,16 @@ defmodule RingTracer.Strategy.RingTest do
       traffic: %{},
       events: [],
       # 4 atoms traced, 1 work unit per microsecond.
-      stats: %{Child.new_stats(1, node(), 1, 4) | traced: 4, work: 40_000, busy_us: 40_000}
+      stats: stats(traced: 4, busy_us: 40_000, work: 40_000)
     }
 
     Map.merge(base, Map.new(fields))
+  end
+
+  defp stats(fields) do
+    base = Child.new_stats(1, node(), 1, 4)
+    {work, fields} = Keyword.pop(fields, :work, 0)
+    %{Map.merge(base, Map.new(fields)) | rays: %{base.rays | work: work}}
   end
 
   # An offer from a sibling as fast as the test's child.
@@ -215,15 +221,27 @@ defmodule RingTracer.Strategy.RingTest do
     busy = child(in_flight: [5], strategy_state: %{heard: [{5.0, 3, 7}, {0.5, 0, 2}]})
     passed = handle(busy, {:help_offer, %{offer(2) | heard: [{2.0, 1, 1}, {1.0, 2, 4}]}})
 
-    heard = [{5.0, 3, 7}, {2.0, 1, 1}, {1.0, 2, 4}]
+    # The offer says child 1 (us) does 2.0 as of its first atom; our own rate
+    # after 4 atoms, 1.0, is newer and goes on instead.
+    heard = [{5.0, 3, 7}, {1.0, 2, 4}, {1.0, 1, 4}]
     assert_received {:help_offer, %HelpOffer{origin: 2, heard: ^heard}}
     assert passed.strategy_state.heard == heard
 
-    # A child's own offer tells its rate (1.0 after 4 atoms), newer than what
-    # the others said of it.
-    Ring.idle(%{passed | in_flight: []})
-    mine = [{5.0, 3, 7}, {1.0, 2, 4}, {1.0, 1, 4}]
-    assert_received {:help_offer, %HelpOffer{origin: 1, rate: 1.0, heard: ^mine}}
+    # Our own offer tells the same, and so do the offers held with it.
+    held = put_in(passed.strategy_state[:held], [%{offer(3) | heard: []}])
+    Ring.idle(%{held | in_flight: []})
+
+    assert_received {:help_offers,
+                     [
+                       %HelpOffer{origin: 1, rate: 1.0, heard: ^heard},
+                       %HelpOffer{origin: 3, heard: ^heard}
+                     ]}
+  end
+
+  test "a dead sibling's rate is no longer told" do
+    c = child(dead: [3], strategy_state: %{heard: [{5.0, 3, 7}, {2.0, 0, 2}]})
+    Ring.idle(c)
+    assert_received {:help_offer, %HelpOffer{origin: 1, heard: [{2.0, 0, 2}, {1.0, 1, 4}]}}
   end
 
   test "a dead sibling is never counted on as the third helper" do
@@ -244,7 +262,7 @@ defmodule RingTracer.Strategy.RingTest do
     c = child(in_flight: [5], queue: Enum.to_list(10..15), strategy_state: heard, dead: [3])
     gave = handle(c, {:help_offer, slow})
     assert_received {:handover, 1, [15]}
-    assert gave.strategy_state.heard == []
+    assert gave.strategy_state.heard == [{1.0, 1, 4}]
   end
 
   test "a working child with nothing to spare passes the offer to its left" do
