@@ -6,15 +6,14 @@ defmodule RingTracer.Ring.HelpOffer do
   sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
   per busy microsecond, see `RingTracer.Ring.Share`; `nil` until it has
   traced work), its mean wall time per atom (`atom_us`, `nil` before its
-  first atom), the fastest siblings
-  heard of along its way (`heard`, see "Gossip") and a sequence number
-  (`seq`) so that a child can tell its current offer from a stale one;
-  `wrapped` is set once the offer has gone past the end of
-  the ring (from a child to one with a higher index, see "Parking"), `hops`
-  counts the siblings it has been sent to and `held` whether it has waited
-  once (see "Holding"). Only the origin's own offers carry its pid: atoms are
-  handed over directly to it, not along the ring. `via` is the last child
-  that sent the offer on (see "Splicing" below).
+  first atom), the fastest siblings heard of along its way (`heard`, see
+  "Gossip") and a sequence number (`seq`) so that a child can tell its
+  current offer from a stale one; `wrapped` is set once the offer has gone
+  past the end of the ring (from a child to one with a higher index, see
+  "Parking"), `hops` counts the siblings it has been sent to and `held`
+  whether it has waited once (see "Holding"). Only the origin's own offers
+  carry its pid: atoms are handed over directly to it, not along the ring.
+  `via` is the last child that sent the offer on (see "Splicing" below).
 
   `decide/2` is the whole rule, pure:
 

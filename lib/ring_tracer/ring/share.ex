@@ -56,8 +56,11 @@ defmodule RingTracer.Ring.Share do
       5
   """
 
-  @typedoc "Kernel work units per microsecond; `nil` before a child's first atom."
+  @typedoc "Kernel work units per microsecond; `nil` until a child has traced work."
   @type rate :: float() | nil
+
+  # Queues up to this long are planned atom by atom.
+  @one_by_one 64
 
   @doc """
   Atoms to give out of `remaining` queued ones, with `in_flight` atoms in the
@@ -71,7 +74,13 @@ defmodule RingTracer.Ring.Share do
   """
   @spec give(non_neg_integer(), non_neg_integer(), rate(), rate(), rate()) :: non_neg_integer()
   def give(remaining, in_flight, offerer_rate, self_rate, helper_rate \\ nil)
-      when is_integer(remaining) and remaining >= 0 and is_integer(in_flight) and in_flight >= 0 do
+
+  def give(0, in_flight, _offerer_rate, _self_rate, _helper_rate)
+      when is_integer(in_flight) and in_flight >= 0,
+      do: 0
+
+  def give(remaining, in_flight, offerer_rate, self_rate, helper_rate)
+      when is_integer(remaining) and remaining > 0 and is_integer(in_flight) and in_flight >= 0 do
     if positive?(self_rate) do
       offerer_rate = if positive?(offerer_rate), do: offerer_rate, else: self_rate
       helper_rate = if positive?(helper_rate), do: helper_rate
@@ -88,8 +97,12 @@ defmodule RingTracer.Ring.Share do
   # The plan: atom by atom to whoever completes one more soonest, `(n + 1) /
   # rate` (the giver first on ties, then the offerer). The atoms completed by
   # a time `t` are `floor(t * rate)` per child (less the giver's in flight),
-  # so whole rounds are placed at once: the latest `t` that does not place
-  # more than `remaining` (bisection), then the few atoms left one by one.
+  # so a long queue is placed in whole rounds: the latest `t` that does not
+  # place more than `remaining` (bisection), then the few atoms left one by
+  # one. A short queue goes one by one straight away.
+  defp plan(remaining, {start, vg}, vo, vh) when remaining <= @one_by_one,
+    do: one_by_one(remaining, {start, 0, 0}, vg, vo, vh)
+
   defp plan(remaining, {start, vg}, vo, vh) do
     rates = [vg, vo, vh || 0.0]
 

@@ -26,8 +26,7 @@ defmodule RingTracer.Strategy.Ring do
   def idle(child) do
     seq = seq(child) + 1
 
-    rate = Child.rate(child)
-    heard = HelpOffer.learn(heard(child), [{rate, child.index, child.done}])
+    {heard, child} = hear(child, [])
 
     offer =
       %HelpOffer{
@@ -35,7 +34,7 @@ defmodule RingTracer.Strategy.Ring do
         pid: self(),
         seq: seq,
         via: self(),
-        rate: rate,
+        rate: Child.rate(child),
         atom_us: Child.mean_atom_us(child),
         heard: heard
       }
@@ -88,12 +87,9 @@ defmodule RingTracer.Strategy.Ring do
   defp offer(child, offer, released_by \\ nil) do
     {remaining, in_flight} = Child.giveable(child)
 
-    # What the offer heard, and our own rate, go into what we know; what we
-    # know goes on with the offer.
-    mine = {Child.rate(child), child.index, child.done}
-    heard = HelpOffer.learn(heard(child), live(child, [mine | offer.heard]))
-
-    child = put_strategy(child, heard: heard)
+    # What the offer heard goes into what we know; what we know goes on with
+    # the offer.
+    {heard, child} = hear(child, offer.heard)
     offer = %{offer | heard: heard}
 
     view = %{
@@ -196,10 +192,19 @@ defmodule RingTracer.Strategy.Ring do
 
   defp seq(child), do: child.strategy_state[:seq] || 0
 
-  # What a child has heard of the fastest siblings, dead ones left out.
-  defp heard(child), do: live(child, child.strategy_state[:heard] || [])
+  # What a child has heard of the fastest siblings, with `news` and its own
+  # newest rate added and dead siblings left out; kept, and returned.
+  defp hear(child, news) do
+    mine = {Child.rate(child), child.index, child.done}
+    known = child.strategy_state[:heard] || []
 
-  defp live(child, heard), do: Enum.reject(heard, fn {_, i, _} -> i in child.dead end)
+    heard =
+      (known ++ [mine | news])
+      |> Enum.reject(fn {_, i, _} -> i in child.dead end)
+      |> then(&HelpOffer.learn([], &1))
+
+    {heard, put_strategy(child, heard: heard)}
+  end
 
   defp put_strategy(child, kv),
     do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}
