@@ -198,10 +198,8 @@ defmodule RingTracer.Strategy.Ring do
     mine = {Child.rate(child), child.index, child.done}
     known = child.strategy_state[:heard] || []
 
-    heard =
-      (known ++ [mine | news])
-      |> Enum.reject(fn {_, i, _} -> i in child.dead end)
-      |> then(&HelpOffer.learn([], &1))
+    dead? = fn {_, i, _} -> i in child.dead end
+    heard = HelpOffer.learn(Enum.reject(known, dead?), Enum.reject([mine | news], dead?))
 
     {heard, put_strategy(child, heard: heard)}
   end

@@ -130,7 +130,7 @@ defmodule RingTracer.Strategy.RingTest do
     child(
       in_flight: [5],
       current_since: System.monotonic_time(:microsecond),
-      stats: %{Child.new_stats(1, node(), 1, 4) | traced: 2, busy_us: 20_000}
+      stats: stats(traced: 2, busy_us: 20_000)
     )
   end
 
