@@ -99,9 +99,13 @@ defmodule RingTracer.StrategyTest do
              Map.get(result.messages, :handover, %{count: 0}).count
   end
 
+  # A send to a process that has already exited is traced apart: as the job
+  # stops, a child may still pass an offer to a sibling that stopped first,
+  # and that offer was sent (and counted) all the same.
   defp collect_sends(acc) do
     receive do
-      {:trace, _from, :send, msg, _to} -> collect_sends(Map.update(acc, kind(msg), 1, &(&1 + 1)))
+      {:trace, _from, event, msg, _to} when event in [:send, :send_to_non_existing_process] ->
+        collect_sends(Map.update(acc, kind(msg), 1, &(&1 + 1)))
     after
       200 -> acc
     end
