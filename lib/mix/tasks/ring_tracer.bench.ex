@@ -53,6 +53,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
   use Mix.Task
 
   alias RingTracer.{Native, Scene, SceneCache, Settings}
+  alias RingTracer.Job.Slowdown
 
   @sim_atoms 64
   @spd ~w(balls_s4 gears_s4 mount_s6 rings_s7 teapot_s12 tetra_s6 tree_s11)
@@ -325,7 +326,9 @@ defmodule Mix.Tasks.RingTracer.Bench do
       :timer.tc(fn ->
         speeds
         |> Enum.map(fn speed ->
-          Task.async(fn -> floor_loop(next, total, context, layout, speed, []) end)
+          Task.async(fn ->
+            floor_loop(next, total, context, layout, Slowdown.new(speed), [])
+          end)
         end)
         |> Enum.flat_map(&Task.await(&1, :infinity))
       end)
@@ -334,14 +337,14 @@ defmodule Mix.Tasks.RingTracer.Bench do
     {:ok, %{elapsed_us: elapsed, ideal_us: RingTracer.Result.ideal_us(traces, speeds, cap)}}
   end
 
-  defp floor_loop(next, total, context, layout, speed, acc) do
+  defp floor_loop(next, total, context, layout, slowdown, acc) do
     atom = :atomics.add_get(next, 1, 1) - 1
 
     if atom < total do
       {first, count} = RingTracer.Layout.span(layout, atom)
       {:ok, _pixels, _rays, us} = RingTracer.Kernel.Native.trace(context, first, count, atom)
-      if speed > 1, do: Process.sleep(round((speed - 1) * us / 1000))
-      floor_loop(next, total, context, layout, speed, [%{trace_us: us} | acc])
+      slowdown = Slowdown.wait(slowdown, us)
+      floor_loop(next, total, context, layout, slowdown, [%{trace_us: us} | acc])
     else
       acc
     end

@@ -22,39 +22,42 @@ defmodule RingTracer.Job.Grandchild do
   `{:atom_failed, self(), atom, message}`.
   """
 
-  alias RingTracer.Job.Pipe
+  alias RingTracer.Job.{Pipe, Slowdown}
   alias RingTracer.Layout
 
   @doc "Spawns a grandchild linked to the calling child."
   @spec start_link({module(), term()}, Layout.t(), number()) :: pid()
   def start_link(kernel, %Layout{} = layout, speed) do
     child = self()
-    spawn_link(fn -> loop(child, kernel, layout, speed) end)
+    spawn_link(fn -> loop(child, kernel, layout, Slowdown.new(speed)) end)
   end
 
-  defp loop(child, kernel, layout, speed) do
+  defp loop(child, kernel, layout, slowdown) do
     receive do
       {:trace, atom} ->
         # The child may have taken the atom back for a sibling (`Pipe`).
-        if Pipe.claim(self(), atom), do: send(child, trace(kernel, layout, speed, atom))
-        loop(child, kernel, layout, speed)
+        if Pipe.claim(self(), atom) do
+          {message, slowdown} = trace(kernel, layout, slowdown, atom)
+          send(child, message)
+          loop(child, kernel, layout, slowdown)
+        else
+          loop(child, kernel, layout, slowdown)
+        end
     end
   end
 
-  @doc false
-  @spec trace({module(), term()}, Layout.t(), number(), non_neg_integer()) :: tuple()
-  def trace({kernel, context}, layout, speed, atom) do
+  defp trace({kernel, context}, layout, slowdown, atom) do
     {first, count} = Layout.span(layout, atom)
     started = System.system_time(:microsecond)
 
     case kernel.trace(context, first, count, atom) do
       {:ok, pixels, rays, us} ->
-        if speed > 1, do: Process.sleep(round((speed - 1) * us / 1000))
+        slowdown = Slowdown.wait(slowdown, us)
         timing = %{trace_us: us, started_at: started, ended_at: System.system_time(:microsecond)}
-        {:traced, self(), atom, pixels, rays, timing}
+        {{:traced, self(), atom, pixels, rays, timing}, slowdown}
 
       {:error, message} ->
-        {:atom_failed, self(), atom, message}
+        {{:atom_failed, self(), atom, message}, slowdown}
     end
   end
 end
