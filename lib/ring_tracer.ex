@@ -34,6 +34,10 @@ defmodule RingTracer do
       cut-off (default false)
     * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
       (see `RingTracer.Strategy`)
+    * `:layout` — which atoms each child owns at the start: `:strips` (the
+      paper's contiguous strips, default) or `:interleaved` (child i owns
+      atoms i, i + N, i + 2N, ...; see `RingTracer.Layout`). The image is
+      the same; the balance is not
     * `:hold_after` — ring only: hops an offer walks before it may wait at a
       child about to run out (default 16; see `RingTracer.Ring.HelpOffer`)
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
@@ -157,7 +161,7 @@ defmodule RingTracer do
   ## Options
 
   Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
-  `:strategy`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
+  `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
   microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
 
       iex> {:ok, result} = RingTracer.simulate(children: 16, atoms: 4, costs: 1000)
@@ -194,7 +198,8 @@ defmodule RingTracer do
       id: make_ref(),
       source: source,
       settings: settings,
-      layout: Layout.new(settings.width, settings.height, opts[:children], opts[:atoms]),
+      layout:
+        Layout.new(settings.width, settings.height, opts[:children], opts[:atoms], opts[:layout]),
       caller: self(),
       nodes: opts[:nodes],
       handover_delay: opts[:handover_delay],
@@ -216,8 +221,12 @@ defmodule RingTracer do
         end
 
         case reply do
-          {:ok, raw} -> {:ok, Result.new(settings, opts[:strategy], capacity_cap, raw)}
-          {:error, message} -> {:error, Error.new(:render_failed, message)}
+          {:ok, raw} ->
+            result = Result.new(settings, opts[:strategy], capacity_cap, raw)
+            {:ok, %{result | layout: opts[:layout]}}
+
+          {:error, message} ->
+            {:error, Error.new(:render_failed, message)}
         end
 
       {:DOWN, ^ref, _, _, reason} ->

@@ -5,41 +5,60 @@ defmodule RingTracer.Layout do
   The image's pixels are numbered row-major from the top-left, `0..w*h-1`.
   With `n` children and `k` atoms per child there are `m = n * k` atoms; atom
   `a` covers pixels `div(a * p, m)` up to (not including) `div((a + 1) * p, m)`
-  where `p = w * h`. Child `i`'s strip is atoms `i*k .. i*k + k - 1`, so strips
-  are contiguous, atoms tile the image exactly once for every size, and
+  where `p = w * h`, so atoms tile the image exactly once for every size, and
   concatenating atom results in atom order gives the image. When `p < m` some
   atoms are empty (zero pixels); they are still traced (instantly) and counted.
+
+  Which atoms a child owns at the start (its strip) is the layout's `order`:
+
+    * `:strips` (the paper, the default): child `i`'s strip is atoms
+      `i*k .. i*k + k - 1`, one contiguous band of the image;
+    * `:interleaved`: child `i` owns atoms `i, i + n, i + 2n, ...`, bands
+      spread over the whole image, so every child's share costs about the
+      same whatever the scene (the sky, the floor and the busy middle).
+
+  The atoms themselves, and so the image, are the same either way.
 
       iex> layout = RingTracer.Layout.new(10, 1, 2, 2)
       iex> Enum.map(RingTracer.Layout.atoms(layout), &RingTracer.Layout.span(layout, &1))
       [{0, 2}, {2, 3}, {5, 2}, {7, 3}]
       iex> RingTracer.Layout.strip(layout, 1)
       [2, 3]
+      iex> RingTracer.Layout.strip(RingTracer.Layout.new(10, 1, 2, 2, :interleaved), 1)
+      [1, 3]
   """
 
   @enforce_keys [:width, :height, :children, :atoms_per_child]
-  defstruct [:width, :height, :children, :atoms_per_child]
+  defstruct [:width, :height, :children, :atoms_per_child, order: :strips]
+
+  @typedoc "Which atoms each child owns at the start: see the module doc."
+  @type order :: :strips | :interleaved
 
   @type t :: %__MODULE__{
           width: pos_integer(),
           height: pos_integer(),
           children: pos_integer(),
-          atoms_per_child: pos_integer()
+          atoms_per_child: pos_integer(),
+          order: order()
         }
   @typedoc "An atom's index, `0..n*k-1`."
   @type atom_id :: non_neg_integer()
 
-  @doc "A layout for a `width` x `height` image, `children` strips of `atoms_per_child` atoms."
-  @spec new(pos_integer(), pos_integer(), pos_integer(), pos_integer()) :: t()
-  def new(width, height, children, atoms_per_child)
+  @doc """
+  A layout for a `width` x `height` image, `children` strips of
+  `atoms_per_child` atoms, in `order` (`:strips` or `:interleaved`).
+  """
+  @spec new(pos_integer(), pos_integer(), pos_integer(), pos_integer(), order()) :: t()
+  def new(width, height, children, atoms_per_child, order \\ :strips)
       when is_integer(width) and width > 0 and is_integer(height) and height > 0 and
              is_integer(children) and children > 0 and is_integer(atoms_per_child) and
-             atoms_per_child > 0 do
+             atoms_per_child > 0 and order in [:strips, :interleaved] do
     %__MODULE__{
       width: width,
       height: height,
       children: children,
-      atoms_per_child: atoms_per_child
+      atoms_per_child: atoms_per_child,
+      order: order
     }
   end
 
@@ -55,15 +74,20 @@ defmodule RingTracer.Layout do
   @spec atoms(t()) :: Range.t()
   def atoms(layout), do: 0..(atom_count(layout) - 1)
 
-  @doc "The atoms of child `i`'s strip, in order."
+  @doc "The atoms of child `i`'s strip, in image order."
   @spec strip(t(), non_neg_integer()) :: [atom_id()]
-  def strip(%__MODULE__{children: n, atoms_per_child: k}, i) when i in 0..(n - 1)//1 do
-    Enum.to_list((i * k)..(i * k + k - 1))
-  end
+  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :strips}, i)
+      when i in 0..(n - 1)//1,
+      do: Enum.to_list((i * k)..(i * k + k - 1))
+
+  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :interleaved}, i)
+      when i in 0..(n - 1)//1,
+      do: Enum.to_list(i..(i + (k - 1) * n)//n)
 
   @doc "The child whose strip holds atom `a` (its original owner)."
   @spec owner(t(), atom_id()) :: non_neg_integer()
-  def owner(%__MODULE__{atoms_per_child: k}, a), do: div(a, k)
+  def owner(%__MODULE__{atoms_per_child: k, order: :strips}, a), do: div(a, k)
+  def owner(%__MODULE__{children: n, order: :interleaved}, a), do: rem(a, n)
 
   @doc "`{first_pixel, pixel_count}` of atom `a`."
   @spec span(t(), atom_id()) :: {non_neg_integer(), non_neg_integer()}

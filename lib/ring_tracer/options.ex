@@ -22,6 +22,7 @@ defmodule RingTracer.Options do
     chaos: {:non_neg_integer, 0},
     hold_after: {:pos_integer, RingTracer.Ring.HelpOffer.default_hold_after()},
     strategy: {:strategy, :ring},
+    layout: {:layout, :strips},
     speeds: {:speeds, []},
     progress: {:pid, nil},
     fail_pixel: {:non_neg_integer, nil},
@@ -144,6 +145,9 @@ defmodule RingTracer.Options do
       do: :ok,
       else: {:error, "one of #{inspect(RingTracer.Strategy.names())}"}
   end
+
+  defp check(:layout, v) when v in [:strips, :interleaved], do: :ok
+  defp check(:layout, _), do: {:error, "one of [:strips, :interleaved]"}
 
   defp check(:speeds, v) when is_list(v) do
     if Enum.all?(v, &(is_number(&1) and &1 >= 1)),

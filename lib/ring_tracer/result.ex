@@ -29,7 +29,8 @@ defmodule RingTracer.Result do
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
       `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
       units (see `RingTracer.Kernel`);
-    * `:strategy` — the strategy's name;
+    * `:strategy` — the strategy's name; `:layout` — `:strips` or
+      `:interleaved` (see `RingTracer.Layout`);
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels
       were still on their way); the first is kept;
@@ -55,6 +56,7 @@ defmodule RingTracer.Result do
     :rays,
     :settings,
     :strategy,
+    layout: :strips,
     duplicates: 0,
     failures: [],
     redone: 0,
@@ -75,6 +77,7 @@ defmodule RingTracer.Result do
           rays: map(),
           settings: RingTracer.Settings.t(),
           strategy: atom(),
+          layout: RingTracer.Layout.order(),
           duplicates: non_neg_integer(),
           failures: [map()],
           redone: non_neg_integer(),

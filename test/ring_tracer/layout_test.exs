@@ -12,6 +12,29 @@ defmodule RingTracer.LayoutTest do
              List.flatten(for i <- 0..2, do: List.duplicate(i, 4))
   end
 
+  test "interleaved strips: child i owns atoms i, i + n, ...; every atom once, owner agrees" do
+    for {n, k} <- [{3, 4}, {1, 5}, {8, 16}, {5, 1}] do
+      layout = Layout.new(40, 30, n, k, :interleaved)
+      strips = for i <- 0..(n - 1), do: Layout.strip(layout, i)
+
+      assert Enum.sort(List.flatten(strips)) == Enum.to_list(Layout.atoms(layout))
+      assert Enum.all?(strips, &(length(&1) == k))
+
+      for {strip, i} <- Enum.with_index(strips), a <- strip do
+        assert Layout.owner(layout, a) == i
+        assert rem(a, n) == i
+      end
+    end
+
+    # The atoms themselves do not depend on the order.
+    spans = fn order ->
+      layout = Layout.new(7, 5, 3, 4, order)
+      Enum.map(Layout.atoms(layout), &Layout.span(layout, &1))
+    end
+
+    assert spans.(:interleaved) == spans.(:strips)
+  end
+
   test "more atoms than pixels leaves some atoms empty but still tiles the image" do
     layout = Layout.new(2, 1, 3, 2)
     spans = Enum.map(Layout.atoms(layout), &Layout.span(layout, &1))

@@ -8,6 +8,7 @@ defmodule RingTracer.OptionsTest do
     {:ok, opts} = Options.validate([])
     assert opts[:children] == System.schedulers_online()
     assert opts[:atoms] == 16
+    assert opts[:layout] == :strips
   end
 
   test "each bad option is named" do
@@ -17,6 +18,7 @@ defmodule RingTracer.OptionsTest do
           {[spd: 1], ":spd"},
           {[nodes: ["a@b"]], ":nodes"},
           {[timeout: 0], ":timeout"},
+          {[layout: :spiral], ":layout"},
           {[bogus: 1], ":bogus"}
         ] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =

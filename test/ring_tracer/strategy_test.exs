@@ -27,6 +27,32 @@ defmodule RingTracer.StrategyTest do
     end
   end
 
+  test "the interleaved layout gives the same image; each child starts with atoms i, i + N, ..." do
+    reference = TestScenes.reference(@scene, 40, 30)
+
+    for strategy <- RingTracer.Strategy.names() do
+      {:ok, result} =
+        RingTracer.render(TestScenes.path(@scene),
+          strategy: strategy,
+          layout: :interleaved,
+          speeds: [1, 3, 1],
+          children: 3,
+          atoms: 6,
+          width: 40,
+          height: 30
+        )
+
+      assert result.pixels == reference, "#{strategy}"
+      assert result.layout == :interleaved
+      assert Enum.all?(result.atoms, &(&1.owner == rem(&1.atom, 3)))
+      # The master owns every atom itself and hands them out in image order.
+      own = if strategy == :master, do: 0, else: 6
+      assert Enum.all?(result.children, &(&1.own == own)), "#{strategy}"
+
+      if strategy == :static, do: assert(Enum.all?(result.atoms, &(&1.child == &1.owner)))
+    end
+  end
+
   test "static never hands atoms over; master hands every atom out; ring counts balance" do
     path = TestScenes.path(@scene)
 

@@ -18,6 +18,8 @@ defmodule Mix.Tasks.RingTracer.Render do
     * `--samples S` — S x S samples per pixel (default 1)
     * `--spd` — the SPD testing procedure (pixel corners, no cut-off)
     * `--strategy S` — `ring` (default), `static`, `master` or `steal`
+    * `--layout L` — `strips` (the paper's contiguous strips, default) or
+      `interleaved` (child i owns atoms i, i + N, i + 2N, ...)
     * `--speeds 1,1,4,1` — slowdown factor of each child (cyclic)
     * `--stats FILE` — the job's statistics as `.json` or `.csv`
     * `--timeline FILE.svg` — one lane per child, every atom a bar coloured
@@ -52,6 +54,7 @@ defmodule Mix.Tasks.RingTracer.Render do
     samples: :integer,
     spd: :boolean,
     strategy: :string,
+    layout: :string,
     speeds: :string,
     stats: :string,
     timeline: :string,
@@ -87,6 +90,7 @@ defmodule Mix.Tasks.RingTracer.Render do
       |> Keyword.drop([:out, :stats, :timeline, :ownership, :sname, :name, :cookie])
       |> parse_nodes()
       |> parse_strategy()
+      |> parse_layout()
       |> parse_speeds()
 
     with {:ok, result} <- render(scene, render_opts),
@@ -136,6 +140,15 @@ defmodule Mix.Tasks.RingTracer.Render do
           strategy ->
             Keyword.put(opts, :strategy, strategy)
         end
+    end
+  end
+
+  defp parse_layout(opts) do
+    case opts[:layout] do
+      nil -> opts
+      "strips" -> Keyword.put(opts, :layout, :strips)
+      "interleaved" -> Keyword.put(opts, :layout, :interleaved)
+      other -> Mix.raise("--layout must be strips or interleaved, got: #{other}")
     end
   end
 
