@@ -15,10 +15,11 @@ defmodule Mix.Tasks.RingTracer.Bench do
   Each real scenario also runs the ring on interleaved strips
   (`ring/interleaved`, `layout: :interleaved`: child i owns atoms i, i + N,
   ...; see `RingTracer.Layout`), which shows how much of the ring's loss
-  comes with the paper's contiguous strips. For each real scenario a `floor` row runs the same atoms and speeds with
-  no protocol at all (N processes calling the kernel, taking atoms from one
-  shared counter): the distance from it to 1.0 is this machine's cost of
-  dirty NIF calls, not load balancing. Images are 1024x1024 by default: at
+  comes with the paper's contiguous strips. For each real scenario a
+  `floor` row runs the same atoms and speeds with no protocol at all (N
+  processes calling the kernel, taking atoms from one shared counter): the
+  distance from it to 1.0 is this machine's cost of dirty NIF calls, not
+  load balancing. Images are 1024x1024 by default: at
   512x512 the real jobs last 20 to 170 ms, and one atom or one scheduling
   hiccup is then several percent of the makespan even for the `floor`.
   Under the table it checks issue 4's targets against it, each "ok" or
@@ -177,14 +178,14 @@ defmodule Mix.Tasks.RingTracer.Bench do
     # the next atom from one `:atomics` counter. What is left between the
     # floor and 1.0 is this machine's cost of running dirty NIFs, not load
     # balancing. Each row: one warm-up, then the median of `runs`.
+    # Every strategy on the paper's strips, then the ring once more on
+    # interleaved strips (`layout: :interleaved`).
+    runs_of =
+      Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), &1, :strips}) ++
+        [{"ring/interleaved", :ring, :interleaved}]
+
     rows =
       Enum.flat_map(real, fn {label, path, job} ->
-        # Every strategy on the paper's strips, then the ring once more on
-        # interleaved strips (`layout: :interleaved`).
-        runs_of =
-          Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), &1, :strips}) ++
-            [{"ring/interleaved", :ring, :interleaved}]
-
         strategies =
           for {name, strategy, layout} <- runs_of do
             render = fn ->
