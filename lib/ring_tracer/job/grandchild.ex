@@ -36,13 +36,16 @@ defmodule RingTracer.Job.Grandchild do
     receive do
       {:trace, atom} ->
         # The child may have taken the atom back for a sibling (`Pipe`).
-        if Pipe.claim(self(), atom) do
-          {message, slowdown} = trace(kernel, layout, slowdown, atom)
-          send(child, message)
-          loop(child, kernel, layout, slowdown)
-        else
-          loop(child, kernel, layout, slowdown)
-        end
+        slowdown =
+          if Pipe.claim(self(), atom) do
+            {message, slowdown} = trace(kernel, layout, slowdown, atom)
+            send(child, message)
+            slowdown
+          else
+            slowdown
+          end
+
+        loop(child, kernel, layout, slowdown)
     end
   end
 
