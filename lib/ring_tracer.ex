@@ -221,12 +221,8 @@ defmodule RingTracer do
         end
 
         case reply do
-          {:ok, raw} ->
-            result = Result.new(settings, opts[:strategy], capacity_cap, raw)
-            {:ok, %{result | layout: opts[:layout]}}
-
-          {:error, message} ->
-            {:error, Error.new(:render_failed, message)}
+          {:ok, raw} -> {:ok, Result.new(settings, opts[:strategy], capacity_cap, raw)}
+          {:error, message} -> {:error, Error.new(:render_failed, message)}
         end
 
       {:DOWN, ^ref, _, _, reason} ->

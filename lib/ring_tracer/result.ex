@@ -111,7 +111,8 @@ defmodule RingTracer.Result do
       duplicates: raw.duplicates,
       failures: raw.failures,
       redone: raw.redone,
-      nodes: raw.nodes
+      nodes: raw.nodes,
+      layout: raw.layout
     }
   end
 

@@ -393,7 +393,8 @@ defmodule RingTracer.Job.Parent do
              duplicates: state.duplicates,
              failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
              redone: state.redone,
-             nodes: node_summary(state, reports)
+             nodes: node_summary(state, reports),
+             layout: state.spec.layout.order
            }}
 
         {:error, message} ->
