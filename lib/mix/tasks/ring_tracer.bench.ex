@@ -173,13 +173,13 @@ defmodule Mix.Tasks.RingTracer.Bench do
       {"teapot, 4 equal", "priv/scenes/spd/teapot_s12.nff", children: 4, speeds: []}
     ]
 
-    # Per scenario: every strategy, then the floor: the same atoms and speeds
-    # with no protocol at all, N plain processes calling the kernel and taking
-    # the next atom from one `:atomics` counter. What is left between the
-    # floor and 1.0 is this machine's cost of running dirty NIFs, not load
-    # balancing. Each row: one warm-up, then the median of `runs`.
-    # Every strategy on the paper's strips, then the ring once more on
-    # interleaved strips (`layout: :interleaved`).
+    # Per scenario: every strategy on the paper's strips, the ring once more
+    # on interleaved strips (`layout: :interleaved`), then the floor: the same
+    # atoms and speeds with no protocol at all, N plain processes calling the
+    # kernel and taking the next atom from one `:atomics` counter. What is
+    # left between the floor and 1.0 is this machine's cost of running dirty
+    # NIFs, not load balancing. Each row: one warm-up, then the median of
+    # `runs`.
     runs_of =
       Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), &1, :strips}) ++
         [{"ring/interleaved", :ring, :interleaved}]
@@ -206,16 +206,16 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
         strategies ++
           [
-            [
-              label,
-              "floor",
-              fmt(f.elapsed_us / 1000),
-              fmt(f.ideal_us / 1000),
-              fmt(f.elapsed_us / f.ideal_us),
-              "-",
-              "0",
-              "-"
-            ]
+            %{
+              scenario: label,
+              strategy: "floor",
+              makespan_us: f.elapsed_us,
+              ideal_us: f.ideal_us,
+              ratio: f.elapsed_us / f.ideal_us,
+              idle_pct: nil,
+              msgs: 0.0,
+              bytes: nil
+            }
           ]
       end)
 
@@ -245,7 +245,10 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
     print_table(
       ~w(scenario strategy makespan_ms ideal_ms makespan/ideal idle% msgs/atom bytes/atom),
-      rows ++ sim_rows
+      Enum.map(rows ++ sim_rows, fn r ->
+        [r.scenario, r.strategy, fmt(r.makespan_us / 1000), fmt(r.ideal_us / 1000)] ++
+          Enum.map([r.ratio, r.idle_pct, r.msgs, r.bytes], &(&1 && fmt(&1)))
+      end)
     )
 
     print_targets(Enum.map(real, &elem(&1, 0)), rows ++ sim_rows)
@@ -365,16 +368,16 @@ defmodule Mix.Tasks.RingTracer.Bench do
     idle = Enum.sum(Enum.map(result.children, & &1.idle_us)) / max(n * result.elapsed_us, 1)
     per = RingTracer.Result.per_atom(result)
 
-    [
-      label,
-      name,
-      fmt(result.elapsed_us / 1000),
-      fmt(result.ideal_us / 1000),
-      fmt(result.elapsed_us / max(result.ideal_us, 1)),
-      fmt(idle * 100),
-      fmt(per.messages),
-      fmt(per.bytes)
-    ]
+    %{
+      scenario: label,
+      strategy: name,
+      makespan_us: result.elapsed_us,
+      ideal_us: result.ideal_us,
+      ratio: result.elapsed_us / max(result.ideal_us, 1),
+      idle_pct: idle * 100,
+      msgs: per.messages,
+      bytes: per.bytes
+    }
   end
 
   defp pov_times(nil, _file, _size, _threads, _runs), do: nil
@@ -424,21 +427,21 @@ defmodule Mix.Tasks.RingTracer.Bench do
   defp secs(us), do: fmt(us / 1_000_000)
   defp fmt(x), do: :erlang.float_to_binary(x / 1, decimals: 3)
 
-  # Issue 4's targets, read back from the table: each says "ok" or "MISSED".
+  # Issue 4's targets against the table's rows: each says "ok" or "MISSED".
   defp print_targets(real, rows) do
-    value = fn scenario, strategy, column ->
-      case Enum.find(rows, &match?([^scenario, ^strategy | _], &1)) do
-        nil -> nil
-        row -> row |> Enum.at(column) |> Float.parse() |> elem(0)
-      end
+    value = fn scenario, strategy, key ->
+      Enum.find_value(rows, &(&1.scenario == scenario and &1.strategy == strategy and &1[key]))
     end
 
-    ratio = &value.(&1, &2, 4)
-    msgs = &value.(&1, &2, 6)
+    ratio = &value.(&1, &2, :ratio)
+    msgs = &value.(&1, &2, :msgs)
     verdict = fn ok -> if ok, do: "ok", else: "MISSED" end
 
     sims =
-      rows |> Enum.map(&hd/1) |> Enum.filter(&String.starts_with?(&1, "simulated")) |> Enum.uniq()
+      rows
+      |> Enum.map(& &1.scenario)
+      |> Enum.filter(&String.starts_with?(&1, "simulated"))
+      |> Enum.uniq()
 
     lines = [
       "ring <= 1.10 x ideal:" <>
