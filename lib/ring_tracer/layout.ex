@@ -34,6 +34,12 @@ defmodule RingTracer.Layout do
   @typedoc "Which atoms each child owns at the start: see the module doc."
   @type order :: :strips | :interleaved
 
+  @orders [:strips, :interleaved]
+
+  @doc "The orders a layout can have, the default first."
+  @spec orders() :: [order()]
+  def orders, do: @orders
+
   @type t :: %__MODULE__{
           width: pos_integer(),
           height: pos_integer(),
@@ -52,7 +58,7 @@ defmodule RingTracer.Layout do
   def new(width, height, children, atoms_per_child, order \\ :strips)
       when is_integer(width) and width > 0 and is_integer(height) and height > 0 and
              is_integer(children) and children > 0 and is_integer(atoms_per_child) and
-             atoms_per_child > 0 and order in [:strips, :interleaved] do
+             atoms_per_child > 0 and order in @orders do
     %__MODULE__{
       width: width,
       height: height,

@@ -146,8 +146,11 @@ defmodule RingTracer.Options do
       else: {:error, "one of #{inspect(RingTracer.Strategy.names())}"}
   end
 
-  defp check(:layout, v) when v in [:strips, :interleaved], do: :ok
-  defp check(:layout, _), do: {:error, "one of [:strips, :interleaved]"}
+  defp check(:layout, v) do
+    if v in RingTracer.Layout.orders(),
+      do: :ok,
+      else: {:error, "one of #{inspect(RingTracer.Layout.orders())}"}
+  end
 
   defp check(:speeds, v) when is_list(v) do
     if Enum.all?(v, &(is_number(&1) and &1 >= 1)),

@@ -89,8 +89,8 @@ defmodule Mix.Tasks.RingTracer.Render do
       opts
       |> Keyword.drop([:out, :stats, :timeline, :ownership, :sname, :name, :cookie])
       |> parse_nodes()
-      |> parse_strategy()
-      |> parse_layout()
+      |> parse_choice(:strategy, RingTracer.Strategy.names())
+      |> parse_choice(:layout, RingTracer.Layout.orders())
       |> parse_speeds()
 
     with {:ok, result} <- render(scene, render_opts),
@@ -125,30 +125,17 @@ defmodule Mix.Tasks.RingTracer.Render do
     end
   end
 
-  defp parse_strategy(opts) do
-    case opts[:strategy] do
+  # `--strategy` and `--layout`: a name among `choices` (atoms), or absent.
+  defp parse_choice(opts, key, choices) do
+    case opts[key] do
       nil ->
         opts
 
       name ->
-        case Enum.find(RingTracer.Strategy.names(), &(Atom.to_string(&1) == name)) do
-          nil ->
-            Mix.raise(
-              "--strategy must be one of #{Enum.join(RingTracer.Strategy.names(), ", ")}, got: #{name}"
-            )
-
-          strategy ->
-            Keyword.put(opts, :strategy, strategy)
+        case Enum.find(choices, &(Atom.to_string(&1) == name)) do
+          nil -> Mix.raise("--#{key} must be one of #{Enum.join(choices, ", ")}, got: #{name}")
+          choice -> Keyword.put(opts, key, choice)
         end
-    end
-  end
-
-  defp parse_layout(opts) do
-    case opts[:layout] do
-      nil -> opts
-      "strips" -> Keyword.put(opts, :layout, :strips)
-      "interleaved" -> Keyword.put(opts, :layout, :interleaved)
-      other -> Mix.raise("--layout must be strips or interleaved, got: #{other}")
     end
   end
 

@@ -26,7 +26,8 @@ defmodule RingTracer.Strategy.Ring do
   def idle(child) do
     seq = seq(child) + 1
 
-    {heard, child} = hear(child, [])
+    rate = Child.rate(child)
+    {heard, child} = hear(child, rate, [])
 
     offer =
       %HelpOffer{
@@ -34,7 +35,7 @@ defmodule RingTracer.Strategy.Ring do
         pid: self(),
         seq: seq,
         via: self(),
-        rate: Child.rate(child),
+        rate: rate,
         atom_us: Child.mean_atom_us(child),
         heard: heard
       }
@@ -89,14 +90,15 @@ defmodule RingTracer.Strategy.Ring do
 
     # What the offer heard goes into what we know; what we know goes on with
     # the offer.
-    {heard, child} = hear(child, offer.heard)
+    rate = Child.rate(child)
+    {heard, child} = hear(child, rate, offer.heard)
     offer = %{offer | heard: heard}
 
     view = %{
       index: child.index,
       remaining: remaining,
       in_flight: in_flight,
-      rate: Child.rate(child),
+      rate: rate,
       heard: heard,
       ring_size: tuple_size(child.siblings) - length(child.dead),
       offer_seq: if(child.status == :offered, do: child.strategy_state[:current]),
@@ -193,9 +195,9 @@ defmodule RingTracer.Strategy.Ring do
   defp seq(child), do: child.strategy_state[:seq] || 0
 
   # What a child has heard of the fastest siblings, with `news` and its own
-  # newest rate added and dead siblings left out; kept, and returned.
-  defp hear(child, news) do
-    mine = {Child.rate(child), child.index, child.done}
+  # newest `rate` added and dead siblings left out; kept, and returned.
+  defp hear(child, rate, news) do
+    mine = {rate, child.index, child.done}
     known = child.strategy_state[:heard] || []
 
     dead? = fn {_, i, _} -> i in child.dead end
