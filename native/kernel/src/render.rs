@@ -115,15 +115,34 @@ fn jitter(pixel: u64, sample: u64) -> (f32, f32) {
     (a, b)
 }
 
-fn check_span(settings: &Settings, start: u64, count: u64) -> Result<u64, Error> {
-    settings.validate()?;
-    let total = settings.width as u64 * settings.height as u64;
-    match start.checked_add(count) {
-        Some(end) if end <= total => Ok(end),
-        _ => Err(Error::InvalidArgument(format!(
-            "pixel span {start}+{count} is outside the {}x{} image ({total} pixels)",
-            settings.width, settings.height
-        ))),
+impl Settings {
+    /// Checks the settings, and that `count` pixels from linear index `start` lie inside the
+    /// image; returns the end of the span (exclusive).
+    ///
+    /// ```
+    /// use ring_tracer_kernel::Settings;
+    /// let s = Settings {
+    ///     width: 4,
+    ///     height: 2,
+    ///     depth: 5,
+    ///     cutoff: 0.0,
+    ///     samples: 1,
+    ///     spd: false,
+    ///     fail_pixel: None,
+    /// };
+    /// assert_eq!(s.span_end(5, 3).unwrap(), 8);
+    /// assert!(s.span_end(5, 4).is_err());
+    /// ```
+    pub fn span_end(&self, start: u64, count: u64) -> Result<u64, Error> {
+        self.validate()?;
+        let total = self.width as u64 * self.height as u64;
+        match start.checked_add(count) {
+            Some(end) if end <= total => Ok(end),
+            _ => Err(Error::InvalidArgument(format!(
+                "pixel span {start}+{count} is outside the {}x{} image ({total} pixels)",
+                self.width, self.height
+            ))),
+        }
     }
 }
 
@@ -137,19 +156,58 @@ pub fn trace_span(
     start: u64,
     count: u64,
 ) -> Result<(Vec<f32>, RayStats), Error> {
-    let end = check_span(settings, start, count)?;
+    settings.span_end(start, count)?;
+    let mut out = vec![0.0f32; count as usize * 3];
+    let stats = trace_span_into(scene, settings, start, &mut out)?;
+    Ok((out, stats))
+}
+
+/// [`trace_span`] into a buffer the caller owns: `out.len() / 3` pixels from `start`, each
+/// written once, in place. The NIF traces straight into the binary it returns.
+///
+/// ```
+/// use ring_tracer_kernel::{trace_span, trace_span_into, Format, Scene, Settings};
+/// let nff = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n\
+///            l 0 5 5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n";
+/// let no_files = |_: &str| Err("no files".to_string());
+/// let scene = Scene::parse(nff.as_bytes(), Format::Nff, "doc.nff", &no_files).unwrap();
+/// let settings = Settings::for_scene(&scene);
+/// let mut out = vec![0.0; 5 * 3];
+/// let stats = trace_span_into(&scene, &settings, 6, &mut out).unwrap();
+/// assert_eq!((out, stats), trace_span(&scene, &settings, 6, 5).unwrap());
+/// assert!(trace_span_into(&scene, &settings, 0, &mut [0.0; 4]).is_err());
+/// ```
+pub fn trace_span_into(
+    scene: &Scene,
+    settings: &Settings,
+    start: u64,
+    out: &mut [f32],
+) -> Result<RayStats, Error> {
+    if !out.len().is_multiple_of(3) {
+        return Err(Error::InvalidArgument(format!(
+            "a pixel buffer holds 3 floats a pixel, got {} floats",
+            out.len()
+        )));
+    }
+    let count = (out.len() / 3) as u64;
+    let end = settings.span_end(start, count)?;
     if let Some(p) = settings.fail_pixel {
         if (start..end).contains(&p) {
             panic!("test hook: tracing pixel {p} (Settings::fail_pixel)");
         }
     }
-    let mut out = Vec::with_capacity(count as usize * 3);
     let mut stats = RayStats::default();
     if count == 0 {
-        return Ok((out, stats));
+        return Ok(stats);
     }
     let integ = settings.integrator();
     let mut scratch = Scratch::new();
+    let mut pixels = out.chunks_exact_mut(3);
+    let mut put = |c: Vec3A| {
+        if let Some(p) = pixels.next() {
+            p.copy_from_slice(&[c.x, c.y, c.z]);
+        }
+    };
     if settings.spd {
         spd_span(
             scene,
@@ -158,7 +216,7 @@ pub fn trace_span(
             start,
             end,
             &mut scratch,
-            &mut out,
+            &mut put,
             &mut stats,
         );
     } else {
@@ -192,14 +250,14 @@ pub fn trace_span(
                 }
                 acc * inv
             };
-            out.extend_from_slice(&[c.x, c.y, c.z]);
+            put(c);
         }
     }
     if scene.display_referred() {
         out.iter_mut().for_each(|v| *v = crate::film::from_srgb(*v));
     }
     stats.work = scratch.work + stats.total();
-    Ok((out, stats))
+    Ok(stats)
 }
 
 /// SPD corner mode: each needed corner traced once per span; a corner's rays counted only in the
@@ -212,7 +270,7 @@ fn spd_span(
     start: u64,
     end: u64,
     scratch: &mut Scratch,
-    out: &mut Vec<f32>,
+    put: &mut impl FnMut(Vec3A),
     stats: &mut RayStats,
 ) {
     let (w, h) = (settings.width, settings.height);
@@ -271,7 +329,7 @@ fn spd_span(
             };
             let c =
                 (get(&top, x) + get(&top, x + 1) + get(&bottom, x) + get(&bottom, x + 1)) * 0.25;
-            out.extend_from_slice(&[c.x, c.y, c.z]);
+            put(c);
         }
         std::mem::swap(&mut top, &mut bottom);
         bottom.iter_mut().for_each(|s| *s = None);

@@ -1,7 +1,8 @@
 //! End-to-end tests: golden pixels, determinism across spans and threads, image round trips.
 
 use ring_tracer_kernel::{
-    encode_png, render_image, to_srgb8, trace_span, write_image, Format, RayStats, Scene, Settings,
+    encode_png, render_image, to_srgb8, trace_span, trace_span_into, write_image, Format, RayStats,
+    Scene, Settings,
 };
 
 fn no_files(_: &str) -> Result<Vec<u8>, String> {
@@ -158,6 +159,15 @@ fn check_splits(settings: &Settings) {
         }
         assert_eq!(bits(&whole), bits(&pixels), "cuts {cuts:?}");
         assert_eq!(rays(whole_stats), rays(stats), "cuts {cuts:?}");
+        // the same pieces traced in place into one buffer: every float written, none twice
+        let mut buffer = vec![f32::NAN; whole.len()];
+        let mut start = 0;
+        for &c in cuts.iter().chain(std::iter::once(&n)) {
+            let piece = &mut buffer[(start * 3) as usize..(c * 3) as usize];
+            trace_span_into(&scene, settings, start, piece).unwrap();
+            start = c;
+        }
+        assert_eq!(bits(&whole), bits(&buffer), "in place, cuts {cuts:?}");
     }
     assert!(whole_stats.eye_hits > 0 && whole_stats.shadow > 0);
     assert!(whole_stats.reflected > 0 && whole_stats.refracted > 0);
@@ -196,6 +206,9 @@ fn span_arguments_checked() {
     let scene = nff(GOLDEN);
     let s = Settings::for_scene(&scene);
     assert!(trace_span(&scene, &s, 40, 9).is_err());
+    assert!(trace_span_into(&scene, &s, 40, &mut [0.0; 27]).is_err());
+    // a buffer must hold whole pixels
+    assert!(trace_span_into(&scene, &s, 0, &mut [0.0; 4]).is_err());
     assert!(trace_span(&scene, &s, u64::MAX, 2).is_err());
     assert_eq!(trace_span(&scene, &s, 48, 0).unwrap().0.len(), 0);
     let bad = Settings {

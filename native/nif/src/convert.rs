@@ -65,10 +65,15 @@ pub fn message(e: Error) -> String {
 /// Linear RGB floats as one binary of native-endian `f32`s, 12 bytes a pixel.
 pub fn floats_to_binary<'a>(env: Env<'a>, rgb: &[f32]) -> Result<Binary<'a>, String> {
     let mut bin = OwnedBinary::new(std::mem::size_of_val(rgb));
-    for (dst, v) in bin.as_mut_slice().chunks_exact_mut(4).zip(rgb) {
-        dst.copy_from_slice(&v.to_ne_bytes());
-    }
+    copy_floats(bin.as_mut_slice(), rgb);
     Ok(bin.release(env))
+}
+
+/// `rgb` as native-endian bytes into `dst` (as long as both last).
+pub fn copy_floats(dst: &mut [u8], rgb: &[f32]) {
+    for (d, v) in dst.chunks_exact_mut(4).zip(rgb) {
+        d.copy_from_slice(&v.to_ne_bytes());
+    }
 }
 
 /// The inverse of [`floats_to_binary`].

@@ -1,17 +1,22 @@
 //! Tracing: one atom (a span of pixels) for a grandchild, or a whole image
 //! with the kernel's own threads for benchmarks and references.
 
-use ring_tracer_kernel::{render_image as kernel_render_image, trace_span};
+use ring_tracer_kernel::{render_image as kernel_render_image, trace_span, trace_span_into};
 use std::time::Instant;
 
-use rustler::{Binary, Env, ResourceArc};
+use rustler::{Binary, Env, OwnedBinary, ResourceArc};
 
-use crate::convert::{floats_to_binary, message, RayStatsTerm, SettingsTerm};
+use crate::convert::{copy_floats, floats_to_binary, message, RayStatsTerm, SettingsTerm};
 use crate::scene::SceneResource;
 
 /// Traces `count` pixels from linear index `start`: linear RGB as f32
 /// binary, the ray counters, and the microseconds spent tracing (measured
 /// here, so time spent waiting for a dirty scheduler is not counted).
+///
+/// The pixels are traced straight into the binary returned. Tracing into a
+/// vector and copying it into a binary cost 50 µs (allocation and copy) and
+/// 27 µs (freeing the vector) a 16,384-pixel atom, on a dirty scheduler but
+/// outside the measured time.
 #[rustler::nif(schedule = "DirtyCpu")]
 fn trace_atom<'a>(
     env: Env<'a>,
@@ -21,10 +26,20 @@ fn trace_atom<'a>(
     count: u64,
 ) -> Result<(Binary<'a>, RayStatsTerm, u64), String> {
     let settings = settings.to_kernel()?;
+    settings.span_end(start, count).map_err(message)?;
+    let mut bin = OwnedBinary::new(count as usize * 12);
     let t0 = Instant::now();
-    let (rgb, stats) = trace_span(&scene.scene, &settings, start, count).map_err(message)?;
+    let stats = match bytemuck::try_cast_slice_mut::<u8, f32>(bin.as_mut_slice()) {
+        Ok(out) => trace_span_into(&scene.scene, &settings, start, out),
+        // Not aligned for f32 (the runtime does not promise it): through a vector.
+        Err(_) => trace_span(&scene.scene, &settings, start, count).map(|(rgb, stats)| {
+            copy_floats(bin.as_mut_slice(), &rgb);
+            stats
+        }),
+    }
+    .map_err(message)?;
     let micros = t0.elapsed().as_micros() as u64;
-    Ok((floats_to_binary(env, &rgb)?, stats.into(), micros))
+    Ok((bin.release(env), stats.into(), micros))
 }
 
 /// Traces the whole image with `threads` OS threads inside this one NIF call.
