@@ -156,6 +156,7 @@ pub fn trace_span(
     start: u64,
     count: u64,
 ) -> Result<(Vec<f32>, RayStats), Error> {
+    // checked before allocating: a span outside the image must not size a buffer
     settings.span_end(start, count)?;
     let mut out = vec![0.0f32; count as usize * 3];
     let stats = trace_span_into(scene, settings, start, &mut out)?;
