@@ -69,7 +69,7 @@ pub fn floats_to_binary<'a>(env: Env<'a>, rgb: &[f32]) -> Result<Binary<'a>, Str
     Ok(bin.release(env))
 }
 
-/// `rgb` as native-endian bytes into `dst` (as long as both last).
+/// `rgb` as native-endian bytes into `dst`, as many floats as both hold.
 pub fn copy_floats(dst: &mut [u8], rgb: &[f32]) {
     for (d, v) in dst.chunks_exact_mut(4).zip(rgb) {
         d.copy_from_slice(&v.to_ne_bytes());
