@@ -91,8 +91,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
     Mix.shell().info(
       "#{size}x#{size}, depth 5, #{threads} kernel threads, ring of #{children} children x #{atoms} atoms, " <>
-        "median of #{runs}; #{System.schedulers_online()} schedulers, " <>
-        "#{:erlang.system_info(:dirty_cpu_schedulers_online)} dirty CPU schedulers" <>
+        "median of #{runs}; #{vm()}" <>
         if(povray, do: "", else: "; povray not installed (apt-get install povray)")
     )
 
@@ -162,7 +161,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
     Mix.shell().info(
       "strategy x scenario: makespan/ideal, idle %, messages and bytes per atom " <>
-        "(#{size}x#{size}, #{k} atoms per child; #{:erlang.system_info(:dirty_cpu_schedulers_online)} dirty CPU schedulers)"
+        "(#{size}x#{size}, #{k} atoms per child; #{vm()})"
     )
 
     real = [
@@ -426,6 +425,19 @@ defmodule Mix.Tasks.RingTracer.Bench do
   defp median(list), do: Enum.at(Enum.sort(list), div(length(list), 2))
   defp secs(us), do: fmt(us / 1_000_000)
   defp fmt(x), do: :erlang.float_to_binary(x / 1, decimals: 3)
+
+  # The VM the figures come from: its schedulers, and the flags that decide
+  # whether idle schedulers spin (`bin/ringtracer` sets them in ERL_FLAGS).
+  defp vm do
+    flags =
+      case System.get_env("ERL_FLAGS", "") do
+        "" -> "ERL_FLAGS unset"
+        f -> "ERL_FLAGS #{inspect(f)}"
+      end
+
+    "#{System.schedulers_online()} schedulers, " <>
+      "#{:erlang.system_info(:dirty_cpu_schedulers_online)} dirty CPU schedulers, #{flags}"
+  end
 
   # Issue 4's targets against the table's rows: each says "ok" or "MISSED".
   defp print_targets(real, rows) do
