@@ -39,6 +39,16 @@ defmodule RingTracer.Kernel do
   @callback trace(context(), non_neg_integer(), non_neg_integer(), non_neg_integer()) ::
               {:ok, binary(), map(), non_neg_integer()} | {:error, String.t()}
 
+  @doc """
+  Optional: an estimate of each atom's work, in the `:work` units of
+  `trace/4`, as a tuple by atom, for strategies that send help where the
+  work is (`RingTracer.Ring.Aim`). Called once per job, on the parent's
+  node, while the children start.
+  """
+  @callback atom_work(Spec.t(), keyword()) :: {:ok, tuple()} | {:error, String.t()}
+
+  @optional_callbacks atom_work: 2
+
   @doc "Zeroed ray counters (and work units)."
   @spec no_rays() :: map()
   def no_rays, do: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0, work: 0}

@@ -95,6 +95,31 @@ defmodule RingTracer.Layout do
   def owner(%__MODULE__{atoms_per_child: k, order: :strips}, a), do: div(a, k)
   def owner(%__MODULE__{children: n, order: :interleaved}, a), do: rem(a, n)
 
+  @doc """
+  Each atom's share of per-row work (`rows`: one number per image row, top
+  first): from every row it covers, the row's work times the fraction of
+  the row's pixels it holds. A tuple, by atom.
+
+      iex> layout = RingTracer.Layout.new(4, 2, 2, 2)
+      iex> RingTracer.Layout.work_by_atom(layout, {8, 4})
+      {4.0, 4.0, 2.0, 2.0}
+      iex> RingTracer.Layout.work_by_atom(RingTracer.Layout.new(4, 2, 1, 3), {8, 4})
+      {4.0, 5.0, 3.0}
+  """
+  @spec work_by_atom(t(), tuple()) :: tuple()
+  def work_by_atom(%__MODULE__{width: w, height: h} = layout, rows) when tuple_size(rows) == h do
+    for a <- atoms(layout) do
+      {first, count} = span(layout, a)
+      last = first + count - 1
+
+      Enum.reduce(div(first, w)..div(last, w)//1, 0.0, fn r, acc ->
+        covered = min(last, r * w + w - 1) - max(first, r * w) + 1
+        acc + elem(rows, r) * covered / w
+      end)
+    end
+    |> List.to_tuple()
+  end
+
   @doc "`{first_pixel, pixel_count}` of atom `a`."
   @spec span(t(), atom_id()) :: {non_neg_integer(), non_neg_integer()}
   def span(layout, a) do

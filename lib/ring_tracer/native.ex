@@ -27,6 +27,7 @@ defmodule RingTracer.Native do
   def scene_live_count, do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
   def render_image(_scene, _settings, _threads), do: err()
+  def row_work(_scene, _settings), do: err()
   def validate_settings(_settings), do: err()
   def write_image(_path, _width, _height, _pixels), do: err()
   def encode_png(_width, _height, _pixels), do: err()

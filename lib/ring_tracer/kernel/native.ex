@@ -6,7 +6,11 @@ defmodule RingTracer.Kernel.Native do
   """
   @behaviour RingTracer.Kernel
 
-  alias RingTracer.{Native, SceneCache, Settings}
+  alias RingTracer.{Layout, Native, SceneCache, Settings}
+
+  # Pixels of the preview that `atom_work/2` traces (about 0.1% of a
+  # 1024x1024 image).
+  @preview_pixels 1024
 
   @impl RingTracer.Kernel
   def prepare(spec, _opts) do
@@ -28,6 +32,27 @@ defmodule RingTracer.Kernel.Native do
     end
   rescue
     e in ErlangError -> {:error, "#{node}: #{Exception.message(e)}"}
+  end
+
+  @doc """
+  Each atom's work, estimated from a preview: the same scene and settings
+  traced at about #{@preview_pixels} pixels in one kernel call, each image
+  row taking the work of the preview row it falls in.
+  """
+  @impl RingTracer.Kernel
+  def atom_work(%{settings: %Settings{width: w, height: h} = settings} = spec, opts) do
+    scale = max(1.0, :math.sqrt(w * h / @preview_pixels))
+    {pw, ph} = {max(1, round(w / scale)), max(1, round(h / scale))}
+    preview = Settings.to_native(%{settings | width: pw, height: ph, fail_pixel: nil})
+
+    with {:ok, {scene, _}} <- prepare(spec, opts),
+         {:ok, rows} <- Native.row_work(scene.ref, preview) do
+      rows = List.to_tuple(rows)
+      per_row = List.to_tuple(for r <- 0..(h - 1), do: elem(rows, div(r * ph, h)) * w / pw)
+      {:ok, Layout.work_by_atom(spec.layout, per_row)}
+    end
+  rescue
+    e in ErlangError -> {:error, "kernel raised: #{Exception.message(e)}"}
   end
 
   @impl RingTracer.Kernel

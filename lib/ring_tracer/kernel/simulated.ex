@@ -38,6 +38,13 @@ defmodule RingTracer.Kernel.Simulated do
   @impl RingTracer.Kernel
   def prepare_node(_spec, _opts, _node), do: {:ok, 0}
 
+  @doc "Each atom's work: its cost in the model (an exact preview)."
+  @impl RingTracer.Kernel
+  def atom_work(spec, opts) do
+    costs = Keyword.get(opts, :costs, 2000)
+    {:ok, List.to_tuple(for a <- RingTracer.Layout.atoms(spec.layout), do: cost(costs, a))}
+  end
+
   @impl RingTracer.Kernel
   def trace(costs, _first, count, atom) do
     us = cost(costs, atom)

@@ -337,6 +337,17 @@ fn spd_span(
     }
 }
 
+/// The work units ([`RayStats::work`]) of each row of the image `settings` describes, top row
+/// first. Traced small, it is a preview of where an image's work lies: the ring's children use
+/// it to guess how much work a sibling they have not heard from yet still holds.
+pub fn work_by_row(scene: &Scene, settings: &Settings) -> Result<Vec<u64>, Error> {
+    settings.validate()?;
+    let w = settings.width as u64;
+    (0..settings.height as u64)
+        .map(|y| trace_span(scene, settings, y * w, w).map(|(_, stats)| stats.work))
+        .collect()
+}
+
 /// A finished chunk of rows: (chunk index, pixels, statistics).
 type Chunk = (usize, Vec<f32>, RayStats);
 

@@ -1,8 +1,8 @@
 //! End-to-end tests: golden pixels, determinism across spans and threads, image round trips.
 
 use ring_tracer_kernel::{
-    encode_png, render_image, to_srgb8, trace_span, trace_span_into, write_image, Format, RayStats,
-    Scene, Settings,
+    encode_png, render_image, to_srgb8, trace_span, trace_span_into, work_by_row, write_image,
+    Format, RayStats, Scene, Settings,
 };
 
 fn no_files(_: &str) -> Result<Vec<u8>, String> {
@@ -99,6 +99,23 @@ fn work_follows_the_geometry_rays_pass_through() {
         few.work > bare.work && many.work > few.work,
         "{bare:?} {few:?} {many:?}"
     );
+}
+
+#[test]
+fn work_by_row_sums_to_the_image_and_finds_the_crowded_rows() {
+    let scene = nff(GOLDEN);
+    let settings = Settings::for_scene(&scene);
+    let rows = work_by_row(&scene, &settings).unwrap();
+    assert_eq!(rows.len(), 6);
+    let (_, whole) = trace_span(&scene, &settings, 0, 48).unwrap();
+    assert_eq!(rows.iter().sum::<u64>(), whole.work);
+    // the square covers rows 2 and 3 only: they cost more than the background rows
+    assert!(rows[2] > rows[5] && rows[3] > rows[5], "{rows:?}");
+    let bad = Settings {
+        width: 0,
+        ..settings
+    };
+    assert!(work_by_row(&scene, &bad).is_err());
 }
 
 const RICH: &str = "b 0.1 0.2 0.3

@@ -1,7 +1,9 @@
 //! Tracing: one atom (a span of pixels) for a grandchild, or a whole image
 //! with the kernel's own threads for benchmarks and references.
 
-use ring_tracer_kernel::{render_image as kernel_render_image, trace_span, trace_span_into};
+use ring_tracer_kernel::{
+    render_image as kernel_render_image, trace_span, trace_span_into, work_by_row,
+};
 use std::time::Instant;
 
 use rustler::{Binary, Env, OwnedBinary, ResourceArc};
@@ -41,6 +43,14 @@ fn trace_atom<'a>(
     .map_err(message)?;
     let micros = t0.elapsed().as_micros() as u64;
     Ok((bin.release(env), stats.into(), micros))
+}
+
+/// The kernel work units of each row of the (small) image `settings` describes: a preview of
+/// where the work lies, traced in one call.
+#[rustler::nif(schedule = "DirtyCpu")]
+fn row_work(scene: ResourceArc<SceneResource>, settings: SettingsTerm) -> Result<Vec<u64>, String> {
+    let settings = settings.to_kernel()?;
+    work_by_row(&scene.scene, &settings).map_err(message)
 }
 
 /// Traces the whole image with `threads` OS threads inside this one NIF call.
