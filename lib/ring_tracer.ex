@@ -40,6 +40,10 @@ defmodule RingTracer do
       the same; the balance is not
     * `:hold_after` — ring only: hops an offer walks before it may wait at a
       child about to run out (default 16; see `RingTracer.Ring.HelpOffer`)
+    * `:aim` — ring only: whether an idle child sends its offer straight to
+      the sibling it expects to stay busy longest rather than to its left
+      sibling (default: on strips yes, on interleaved strips no; see
+      `RingTracer.Ring.Aim`)
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — other nodes to place children on, round robin with this
@@ -161,7 +165,7 @@ defmodule RingTracer do
   ## Options
 
   Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
-  `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
+  `:aim`, `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
   microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
 
       iex> {:ok, result} = RingTracer.simulate(children: 16, atoms: 4, costs: 1000)
@@ -205,6 +209,7 @@ defmodule RingTracer do
       handover_delay: opts[:handover_delay],
       chaos: opts[:chaos],
       hold_after: opts[:hold_after],
+      aim: if(opts[:aim] == nil, do: opts[:layout] == :strips, else: opts[:aim]),
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],

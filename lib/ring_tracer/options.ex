@@ -21,6 +21,7 @@ defmodule RingTracer.Options do
     handover_delay: {:non_neg_integer, 0},
     chaos: {:non_neg_integer, 0},
     hold_after: {:pos_integer, RingTracer.Ring.HelpOffer.default_hold_after()},
+    aim: {:boolean, nil},
     strategy: {:strategy, :ring},
     layout: {:layout, :strips},
     speeds: {:speeds, []},

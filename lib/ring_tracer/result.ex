@@ -30,7 +30,8 @@ defmodule RingTracer.Result do
       `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
       units (see `RingTracer.Kernel`);
     * `:strategy` — the strategy's name; `:layout` — `:strips` or
-      `:interleaved` (see `RingTracer.Layout`);
+      `:interleaved` (see `RingTracer.Layout`); `:aim` — whether the ring's
+      children aimed their offers (see `RingTracer.Ring.Aim`);
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels
       were still on their way); the first is kept;
@@ -57,6 +58,7 @@ defmodule RingTracer.Result do
     :settings,
     :strategy,
     layout: :strips,
+    aim: false,
     duplicates: 0,
     failures: [],
     redone: 0,
@@ -78,6 +80,7 @@ defmodule RingTracer.Result do
           settings: RingTracer.Settings.t(),
           strategy: atom(),
           layout: RingTracer.Layout.order(),
+          aim: boolean(),
           duplicates: non_neg_integer(),
           failures: [map()],
           redone: non_neg_integer(),
@@ -112,7 +115,8 @@ defmodule RingTracer.Result do
       failures: raw.failures,
       redone: raw.redone,
       nodes: raw.nodes,
-      layout: raw.layout
+      layout: raw.layout,
+      aim: raw.aim
     }
   end
 

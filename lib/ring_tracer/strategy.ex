@@ -41,7 +41,13 @@ defmodule RingTracer.Strategy do
   @doc "The parent, each time a new atom arrives from child `index`."
   @callback parent_atom_done(parent(), index :: non_neg_integer()) :: parent()
 
-  @optional_callbacks parent_start: 1, parent_atom_done: 2
+  @doc """
+  The parent, on a message it does not know itself (for instance the reply
+  of a task the strategy started in `parent_start/1`).
+  """
+  @callback parent_info(parent(), msg :: term()) :: parent()
+
+  @optional_callbacks parent_start: 1, parent_atom_done: 2, parent_info: 2
 
   @strategies %{
     static: RingTracer.Strategy.Static,

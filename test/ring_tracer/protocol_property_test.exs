@@ -1,9 +1,10 @@
 defmodule RingTracer.ProtocolPropertyTest do
   @moduledoc """
   The ring protocol under adversarial schedules: random ring sizes, atoms,
-  image sizes, speeds, strategies, layouts (strips or interleaved), message
-  delays (which reorder messages), child kills and how soon offers may wait
-  at a child (`:hold_after`), against the real parent, children and kernel.
+  image sizes, speeds, strategies, layouts (strips or interleaved), aimed
+  offers or not, message delays (which reorder messages), child kills and
+  how soon offers may wait at a child (`:hold_after`), against the real
+  parent, children and kernel.
 
   CI runs 1,000 cases (200 missed a hang that 2,000 found); `PROPER_NUMTESTS=5000 mix test
   test/ring_tracer/protocol_property_test.exs --include slow` runs more.
@@ -23,7 +24,8 @@ defmodule RingTracer.ProtocolPropertyTest do
 
     {integer(1, 7), integer(1, 6), integer(1, 20), integer(1, 14), list(integer(1, 3)),
      oneof([:ring, :static, :master, :steal]), integer(0, 4), integer(0, 2),
-     integer(0, 1_000_000), integer(1, 3), oneof([:strips, :interleaved])}
+     integer(0, 1_000_000), integer(1, 3), oneof([:strips, :interleaved]),
+     oneof([nil, true, false])}
   end
 
   test "property: every schedule ends with the single-process image and no process left" do
@@ -32,7 +34,7 @@ defmodule RingTracer.ProtocolPropertyTest do
 
     RingTracer.PropErCase.check(
       gen(),
-      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout} = case_ ->
+      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout, aim} = case_ ->
         if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
         :rand.seed(:exsss, {seed, n, k})
         kills = min(kills, n - 1)
@@ -54,7 +56,9 @@ defmodule RingTracer.ProtocolPropertyTest do
           chaos: chaos,
           # Small rings: let offers wait after 1-3 hops so that holding is
           # exercised (the default, 16, needs a ring of 17 or more).
-          hold_after: hold_after
+          hold_after: hold_after,
+          # nil: the default for the layout (see `RingTracer.Ring.Aim`).
+          aim: aim
         ]
 
         {:ok, job} = RingTracer.render_async(TestScenes.path(@scene), opts)

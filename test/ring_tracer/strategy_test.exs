@@ -125,6 +125,44 @@ defmodule RingTracer.StrategyTest do
              Map.get(result.messages, :handover, %{count: 0}).count
   end
 
+  test "aiming: the parent sends its board to two children, and the image does not change" do
+    reference = TestScenes.reference(@scene, 40, 30)
+
+    for {aim, boards} <- [{true, 2}, {false, 0}] do
+      :erlang.trace(:new_processes, true, [:send])
+
+      {:ok, result} =
+        RingTracer.render(TestScenes.path(@scene),
+          children: 5,
+          atoms: 6,
+          width: 40,
+          height: 30,
+          speeds: [1, 3, 1, 2, 1],
+          aim: aim
+        )
+
+      :erlang.trace(:new_processes, false, [:send])
+      observed = collect_sends(%{})
+
+      assert result.pixels == reference
+      assert Map.get(observed, :board, 0) == boards, "aim: #{aim}"
+    end
+  end
+
+  test "aiming is on for strips and off for interleaved strips unless asked" do
+    for {layout, opts, aimed?} <- [
+          {:strips, [], true},
+          {:interleaved, [], false},
+          {:interleaved, [aim: true], true},
+          {:strips, [aim: false], false}
+        ] do
+      {:ok, result} =
+        RingTracer.simulate([children: 3, atoms: 4, costs: 500, layout: layout] ++ opts)
+
+      assert result.aim == aimed?, "#{layout} #{inspect(opts)}"
+    end
+  end
+
   # A send to a process that has already exited is traced apart: as the job
   # stops, a child may still pass an offer to a sibling that stopped first,
   # and that offer was sent (and counted) all the same.
@@ -141,6 +179,8 @@ defmodule RingTracer.StrategyTest do
   defp kind({:help_offer, _}), do: :offer
   defp kind({:help_offers, _}), do: :offer
   defp kind({:handover, _, _}), do: :handover
+  defp kind({:handover, _, _, _}), do: :handover
+  defp kind({:loads, _}), do: :board
   defp kind(_), do: :other
 
   test "idle children park offers: the end of a 256-child job costs far fewer than N² offer messages" do

@@ -20,6 +20,9 @@ defmodule Mix.Tasks.RingTracer.Render do
     * `--strategy S` — `ring` (default), `static`, `master` or `steal`
     * `--layout L` — `strips` (the paper's contiguous strips, default) or
       `interleaved` (child i owns atoms i, i + N, i + 2N, ...)
+    * `--aim` / `--no-aim` — ring only: idle children send their offers
+      straight to the sibling expected to stay busy longest (default: on
+      strips yes, on interleaved strips no)
     * `--speeds 1,1,4,1` — slowdown factor of each child (cyclic)
     * `--stats FILE` — the job's statistics as `.json` or `.csv`
     * `--timeline FILE.svg` — one lane per child, every atom a bar coloured
@@ -55,6 +58,7 @@ defmodule Mix.Tasks.RingTracer.Render do
     spd: :boolean,
     strategy: :string,
     layout: :string,
+    aim: :boolean,
     speeds: :string,
     stats: :string,
     timeline: :string,

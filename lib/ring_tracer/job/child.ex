@@ -127,9 +127,13 @@ defmodule RingTracer.Job.Child do
   end
 
   @doc "Hands `atoms` over to `pid` (possibly none: a refusal)."
-  @spec hand_over(map(), pid(), [Layout.atom_id()]) :: map()
-  def hand_over(state, pid, atoms) do
-    msg = {:handover, state.index, atoms}
+  @spec hand_over(map(), pid(), [Layout.atom_id()], term()) :: map()
+  def hand_over(state, pid, atoms, news \\ nil) do
+    msg =
+      if news == nil,
+        do: {:handover, state.index, atoms},
+        else: {:handover, state.index, atoms, news}
+
     state = count(state, :handover, msg)
 
     deliver(state.spec, pid, msg, state.spec.handover_delay)
@@ -371,8 +375,14 @@ defmodule RingTracer.Job.Child do
 
       :unhandled ->
         case msg do
-          {:handover, _from, atoms} when is_list(atoms) -> {:noreply, receive_atoms(state, atoms)}
-          _ -> {:noreply, state}
+          {:handover, _from, atoms} when is_list(atoms) ->
+            {:noreply, receive_atoms(state, atoms)}
+
+          {:handover, _from, atoms, _news} when is_list(atoms) ->
+            {:noreply, receive_atoms(state, atoms)}
+
+          _ ->
+            {:noreply, state}
         end
     end
   end

@@ -214,6 +214,13 @@ defmodule RingTracer.Job.Parent do
     {:noreply, maybe_reassign(state)}
   end
 
+  # Anything else is for the strategy, if it listens (`parent_info/2`).
+  def handle_info(other, %{stopping: nil} = state) do
+    if function_exported?(state.spec.strategy, :parent_info, 2),
+      do: {:noreply, state.spec.strategy.parent_info(state, other)},
+      else: {:noreply, state}
+  end
+
   def handle_info(_other, state), do: {:noreply, state}
 
   # A child (or its whole node) is gone. The ring is re-linked around the gap,
@@ -394,7 +401,8 @@ defmodule RingTracer.Job.Parent do
              failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
              redone: state.redone,
              nodes: node_summary(state, reports),
-             layout: state.spec.layout.order
+             layout: state.spec.layout.order,
+             aim: state.spec.aim and state.spec.strategy == RingTracer.Strategy.Ring
            }}
 
         {:error, message} ->

@@ -33,7 +33,7 @@ defmodule RingTracer.Report.Stats do
   @doc """
   A summary of `result`:
 
-    * `:strategy`, `:layout`, `:width`, `:height`, `:atoms` (count), `:children_count`;
+    * `:strategy`, `:layout`, `:aim`, `:width`, `:height`, `:atoms` (count), `:children_count`;
     * `:makespan_us`, `:ideal_us`, `:ratio` (makespan / ideal, `nil` when the
       ideal is 0), `:idle_pct` (the children's summed idle time as a
       percentage of `children * makespan`);
@@ -60,6 +60,7 @@ defmodule RingTracer.Report.Stats do
     %{
       strategy: result.strategy,
       layout: result.layout,
+      aim: result.aim,
       width: result.width,
       height: result.height,
       atoms: atoms,

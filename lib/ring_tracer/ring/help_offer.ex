@@ -14,6 +14,9 @@ defmodule RingTracer.Ring.HelpOffer do
   whether it has waited once (see "Holding"). Only the origin's own offers
   carry its pid: atoms are handed over directly to it, not along the ring.
   `via` is the last child that sent the offer on (see "Splicing" below).
+  `aimed` is the sibling an offer was sent straight to, if not its child's
+  left one, and `loads` the siblings' loads it carries (both
+  `RingTracer.Ring.Aim`).
 
   `decide/2` is the whole rule, pure:
 
@@ -110,6 +113,8 @@ defmodule RingTracer.Ring.HelpOffer do
     :atom_us,
     heard: [],
     wrapped: false,
+    aimed: nil,
+    loads: [],
     hops: 0,
     held: false
   ]
@@ -131,6 +136,8 @@ defmodule RingTracer.Ring.HelpOffer do
           atom_us: non_neg_integer() | nil,
           heard: heard(),
           wrapped: boolean(),
+          aimed: non_neg_integer() | nil,
+          loads: [RingTracer.Ring.Aim.load()],
           hops: non_neg_integer(),
           held: boolean()
         }

@@ -10,24 +10,87 @@ defmodule RingTracer.Strategy.Ring do
   of), parking (an idle child keeps the offers that reach it until its own
   offer is answered), holding (in a large ring, an offer that walked far
   waits for a child about to run out and leaves with that child's own
-  offer, in one message) and splicing (offers stop visiting finished
-  children).
+  offer, in one message), splicing (offers stop visiting finished
+  children) and aiming (on strips, an idle child's offer goes straight to
+  the sibling it expects to stay busy longest: `RingTracer.Ring.Aim`).
   """
   @behaviour RingTracer.Strategy
 
-  alias RingTracer.Job.Child
+  alias RingTracer.Job.{Child, Parent}
   alias RingTracer.Layout
-  alias RingTracer.Ring.HelpOffer
+  alias RingTracer.Ring.{Aim, HelpOffer}
 
   @impl true
   def initial_atoms(layout, index), do: Layout.strip(layout, index)
 
+  # The parent's side of aiming: a preview of each atom's work, traced beside
+  # the children's first atoms where the kernel can make one, then one board
+  # (`RingTracer.Ring.Aim.board/4`) once every child has sent an atom.
   @impl true
-  def idle(child) do
+  def parent_start(%{spec: %{aim: true, kernel: {kernel, opts}} = spec} = parent) do
+    if function_exported?(kernel, :atom_work, 2) do
+      me = self()
+      Task.start(fn -> send(me, {:atom_work, spec.id, kernel.atom_work(spec, opts)}) end)
+    end
+
+    %{parent | strategy_state: %{work: nil, heard_from: MapSet.new(), board: false}}
+  end
+
+  def parent_start(parent), do: parent
+
+  @impl true
+  def parent_atom_done(%{strategy_state: %{board: false} = board} = parent, index),
+    do:
+      board(%{parent | strategy_state: %{board | heard_from: MapSet.put(board.heard_from, index)}})
+
+  def parent_atom_done(parent, _index), do: parent
+
+  @impl true
+  def parent_info(%{strategy_state: %{board: false} = board} = parent, {:atom_work, id, result})
+      when id == parent.spec.id do
+    case result do
+      {:ok, work} -> board(%{parent | strategy_state: %{board | work: work}})
+      # No preview: no board; offers still carry the loads children report.
+      {:error, _} -> %{parent | strategy_state: %{board | board: true}}
+    end
+  end
+
+  def parent_info(parent, _msg), do: parent
+
+  defp board(%{strategy_state: %{work: work, heard_from: from} = board} = parent)
+       when work != nil do
+    if Enum.all?(Map.keys(parent.children), &MapSet.member?(from, &1)) do
+      {loads, to} = Aim.board(parent.spec.layout, work, parent.traced_by, job_now(parent))
+      parent = %{parent | strategy_state: %{board | board: true}}
+
+      to
+      |> Enum.filter(&is_map_key(parent.children, &1))
+      |> Enum.reduce(parent, fn i, p ->
+        Parent.send_counted(p, Map.fetch!(p.children, i), :control, {:loads, loads})
+      end)
+    else
+      parent
+    end
+  end
+
+  defp board(parent), do: parent
+
+  @impl true
+  def idle(child), do: idle(child, child.spec.aim)
+
+  # `aim?` false: the offer goes to the left sibling, as after a miss.
+  defp idle(child, aim?) do
     seq = seq(child) + 1
 
     rate = Child.rate(child)
     {heard, child} = hear(child, rate, [])
+    {known, child} = learn_loads(child, [])
+    target = if aim?, do: aim(child, known)
+
+    {to, to_index} =
+      if target,
+        do: {elem(child.siblings, target), target},
+        else: {child.left, child.left_index}
 
     offer =
       %HelpOffer{
@@ -37,27 +100,42 @@ defmodule RingTracer.Strategy.Ring do
         via: self(),
         rate: rate,
         atom_us: Child.mean_atom_us(child),
-        heard: heard
+        heard: heard,
+        loads: Aim.news(known),
+        aimed: target
       }
-      |> HelpOffer.hop(child.index, child.left_index)
+      |> HelpOffer.hop(child.index, to_index)
 
-    # Offers held while we traced our last atom leave with ours, in one message.
+    # Offers held while we traced our last atom leave with ours, in one
+    # message, to our left sibling (ours may be aimed elsewhere).
     {held, child} = take_offers(child, :held)
 
     held =
       Enum.map(
         held,
-        &HelpOffer.hop(%{&1 | via: self(), heard: heard}, child.index, child.left_index)
+        &HelpOffer.hop(
+          %{&1 | via: self(), heard: heard, loads: Aim.news(known)},
+          child.index,
+          child.left_index
+        )
       )
 
+    {with_ours, to_left} = if target, do: {[], held}, else: {held, []}
+
     child
-    |> Child.send_counted(child.left, :offer, offers_message([offer | held]))
-    |> Child.event(:offer, child.left_index)
+    |> send_offers(to, [offer | with_ours])
+    |> send_offers(child.left, to_left)
+    |> Child.event(:offer, to_index)
     |> then(&Enum.reduce(held, &1, fn _, c -> Child.event(c, :pass, child.left_index) end))
     |> Child.bump(:offers_sent)
     |> put_strategy(seq: seq, current: seq)
     |> Map.put(:status, :offered)
   end
+
+  defp send_offers(child, _to, []), do: child
+
+  defp send_offers(child, to, offers),
+    do: Child.send_counted(child, to, :offer, offers_message(offers))
 
   @impl true
   def handle_message({:help_offer, %HelpOffer{} = offer}, child),
@@ -65,6 +143,11 @@ defmodule RingTracer.Strategy.Ring do
 
   def handle_message({:help_offers, offers}, child) when is_list(offers),
     do: {:ok, offers |> Enum.reduce(child, &offer(&2, &1)) |> flush()}
+
+  def handle_message({:handover, from, atoms, loads}, child) when is_list(atoms) do
+    {_, child} = learn_loads(child, loads)
+    handle_message({:handover, from, atoms}, child)
+  end
 
   def handle_message({:handover, from, atoms}, child) when is_list(atoms) do
     # Atoms again: the offers parked while we were idle (or held while we
@@ -74,6 +157,9 @@ defmodule RingTracer.Strategy.Ring do
     child = Child.receive_atoms(child, atoms)
     {:ok, (parked ++ held) |> Enum.reduce(child, &offer(&2, &1, from)) |> flush()}
   end
+
+  def handle_message({:loads, loads}, child) when is_list(loads),
+    do: {:ok, child |> learn_loads(loads) |> elem(1)}
 
   def handle_message({:ring_skip, gone, left, left_index}, child) do
     if child.left == gone and left_index not in child.dead do
@@ -92,7 +178,8 @@ defmodule RingTracer.Strategy.Ring do
     # the offer.
     rate = Child.rate(child)
     {heard, child} = hear(child, rate, offer.heard)
-    offer = %{offer | heard: heard}
+    {known, child} = learn_loads(child, offer.loads)
+    offer = %{offer | heard: heard, loads: Aim.news(known)}
 
     view = %{
       index: child.index,
@@ -107,6 +194,11 @@ defmodule RingTracer.Strategy.Ring do
     }
 
     case HelpOffer.decide(view, offer) do
+      :returned when offer.aimed != nil ->
+        # Our aimed offer missed: its target had nothing to give (and told us
+        # so in the loads it carries back). Walk the ring as the paper does.
+        idle(child, false)
+
       :returned ->
         {parked, child} = take_offers(child, :parked)
 
@@ -123,6 +215,24 @@ defmodule RingTracer.Strategy.Ring do
 
       :drop ->
         child
+
+      {:give, g} ->
+        {atoms, child} = Child.take_last(child, g)
+
+        child
+        |> hand_over(offer.pid, atoms)
+        |> Child.event(:give, offer.origin)
+        |> Child.bump(:offers_consumed)
+
+      _ when offer.aimed == child.index ->
+        # Aimed here and nothing to give: straight back to its origin, with
+        # our own load first among those it carries.
+        offer = %{offer | loads: Aim.news(known, own_load(child))}
+
+        child
+        |> Child.send_counted(offer.pid, :offer, {:help_offer, offer})
+        |> Child.event(:back, offer.origin)
+        |> Child.bump(:offers_passed)
 
       :park ->
         keep(child, :parked, offer)
@@ -142,16 +252,17 @@ defmodule RingTracer.Strategy.Ring do
         child
         |> keep(:outbox, {to, HelpOffer.hop(%{offer | via: self()}, child.index, to_index)})
         |> Child.event(:pass, to_index)
-
-      {:give, g} ->
-        {atoms, child} = Child.take_last(child, g)
-
-        child
-        |> Child.hand_over(offer.pid, atoms)
-        |> Child.event(:give, offer.origin)
-        |> Child.bump(:offers_consumed)
     end
   end
+
+  # Atoms to an offerer; where children aim, with our own load (just
+  # lowered) and the latest-ending ones we know of.
+  defp hand_over(%{spec: %{aim: true}} = child, pid, atoms) do
+    {known, child} = learn_loads(child, [])
+    Child.hand_over(child, pid, atoms, Aim.news(known, own_load(child)))
+  end
+
+  defp hand_over(child, pid, atoms), do: Child.hand_over(child, pid, atoms)
 
   # A finished child asks whoever sent it an offer to skip it from now on.
   defp splice(child, %HelpOffer{via: via}) when is_pid(via) and via != self() do
@@ -205,6 +316,37 @@ defmodule RingTracer.Strategy.Ring do
 
     {heard, put_strategy(child, heard: heard)}
   end
+
+  # What a child knows of its siblings' loads, with `news` and its own load
+  # added; kept, and returned. Without aiming, nothing.
+  defp learn_loads(%{spec: %{aim: true}} = child, news) do
+    known = Aim.learn(child.strategy_state[:loads] || [], [own_load(child) | news])
+    {known, put_strategy(child, loads: known)}
+  end
+
+  defp learn_loads(child, _news), do: {[], child}
+
+  # When this child expects to have traced all it holds (job microseconds),
+  # and how many atoms it holds queued.
+  defp own_load(child) do
+    now = job_now(child)
+    {remaining, in_flight} = Child.giveable(child)
+    mean = Child.mean_atom_us(child) || 0
+    current = if in_flight > 0, do: Child.expected_remaining_us(child) || 0, else: 0
+    {child.index, now + remaining * mean + current, now, remaining}
+  end
+
+  defp aim(child, known) do
+    Aim.target(known, %{
+      index: child.index,
+      left_index: child.left_index,
+      dead: child.dead,
+      now: job_now(child),
+      min_us: Child.mean_atom_us(child) || 0
+    })
+  end
+
+  defp job_now(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
   defp put_strategy(child, kv),
     do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}

@@ -270,4 +270,77 @@ defmodule RingTracer.Strategy.RingTest do
     _ = handle(busy, {:help_offer, offer(2)})
     assert_received {:help_offer, %HelpOffer{origin: 2}}
   end
+
+  describe "aiming" do
+    # A child that aims (`aim: true`), with job time starting now.
+    defp aiming(fields) do
+      c = child(Keyword.put_new(fields, :t0, System.system_time(:microsecond)))
+      put_in(c.spec.aim, true)
+    end
+
+    # A sibling that tells the test what reached it.
+    defp relay(tag) do
+      me = self()
+      spawn(fn -> receive(do: (m -> send(me, {tag, m}))) end)
+    end
+
+    test "an idle child sends its offer straight to the sibling expected to end last" do
+      three = relay(:three)
+      # Sibling 3 said, just now, that it holds 8 queued atoms and should end
+      # in a second; sibling 2 ends sooner. Our left sibling is 0.
+      loads = [{3, 1_000_000, 0, 8}, {2, 500_000, 0, 8}]
+      c = aiming(siblings: {self(), self(), self(), three}, strategy_state: %{loads: loads})
+
+      offered = Ring.idle(c)
+      assert_receive {:three, {:help_offer, %HelpOffer{origin: 1, aimed: 3} = o}}
+      # It carries what we know: sibling 3 first, and our own load among them.
+      assert [{3, 1_000_000, 0, 8} | _] = o.loads
+      assert Enum.any?(o.loads, &(elem(&1, 0) == 1))
+      assert offered.status == :offered
+      refute_received {:help_offer, _}
+    end
+
+    test "with nobody expected to have atoms queued, the offer goes to the left sibling" do
+      # Sibling 3 ends late, but has started its last queued atom since it said so.
+      loads = [{3, 1_000_000, -900_000, 1}]
+      Ring.idle(aiming(strategy_state: %{loads: loads}))
+      assert_received {:help_offer, %HelpOffer{origin: 1, aimed: nil}}
+    end
+
+    test "without aiming, offers go left and carry no loads" do
+      Ring.idle(child(strategy_state: %{loads: [{3, 1_000_000, 0, 8}]}))
+      assert_received {:help_offer, %HelpOffer{origin: 1, aimed: nil, loads: []}}
+    end
+
+    test "an aimed offer that finds nothing goes straight back, with the target's load first" do
+      left = relay(:left)
+      # Tracing its last atom: nothing to give.
+      target = aiming(index: 3, left: left, left_index: 2, in_flight: [5])
+      _ = handle(target, {:help_offer, %{offer(1) | aimed: 3}})
+
+      assert_received {:help_offer, %HelpOffer{origin: 1, aimed: 3, loads: [{3, _, _, 0} | _]}}
+      refute_receive {:left, _}, 50
+    end
+
+    test "an aimed offer that comes home is followed by one that walks the ring" do
+      home = aiming(status: :offered, strategy_state: %{seq: 1, current: 1})
+      back = %{offer(1) | aimed: 3, loads: [{3, 100, 50, 0}]}
+      walking = handle(home, {:help_offer, back})
+
+      assert_received {:help_offer, %HelpOffer{origin: 1, seq: 2, aimed: nil}}
+      assert walking.status == :offered
+      # Sibling 3 has nothing to give, and we know it now.
+      assert {3, 100, 50, 0} in walking.strategy_state.loads
+    end
+
+    test "a giver tells the offerer its load, just lowered, in the hand-over" do
+      gc = spawn(fn -> Process.sleep(:infinity) end)
+      busy = aiming(in_flight: [5], queue: Enum.to_list(10..15), grandchild: gc)
+      gave = handle(busy, {:help_offer, offer(2)})
+
+      assert_received {:handover, 1, atoms, [{1, _end, _at, queued} | _]}
+      assert queued == length(gave.queue)
+      assert length(atoms) + queued == 6
+    end
+  end
 end
