@@ -15,7 +15,9 @@ defmodule Mix.Tasks.RingTracer.Bench do
   Each real scenario also runs the ring on interleaved strips
   (`ring/interleaved`, `layout: :interleaved`: child i owns atoms i, i + N,
   ...; see `RingTracer.Layout`), which shows how much of the ring's loss
-  comes with the paper's contiguous strips. For each real scenario a
+  comes with the paper's contiguous strips, and every scenario runs it
+  once more on strips with every offer sent to the left sibling as in the
+  paper (`ring/left`, `aim: false`; see `RingTracer.Ring.Aim`). For each real scenario a
   `floor` row runs the same atoms and speeds with no protocol at all (N
   processes calling the kernel, taking atoms from one shared counter): the
   distance from it to 1.0 is this machine's cost of dirty NIF calls, not
@@ -173,25 +175,26 @@ defmodule Mix.Tasks.RingTracer.Bench do
     ]
 
     # Per scenario: every strategy on the paper's strips, the ring once more
-    # on interleaved strips (`layout: :interleaved`), then the floor: the same
+    # with offers to the left sibling only (`aim: false`) and once on
+    # interleaved strips (`layout: :interleaved`), then the floor: the same
     # atoms and speeds with no protocol at all, N plain processes calling the
     # kernel and taking the next atom from one `:atomics` counter. What is
     # left between the floor and 1.0 is this machine's cost of running dirty
     # NIFs, not load balancing. Each row: one warm-up, then the median of
     # `runs`.
     runs_of =
-      Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), &1, :strips}) ++
-        [{"ring/interleaved", :ring, :interleaved}]
+      Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
+        [
+          {"ring/left", [strategy: :ring, aim: false]},
+          {"ring/interleaved", [strategy: :ring, layout: :interleaved]}
+        ]
 
     rows =
       Enum.flat_map(real, fn {label, path, job} ->
         strategies =
-          for {name, strategy, layout} <- runs_of do
+          for {name, how} <- runs_of do
             render = fn ->
-              RingTracer.render(
-                path,
-                [strategy: strategy, layout: layout, atoms: k, width: size, height: size] ++ job
-              )
+              RingTracer.render(path, how ++ [atoms: k, width: size, height: size] ++ job)
             end
 
             {:ok, _} = render.()
@@ -218,8 +221,12 @@ defmodule Mix.Tasks.RingTracer.Bench do
           ]
       end)
 
+    sim_runs =
+      Enum.map(RingTracer.Strategy.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
+        [{"ring/left", [strategy: :ring, aim: false]}]
+
     sim_rows =
-      for n <- sims, strategy <- RingTracer.Strategy.names() do
+      for n <- sims, {name, how} <- sim_runs do
         # Speeds from 1 to 4 (a fixed pseudo-random draw) and atom costs of
         # 20 to 80 ms varying across the image, as a real scene's do.
         :rand.seed(:exsss, {n, 1, 2})
@@ -231,15 +238,11 @@ defmodule Mix.Tasks.RingTracer.Bench do
         result =
           median_result(if(n > 256, do: 1, else: runs), fn ->
             RingTracer.simulate(
-              strategy: strategy,
-              children: n,
-              atoms: @sim_atoms,
-              speeds: speeds,
-              costs: costs
+              how ++ [children: n, atoms: @sim_atoms, speeds: speeds, costs: costs]
             )
           end)
 
-        balance_row("simulated N=#{n}", Atom.to_string(strategy), result)
+        balance_row("simulated N=#{n}", name, result)
       end
 
     print_table(
@@ -459,6 +462,11 @@ defmodule Mix.Tasks.RingTracer.Bench do
       "ring <= 1.10 x ideal:" <>
         Enum.map_join(real, ";", fn s ->
           " #{s} #{fmt(ratio.(s, "ring"))} #{verdict.(ratio.(s, "ring") <= 1.10)}"
+        end),
+      "(not a target) the ring with offers to the left only <= 1.10 x ideal:" <>
+        Enum.map_join(real, ";", fn s ->
+          r = ratio.(s, "ring/left")
+          " #{s} #{fmt(r)} #{if r <= 1.10, do: "yes", else: "no"}"
         end),
       "(not a target) the ring on interleaved strips <= 1.10 x ideal:" <>
         Enum.map_join(real, ";", fn s ->
