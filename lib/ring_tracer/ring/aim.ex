@@ -11,9 +11,11 @@ defmodule RingTracer.Ring.Aim do
   idle child sends its offer straight to the sibling it expects to stay busy
   longest, if that is not its left sibling anyway. A sibling so aimed at
   consumes the offer as any other; if it has nothing to give (a miss), it
-  sends the offer straight back, and its child then sends a new one that
-  walks the ring as the paper's do, so that a child is still finished only
-  once its offer has asked every sibling.
+  sends the offer on to its origin's left sibling (which the offer names),
+  as if the origin had sent it there, and from there it walks the ring as
+  the paper's offers do: a child is still finished only once an offer of
+  its own has asked every sibling. (Sending a miss back to its origin,
+  which then sent a new offer, cost one message more per miss.)
 
   ## What a child knows
 

@@ -15,8 +15,9 @@ defmodule RingTracer.Ring.HelpOffer do
   carry its pid: atoms are handed over directly to it, not along the ring.
   `via` is the last child that sent the offer on (see "Splicing" below).
   `aimed` is the sibling an offer was sent straight to, if not its child's
-  left one, and `loads` the siblings' loads it carries (both
-  `RingTracer.Ring.Aim`).
+  left one, `home_left` that child's left sibling (`{pid, index}`) for the
+  walk a miss turns it into, and `loads` the siblings' loads it carries
+  (all three `RingTracer.Ring.Aim`).
 
   `decide/2` is the whole rule, pure:
 
@@ -114,6 +115,7 @@ defmodule RingTracer.Ring.HelpOffer do
     heard: [],
     wrapped: false,
     aimed: nil,
+    home_left: nil,
     loads: [],
     hops: 0,
     held: false
@@ -137,6 +139,7 @@ defmodule RingTracer.Ring.HelpOffer do
           heard: heard(),
           wrapped: boolean(),
           aimed: non_neg_integer() | nil,
+          home_left: {pid(), non_neg_integer()} | nil,
           loads: [RingTracer.Ring.Aim.load()],
           hops: non_neg_integer(),
           held: boolean()

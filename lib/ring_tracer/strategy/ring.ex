@@ -102,7 +102,8 @@ defmodule RingTracer.Strategy.Ring do
         atom_us: Child.mean_atom_us(child),
         heard: heard,
         loads: Aim.news(known),
-        aimed: target
+        aimed: target,
+        home_left: if(target, do: {child.left, child.left_index})
       }
       |> HelpOffer.hop(child.index, to_index)
 
@@ -195,8 +196,8 @@ defmodule RingTracer.Strategy.Ring do
 
     case HelpOffer.decide(view, offer) do
       :returned when offer.aimed != nil ->
-        # Our aimed offer missed: its target had nothing to give (and told us
-        # so in the loads it carries back). Walk the ring as the paper does.
+        # Our aimed offer missed and its target could not send it on to our
+        # left sibling (dead, as far as it knew): walk the ring from here.
         idle(child, false)
 
       :returned ->
@@ -225,14 +226,10 @@ defmodule RingTracer.Strategy.Ring do
         |> Child.bump(:offers_consumed)
 
       _ when offer.aimed == child.index ->
-        # Aimed here and nothing to give: straight back to its origin, with
-        # our own load first among those it carries.
-        offer = %{offer | loads: Aim.news(known, own_load(child))}
-
-        child
-        |> Child.send_counted(offer.pid, :offer, {:help_offer, offer})
-        |> Child.event(:back, offer.origin)
-        |> Child.bump(:offers_passed)
+        # Aimed here and nothing to give (a miss): the offer walks the ring
+        # from its origin's left sibling, as if its origin had sent it there,
+        # with our own load first among those it carries.
+        miss(child, %{offer | loads: Aim.news(known, own_load(child))})
 
       :park ->
         keep(child, :parked, offer)
@@ -252,6 +249,24 @@ defmodule RingTracer.Strategy.Ring do
         child
         |> keep(:outbox, {to, HelpOffer.hop(%{offer | via: self()}, child.index, to_index)})
         |> Child.event(:pass, to_index)
+    end
+  end
+
+  defp miss(child, %HelpOffer{home_left: {left, left_index}} = offer) do
+    if left_index in child.dead do
+      child
+      |> Child.send_counted(offer.pid, :offer, {:help_offer, offer})
+      |> Child.event(:back, offer.origin)
+      |> Child.bump(:offers_passed)
+    else
+      walking =
+        %{offer | aimed: nil, home_left: nil, wrapped: false, hops: 0, via: offer.pid}
+        |> HelpOffer.hop(offer.origin, left_index)
+
+      child
+      |> Child.send_counted(left, :offer, {:help_offer, walking})
+      |> Child.event(:pass, left_index)
+      |> Child.bump(:offers_passed)
     end
   end
 

@@ -312,14 +312,30 @@ defmodule RingTracer.Strategy.RingTest do
       assert_received {:help_offer, %HelpOffer{origin: 1, aimed: nil, loads: []}}
     end
 
-    test "an aimed offer that finds nothing goes straight back, with the target's load first" do
-      left = relay(:left)
+    test "an aimed offer that finds nothing walks the ring from its origin's left sibling" do
+      target_left = relay(:target_left)
+      origin_left = relay(:origin_left)
       # Tracing its last atom: nothing to give.
-      target = aiming(index: 3, left: left, left_index: 2, in_flight: [5])
-      _ = handle(target, {:help_offer, %{offer(1) | aimed: 3}})
+      target = aiming(index: 3, left: target_left, left_index: 2, in_flight: [5])
+      aimed = %{offer(1) | aimed: 3, home_left: {origin_left, 0}, wrapped: true, hops: 1}
+      _ = handle(target, {:help_offer, aimed})
 
+      # As if child 1 had sent it to child 0 itself, with our load first.
+      me = self()
+
+      assert_receive {:origin_left,
+                      {:help_offer,
+                       %HelpOffer{origin: 1, aimed: nil, hops: 1, wrapped: false, via: ^me} = o}}
+
+      assert [{3, _, _, 0} | _] = o.loads
+      refute_receive {:target_left, _}, 50
+      refute_received {:help_offer, _}
+    end
+
+    test "a miss goes back to its origin if the origin's left sibling is dead" do
+      target = aiming(index: 3, left_index: 2, in_flight: [5], dead: [0])
+      _ = handle(target, {:help_offer, %{offer(1) | aimed: 3, home_left: {relay(:gone), 0}}})
       assert_received {:help_offer, %HelpOffer{origin: 1, aimed: 3, loads: [{3, _, _, 0} | _]}}
-      refute_receive {:left, _}, 50
     end
 
     test "an aimed offer that comes home is followed by one that walks the ring" do
