@@ -85,9 +85,16 @@ defmodule RingTracer.Job.Child do
   @doc "Records a protocol event (offer sent, passed, consumed...) for the timeline."
   @spec event(map(), atom(), term()) :: map()
   def event(state, kind, to) do
-    at = System.system_time(:microsecond) - state.t0
+    at = job_time(state)
     %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
   end
+
+  @doc """
+  Microseconds since the job's start (`t0`, wall clock, shared by the
+  parent and every child, whatever their node).
+  """
+  @spec job_time(%{t0: integer()}) :: integer()
+  def job_time(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
   @doc """
   What the child could give: `{remaining, in_flight}`, where `remaining`

@@ -60,7 +60,7 @@ defmodule RingTracer.Strategy.Ring do
   defp board(%{strategy_state: %{work: work, heard_from: from} = board} = parent)
        when work != nil do
     if Enum.all?(Map.keys(parent.children), &MapSet.member?(from, &1)) do
-      {loads, to} = Aim.board(parent.spec.layout, work, parent.traced_by, job_now(parent))
+      {loads, to} = Aim.board(parent.spec.layout, work, parent.traced_by, Child.job_time(parent))
       parent = %{parent | strategy_state: %{board | board: true}}
 
       to
@@ -344,7 +344,7 @@ defmodule RingTracer.Strategy.Ring do
   # When this child expects to have traced all it holds (job microseconds),
   # and how many atoms it holds queued.
   defp own_load(child) do
-    now = job_now(child)
+    now = Child.job_time(child)
     {remaining, in_flight} = Child.giveable(child)
     mean = Child.mean_atom_us(child) || 0
     current = if in_flight > 0, do: Child.expected_remaining_us(child) || 0, else: 0
@@ -356,12 +356,10 @@ defmodule RingTracer.Strategy.Ring do
       index: child.index,
       left_index: child.left_index,
       dead: child.dead,
-      now: job_now(child),
+      now: Child.job_time(child),
       min_us: Child.mean_atom_us(child) || 0
     })
   end
-
-  defp job_now(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
   defp put_strategy(child, kv),
     do: %{child | strategy_state: Map.merge(child.strategy_state, Map.new(kv))}
