@@ -103,21 +103,10 @@ defmodule RingTracer.StrategyTest do
   end
 
   test "message counts in the stats equal the sends a tracer observes" do
-    :erlang.trace(:new_processes, true, [:send])
-
     # hold_after: 1, so that held offers leave in shared messages too.
-    {:ok, result} =
-      RingTracer.render(TestScenes.path(@scene),
-        children: 6,
-        atoms: 6,
-        width: 40,
-        height: 30,
-        speeds: [1, 5, 1, 1, 3, 1],
-        hold_after: 1
-      )
+    {result, observed} =
+      render_traced(children: 6, atoms: 6, speeds: [1, 5, 1, 1, 3, 1], hold_after: 1)
 
-    :erlang.trace(:new_processes, false, [:send])
-    observed = collect_sends(%{})
     assert observed[:result] == result.messages.result.count
     assert Map.get(observed, :offer, 0) == Map.get(result.messages, :offer, %{count: 0}).count
 
@@ -129,20 +118,7 @@ defmodule RingTracer.StrategyTest do
     reference = TestScenes.reference(@scene, 40, 30)
 
     for {aim, boards} <- [{true, 2}, {false, 0}] do
-      :erlang.trace(:new_processes, true, [:send])
-
-      {:ok, result} =
-        RingTracer.render(TestScenes.path(@scene),
-          children: 5,
-          atoms: 6,
-          width: 40,
-          height: 30,
-          speeds: [1, 3, 1, 2, 1],
-          aim: aim
-        )
-
-      :erlang.trace(:new_processes, false, [:send])
-      observed = collect_sends(%{})
+      {result, observed} = render_traced(children: 5, atoms: 6, speeds: [1, 3, 1, 2, 1], aim: aim)
 
       assert result.pixels == reference
       assert Map.get(observed, :board, 0) == boards, "aim: #{aim}"
@@ -161,6 +137,15 @@ defmodule RingTracer.StrategyTest do
 
       assert result.aim == aimed?, "#{layout} #{inspect(opts)}"
     end
+  end
+
+  # A 40x30 render with every send by the job's processes traced: the
+  # result, and the sends observed, by kind.
+  defp render_traced(opts) do
+    :erlang.trace(:new_processes, true, [:send])
+    {:ok, result} = RingTracer.render(TestScenes.path(@scene), [width: 40, height: 30] ++ opts)
+    :erlang.trace(:new_processes, false, [:send])
+    {result, collect_sends(%{})}
   end
 
   # A send to a process that has already exited is traced apart: as the job
