@@ -93,7 +93,7 @@ defmodule RingTracer.Job.Child do
   Microseconds since the job's start (`t0`, wall clock, shared by the
   parent and every child, whatever their node).
   """
-  @spec job_time(%{t0: integer()}) :: integer()
+  @spec job_time(map()) :: integer()
   def job_time(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
   @doc """
