@@ -209,7 +209,9 @@ defmodule RingTracer do
       handover_delay: opts[:handover_delay],
       chaos: opts[:chaos],
       hold_after: opts[:hold_after],
-      aim: if(opts[:aim] == nil, do: opts[:layout] == :strips, else: opts[:aim]),
+      aim:
+        opts[:strategy] == :ring and
+          if(opts[:aim] == nil, do: opts[:layout] == :strips, else: opts[:aim]),
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],

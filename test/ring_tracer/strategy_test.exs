@@ -125,12 +125,13 @@ defmodule RingTracer.StrategyTest do
     end
   end
 
-  test "aiming is on for strips and off for interleaved strips unless asked" do
+  test "the ring aims on strips, not on interleaved strips unless asked; no other strategy aims" do
     for {layout, opts, aimed?} <- [
           {:strips, [], true},
           {:interleaved, [], false},
           {:interleaved, [aim: true], true},
-          {:strips, [aim: false], false}
+          {:strips, [aim: false], false},
+          {:strips, [strategy: :master], false}
         ] do
       {:ok, result} =
         RingTracer.simulate([children: 3, atoms: 4, costs: 500, layout: layout] ++ opts)

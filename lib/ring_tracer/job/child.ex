@@ -382,14 +382,8 @@ defmodule RingTracer.Job.Child do
 
       :unhandled ->
         case msg do
-          {:handover, _from, atoms} when is_list(atoms) ->
-            {:noreply, receive_atoms(state, atoms)}
-
-          {:handover, _from, atoms, _news} when is_list(atoms) ->
-            {:noreply, receive_atoms(state, atoms)}
-
-          _ ->
-            {:noreply, state}
+          {:handover, _from, atoms} when is_list(atoms) -> {:noreply, receive_atoms(state, atoms)}
+          _ -> {:noreply, state}
         end
     end
   end

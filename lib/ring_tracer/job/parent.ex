@@ -402,7 +402,7 @@ defmodule RingTracer.Job.Parent do
              redone: state.redone,
              nodes: node_summary(state, reports),
              layout: state.spec.layout.order,
-             aim: state.spec.aim and state.spec.strategy == RingTracer.Strategy.Ring
+             aim: state.spec.aim
            }}
 
         {:error, message} ->

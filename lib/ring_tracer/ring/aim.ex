@@ -1,4 +1,8 @@
 defmodule RingTracer.Ring.Aim do
+  @loads_max 3
+  @known_max 8
+  @board_to 2
+
   @moduledoc """
   Aiming (our addition to the paper): where an idle child sends its help
   offer.
@@ -23,9 +27,9 @@ defmodule RingTracer.Ring.Aim do
   `at_us` of when a sibling will have traced everything it holds (`end_us`)
   and how many atoms it had queued. A child's own: its queued atoms times its
   mean time per atom, plus what its atom in flight should still take. Offers
-  carry the #{3} latest-ending loads their children know of, and so do
+  carry the #{@loads_max} latest-ending loads their children know of, and so do
   hand-overs (the giver's own load, just lowered, first among them); every
-  child an offer or a hand-over reaches adds its own and keeps the #{8}
+  child an offer or a hand-over reaches adds its own and keeps the #{@known_max}
   latest-ending ones, the newest report per sibling. A report ages: by the
   time per atom it implies, the sibling has started atoms since, and one
   that should have no atom queued any more is not aimed at.
@@ -35,7 +39,7 @@ defmodule RingTracer.Ring.Aim do
   parent, which receives every atom, makes one board once each child has
   sent it an atom: for each child, the work left in its own atoms (from a
   preview of the image, the kernel's optional `atom_work/2`) over the work
-  per microsecond it has delivered so far. It sends it only to the #{2}
+  per microsecond it has delivered so far. It sends it only to the #{@board_to}
   children expected to run out first, the first to offer; their offers
   carry it on. (Sending it to every child cost more messages in misses than
   it saved, measured on `8, speeds 1..8`.)
@@ -51,10 +55,6 @@ defmodule RingTracer.Ring.Aim do
   """
 
   alias RingTracer.Layout
-
-  @loads_max 3
-  @known_max 8
-  @board_to 2
 
   @typedoc """
   A sibling's index, its expected end and when that was said (job
