@@ -1,4 +1,4 @@
-//! The crate's single error type.
+//! The crate's single error type, and how text from a file is shown in one.
 
 /// Everything that can go wrong in the kernel: parsing, I/O, limits, bad arguments, image output.
 ///
@@ -75,5 +75,117 @@ impl Error {
             file: file.to_string(),
             message: message.into(),
         }
+    }
+}
+
+/// At most this many characters of a file's text are echoed in an error ([`snippet`]).
+pub(crate) const SNIPPET_CHARS: usize = 64;
+
+/// At most this many characters of a message from another crate that quotes a file's text
+/// ([`quoted_snippets`]).
+const MESSAGE_CHARS: usize = 512;
+
+/// Text from a file as an error shows it: control and other non-printing characters escaped
+/// the way Rust's `escape_debug` does (`\u{1b}`, `\n`; quotes and backslashes are kept), and at
+/// most [`SNIPPET_CHARS`] characters, the last three `...` when the text was cut. The one way
+/// any text read from a file gets into an error message.
+pub(crate) fn snippet(text: &str) -> String {
+    escape_bounded(text, SNIPPET_CHARS)
+}
+
+/// [`snippet`] of bytes that may not be UTF-8. Only a prefix is looked at, so a huge token
+/// costs nothing.
+pub(crate) fn snippet_bytes(bytes: &[u8]) -> String {
+    let head = bytes.get(..SNIPPET_CHARS * 4 + 4).unwrap_or(bytes);
+    let text = String::from_utf8_lossy(head);
+    if head.len() < bytes.len() {
+        // a cut is always shown, even if the prefix itself fits
+        let mut s = escape_bounded(&text, SNIPPET_CHARS);
+        if !s.ends_with("...") {
+            let keep: String = s.chars().take(SNIPPET_CHARS - 3).collect();
+            s = keep + "...";
+        }
+        s
+    } else {
+        snippet(&text)
+    }
+}
+
+/// A message from another crate (the TOML reader's) that may quote text of the file between
+/// backticks or double quotes: every such piece goes through [`snippet`], and the whole is
+/// escaped and bounded too.
+pub(crate) fn quoted_snippets(message: &str) -> String {
+    let mut out = String::new();
+    let mut rest = message;
+    while let Some(i) = rest.find(['`', '"']) {
+        out.push_str(&snippet(&rest[..i]));
+        out.push_str(&rest[i..i + 1]);
+        rest = &rest[i + 1..];
+    }
+    out.push_str(&snippet(rest));
+    escape_bounded(&out, MESSAGE_CHARS)
+}
+
+/// Escapes non-printing characters (see [`snippet`]) and keeps at most `max_chars` characters
+/// of the result, ending in `...` when cut (an escape is never split).
+pub(crate) fn escape_bounded(text: &str, max_chars: usize) -> String {
+    let mut out = String::new();
+    let mut count = 0;
+    // byte length of `out` at the last piece boundary where `...` still fits
+    let mut cut = 0;
+    for c in text.chars() {
+        let esc = c.escape_debug();
+        let n = if matches!(c, '\\' | '\'' | '"') {
+            1
+        } else {
+            esc.len()
+        };
+        if count + n > max_chars {
+            out.truncate(cut);
+            out.push_str("...");
+            return out;
+        }
+        if n == 1 {
+            out.push(c);
+        } else {
+            out.extend(esc);
+        }
+        count += n;
+        if count + 3 <= max_chars {
+            cut = out.len();
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn snippets_escape_and_bound() {
+        assert_eq!(snippet("plain 'text' \\ \"q\""), "plain 'text' \\ \"q\"");
+        assert_eq!(snippet("\x1b[31mred\n"), "\\u{1b}[31mred\\n");
+        assert_eq!(snippet("a\u{202e}b"), "a\\u{202e}b");
+        let long = "x".repeat(1000);
+        let s = snippet(&long);
+        assert_eq!(s.chars().count(), SNIPPET_CHARS);
+        assert!(s.ends_with("..."));
+        assert_eq!(snippet(&"y".repeat(64)), "y".repeat(64));
+        // an escape is never cut in half
+        let s = snippet(&"\u{1}".repeat(100));
+        assert!(s.ends_with("\\u{1}..."), "{s}");
+        assert!(s.chars().count() <= SNIPPET_CHARS);
+        let s = snippet_bytes(&[b'z'; 10_000_000]);
+        assert_eq!(s.chars().count(), SNIPPET_CHARS);
+        assert!(s.ends_with("..."));
+        assert_eq!(snippet_bytes(b"ab\xffc"), "ab\u{fffd}c");
+        let m = quoted_snippets(&format!(
+            "unknown field `{}`, expected `camera`",
+            "f".repeat(500)
+        ));
+        assert!(m.starts_with("unknown field `ffff"), "{m}");
+        assert!(m.ends_with("...`, expected `camera`"), "{m}");
+        assert!(quoted_snippets(&"`a".repeat(100_000)).chars().count() <= MESSAGE_CHARS);
     }
 }

@@ -21,6 +21,7 @@
 //! that are NaN or infinite (also after conversion to f32) are rejected.
 
 use crate::camera::Camera;
+use crate::error::snippet_bytes;
 use crate::light::{spd_intensity, Light};
 use crate::limits;
 use crate::material::Material;
@@ -86,10 +87,11 @@ impl<'a> Lexer<'a> {
             return Ok(v);
         }
         let text = String::from_utf8_lossy(tok);
+        let shown = snippet_bytes(tok);
         match text.parse::<f32>() {
             Ok(v) if v.is_finite() => Ok(v),
-            Ok(_) => Err(self.err(line, format!("number '{text}' in {what} is not finite"))),
-            Err(_) => Err(self.err(line, format!("expected a number in {what}, got '{text}'"))),
+            Ok(_) => Err(self.err(line, format!("number '{shown}' in {what} is not finite"))),
+            Err(_) => Err(self.err(line, format!("expected a number in {what}, got '{shown}'"))),
         }
     }
 
@@ -110,11 +112,36 @@ impl<'a> Lexer<'a> {
             Ok(v) => Ok((v, line)),
             Err(_) => Err(self.err(
                 line,
-                format!("expected a non-negative integer for {what}, got '{text}'"),
+                format!(
+                    "expected a non-negative integer for {what}, got '{}'",
+                    snippet_bytes(tok)
+                ),
             )),
         }
     }
+
+    /// Whether the token that ends at the current position is the first one on its line.
+    fn token_starts_line(&self, tok: &[u8]) -> bool {
+        let start = self.pos.saturating_sub(tok.len());
+        let before = self.src.get(..start).unwrap_or_default();
+        before
+            .iter()
+            .rev()
+            .take_while(|&&c| c != b'\n')
+            .all(|c| c.is_ascii_whitespace())
+    }
 }
+
+/// Whether a token could be meant as an NFF keyword: an ASCII letter, then at most 15 ASCII
+/// letters, digits or underscores. Only such a token is echoed in the "unknown entity" error,
+/// so that a file that is not a scene (`/etc/passwd`) does not have its content printed.
+fn looks_like_keyword(tok: &[u8]) -> bool {
+    matches!(tok.first(), Some(c) if c.is_ascii_alphabetic())
+        && tok.len() <= 16
+        && tok.iter().all(|c| c.is_ascii_alphanumeric() || *c == b'_')
+}
+
+const ENTITIES: &str = "v, b, l, f, c, s, p, pp or #";
 
 fn is_number(tok: &[u8]) -> bool {
     matches!(tok.first(), Some(c) if c.is_ascii_digit() || *c == b'-' || *c == b'+' || *c == b'.')
@@ -229,13 +256,22 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                 r.map_err(|e| lx.err(line, e.to_string()))?;
             }
             _ => {
-                return Err(lx.err(
-                    line,
+                let message = if looks_like_keyword(tok) {
                     format!(
-                        "unknown entity '{}' (expected v, b, l, f, c, s, p, pp or #)",
+                        "unknown entity '{}' (expected {ENTITIES})",
                         String::from_utf8_lossy(tok)
-                    ),
-                ))
+                    )
+                } else if lx.token_starts_line(tok) {
+                    format!(
+                        "line does not start with an NFF entity ({ENTITIES}); is this an NFF file?"
+                    )
+                } else {
+                    format!(
+                        "unexpected text where an NFF entity ({ENTITIES}) should start \
+                         (too many values for the entity before it?)"
+                    )
+                };
+                return Err(lx.err(line, message));
             }
         }
     }
@@ -379,6 +415,49 @@ mod tests {
             err(&format!("{HEAD}p -3\n")),
             "t.nff:8: expected a non-negative integer for the vertex count of polygon 'p', got '-3'"
         );
+    }
+
+    #[test]
+    fn errors_do_not_echo_what_is_not_a_scene() {
+        let e = err("root:x:0:0:root:/root:/bin/bash\ndaemon:x:1:1::/usr/sbin:/bin/false\n");
+        assert!(!e.contains("root:"), "{e}");
+        assert_eq!(
+            e,
+            "t.nff:1: line does not start with an NFF entity (v, b, l, f, c, s, p, pp or #); \
+             is this an NFF file?"
+        );
+        let e = err(&format!("{HEAD}s 0 0 0 1 secret_number_42x\n"));
+        assert_eq!(
+            e,
+            "t.nff:8: unexpected text where an NFF entity (v, b, l, f, c, s, p, pp or #) should \
+             start (too many values for the entity before it?)"
+        );
+        // a keyword-like token is still named
+        assert!(err("hello 1 2\n").contains("unknown entity 'hello'"));
+        assert!(!err("seventeen_letters 1\n").contains("seventeen"));
+        // control characters are escaped
+        let e = err(&format!("{HEAD}s 0 0 \x1b[31m 1\n"));
+        assert_eq!(
+            e,
+            "t.nff:8: expected a number in sphere 's', got '\\u{1b}[31m'"
+        );
+        assert!(!e.contains('\x1b'));
+        // a huge single token gives a short error, in every place a token is echoed
+        let big = "a".repeat(10 << 20);
+        for src in [
+            big.clone(),
+            format!("{HEAD}s 0 0 {big} 1\n"),
+            format!("{HEAD}s 0 0 1{} 1\n", "0".repeat(10 << 20)),
+            format!("{HEAD}p 9{big}\n"),
+        ] {
+            let e = err(&src);
+            assert!(
+                e.len() < 300,
+                "{} bytes: {}",
+                e.len(),
+                &e[..300.min(e.len())]
+            );
+        }
     }
 
     #[test]

@@ -77,6 +77,7 @@
 //! ```
 
 use crate::camera::Camera;
+use crate::error::{quoted_snippets, snippet};
 use crate::light::{spd_intensity, Light};
 use crate::limits;
 use crate::material::{Checker, Material};
@@ -301,7 +302,7 @@ pub fn parse(
     })?;
     let def: SceneDef = toml::from_str(text).map_err(|e| {
         let line = e.span().map_or(1, |s| line_of(bytes, s.start));
-        Error::parse(file, line, e.message().trim().to_string())
+        Error::parse(file, line, quoted_snippets(e.message().trim()))
     })?;
     let cx = Ctx { src: bytes, file };
     let mut b = SceneBuilder::new();
@@ -360,7 +361,7 @@ pub fn parse(
     for (name, m) in &def.materials {
         let span = m.span();
         let m = m.get_ref();
-        let what = format!("material '{name}'");
+        let what = format!("material '{}'", snippet(name));
         cx.finite(&span, &what, &[m.kd, m.ks, m.shine, m.t, m.ior])?;
         let checker = match &m.checker {
             Some(ch) => {
@@ -392,10 +393,9 @@ pub fn parse(
         let find = |m: &Option<String>| -> Result<u32, Error> {
             match m {
                 None => Ok(default_mat),
-                Some(n) => names
-                    .get(n.as_str())
-                    .copied()
-                    .ok_or_else(|| cx.err(span.clone(), format!("unknown material '{n}'"))),
+                Some(n) => names.get(n.as_str()).copied().ok_or_else(|| {
+                    cx.err(span.clone(), format!("unknown material '{}'", snippet(n)))
+                }),
             }
         };
         let lim = |e: Error| cx.err(span.clone(), e.to_string());
@@ -523,14 +523,15 @@ pub fn parse(
                 if xf.matrix3.determinant() == 0.0 {
                     return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
                 }
+                let shown = snippet(mesh_file);
                 let data = resolve(mesh_file).map_err(|e| {
-                    cx.err(span.clone(), format!("cannot load mesh '{mesh_file}': {e}"))
+                    cx.err(span.clone(), format!("cannot load mesh '{shown}': {e}"))
                 })?;
                 let mat = match material {
                     Some(_) => Some(find(material)?),
                     None => None,
                 };
-                crate::obj::load_mesh(&data, mesh_file, resolve, xf, mat, *smooth, &mut b)
+                crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, &mut b)
                     .map_err(|e| cx.err(span.clone(), e.to_string()))?;
             }
         }
@@ -631,5 +632,30 @@ mod tests {
         assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
         let e = err("[camera]\nfrom = [0, 0, 5\n");
         assert!(e.starts_with("s.toml:2:"), "{e}");
+    }
+
+    #[test]
+    fn echoed_text_is_escaped_and_short() {
+        let long = "q".repeat(10 << 20);
+        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"{long}\"\n"));
+        assert!(e.len() < 700, "{} bytes", e.len());
+        let e = err(&format!("{CAM}{long} = 1\n"));
+        assert!(e.len() < 700, "{} bytes", e.len());
+        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"\\u001b[31m{long}\"\n"));
+        assert!(
+            e.starts_with("s.toml:5: unknown material '\\u{1b}[31mqqq"),
+            "{e}"
+        );
+        assert!(e.len() < 300 && !e.contains('\x1b'), "{e}");
+        let e = err(&format!(
+            "{CAM}\n[[objects]]\ntype = \"mesh\"\nfile = \"a\\u0007{long}.obj\"\n"
+        ));
+        assert!(
+            e.starts_with("s.toml:5: cannot load mesh 'a\\u{7}qqq"),
+            "{e}"
+        );
+        assert!(e.len() < 300 && !e.contains('\x07'), "{e}");
+        let e = err("[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n\"\\u001b[2J\" = 1\n");
+        assert!(e.contains("\\u{1b}[2J") && !e.contains('\x1b'), "{e}");
     }
 }
