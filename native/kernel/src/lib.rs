@@ -18,8 +18,10 @@
 //! of the image into spans, on any number of threads or machines, gives the same bits.
 //!
 //! ## Map of the crate
-//! - [`nff`], [`toml_scene`], [`obj`]: scene formats (all errors are `file:line: problem`);
-//!   [`limits`]: bounds checked before allocating.
+//! - [`nff`], [`toml_scene`], [`obj`]: scene formats (all errors are `file:line: problem`;
+//!   text of the file is echoed only escaped and cut short); [`limits`]: bounds checked before
+//!   allocating; [`files`]: the files a scene may read (regular files only, size-checked, and
+//!   referenced files confined to the scene's folder by [`files::Confinement`]).
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (polygons
 //!   are ear-clipped into triangles, smooth patches keep vertex normals), cones/cylinders,
@@ -39,6 +41,7 @@
 pub mod bvh;
 pub mod camera;
 pub mod error;
+pub mod files;
 pub mod film;
 pub mod geometry;
 pub mod integrator;

@@ -2,6 +2,7 @@
 
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
+use crate::files;
 use crate::geometry::{ear_clip, hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
 use crate::light::Light;
 use crate::limits;
@@ -9,7 +10,7 @@ use crate::material::Material;
 use crate::ray::Ray;
 use crate::Error;
 use glam::Vec3A;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Scene file formats, chosen by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -118,18 +119,23 @@ impl Scene {
         }
     }
 
-    /// Convenience: read file, resolve references relative to its directory.
+    /// Convenience: reads the file ([`files::read_regular`]) and the files it references,
+    /// relative to its folder and confined to it ([`files::Confinement`]).
     pub fn load(path: &Path) -> Result<Scene, Error> {
         let shown = path.display().to_string();
         let format = Format::from_path(&shown)?;
-        let bytes = read_limited(path)?;
-        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let bytes = files::read_regular(path, limits::MAX_FILE_BYTES)?;
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let confinement = files::Confinement::new([&dir])?;
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or(shown);
         let resolve = move |rel: &str| -> Result<Vec<u8>, String> {
-            read_limited(&dir.join(rel)).map_err(|e| e.to_string())
+            confinement.read(&dir, rel).map(|(bytes, _)| bytes)
         };
         Scene::parse(&bytes, format, &name, &resolve)
     }
@@ -351,17 +357,6 @@ impl Scene {
             .copied()
             .unwrap_or_default()
     }
-}
-
-pub(crate) fn read_limited(path: &Path) -> Result<Vec<u8>, Error> {
-    let file = path.display().to_string();
-    let io = |e: std::io::Error| Error::Io {
-        file: file.clone(),
-        message: e.to_string(),
-    };
-    let meta = std::fs::metadata(path).map_err(io)?;
-    limits::check_file_size(format!("the size of {file}"), meta.len())?;
-    std::fs::read(path).map_err(io)
 }
 
 /// Remembers the last cones tested along one ray: long oblique cones are referenced by several

@@ -417,6 +417,39 @@ fn limit_file_size() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `Scene::load` reads referenced files only inside the scene's folder.
+#[test]
+fn load_confines_references() {
+    let t = tempfile::tempdir().unwrap();
+    let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n";
+    std::fs::write(t.path().join("quad.obj"), quad).unwrap();
+    let dir = t.path().join("scenes");
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(dir.join("quad.obj"), quad).unwrap();
+    let scene = |file: &str| {
+        let path = dir.join("s.toml");
+        std::fs::write(
+            &path,
+            format!("[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n[[objects]]\ntype = \"mesh\"\nfile = \"{file}\"\n"),
+        )
+        .unwrap();
+        Scene::load(&path).map_err(|e| e.to_string())
+    };
+    assert_eq!(scene("quad.obj").unwrap().primitive_count(), 1);
+    let e = scene("../quad.obj").unwrap_err();
+    assert!(
+        e.starts_with("s.toml:4: cannot load mesh '../quad.obj': '../quad.obj' resolves to "),
+        "{e}"
+    );
+    assert!(e.contains("outside the scene's folder"), "{e}");
+    let e = scene("/etc/passwd").unwrap_err();
+    assert!(
+        e.contains("'/etc/passwd' resolves to /etc/passwd, outside"),
+        "{e}"
+    );
+    assert!(!e.contains("root:"), "{e}");
+}
+
 // ---- the fuzz seeds (native/fuzz/corpus/<target>/) on stable, through the fuzz driver's steps ----
 
 /// What the fuzz targets' resolver returns: a small quad mesh, or its material library.

@@ -1,0 +1,573 @@
+//! The files a scene may read.
+//!
+//! Two rules, for the scene file itself and for every file it references (TOML `mesh` files,
+//! OBJ `mtllib`s):
+//! - [`read_regular`]: only a regular file is read, never a FIFO (which would block forever),
+//!   a device, a socket or a directory, and nothing of the kernel's pseudo-filesystems
+//!   (`/proc/self/environ`, `/sys/...`); its size is checked against a bound before a byte is
+//!   read, and no more than the bound is read even if the file grows meanwhile. The checks are
+//!   made on the open file (`fstat`, `fstatfs`), opened non-blocking.
+//! - [`Confinement`]: a file a scene references must lie, after every `..` and symbolic link
+//!   is resolved, inside one of a set of folders (the scene's own, and any the user allows).
+//!   `../../etc/passwd`, `/etc/shadow` and a symbolic link out of the folder are refused, with
+//!   a message naming the reference as written and where it leads.
+//!
+//! ```no_run
+//! use ring_tracer_kernel::files::{read_regular, Confinement};
+//! use ring_tracer_kernel::limits::MAX_FILE_BYTES;
+//! use std::path::Path;
+//! let scene = read_regular(Path::new("scenes/teapot.toml"), MAX_FILE_BYTES)?;
+//! let confined = Confinement::new(["scenes"])?;
+//! let mesh = confined.read(Path::new("scenes"), "meshes/teapot.obj");
+//! assert!(confined.read(Path::new("scenes"), "../../etc/passwd").is_err());
+//! # Ok::<(), ring_tracer_kernel::Error>(())
+//! ```
+//!
+//! What is left: a folder inside a root that someone swaps for a symbolic link between the
+//! check and the open is followed (the last component is opened with `O_NOFOLLOW`, and the
+//! file must still be a regular file not on a pseudo-filesystem).
+
+use crate::error::escape_bounded;
+use crate::limits;
+use crate::Error;
+use std::fs::{File, FileType, OpenOptions};
+use std::io::Read;
+use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+use std::path::{Component, Path, PathBuf};
+
+/// At most this many characters of a path or reference are shown in a message.
+const PATH_CHARS: usize = 1024;
+
+/// Folders of the kernel's pseudo-filesystems: nothing under them is read, whatever `fstatfs`
+/// says (some sandboxes, gVisor among them, may report another filesystem type).
+const PSEUDO_DIRS: [&str; 2] = ["/proc", "/sys"];
+
+/// A path or reference as messages show it: escaped, bounded.
+fn shown(path: &Path) -> String {
+    escape_bounded(&path.to_string_lossy(), PATH_CHARS)
+}
+
+fn io_error(path: &Path, message: impl Into<String>) -> Error {
+    Error::Io {
+        file: shown(path),
+        message: message.into(),
+    }
+}
+
+/// What a file is, for a message refusing it.
+fn kind(ft: &FileType) -> &'static str {
+    if ft.is_dir() {
+        "a directory"
+    } else if ft.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if ft.is_socket() {
+        "a socket"
+    } else if ft.is_char_device() {
+        "a character device"
+    } else if ft.is_block_device() {
+        "a block device"
+    } else if ft.is_symlink() {
+        "a symbolic link"
+    } else {
+        "not a regular file"
+    }
+}
+
+fn not_regular(path: &Path, ft: &FileType) -> Error {
+    let what = kind(ft);
+    let message = if what == "not a regular file" {
+        what.to_string()
+    } else {
+        format!("is {what}, not a regular file")
+    };
+    io_error(path, message)
+}
+
+/// The pseudo-filesystem a file is on (by `fstatfs`), if any.
+#[cfg(target_os = "linux")]
+fn pseudo_filesystem(file: &File) -> Result<Option<&'static str>, std::io::Error> {
+    use std::os::fd::AsRawFd;
+    // SAFETY: `statfs` is plain old data, fully written by a successful `fstatfs`; the file
+    // descriptor is open for the duration of the call.
+    let st = unsafe {
+        let mut st: libc::statfs = std::mem::zeroed();
+        if libc::fstatfs(file.as_raw_fd(), &mut st) != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        st
+    };
+    let known = [
+        (libc::PROC_SUPER_MAGIC, "proc"),
+        (libc::SYSFS_MAGIC, "sysfs"),
+        (libc::DEBUGFS_MAGIC, "debugfs"),
+        (libc::TRACEFS_MAGIC, "tracefs"),
+        (libc::SECURITYFS_MAGIC, "securityfs"),
+        (libc::CGROUP2_SUPER_MAGIC, "cgroup2"),
+        (libc::BPF_FS_MAGIC, "bpf"),
+    ];
+    Ok(known
+        .iter()
+        .find(|(magic, _)| st.f_type == *magic)
+        .map(|(_, name)| *name))
+}
+
+/// Elsewhere only the path rule ([`PSEUDO_DIRS`]) applies.
+#[cfg(not(target_os = "linux"))]
+fn pseudo_filesystem(_file: &File) -> Result<Option<&'static str>, std::io::Error> {
+    Ok(None)
+}
+
+/// Opens `path` read-only and non-blocking (a FIFO never blocks the open) and checks the open
+/// file: a regular file, not on a pseudo-filesystem. Returns it with its size.
+fn open_checked(path: &Path) -> Result<(File, u64), Error> {
+    let file = OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY | libc::O_NOFOLLOW)
+        .open(path)
+        .map_err(|e| io_error(path, e.to_string()))?;
+    // fstat: the file opened, not whatever the name points to now
+    let meta = file.metadata().map_err(|e| io_error(path, e.to_string()))?;
+    if !meta.file_type().is_file() {
+        return Err(not_regular(path, &meta.file_type()));
+    }
+    match pseudo_filesystem(&file) {
+        Ok(None) => {}
+        Ok(Some(fs)) => {
+            return Err(io_error(
+                path,
+                format!("is on the kernel's {fs} filesystem, not a file a scene may read"),
+            ))
+        }
+        Err(e) => return Err(io_error(path, e.to_string())),
+    }
+    Ok((file, meta.len()))
+}
+
+/// Reads a regular file of at most `max_bytes` bytes (normally [`limits::MAX_FILE_BYTES`]).
+///
+/// Refused, each with a message naming the path and why: a path that does not exist, anything
+/// but a regular file (a FIFO, a device, a socket, a directory: named in the message), a file
+/// under `/proc` or `/sys` or on one of the kernel's pseudo-filesystems, and a file larger
+/// than `max_bytes` ([`Error::Limit`], checked before reading; at most `max_bytes + 1` bytes
+/// are ever read, so a file that grows is still bounded). The open is non-blocking, so a FIFO
+/// swapped in after the checks does not hang the caller either.
+pub fn read_regular(path: &Path, max_bytes: u64) -> Result<Vec<u8>, Error> {
+    read_regular_with_path(path, max_bytes).map(|(bytes, _)| bytes)
+}
+
+/// [`read_regular`], also returning the canonical absolute path of the file read (every
+/// symbolic link and `..` resolved), e.g. so that an output file never overwrites an input.
+pub fn read_regular_with_path(path: &Path, max_bytes: u64) -> Result<(Vec<u8>, PathBuf), Error> {
+    let canonical = std::fs::canonicalize(path).map_err(|e| io_error(path, e.to_string()))?;
+    if let Some(dir) = PSEUDO_DIRS.iter().find(|d| canonical.starts_with(d)) {
+        return Err(io_error(
+            path,
+            format!(
+                "is {}, under {dir}: not a file a scene may read",
+                shown(&canonical)
+            ),
+        ));
+    }
+    // stat first, so that a device is not even opened (opening some has effects)
+    let meta = std::fs::metadata(&canonical).map_err(|e| io_error(path, e.to_string()))?;
+    if !meta.file_type().is_file() {
+        return Err(not_regular(path, &meta.file_type()));
+    }
+    let (file, size) = open_checked(&canonical)?;
+    let over = |value: u64| {
+        limits::check_with(
+            format!("the size of {}", shown(path)),
+            value,
+            " bytes",
+            max_bytes,
+            "MAX_FILE_BYTES",
+            limits::RAISE,
+        )
+    };
+    over(size)?;
+    let mut bytes = Vec::with_capacity(size as usize);
+    file.take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io_error(path, e.to_string()))?;
+    over(bytes.len() as u64)?;
+    Ok((bytes, canonical))
+}
+
+/// `path` with `.` and `..` resolved by the text alone (no symbolic link followed).
+fn lexical(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
+}
+
+/// The folders whose files a scene may reference: the scene's own folder first, then any the
+/// user allows. Held canonical (absolute, symbolic links resolved).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Confinement {
+    roots: Vec<PathBuf>,
+}
+
+impl Confinement {
+    /// The folders `roots`, the first being the scene's own (messages call it so). Each must
+    /// exist and be a directory.
+    pub fn new<P: AsRef<Path>>(roots: impl IntoIterator<Item = P>) -> Result<Confinement, Error> {
+        let roots = roots
+            .into_iter()
+            .map(|r| {
+                let r = r.as_ref();
+                let c = std::fs::canonicalize(r).map_err(|e| io_error(r, e.to_string()))?;
+                if c.is_dir() {
+                    Ok(c)
+                } else {
+                    Err(io_error(r, "is not a folder"))
+                }
+            })
+            .collect::<Result<Vec<_>, Error>>()?;
+        Ok(Confinement { roots })
+    }
+
+    /// The canonical folders, the scene's first.
+    pub fn roots(&self) -> &[PathBuf] {
+        &self.roots
+    }
+
+    /// Whether a canonical path lies in one of the folders (component by component: `/a/bc`
+    /// is not inside `/a/b`).
+    pub fn contains(&self, canonical: &Path) -> bool {
+        self.roots.iter().any(|r| canonical.starts_with(r))
+    }
+
+    fn outside(&self, reference: &str, to: &Path, how: &str) -> String {
+        let mut folders = match self.roots.split_first() {
+            None => "outside every allowed folder (there are none)".to_string(),
+            Some((scene, [])) => format!("outside the scene's folder {}", shown(scene)),
+            Some((scene, more)) => format!(
+                "outside the scene's folder {} and the allowed folders {}",
+                shown(scene),
+                more.iter().map(|p| shown(p)).collect::<Vec<_>>().join(", ")
+            ),
+        };
+        folders.push_str(" (allow it with --allow-dir)");
+        format!(
+            "'{}' resolves to {}{how}, {folders}",
+            escape_bounded(reference, PATH_CHARS),
+            shown(to)
+        )
+    }
+
+    /// Where a reference written in a scene (or in a file it references) leads: relative ones
+    /// are taken from `base_dir`, absolute ones as they are; `..` and symbolic links are
+    /// resolved. The canonical path must lie inside one of the folders; the error names the
+    /// reference as written and why, e.g. `'../../etc/passwd' resolves to /etc/passwd,
+    /// outside the scene's folder /x/y (allow it with --allow-dir)` or `'m.obj' does not
+    /// exist (/x/y/m.obj)`. A reference that leaves the folders by its text alone is refused
+    /// before anything on disk is looked at (so whether a file exists outside is not told).
+    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, String> {
+        let quoted = escape_bounded(reference, PATH_CHARS);
+        if reference.is_empty() {
+            return Err("'' is an empty file name".to_string());
+        }
+        let base = std::fs::canonicalize(base_dir)
+            .map_err(|e| format!("'{quoted}': the folder {}: {e}", shown(base_dir)))?;
+        let written = lexical(&base.join(reference));
+        if !self.contains(&written) {
+            return Err(self.outside(reference, &written, ""));
+        }
+        let canonical = std::fs::canonicalize(&written).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                format!("'{quoted}' does not exist ({})", shown(&written))
+            } else {
+                format!("'{quoted}': {}: {e}", shown(&written))
+            }
+        })?;
+        if !self.contains(&canonical) {
+            return Err(self.outside(reference, &canonical, " (through a symbolic link)"));
+        }
+        Ok(canonical)
+    }
+
+    /// Reads a referenced file: [`Confinement::resolve`], then [`read_regular`] with
+    /// [`limits::MAX_FILE_BYTES`]. Returns the bytes and the canonical path read.
+    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), String> {
+        let path = self.resolve(base_dir, reference)?;
+        read_regular_with_path(&path, limits::MAX_FILE_BYTES).map_err(|e| e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::symlink;
+    use std::time::{Duration, Instant};
+
+    /// A temporary folder `root` holding `scene/m.obj` and `outside.txt`.
+    fn tree() -> (tempfile::TempDir, PathBuf) {
+        let t = tempfile::tempdir().unwrap();
+        let scene = t.path().join("scene");
+        std::fs::create_dir(&scene).unwrap();
+        std::fs::write(scene.join("m.obj"), "v 0 0 0\n").unwrap();
+        std::fs::write(t.path().join("outside.txt"), "secret\n").unwrap();
+        (t, scene)
+    }
+
+    fn canon(p: &Path) -> PathBuf {
+        std::fs::canonicalize(p).unwrap()
+    }
+
+    #[test]
+    fn reads_inside_and_names_what_it_read() {
+        let (_t, scene) = tree();
+        let c = Confinement::new([&scene]).unwrap();
+        let (bytes, path) = c.read(&scene, "m.obj").unwrap();
+        assert_eq!(bytes, b"v 0 0 0\n");
+        assert_eq!(path, canon(&scene.join("m.obj")));
+        std::fs::create_dir(scene.join("sub")).unwrap();
+        assert_eq!(
+            c.resolve(&scene, "sub/../m.obj").unwrap(),
+            canon(&scene.join("m.obj"))
+        );
+        let abs = canon(&scene.join("m.obj"));
+        assert_eq!(c.resolve(&scene, abs.to_str().unwrap()).unwrap(), abs);
+        let e = c.resolve(&scene, "nope.obj").unwrap_err();
+        assert!(e.starts_with("'nope.obj' does not exist ("), "{e}");
+    }
+
+    #[test]
+    fn dot_dot_escape_is_refused() {
+        let (t, scene) = tree();
+        let c = Confinement::new([&scene]).unwrap();
+        let e = c.resolve(&scene, "../outside.txt").unwrap_err();
+        let root = canon(t.path());
+        assert_eq!(
+            e,
+            format!(
+                "'../outside.txt' resolves to {}, outside the scene's folder {} (allow it with \
+                 --allow-dir)",
+                root.join("outside.txt").display(),
+                canon(&scene).display()
+            )
+        );
+        let e = c
+            .read(&scene, "../../../../../../../../etc/passwd")
+            .unwrap_err();
+        assert!(
+            e.starts_with("'../../../../../../../../etc/passwd' resolves to /etc/passwd, outside"),
+            "{e}"
+        );
+        // whether a file exists outside is not told
+        let e = c.resolve(&scene, "../no_such_file").unwrap_err();
+        assert!(e.contains("outside the scene's folder"), "{e}");
+        // allowed with a second root
+        let c2 = Confinement::new([scene.clone(), t.path().to_path_buf()]).unwrap();
+        assert_eq!(c2.read(&scene, "../outside.txt").unwrap().0, b"secret\n");
+        let e = Confinement::new([scene.clone(), scene.join("sub_missing")]).unwrap_err();
+        assert!(e.to_string().contains("sub_missing"), "{e}");
+        let e = Confinement::new([scene.join("m.obj")]).unwrap_err();
+        assert!(e.to_string().ends_with("is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn absolute_path_outside_is_refused() {
+        let (_t, scene) = tree();
+        let c = Confinement::new([&scene]).unwrap();
+        for r in ["/etc/shadow", "/etc/passwd", "/proc/self/environ"] {
+            let e = c.read(&scene, r).unwrap_err();
+            assert!(
+                e.starts_with(&format!(
+                    "'{r}' resolves to {r}, outside the scene's folder"
+                )),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn symlinks_are_followed_and_must_stay_inside() {
+        let (t, scene) = tree();
+        let c = Confinement::new([&scene]).unwrap();
+        symlink(t.path().join("outside.txt"), scene.join("out.obj")).unwrap();
+        let e = c.read(&scene, "out.obj").unwrap_err();
+        assert!(
+            e.starts_with(&format!(
+                "'out.obj' resolves to {} (through a symbolic link), outside the scene's folder",
+                canon(&t.path().join("outside.txt")).display()
+            )),
+            "{e}"
+        );
+        symlink("/etc", scene.join("etc")).unwrap();
+        let e = c.read(&scene, "etc/passwd").unwrap_err();
+        assert!(
+            e.contains("resolves to /etc/passwd (through a symbolic link)"),
+            "{e}"
+        );
+        // a link inside pointing inside is fine
+        std::fs::create_dir(scene.join("meshes")).unwrap();
+        symlink("../m.obj", scene.join("meshes/alias.obj")).unwrap();
+        let (bytes, path) = c.read(&scene, "meshes/alias.obj").unwrap();
+        assert_eq!(bytes, b"v 0 0 0\n");
+        assert_eq!(path, canon(&scene.join("m.obj")));
+        // the scene's folder given through a link is taken as what it points to
+        symlink(&scene, t.path().join("scene_link")).unwrap();
+        let c = Confinement::new([t.path().join("scene_link")]).unwrap();
+        assert!(c.read(&t.path().join("scene_link"), "m.obj").is_ok());
+    }
+
+    #[test]
+    fn prefix_of_a_name_is_not_inside() {
+        let t = tempfile::tempdir().unwrap();
+        let (b, bc) = (t.path().join("b"), t.path().join("bc"));
+        std::fs::create_dir(&b).unwrap();
+        std::fs::create_dir(&bc).unwrap();
+        std::fs::write(bc.join("x.obj"), "v 0 0 0\n").unwrap();
+        let c = Confinement::new([&b]).unwrap();
+        assert!(!c.contains(&canon(&bc.join("x.obj"))));
+        let e = c.resolve(&b, "../bc/x.obj").unwrap_err();
+        assert!(e.contains("outside the scene's folder"), "{e}");
+        let abs = canon(&bc).join("x.obj");
+        assert!(c.resolve(&b, abs.to_str().unwrap()).is_err());
+        assert!(Confinement::new([&bc]).unwrap().contains(&abs));
+    }
+
+    #[test]
+    fn fifo_is_refused_promptly() {
+        let t = tempfile::tempdir().unwrap();
+        let fifo = t.path().join("pipe.obj");
+        let c_path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0);
+        let (tx, rx) = std::sync::mpsc::channel();
+        let f = fifo.clone();
+        let dir = t.path().to_path_buf();
+        std::thread::spawn(move || {
+            let read = read_regular(&f, 1 << 20).map(|_| ());
+            // the open itself, as if the FIFO had been swapped in after the stat
+            let open = open_checked(&f).map(|_| ());
+            let confined = Confinement::new([&dir]).unwrap().read(&dir, "pipe.obj");
+            let _ = tx.send((read, open, confined.map(|_| ())));
+        });
+        let t0 = Instant::now();
+        let (read, open, confined) = rx
+            .recv_timeout(Duration::from_secs(10))
+            .expect("reading a FIFO must not block");
+        assert!(t0.elapsed() < Duration::from_secs(10));
+        for e in [read.unwrap_err(), open.unwrap_err()] {
+            assert!(
+                e.to_string()
+                    .ends_with("pipe.obj: is a FIFO (named pipe), not a regular file"),
+                "{e}"
+            );
+        }
+        assert!(confined.unwrap_err().contains("is a FIFO"));
+    }
+
+    #[test]
+    fn directories_devices_and_procfs_are_refused() {
+        let t = tempfile::tempdir().unwrap();
+        let e = read_regular(t.path(), 1 << 20).unwrap_err().to_string();
+        assert!(e.ends_with(": is a directory, not a regular file"), "{e}");
+        let e = read_regular(Path::new("/dev/null"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "/dev/null: is a character device, not a regular file");
+        let e = open_checked(Path::new("/dev/null"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("character device"), "{e}");
+        let e = read_regular(Path::new("/proc/self/environ"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("/proc/self/environ: is /proc/"), "{e}");
+        assert!(
+            e.ends_with("under /proc: not a file a scene may read"),
+            "{e}"
+        );
+        // the open file's filesystem is checked too (where /proc reports itself)
+        if let Ok(Some("proc")) =
+            File::open("/proc/self/environ").map(|f| pseudo_filesystem(&f).unwrap_or(None))
+        {
+            let e = open_checked(Path::new("/proc/self/environ"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.ends_with("is on the kernel's proc filesystem, not a file a scene may read"),
+                "{e}"
+            );
+        }
+        let e = read_regular(
+            Path::new("/sys/kernel/mm/transparent_hugepage/enabled"),
+            1 << 20,
+        );
+        assert!(e.is_err());
+        // a link to /proc is followed, then refused
+        symlink("/proc/self/environ", t.path().join("env.nff")).unwrap();
+        let e = read_regular(&t.path().join("env.nff"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("under /proc"), "{e}");
+        let e = read_regular(&t.path().join("missing.nff"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing.nff: No such file"), "{e}");
+    }
+
+    #[test]
+    fn size_is_checked_before_reading() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("big.nff");
+        std::fs::write(&p, vec![b'x'; 101]).unwrap();
+        let e = read_regular(&p, 100).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Limit {
+                    value: 101,
+                    max: 100,
+                    constant: "MAX_FILE_BYTES",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        let s = e.to_string();
+        assert!(
+            s.contains("big.nff is 101 bytes, more than the limit of 100 (limits::MAX_FILE_BYTES)"),
+            "{s}"
+        );
+        assert_eq!(read_regular(&p, 101).unwrap().len(), 101);
+        // a sparse file far over the bound is refused from its size, never read
+        let huge = t.path().join("huge.obj");
+        File::create(&huge)
+            .unwrap()
+            .set_len(limits::MAX_FILE_BYTES + 1)
+            .unwrap();
+        let t0 = Instant::now();
+        assert!(read_regular(&huge, limits::MAX_FILE_BYTES).is_err());
+        assert!(t0.elapsed() < Duration::from_secs(2));
+    }
+
+    #[test]
+    fn references_are_escaped_in_messages() {
+        let (_t, scene) = tree();
+        let c = Confinement::new([&scene]).unwrap();
+        let e = c.resolve(&scene, "../\x1b[31mred\n.obj").unwrap_err();
+        assert!(
+            e.starts_with("'../\\u{1b}[31mred\\n.obj' resolves to "),
+            "{e}"
+        );
+        assert!(!e.contains('\x1b') && !e.contains('\n'), "{e}");
+        assert_eq!(
+            c.resolve(&scene, "").unwrap_err(),
+            "'' is an empty file name"
+        );
+        let e = c.read(&scene, ".").unwrap_err();
+        assert!(e.contains("is a directory"), "{e}");
+    }
+}
