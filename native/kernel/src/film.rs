@@ -1,6 +1,9 @@
 //! Image output: 8-bit sRGB PNG and linear f32 OpenEXR.
 
 use crate::Error;
+use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+use std::io::Write;
+use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 
 /// sRGB transfer curve of one linear value, clamped to [0, 1] (NaN becomes 0), rounded to 8 bits.
@@ -102,6 +105,11 @@ pub fn encode_png(width: u32, height: u32, rgb: &[f32]) -> Result<Vec<u8>, Error
 }
 
 /// Writes an image: `.png` as 8-bit sRGB, `.exr` as linear f32 RGB; other extensions are an error.
+///
+/// Atomic: the image is written to a temporary file in the same folder, which then replaces
+/// `path` (a rename). A failure leaves an earlier file at `path` as it was, never a partial
+/// image, and removes the temporary file. A file replaced keeps its permissions; a new one
+/// gets `0o666` less the umask, as a plain create would.
 pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<(), Error> {
     check_len(width, height, rgb)?;
     let file = path.display().to_string();
@@ -109,29 +117,57 @@ pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<
         .extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("png") => {
-            let data = encode_png(width, height, rgb)?;
-            std::fs::write(path, data).map_err(|e| Error::Io {
-                file,
-                message: e.to_string(),
-            })
+    let png = match ext.as_deref() {
+        Some("png") => Some(encode_png(width, height, rgb)?),
+        Some("exr") => None,
+        _ => {
+            return Err(Error::Unsupported(format!(
+                "{file}: unknown image format (expected .png or .exr)"
+            )))
         }
-        Some("exr") => {
+    };
+    let io = |e: std::io::Error| Error::Io {
+        file: file.clone(),
+        message: e.to_string(),
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".ring_tracer_")
+        .suffix(".tmp")
+        .permissions(std::fs::Permissions::from_mode(0o666))
+        .tempfile_in(dir)
+        .map_err(io)?;
+    // dropping `tmp` on any error below removes the temporary file
+    match png {
+        Some(data) => tmp.as_file_mut().write_all(&data).map_err(io)?,
+        None => {
             let w = width as usize;
-            exr::prelude::write_rgb_file(path, w, height as usize, |x, y| {
-                let i = (y * w + x) * 3;
+            let pixels = SpecificChannels::rgb(|pos: Vec2<usize>| {
+                let i = (pos.y() * w + pos.x()) * 3;
                 match rgb.get(i..i + 3) {
                     Some(p) => (p[0], p[1], p[2]),
                     None => (0.0, 0.0, 0.0),
                 }
-            })
-            .map_err(|e| Error::Image(format!("{file}: {e}")))
+            });
+            Image::from_channels((w, height as usize), pixels)
+                .write()
+                .to_unbuffered(tmp.as_file_mut())
+                .map_err(|e| Error::Image(format!("{file}: {e}")))?;
         }
-        _ => Err(Error::Unsupported(format!(
-            "{file}: unknown image format (expected .png or .exr)"
-        ))),
     }
+    tmp.as_file().sync_all().map_err(io)?;
+    if let Ok(old) = std::fs::metadata(path) {
+        if old.is_file() {
+            tmp.as_file()
+                .set_permissions(old.permissions())
+                .map_err(io)?;
+        }
+    }
+    tmp.persist(path).map_err(|e| io(e.error))?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -157,6 +193,59 @@ mod tests {
         for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -0.0] {
             assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
         }
+    }
+
+    /// The names in a folder.
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn writes_are_atomic() {
+        let t = tempfile::tempdir().unwrap();
+        let rgb = [0.5f32; 2 * 2 * 3];
+        for name in ["a.png", "a.exr"] {
+            let out = t.path().join(name);
+            std::fs::write(&out, b"earlier image").unwrap();
+            // a failure leaves the earlier file as it was
+            let e = write_image(&out, 2, 2, &rgb[..11]).unwrap_err();
+            assert!(matches!(e, Error::InvalidArgument(_)), "{e}");
+            assert_eq!(std::fs::read(&out).unwrap(), b"earlier image");
+            // a success replaces it
+            write_image(&out, 2, 2, &rgb).unwrap();
+            let bytes = std::fs::read(&out).unwrap();
+            assert_ne!(bytes, b"earlier image");
+            let magic: &[u8] = if name.ends_with(".png") {
+                b"\x89PNG"
+            } else {
+                b"\x76\x2f\x31\x01"
+            };
+            assert!(bytes.starts_with(magic), "{name}");
+        }
+        assert_eq!(names(t.path()), ["a.exr", "a.png"]);
+        // a failure after the temporary file exists (the rename onto a folder) removes it
+        let dir_out = t.path().join("folder.png");
+        std::fs::create_dir(&dir_out).unwrap();
+        std::fs::write(dir_out.join("keep"), b"x").unwrap();
+        assert!(matches!(
+            write_image(&dir_out, 2, 2, &rgb),
+            Err(Error::Io { .. })
+        ));
+        assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
+        assert_eq!(names(&dir_out), ["keep"]);
+        // permissions of a replaced file are kept
+        let out = t.path().join("a.png");
+        std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o640)).unwrap();
+        write_image(&out, 2, 2, &rgb).unwrap();
+        let mode = std::fs::metadata(&out).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o640);
+        assert!(write_image(&t.path().join("a.bmp"), 2, 2, &rgb).is_err());
+        assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
     }
 
     #[test]
