@@ -66,8 +66,8 @@ defmodule RingTracer.Scene do
   end
 
   defp parse(bytes, format, name, base_dir, includes) do
-    case Native.scene_parse(bytes, format, name, base_dir, includes) do
-      {:ok, {ref, info, files}} ->
+    case Native.scene_parse(bytes, format, name, base_dir, [], includes) do
+      {:ok, {ref, info, files, _read_paths}} ->
         source = Source.new(name, format, bytes, Map.new(files))
 
         {:ok,

@@ -2,10 +2,12 @@
 //! parsed it: Elixir ships scene bytes between nodes and parses on each.
 
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::os::unix::ffi::OsStrExt;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::Mutex;
 
+use ring_tracer_kernel::files::{self, Confinement};
 use ring_tracer_kernel::{Format, Scene};
 use rustler::{Binary, Env, NifMap, OwnedBinary, ResourceArc};
 
@@ -43,10 +45,22 @@ pub struct SceneInfo {
     pub lights: u64,
 }
 
-/// Parses scene bytes. `base_dir`, when given, is where referenced files
-/// (OBJ meshes, MTL) are read from; `includes` holds referenced files shipped
-/// as bytes (used first). Returns the resource, its info, and every referenced
-/// file's bytes so that they can be shipped to other nodes.
+/// A path as Erlang sees one: its bytes, as they are (no UTF-8 required).
+fn path_binary<'a>(env: Env<'a>, path: &Path) -> Binary<'a> {
+    OwnedBinary::from_slice(path.as_os_str().as_bytes()).release(env)
+}
+
+/// Parses scene bytes. `includes` holds referenced files shipped as bytes,
+/// keyed by the reference as written (used first: that is how a node parses a
+/// scene without touching its own disk). Otherwise, when `base_dir` is given,
+/// a referenced file (TOML mesh, OBJ `mtllib`) is read from there, confined to
+/// `base_dir` and the `allow_dirs` folders (`files::Confinement`), and only if
+/// it is a regular file of at most `limits::MAX_FILE_BYTES`.
+///
+/// Returns the resource, its info, every referenced file's bytes keyed by its
+/// reference (to ship to other nodes), and the canonical absolute paths of the
+/// files read from disk, in the order first read (so that an output never
+/// overwrites an input).
 #[rustler::nif(schedule = "DirtyCpu")]
 #[allow(clippy::type_complexity)]
 fn scene_parse<'a>(
@@ -55,12 +69,14 @@ fn scene_parse<'a>(
     format: String,
     name: String,
     base_dir: Option<String>,
+    allow_dirs: Vec<String>,
     includes: HashMap<String, Binary<'a>>,
 ) -> Result<
     (
         ResourceArc<SceneResource>,
         SceneInfo,
         Vec<(String, Binary<'a>)>,
+        Vec<Binary<'a>>,
     ),
     String,
 > {
@@ -69,17 +85,30 @@ fn scene_parse<'a>(
         .iter()
         .map(|(k, v)| (k.clone(), v.as_slice().to_vec()))
         .collect();
+    let disk = match &base_dir {
+        Some(dir) => {
+            let roots = std::iter::once(dir).chain(allow_dirs.iter());
+            let confinement = Confinement::new(roots).map_err(message)?;
+            Some((PathBuf::from(dir), confinement))
+        }
+        None => None,
+    };
     let used: Mutex<Vec<(String, Vec<u8>)>> = Mutex::new(Vec::new());
+    let read: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
     let resolve = |rel: &str| -> Result<Vec<u8>, String> {
         let data = if let Some(data) = shipped.get(rel) {
             data.clone()
-        } else if let Some(dir) = &base_dir {
-            let path = PathBuf::from(dir).join(rel);
-            std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?
+        } else if let Some((dir, confinement)) = &disk {
+            let (data, path) = confinement.read(dir, rel)?;
+            if let Ok(mut read) = read.lock() {
+                if !read.contains(&path) {
+                    read.push(path);
+                }
+            }
+            data
         } else {
-            return Err(format!(
-                "{rel}: referenced file was not shipped with the scene"
-            ));
+            // `rel` is not echoed: the caller names the reference, escaped
+            return Err("referenced file was not shipped with the scene".to_string());
         };
         if let Ok(mut used) = used.lock() {
             used.push((rel.to_string(), data.clone()));
@@ -100,7 +129,36 @@ fn scene_parse<'a>(
         let bin = OwnedBinary::from_slice(&data);
         files.push((rel, bin.release(env)));
     }
-    Ok((ResourceArc::new(SceneResource::new(scene)), info, files))
+    let read = read
+        .into_inner()
+        .unwrap_or_default()
+        .iter()
+        .map(|p| path_binary(env, p))
+        .collect();
+    Ok((
+        ResourceArc::new(SceneResource::new(scene)),
+        info,
+        files,
+        read,
+    ))
+}
+
+/// Reads a top-level scene file the user named (anywhere: no confinement),
+/// with `files::read_regular`: a regular file, not on procfs/sysfs, at most
+/// `max_bytes` (checked before reading). Returns its bytes and its canonical
+/// absolute path.
+#[rustler::nif(schedule = "DirtyIo")]
+fn read_scene_file<'a>(
+    env: Env<'a>,
+    path: String,
+    max_bytes: u64,
+) -> Result<(Binary<'a>, Binary<'a>), String> {
+    let (bytes, canonical) =
+        files::read_regular_with_path(Path::new(&path), max_bytes).map_err(message)?;
+    Ok((
+        OwnedBinary::from_slice(&bytes).release(env),
+        path_binary(env, &canonical),
+    ))
 }
 
 /// How many parsed scenes are alive on this node (for leak checks).
