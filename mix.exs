@@ -26,7 +26,7 @@ defmodule RingTracer.MixProject do
   def application do
     [
       # Debian's erlang-jiffy writes --stats JSON; PropEr and xmerl serve the tests.
-      extra_applications: [:logger, :crypto, :jiffy] ++ test_applications(Mix.env()),
+      extra_applications: [:logger, :crypto, :ssl, :jiffy] ++ test_applications(Mix.env()),
       mod: {RingTracer.Application, []}
     ]
   end

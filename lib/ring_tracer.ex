@@ -18,8 +18,9 @@ defmodule RingTracer do
   alias RingTracer.Job.{Parent, Spec}
 
   @doc """
-  Renders the scene file at `path` (`.nff`, `.toml` or `.obj`) and returns the
-  image and the job's statistics.
+  Renders the scene file at `path` (`.nff`, `.toml` or `.obj`), or a scene
+  already loaded with `RingTracer.Scene.load/2`, and returns the image and
+  the job's statistics.
 
   ## Options
 
@@ -56,18 +57,78 @@ defmodule RingTracer do
     * `:progress` — a pid that gets `{RingTracer, job_id, {:progress, done,
       total}}` as atoms arrive
     * `:timeout` — milliseconds, or `:infinity` (default)
+    * `:liveness` — with `:nodes`, milliseconds after which a node that
+      does not answer (frozen, hung) is disconnected and its atoms traced
+      elsewhere (default 10_000; see `RingTracer.Cluster.Liveness`)
+    * `:allow_dirs` — folders besides the scene's own that the scene may read
+      referenced files from (default none; see `RingTracer.Scene.load/2`)
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
   for a missing or invalid scene, a bad option, or a job that failed.
   """
-  @spec render(Path.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
-  def render(path, opts \\ []) when is_binary(path) do
+  @spec render(Path.t() | Scene.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
+  def render(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene) do
     with {:ok, opts} <- Options.validate(opts),
-         :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
-         {:ok, scene} <- Scene.load(path),
+         :ok <- running() do
+      within(opts[:timeout], fn -> load_and_run(scene, opts) end)
+    end
+  end
+
+  defp load_and_run(scene, opts) do
+    with :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
+         {:ok, scene} <- load(scene, opts),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
       run(scene, settings, opts)
+    end
+  end
+
+  defp load(%Scene{} = scene, _opts), do: {:ok, scene}
+  defp load(path, opts), do: Scene.load(path, allow_dirs: opts[:allow_dirs])
+
+  defp running do
+    if Process.whereis(RingTracer.Names.jobs()),
+      do: :ok,
+      else:
+        {:error,
+         Error.new(
+           :not_running,
+           "the :ring_tracer application is not running; " <>
+             "start it with Application.ensure_all_started(:ring_tracer)"
+         )}
+  end
+
+  # `:timeout` covers the whole render, the scene's loading included: the
+  # work runs in a process of its own, killed at the deadline (the job's
+  # parent, which monitors it, then stops every process of the job).
+  defp within(:infinity, fun), do: fun.()
+
+  defp within(ms, fun) do
+    me = self()
+    {pid, ref} = spawn_monitor(fn -> send(me, {__MODULE__, self(), fun.()}) end)
+
+    receive do
+      {__MODULE__, ^pid, result} ->
+        Process.demonitor(ref, [:flush])
+        result
+
+      {:DOWN, ^ref, _, _, reason} ->
+        {:error, Error.new(:render_failed, "the render exited: #{inspect(reason)}")}
+    after
+      ms ->
+        Process.exit(pid, :kill)
+
+        receive do
+          {:DOWN, ^ref, _, _, _} -> :ok
+        end
+
+        receive do
+          {__MODULE__, ^pid, _} -> :ok
+        after
+          0 -> :ok
+        end
+
+        {:error, Error.new(:timeout, "timed out after #{ms} ms")}
     end
   end
 
@@ -112,47 +173,84 @@ defmodule RingTracer do
       iex> receive do {RingTracer, ^id, {:ok, result}} -> byte_size(result.pixels) end
       16 * 16 * 12
   """
-  @spec render_async(Path.t(), keyword()) :: {:ok, %{id: reference(), pid: pid()}}
-  def render_async(path, opts \\ []) when is_binary(path) do
+  @spec render_async(Path.t() | Scene.t(), keyword()) ::
+          {:ok, %{id: reference(), pid: pid()}}
+  def render_async(path, opts \\ []) when is_binary(path) or is_struct(path, Scene) do
     caller = self()
     id = make_ref()
 
     pid =
       spawn(fn ->
-        ref = Process.monitor(caller)
+        caller_ref = Process.monitor(caller)
         forwarder = self()
-        job = Task.async(fn -> render(path, Keyword.put(opts, :progress, forwarder)) end)
-        forward(caller, id, ref, job)
+        opts = Keyword.put(opts, :progress, forwarder)
+
+        {worker, worker_ref} =
+          spawn_monitor(fn -> send(forwarder, {:result, self(), render(path, opts)}) end)
+
+        forward(%{caller: caller, id: id, caller_ref: caller_ref, worker: {worker, worker_ref}})
       end)
 
     {:ok, %{id: id, pid: pid}}
   end
 
-  defp forward(caller, id, ref, job) do
+  # Exactly one final message reaches the caller: the result, an error if
+  # the render crashed, or `:cancelled` after `cancel/1`.
+  defp forward(%{caller: caller, id: id, worker: {worker, worker_ref}} = f) do
     receive do
       {RingTracer, _, {:progress, _, _} = progress} ->
         send(caller, {RingTracer, id, progress})
-        forward(caller, id, ref, job)
+        forward(f)
 
-      {task_ref, result} when task_ref == job.ref ->
+      {:result, ^worker, result} ->
         send(caller, {RingTracer, id, result})
 
-      {:DOWN, ^ref, _, _, _} ->
-        exit(:shutdown)
+      {:DOWN, ^worker_ref, _, _, reason} ->
+        message = "the render exited: #{inspect(reason)}"
+        send(caller, {RingTracer, id, {:error, Error.new(:render_failed, message)}})
+
+      {:cancel, from, ref} ->
+        stop_worker(f)
+
+        send(
+          caller,
+          {RingTracer, id, {:error, Error.new(:cancelled, "the render was cancelled")}}
+        )
+
+        send(from, {:cancelled, ref})
+
+      {:DOWN, ref, _, _, _} when ref == f.caller_ref ->
+        stop_worker(f)
+    end
+  end
+
+  defp stop_worker(%{worker: {worker, ref}}) do
+    Process.exit(worker, :kill)
+
+    receive do
+      {:DOWN, ^ref, _, _, _} -> :ok
     end
   end
 
   @doc """
   Cancels a render started with `render_async/2`: the job's parent, children
-  and grandchildren stop. Returns `:ok` (also when the job had finished).
+  and grandchildren stop, and the caller of `render_async/2` gets `{RingTracer,
+  id, {:error, %RingTracer.Error{reason: :cancelled}}}` as its final message
+  (unless the render had finished: then its result was the final message).
+  Returns `:ok`.
   """
   @spec cancel(%{pid: pid()}) :: :ok
   def cancel(%{pid: pid}) do
     ref = Process.monitor(pid)
-    Process.exit(pid, :shutdown)
+    send(pid, {:cancel, self(), ref})
 
     receive do
-      {:DOWN, ^ref, _, _, _} -> :ok
+      {:DOWN, ^ref, _, _, _} ->
+        receive do
+          {:cancelled, ^ref} -> :ok
+        after
+          0 -> :ok
+        end
     end
   end
 
@@ -176,12 +274,13 @@ defmodule RingTracer do
   def simulate(opts \\ []) do
     {costs, opts} = Keyword.pop(opts, :costs, 2000)
 
-    with {:ok, opts} <- Options.validate(opts) do
+    with {:ok, opts} <- Options.validate(opts),
+         :ok <- running() do
       n = opts[:children] * opts[:atoms]
       settings = %Settings{width: n, height: 1}
       source = RingTracer.Scene.Source.new("simulated", "sim", "", %{})
       kernel = {RingTracer.Kernel.Simulated, costs: RingTracer.Kernel.Simulated.pack(costs)}
-      run(source, settings, kernel, :infinity, opts)
+      within(opts[:timeout], fn -> run(source, settings, kernel, :infinity, opts) end)
     end
   end
 
@@ -206,6 +305,7 @@ defmodule RingTracer do
         Layout.new(settings.width, settings.height, opts[:children], opts[:atoms], opts[:layout]),
       caller: self(),
       nodes: opts[:nodes],
+      liveness: opts[:liveness],
       handover_delay: opts[:handover_delay],
       chaos: opts[:chaos],
       hold_after: opts[:hold_after],
@@ -234,11 +334,6 @@ defmodule RingTracer do
 
       {:DOWN, ^ref, _, _, reason} ->
         {:error, Error.new(:render_failed, "the job's parent exited: #{inspect(reason)}")}
-    after
-      opts[:timeout] ->
-        Process.demonitor(ref, [:flush])
-        DynamicSupervisor.terminate_child(RingTracer.Names.jobs(), parent)
-        {:error, Error.new(:render_failed, "timed out after #{opts[:timeout]} ms")}
     end
   end
 end

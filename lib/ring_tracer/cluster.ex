@@ -61,17 +61,18 @@ defmodule RingTracer.Cluster do
     cond do
       not Node.alive?() ->
         {:error,
-         "cannot use node #{n}: this node is not distributed; start it with --sname NAME (and --cookie C)"}
+         "cannot use node #{n}: this node is not distributed; start it with --sname NAME " <>
+           "(the cookie comes from --cookie-file, default ~/.erlang.cookie)"}
 
       not Node.connect(n) ->
-        {:error,
-         "cannot reach node #{n}: is it running (mix ring_tracer.worker --sname ...), " <>
-           "with the same cookie, and is epmd reachable?"}
+        {:error, "cannot connect to node #{n}: #{refusal(n)}"}
 
       true ->
         remote_check(n)
     end
   end
+
+  defp refusal(n), do: RingTracer.Cluster.TLS.diagnose(n)
 
   defp remote_check(n) do
     apps = :erpc.call(n, Application, :started_applications, [], 5_000)

@@ -11,8 +11,13 @@ defmodule RingTracer.Error do
   | `:invalid_option` | an option has the wrong type or is out of range |
   | `:file` | a file could not be read or written |
   | `:invalid_scene` | the scene failed to parse (message names file and line) |
-  | `:render_failed` | the job could not complete (a crash, a timeout) |
-  | `:node_unavailable` | a node given in `:nodes` cannot host children |
+  | `:render_failed` | the job could not complete (a crash, a failed atom) |
+  | `:timeout` | the render did not finish within `:timeout` |
+  | `:cancelled` | `RingTracer.cancel/1` stopped the render |
+  | `:not_running` | the `:ring_tracer` application is not running |
+  | `:node_unavailable` | a node given in `:nodes` cannot host children (the message says why) |
+  | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |
+  | `:distribution` | this node could not become distributed (name in use, epmd, TLS set-up) |
   """
   defexception [:reason, :message]
 

@@ -4,7 +4,9 @@ defmodule RingTracer.Image do
 
   The output file's extension picks the format: `.png` writes 8-bit sRGB
   (values clamped to [0, 1], then the sRGB transfer curve), `.exr` writes
-  OpenEXR with linear 32-bit float RGB, lossless.
+  OpenEXR with linear 32-bit float RGB, lossless. Files are written
+  atomically: to a temporary file in the same folder, then renamed, so an
+  earlier file is never left half-written.
   """
 
   alias RingTracer.{Error, Native, Result}
@@ -31,11 +33,8 @@ defmodule RingTracer.Image do
          Error.new(:file, "#{path}: unknown image format #{inspect(ext)}; use .png or .exr")}
 
       true ->
-        with :ok <- mkdir(path),
-             {:ok, _} <- Native.write_image(Path.expand(path), width, height, pixels) do
-          :ok
-        else
-          {:error, %Error{}} = error -> error
+        case Native.write_image(Path.expand(path), width, height, pixels) do
+          {:ok, _} -> :ok
           {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
         end
     end
@@ -54,13 +53,6 @@ defmodule RingTracer.Image do
     case Native.encode_png(width, height, pixels) do
       {:ok, bytes} -> {:ok, bytes}
       {:error, message} -> {:error, Error.new(:file, message)}
-    end
-  end
-
-  defp mkdir(path) do
-    case File.mkdir_p(Path.dirname(path)) do
-      :ok -> :ok
-      {:error, reason} -> {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
     end
   end
 end

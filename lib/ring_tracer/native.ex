@@ -24,7 +24,7 @@ defmodule RingTracer.Native do
   end
 
   def scene_parse(_bytes, _format, _name, _base_dir, _allow_dirs, _includes), do: err()
-  def read_scene_file(_path, _max_bytes), do: err()
+  def read_scene_file(_path), do: err()
   def scene_live_count, do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
   def render_image(_scene, _settings, _threads), do: err()

@@ -28,10 +28,15 @@ defmodule RingTracer.Options do
     progress: {:pid, nil},
     fail_pixel: {:non_neg_integer, nil},
     children_per_node: {:pos_integer, nil},
-    local: {:boolean, true}
+    local: {:boolean, true},
+    allow_dirs: {:paths, []},
+    liveness: {:pos_integer, RingTracer.Cluster.Liveness.default_timeout()}
   ]
 
   @max_children 100_000
+  # A slowdown beyond this emulates no machine anyone renders on, and its
+  # sleeps would overflow timers.
+  @max_speed 1000
 
   @doc "The option names and their defaults."
   @spec defaults() :: keyword()
@@ -154,12 +159,18 @@ defmodule RingTracer.Options do
   end
 
   defp check(:speeds, v) when is_list(v) do
-    if Enum.all?(v, &(is_number(&1) and &1 >= 1)),
+    if Enum.all?(v, &(is_number(&1) and &1 >= 1 and &1 <= @max_speed)),
       do: :ok,
-      else: {:error, "a list of slowdown factors >= 1"}
+      else: {:error, "a list of slowdown factors from 1 to #{@max_speed}"}
   end
 
-  defp check(:speeds, _), do: {:error, "a list of slowdown factors >= 1"}
+  defp check(:speeds, _), do: {:error, "a list of slowdown factors from 1 to #{@max_speed}"}
+
+  defp check(:paths, v) when is_list(v) do
+    if Enum.all?(v, &is_binary/1), do: :ok, else: {:error, "a list of folder paths (strings)"}
+  end
+
+  defp check(:paths, _), do: {:error, "a list of folder paths (strings)"}
   defp check(:pid, v) when is_pid(v), do: :ok
   defp check(:pid, _), do: {:error, "a pid"}
 

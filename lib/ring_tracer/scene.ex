@@ -22,35 +22,59 @@ defmodule RingTracer.Scene do
   alias RingTracer.Scene.Source
 
   @enforce_keys [:ref, :source, :width, :height, :primitives, :lights]
-  defstruct [:ref, :source, :width, :height, :primitives, :lights]
+  defstruct [:ref, :source, :width, :height, :primitives, :lights, path: nil, files: []]
 
+  @typedoc """
+  `:path` is the scene file (canonical, after symlinks) and `:files` every
+  file it referenced, as read on this node; both empty for a scene parsed
+  from a shipped source.
+  """
   @type t :: %__MODULE__{
           ref: reference(),
           source: Source.t(),
           width: pos_integer(),
           height: pos_integer(),
           primitives: non_neg_integer(),
-          lights: non_neg_integer()
+          lights: non_neg_integer(),
+          path: Path.t() | nil,
+          files: [Path.t()]
         }
 
   @formats %{".nff" => "nff", ".toml" => "toml", ".obj" => "obj"}
 
   @doc """
-  Reads and parses the scene file at `path`; referenced files (meshes) are
-  read relative to its directory.
+  Reads and parses the scene file at `path`.
+
+  The scene file itself may be anywhere, but must be a regular file (not a
+  FIFO, a device or a file of `/proc`) no larger than the kernel's file
+  limit. Every file it references (TOML meshes, OBJ `mtllib`) is confined:
+  after symlinks it must lie inside the scene file's folder or one of
+  `:allow_dirs`, and be a regular file of bounded size, or the load fails
+  with the scene's file and line and the reference as written. Nothing is
+  read before these checks pass.
+
+  ## Options
+
+    * `:allow_dirs` — more folders that referenced files may come from
+      (default none)
   """
-  @spec load(Path.t()) :: {:ok, t()} | {:error, Error.t()}
-  def load(path) when is_binary(path) do
+  @spec load(Path.t(), keyword()) :: {:ok, t()} | {:error, Error.t()}
+  def load(path, opts \\ []) when is_binary(path) do
+    allow = Enum.map(Keyword.get(opts, :allow_dirs) || [], &Path.expand/1)
+
     with {:ok, format} <- format_of(path),
-         {:ok, bytes} <- read(path) do
-      parse(bytes, format, Path.basename(path), Path.dirname(Path.expand(path)), %{})
+         :ok <- check_dirs(allow),
+         {:ok, bytes, real} <- read(path) do
+      with {:ok, scene} <-
+             parse(bytes, format, Path.basename(path), Path.dirname(real), allow, %{}),
+           do: {:ok, %{scene | path: real}}
     end
   end
 
-  @doc "Like `load/1` but raises `RingTracer.Error`."
-  @spec load!(Path.t()) :: t()
-  def load!(path) do
-    case load(path) do
+  @doc "Like `load/2` but raises `RingTracer.Error`."
+  @spec load!(Path.t(), keyword()) :: t()
+  def load!(path, opts \\ []) do
+    case load(path, opts) do
       {:ok, scene} -> scene
       {:error, error} -> raise error
     end
@@ -62,12 +86,12 @@ defmodule RingTracer.Scene do
   """
   @spec from_source(Source.t()) :: {:ok, t()} | {:error, Error.t()}
   def from_source(%Source{} = source) do
-    parse(source.bytes, source.format, source.name, nil, source.includes)
+    parse(source.bytes, source.format, source.name, nil, [], source.includes)
   end
 
-  defp parse(bytes, format, name, base_dir, includes) do
-    case Native.scene_parse(bytes, format, name, base_dir, [], includes) do
-      {:ok, {ref, info, files, _read_paths}} ->
+  defp parse(bytes, format, name, base_dir, allow, includes) do
+    case Native.scene_parse(bytes, format, name, base_dir, allow, includes) do
+      {:ok, {ref, info, files, paths}} ->
         source = Source.new(name, format, bytes, Map.new(files))
 
         {:ok,
@@ -77,7 +101,8 @@ defmodule RingTracer.Scene do
            width: info.width,
            height: info.height,
            primitives: info.primitives,
-           lights: info.lights
+           lights: info.lights,
+           files: paths
          }}
 
       {:error, message} ->
@@ -99,10 +124,17 @@ defmodule RingTracer.Scene do
     end
   end
 
+  defp check_dirs(dirs) do
+    case Enum.reject(dirs, &File.dir?/1) do
+      [] -> :ok
+      [dir | _] -> {:error, Error.new(:invalid_option, "--allow-dir #{dir}: no such folder")}
+    end
+  end
+
   defp read(path) do
-    case File.read(path) do
-      {:ok, bytes} -> {:ok, bytes}
-      {:error, reason} -> {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
+    case Native.read_scene_file(Path.expand(path)) do
+      {:ok, {bytes, real}} -> {:ok, bytes, real}
+      {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
     end
   end
 end

@@ -89,6 +89,33 @@ defmodule RingTracer.DistributedTest do
     end
   end
 
+  test "a frozen node is declared dead after the liveness timeout and its atoms traced elsewhere",
+       %{reference: reference} do
+    {peer, frozen} = Peers.start("frozen")
+    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
+
+    try do
+      {:ok, job} =
+        RingTracer.render_async(
+          TestScenes.path(@scene),
+          [nodes: [frozen], children: 4, atoms: 8, speeds: [200], liveness: 1_000] ++ @size
+        )
+
+      id = job.id
+      assert_receive {RingTracer, ^id, {:progress, 1, _}}, 10_000
+      {_, 0} = System.cmd("kill", ["-STOP", os_pid])
+      t0 = System.monotonic_time(:millisecond)
+      assert_receive {RingTracer, ^id, {:ok, result}}, 30_000
+      assert result.pixels == reference
+      assert Enum.any?(result.failures, &(&1.reason =~ "noconnection"))
+      # Declared dead after about a second, not after distribution's minute.
+      assert System.monotonic_time(:millisecond) - t0 < 20_000
+    after
+      System.cmd("kill", ["-CONT", os_pid])
+      Peers.stop(peer)
+    end
+  end
+
   test "an unreachable node is a clear error before any work starts" do
     assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
              RingTracer.render(TestScenes.path(@scene), nodes: [:nobody@nowhere])

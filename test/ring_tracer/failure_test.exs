@@ -129,4 +129,71 @@ defmodule RingTracer.FailureTest do
     assert children() == []
     assert DynamicSupervisor.which_children(RingTracer.Jobs) == []
   end
+
+  test "cancel sends exactly one final message, :cancelled" do
+    {:ok, job} =
+      RingTracer.render_async(TestScenes.path(@scene),
+        children: 2,
+        atoms: 50,
+        width: 256,
+        height: 256,
+        speeds: [5]
+      )
+
+    id = job.id
+    assert_receive {RingTracer, ^id, {:progress, _, _}}, 10_000
+    assert :ok = RingTracer.cancel(job)
+    assert_receive {RingTracer, ^id, {:error, %RingTracer.Error{reason: :cancelled}}}
+    refute_receive {RingTracer, ^id, {:error, _}}, 200
+    refute_receive {RingTracer, ^id, {:ok, _}}, 0
+  end
+
+  test ":timeout covers the whole render and leaves no process behind" do
+    t0 = System.monotonic_time(:millisecond)
+
+    assert {:error, %RingTracer.Error{reason: :timeout}} =
+             RingTracer.render(TestScenes.path(@scene),
+               children: 2,
+               atoms: 50,
+               width: 256,
+               height: 256,
+               speeds: [20],
+               timeout: 200
+             )
+
+    assert System.monotonic_time(:millisecond) - t0 < 2_000
+    assert eventually(fn -> children() == [] end)
+    assert DynamicSupervisor.which_children(RingTracer.Jobs) == []
+  end
+
+  test "slowdown factors beyond the documented range are refused before any work" do
+    assert {:error, %RingTracer.Error{reason: :invalid_option, message: message}} =
+             RingTracer.render(TestScenes.path(@scene), speeds: [1.0e308])
+
+    assert message =~ ":speeds"
+  end
+
+  test "with the application stopped, render/2 and render_async/2 answer with an error" do
+    :ok = Application.stop(:ring_tracer)
+
+    try do
+      assert {:error, %RingTracer.Error{reason: :not_running}} =
+               RingTracer.render(TestScenes.path(@scene))
+
+      {:ok, job} = RingTracer.render_async(TestScenes.path(@scene))
+      id = job.id
+      assert_receive {RingTracer, ^id, {:error, %RingTracer.Error{reason: :not_running}}}
+      assert {:error, %RingTracer.Error{reason: :not_running}} = RingTracer.simulate()
+    after
+      {:ok, _} = Application.ensure_all_started(:ring_tracer)
+    end
+  end
+
+  defp eventually(fun, tries \\ 200) do
+    cond do
+      fun.() -> true
+      tries == 0 -> false
+      true -> Process.sleep(10) && eventually(fun, tries - 1)
+    end
+  end
 end

@@ -264,7 +264,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
     children = opts[:children] || 6
     runs = opts[:runs] || 3
     Mix.Task.run("app.start")
-    RingTracer.Distribution.start!([], generate: true)
+    RingTracer.Cluster.Distribution.start!(generate: true)
     peers = for name <- ["bench_w1", "bench_w2"], do: RingTracer.LocalCluster.start(name)
     nodes = Enum.map(peers, &elem(&1, 1))
 

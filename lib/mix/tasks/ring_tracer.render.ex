@@ -34,9 +34,22 @@ defmodule Mix.Tasks.RingTracer.Render do
     * `--nodes a@host,b@host` — also place children on these nodes (round robin)
     * `--children-per-node C` — C children on each node instead
     * `--no-local` — no children on this node
-    * `--sname NAME` / `--name NAME@HOST`, `--cookie C` — this node's name and
-      cookie (a short name is made up when `--nodes` is given without one; a
-      node started with `elixir --sname X --cookie C -S mix ...` is used as is)
+    * `--sname NAME` / `--name NAME@HOST` — this node's name (a unique short
+      name is made up when `--nodes` is given without one; a node started
+      with `elixir --sname X -S mix ...` is used as is)
+    * `--cookie-file PATH` — the cookie, in a file only you can read
+      (default `~/.erlang.cookie`)
+    * `--listen ADDR`, `--ports MIN-MAX` — where this node listens (default
+      127.0.0.1, any port)
+    * `--tls DIR` — distribution over TLS (see `RingTracer.Cluster.TLS`)
+
+  Files:
+
+    * `--allow-dir DIR` — a folder (besides the scene's own) that the scene
+      may read meshes and materials from; repeatable
+
+  Every output is checked before any tracing (extension, folder, no two the
+  same file, none an input of the render) and written atomically.
 
   A progress bar (atoms done / total, rate, ETA) goes to stderr when it is a
   terminal.
@@ -45,6 +58,8 @@ defmodule Mix.Tasks.RingTracer.Render do
   per child.
   """
   use Mix.Task
+
+  alias RingTracer.CLI.Paths
 
   @switches [
     out: :string,
@@ -68,8 +83,16 @@ defmodule Mix.Tasks.RingTracer.Render do
     local: :boolean,
     sname: :string,
     name: :string,
-    cookie: :string
+    cookie: :string,
+    cookie_file: :string,
+    listen: :string,
+    ports: :string,
+    tls: :string,
+    allow_dir: :keep
   ]
+
+  @outputs [out: :image, stats: :stats, timeline: :timeline, ownership: :ownership]
+  @distribution [:sname, :name, :cookie, :cookie_file, :listen, :ports, :tls]
 
   @impl Mix.Task
   def run(argv) do
@@ -81,23 +104,42 @@ defmodule Mix.Tasks.RingTracer.Render do
 
     scene =
       case args do
-        [scene] -> scene
+        [scene] -> Paths.expand(scene)
         _ -> Mix.raise("usage: mix ring_tracer.render SCENE --out FILE [options]")
       end
 
+    opts =
+      Paths.expand(opts, [:out, :stats, :timeline, :ownership, :cookie_file, :tls, :allow_dir])
+
     out = opts[:out] || Mix.raise("--out FILE is required (a .png or .exr file)")
-    if opts[:nodes], do: RingTracer.Distribution.start!(opts, generate: true)
+    outputs = for {key, kind} <- @outputs, path = opts[key], do: {kind, path}
+    # Outputs first: a bad one is known before the scene is even read.
+    ok!(RingTracer.Output.check(outputs, [scene]))
+
+    if opts[:nodes] do
+      ok!(
+        RingTracer.Cluster.Distribution.start(
+          Keyword.take(opts, @distribution) ++ [generate: true]
+        )
+      )
+    end
+
     Mix.Task.run("app.start")
+    allow_dirs = Keyword.get_values(opts, :allow_dir)
 
     render_opts =
       opts
-      |> Keyword.drop([:out, :stats, :timeline, :ownership, :sname, :name, :cookie])
+      |> Keyword.drop([:out, :stats, :timeline, :ownership, :allow_dir | @distribution])
       |> parse_nodes()
       |> parse_choice(:strategy, RingTracer.Strategy.names())
       |> parse_choice(:layout, RingTracer.Layout.orders())
       |> parse_speeds()
 
-    with {:ok, result} <- render(scene, render_opts),
+    # Then the scene, whose references are inputs too; then the job.
+    {:ok, loaded} = ok!(RingTracer.Scene.load(scene, allow_dirs: allow_dirs))
+    ok!(RingTracer.Output.check(outputs, [scene | loaded.files]))
+
+    with {:ok, result} <- render(loaded, render_opts),
          :ok <- RingTracer.Image.write(result, out),
          :ok <- maybe_write(opts[:stats], &RingTracer.Report.Stats.write(result, &1)),
          :ok <- maybe_write(opts[:timeline], &RingTracer.Report.Timeline.write(result, &1)),
@@ -111,6 +153,9 @@ defmodule Mix.Tasks.RingTracer.Render do
       {:error, %RingTracer.Error{message: message}} -> Mix.raise(message)
     end
   end
+
+  defp ok!({:error, %RingTracer.Error{message: message}}), do: Mix.raise(message)
+  defp ok!(ok), do: ok
 
   defp maybe_write(nil, _fun), do: :ok
   defp maybe_write(path, fun), do: fun.(path)

@@ -5,27 +5,26 @@ defmodule Mix.Tasks.RingTracer.Worker do
   of renders started on other nodes, and keeps it up until it is stopped
   (Ctrl-C twice, or SIGTERM).
 
-      mix ring_tracer.worker --sname NAME [--cookie COOKIE]
-      mix ring_tracer.worker --name NAME@HOST [--cookie COOKIE]
+      mix ring_tracer.worker --sname NAME [--cookie-file PATH] [--listen ADDR]
+        [--ports MIN-MAX] [--tls DIR]
 
-  `--sname` uses short host names (nodes on one machine or one domain),
-  `--name` long ones. The cookie must be the same on every node of a render;
-  without `--cookie` the node uses `~/.erlang.cookie`.
+  The options are `RingTracer.CLI.Worker`'s. Start workers on loopback and
+  render with children on them:
+
+      bin/ringtracer worker --sname w1 &
+      bin/ringtracer render priv/scenes/balls_s2.nff --out balls.png --nodes w1@localhost
   """
   use Mix.Task
 
   @impl Mix.Task
   def run(argv) do
-    {opts, _, _} =
-      OptionParser.parse(argv, strict: [sname: :string, name: :string, cookie: :string])
+    case RingTracer.CLI.Worker.start(argv) do
+      {:ok, _node, line} ->
+        Mix.shell().info(line)
+        Process.sleep(:infinity)
 
-    RingTracer.Distribution.start!(opts)
-    Mix.Task.run("app.start")
-
-    Mix.shell().info(
-      "RingTracer worker #{node()} ready (cookie from #{if opts[:cookie], do: "--cookie", else: "~/.erlang.cookie"})"
-    )
-
-    Process.sleep(:infinity)
+      {:error, message} ->
+        Mix.raise(message)
+    end
   end
 end

@@ -103,6 +103,7 @@ defmodule RingTracer.Job.Parent do
 
     case started do
       {:ok, list} ->
+        _ = RingTracer.Cluster.Liveness.start(placement, state.spec.liveness)
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
         state = %{state | children: children, monitors: monitors}

@@ -23,7 +23,8 @@ defmodule RingTracer.Job.Spec do
     strategy: RingTracer.Strategy.Ring,
     kernel: {RingTracer.Kernel.Native, []},
     speeds: [],
-    progress: nil
+    progress: nil,
+    liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
   @type t :: %__MODULE__{
@@ -40,6 +41,7 @@ defmodule RingTracer.Job.Spec do
           strategy: module(),
           kernel: {module(), keyword()},
           speeds: [number()],
-          progress: pid() | nil
+          progress: pid() | nil,
+          liveness: pos_integer()
         }
 end

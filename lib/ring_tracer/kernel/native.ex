@@ -1,7 +1,8 @@
 defmodule RingTracer.Kernel.Native do
   @moduledoc """
   The Rust kernel through the NIF: traces on a dirty CPU scheduler with the
-  scene parsed once per node (`RingTracer.SceneCache`). A panic or error in
+  scene parsed once per node and pinned there while the job runs
+  (`RingTracer.SceneCache`). A panic or error in
   the kernel comes back as `{:error, message}`, never as a crash of the VM.
   """
   @behaviour RingTracer.Kernel
@@ -21,12 +22,14 @@ defmodule RingTracer.Kernel.Native do
   end
 
   @impl RingTracer.Kernel
+  # The parent pins the scene on each node for as long as it lives, so no
+  # other job's scenes can push it out of a cache while this job runs.
   def prepare_node(spec, _opts, node) when node == node() do
-    with :ok <- SceneCache.preload(spec.source), do: {:ok, 0}
+    with :ok <- SceneCache.pin(spec.source, self()), do: {:ok, 0}
   end
 
   def prepare_node(spec, _opts, node) do
-    case :erpc.call(node, SceneCache, :preload, [spec.source], 60_000) do
+    case :erpc.call(node, SceneCache, :pin, [spec.source, self()], 60_000) do
       :ok -> {:ok, RingTracer.Scene.Source.size(spec.source)}
       {:error, message} -> {:error, "#{node}: #{message}"}
     end

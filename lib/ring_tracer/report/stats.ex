@@ -163,12 +163,5 @@ defmodule RingTracer.Report.Stats do
   defp key(k) when is_atom(k) or is_number(k), do: to_string(k)
   defp key(k), do: inspect(k)
 
-  defp write_file(path, data) do
-    with :ok <- File.mkdir_p(Path.dirname(path)),
-         :ok <- File.write(path, data) do
-      :ok
-    else
-      {:error, reason} -> {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
-    end
-  end
+  defp write_file(path, data), do: RingTracer.Output.write(path, data)
 end

@@ -79,19 +79,16 @@ defmodule RingTracer.Report.Timeline do
   end
 
   @doc """
-  Writes the timeline of `result` to `path` (creating its directory).
+  Writes the timeline of `result` to `path` (an `.svg`), atomically
+  (`RingTracer.Output.write/2`).
 
-  Returns `{:error, %RingTracer.Error{reason: :file}}` when the file cannot
-  be written.
+  Returns `{:error, %RingTracer.Error{reason: :file}}` for another
+  extension or when the file cannot be written.
   """
   @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
   def write(%Result{} = result, path) when is_binary(path) do
-    with :ok <- File.mkdir_p(Path.dirname(path)),
-         :ok <- File.write(path, svg(result)) do
-      :ok
-    else
-      {:error, reason} -> {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
-    end
+    with :ok <- RingTracer.Output.check([timeline: path], []),
+         do: RingTracer.Output.write(path, svg(result))
   end
 
   ## Parts

@@ -53,16 +53,28 @@ pub(crate) fn load_mesh(
         ignore_points: true,
         ignore_lines: true,
     };
+    // A material library that is missing (or was not shipped) falls back to
+    // grey, as documented; one that is refused (outside the allowed folders,
+    // not a regular file, too large) stops the load.
+    let refused: std::cell::RefCell<Option<String>> = std::cell::RefCell::new(None);
     let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut reader = std::io::BufReader::new(bytes);
         tobj::load_obj_buf(&mut reader, &opts, |p| {
             let rel = p.to_string_lossy();
             match resolve(&rel) {
                 Ok(data) => tobj::load_mtl_buf(&mut std::io::BufReader::new(data.as_slice())),
-                Err(_) => Err(tobj::LoadError::OpenFileFailed),
+                Err(e) => {
+                    if !(e.contains("does not exist") || e.contains("not shipped")) {
+                        refused.borrow_mut().get_or_insert(e);
+                    }
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
             }
         })
     }));
+    if let Some(e) = refused.into_inner() {
+        return Err(Error::scene(name, format!("cannot load its mtllib: {e}")));
+    }
     let (models, mtls) = match loaded {
         Ok(Ok(r)) => r,
         Ok(Err(e)) => return Err(Error::scene(name, format!("invalid OBJ: {e}"))),

@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::Mutex;
 
 use ring_tracer_kernel::files::{self, Confinement};
-use ring_tracer_kernel::{Format, Scene};
+use ring_tracer_kernel::{limits, Format, Scene};
 use rustler::{Binary, Env, NifMap, OwnedBinary, ResourceArc};
 
 use crate::convert::message;
@@ -145,16 +145,12 @@ fn scene_parse<'a>(
 
 /// Reads a top-level scene file the user named (anywhere: no confinement),
 /// with `files::read_regular`: a regular file, not on procfs/sysfs, at most
-/// `max_bytes` (checked before reading). Returns its bytes and its canonical
+/// `limits::MAX_FILE_BYTES` (checked before reading). Returns its bytes and its canonical
 /// absolute path.
 #[rustler::nif(schedule = "DirtyIo")]
-fn read_scene_file<'a>(
-    env: Env<'a>,
-    path: String,
-    max_bytes: u64,
-) -> Result<(Binary<'a>, Binary<'a>), String> {
+fn read_scene_file<'a>(env: Env<'a>, path: String) -> Result<(Binary<'a>, Binary<'a>), String> {
     let (bytes, canonical) =
-        files::read_regular_with_path(Path::new(&path), max_bytes).map_err(message)?;
+        files::read_regular_with_path(Path::new(&path), limits::MAX_FILE_BYTES).map_err(message)?;
     Ok((
         OwnedBinary::from_slice(&bytes).release(env),
         path_binary(env, &canonical),

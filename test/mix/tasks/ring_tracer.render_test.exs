@@ -34,4 +34,90 @@ defmodule Mix.Tasks.RingTracer.RenderTest do
       Mix.Tasks.RingTracer.Render.run(["missing.nff", "--out", "x.png"])
     end
   end
+
+  describe "outputs are checked before any tracing" do
+    setup %{tmp_dir: dir} do
+      scene = Path.join(dir, "scene.nff")
+      File.cp!("priv/scenes/tetra_s1.nff", scene)
+      {:ok, scene: scene, bytes: File.read!(scene)}
+    end
+
+    defp render!(args), do: capture_io(fn -> Mix.Tasks.RingTracer.Render.run(args) end)
+
+    @tag :tmp_dir
+    test "--timeline over the scene is refused and the scene is intact", %{
+      tmp_dir: dir,
+      scene: scene,
+      bytes: bytes
+    } do
+      out = Path.join(dir, "a.png")
+
+      assert_raise Mix.Error, ~r/--timeline .*scene\.nff: the timeline must end in \.svg/, fn ->
+        render!([scene, "--out", out, "--timeline", scene])
+      end
+
+      assert File.read!(scene) == bytes
+      refute File.exists?(out)
+    end
+
+    @tag :tmp_dir
+    test "the scene itself, under a name with the right extension, is refused", %{
+      tmp_dir: dir,
+      scene: scene,
+      bytes: bytes
+    } do
+      link = Path.join(dir, "scene.svg")
+      File.ln_s!(scene, link)
+
+      assert_raise Mix.Error, ~r/would overwrite .*scene\.nff, which this render reads/, fn ->
+        render!([scene, "--out", Path.join(dir, "a.png"), "--timeline", link])
+      end
+
+      assert File.read!(scene) == bytes
+    end
+
+    @tag :tmp_dir
+    test "two outputs that are one file are refused", %{tmp_dir: dir, scene: scene} do
+      out = Path.join(dir, "a.png")
+
+      assert_raise Mix.Error, ~r/--ownership .*a\.png: is the same file as --out/, fn ->
+        render!([scene, "--out", out, "--ownership", out])
+      end
+
+      refute File.exists?(out)
+    end
+
+    @tag :tmp_dir
+    test "bad extensions and missing folders are refused before the image is written", %{
+      tmp_dir: dir,
+      scene: scene
+    } do
+      assert_raise Mix.Error, ~r/--out .*a\.jpg: the image must end in \.png or \.exr/, fn ->
+        render!([scene, "--out", Path.join(dir, "a.jpg")])
+      end
+
+      out = Path.join(dir, "a.png")
+
+      assert_raise Mix.Error, ~r/--stats .*s\.txt: the statistics must end in/, fn ->
+        render!([scene, "--out", out, "--stats", Path.join(dir, "s.txt")])
+      end
+
+      assert_raise Mix.Error, ~r/the folder .*nowhere does not exist/, fn ->
+        render!([scene, "--out", Path.join([dir, "nowhere", "a.png"])])
+      end
+
+      assert File.ls!(dir) == ["scene.nff"]
+    end
+
+    @tag :tmp_dir
+    test "a failed write leaves the earlier file untouched and no temporary file", %{
+      tmp_dir: dir
+    } do
+      out = Path.join(dir, "a.png")
+      File.write!(out, "earlier")
+      assert {:error, _} = RingTracer.Image.write(out, 2, 2, <<0::96>>)
+      assert File.read!(out) == "earlier"
+      assert File.ls!(dir) |> Enum.sort() == ["a.png", "scene.nff"]
+    end
+  end
 end

@@ -54,9 +54,17 @@ defmodule RingTracer.Report.TimelineTest do
   end
 
   test "write/2 writes the SVG and reports unwritable paths", %{result: result, tmp_dir: dir} do
-    path = Path.join([dir, "sub", "timeline.svg"])
+    path = Path.join([dir, "timeline.svg"])
     assert :ok = Timeline.write(result, path)
     assert "<?xml" <> _ = File.read!(path)
+
+    # Outputs go only where the user pointed: a missing folder is an error,
+    # not made.
+    assert {:error, %RingTracer.Error{reason: :file, message: m}} =
+             Timeline.write(result, Path.join([dir, "sub", "timeline.svg"]))
+
+    assert m =~ "does not exist"
+    refute File.exists?(Path.join(dir, "sub"))
 
     File.write!(Path.join(dir, "file"), "")
 

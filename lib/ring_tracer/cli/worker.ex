@@ -1,0 +1,60 @@
+defmodule RingTracer.CLI.Worker do
+  @moduledoc """
+  `ringtracer worker`: a distributed node that hosts children of renders
+  started on other nodes. Shared by the launcher and `mix ring_tracer.worker`.
+
+  ## Options
+
+    * `--sname NAME` — a short name (on loopback, `NAME@localhost`)
+    * `--name NAME@HOST` — a long name
+    * `--cookie-file PATH` — the cookie, in a file only you can read
+      (default `~/.erlang.cookie`; make one with `ringtracer cookie`)
+    * `--listen ADDR` — the address to listen on (default 127.0.0.1: only
+      this machine can connect)
+    * `--ports MIN-MAX` — the distribution listener's ports, for firewalls
+    * `--tls DIR` — distribution over TLS with the certificates in `DIR`
+      (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS)
+  """
+
+  alias RingTracer.CLI.Paths
+  alias RingTracer.Cluster.Distribution
+
+  @switches [
+    sname: :string,
+    name: :string,
+    cookie: :string,
+    cookie_file: :string,
+    listen: :string,
+    ports: :string,
+    tls: :string
+  ]
+
+  @doc """
+  Parses `argv`, makes this node distributed and starts the application.
+  Returns the node's name and a line to print, or an error message.
+  """
+  @spec start([String.t()]) :: {:ok, node(), String.t()} | {:error, String.t()}
+  def start(argv) do
+    case OptionParser.parse(argv, strict: @switches) do
+      {opts, [], []} ->
+        opts = Paths.expand(opts, [:cookie_file, :tls])
+
+        with {:ok, node} <- Distribution.start(opts),
+             {:ok, _} <- Application.ensure_all_started(:ring_tracer) do
+          {:ok, node,
+           "RingTracer worker #{node} ready (cookie from " <>
+             "#{opts[:cookie_file] || "~/.erlang.cookie"}" <>
+             "#{if opts[:tls], do: ", TLS from #{opts[:tls]}"})"}
+        else
+          {:error, %RingTracer.Error{message: message}} -> {:error, message}
+          {:error, reason} -> {:error, "could not start :ring_tracer: #{inspect(reason)}"}
+        end
+
+      {_, extra, []} when extra != [] ->
+        {:error, "unexpected argument(s): #{Enum.join(extra, " ")}"}
+
+      {_, _, invalid} ->
+        {:error, "invalid option(s): #{Enum.map_join(invalid, ", ", &elem(&1, 0))}"}
+    end
+  end
+end

@@ -1,0 +1,155 @@
+defmodule RingTracer.Cluster.Cookie do
+  @moduledoc """
+  The distribution cookie, read from a file that only its owner can read.
+
+  A cookie grants full code execution on every node that accepts it, so it
+  never goes on a command line (`/proc/PID/cmdline` is readable by every
+  local user) or in the environment: workers and renders read it from a
+  file (`--cookie-file PATH`, default `~/.erlang.cookie`) after the VM has
+  started, and set it with `Node.set_cookie/1`.
+
+  A file that its group or others can read, write or execute is refused, with
+  the command that fixes it. `create/1` makes a new file with mode 0600 and
+  a random cookie.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_cookie_doc_#{System.unique_integer([:positive])}")
+      iex> File.mkdir_p!(dir)
+      iex> path = Path.join(dir, "cookie")
+      iex> {:ok, ^path} = RingTracer.Cluster.Cookie.create(path)
+      iex> {:ok, cookie} = RingTracer.Cluster.Cookie.read(path)
+      iex> is_atom(cookie)
+      true
+      iex> File.chmod!(path, 0o644)
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Cookie.read(path)
+      iex> message =~ "chmod 600"
+      true
+  """
+
+  import Bitwise
+  alias RingTracer.Error
+
+  @max_bytes 4096
+
+  @doc "The default cookie file: `~/.erlang.cookie`, the one Erlang itself uses."
+  @spec default_path() :: Path.t()
+  def default_path, do: Path.join(System.user_home!(), ".erlang.cookie")
+
+  @doc """
+  Reads the cookie in `path` (a regular file, mode 0600 or 0400, owned by
+  this user, not empty).
+  """
+  @spec read(Path.t()) :: {:ok, atom()} | {:error, Error.t()}
+  def read(path) do
+    with {:ok, stat} <- stat(path),
+         :ok <- check(path, stat),
+         {:ok, bytes} <- read_file(path) do
+      case String.trim(bytes) do
+        "" ->
+          {:error, Error.new(:cookie, "#{path}: the cookie file is empty")}
+
+        cookie ->
+          if String.printable?(cookie) and not String.contains?(cookie, ["\n", "\r"]),
+            do: {:ok, String.to_atom(cookie)},
+            else: {:error, Error.new(:cookie, "#{path}: the cookie must be one line of text")}
+      end
+    end
+  end
+
+  @doc """
+  Creates `path` with a random 32-byte cookie and mode 0600; refuses to
+  replace an existing file. Returns the path.
+  """
+  @spec create(Path.t()) :: {:ok, Path.t()} | {:error, Error.t()}
+  def create(path) do
+    cookie = 32 |> :crypto.strong_rand_bytes() |> Base.url_encode64(padding: false)
+
+    # Created empty with mode 0600 before the secret is written: it is never
+    # readable by others, not even for a moment.
+    with :ok <- exclusive(path),
+         :ok <- File.chmod(path, 0o600),
+         :ok <- File.write(path, cookie <> "\n") do
+      {:ok, path}
+    else
+      {:error, %Error{} = error} -> {:error, error}
+      {:error, reason} -> {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+
+  defp exclusive(path) do
+    case :file.open(path, [:write, :exclusive, :raw]) do
+      {:ok, fd} ->
+        :file.close(fd)
+
+      {:error, :eexist} ->
+        {:error, Error.new(:cookie, "#{path} exists already; not replacing a cookie")}
+
+      {:error, reason} ->
+        {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+
+  defp stat(path) do
+    case File.stat(path) do
+      {:ok, stat} ->
+        {:ok, stat}
+
+      {:error, :enoent} ->
+        {:error,
+         Error.new(
+           :cookie,
+           "#{path}: no such cookie file; create one with `ringtracer cookie #{path}` " <>
+             "and copy it (mode 0600) to every node"
+         )}
+
+      {:error, reason} ->
+        {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+
+  defp check(path, %File.Stat{type: type}) when type != :regular,
+    do: {:error, Error.new(:cookie, "#{path}: the cookie file must be a regular file")}
+
+  defp check(path, %File.Stat{size: size}) when size > @max_bytes,
+    do: {:error, Error.new(:cookie, "#{path}: too large for a cookie file (#{size} bytes)")}
+
+  defp check(path, %File.Stat{mode: mode}) when (mode &&& 0o077) != 0 do
+    {:error,
+     Error.new(
+       :cookie,
+       "#{path} can be read by other users (mode #{mode_string(mode)}); anyone who reads it " <>
+         "can run any code on every node. Fix it with: chmod 600 #{path}"
+     )}
+  end
+
+  defp check(path, %File.Stat{uid: uid}) do
+    case own_uid() do
+      ^uid ->
+        :ok
+
+      me when is_integer(me) ->
+        {:error, Error.new(:cookie, "#{path} belongs to user #{uid}, not to this user (#{me})")}
+
+      nil ->
+        :ok
+    end
+  end
+
+  defp read_file(path) do
+    case File.read(path) do
+      {:ok, bytes} -> {:ok, bytes}
+      {:error, reason} -> {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+
+  defp mode_string(mode), do: "0" <> Integer.to_string(mode &&& 0o777, 8)
+
+  # This OS process's user id, from /proc (Linux); nil where unknown.
+  defp own_uid do
+    with {:ok, status} <- File.read("/proc/self/status"),
+         [_, uid] <- Regex.run(~r/^Uid:\s+(\d+)/m, status) do
+      String.to_integer(uid)
+    else
+      _ -> nil
+    end
+  end
+end

@@ -1,0 +1,362 @@
+defmodule RingTracer.Cluster.Distribution do
+  @moduledoc """
+  Makes this VM a distributed node at run time, safely by default.
+
+    * **Loopback by default.** The distribution listener binds to
+      127.0.0.1, and epmd (started here when none runs) to 127.0.0.1 too,
+      unless `listen:` names another address; `ports:` fixes the
+      listener's port range for firewalls. On loopback, short names get
+      the host `localhost` (`w1` becomes `w1@localhost`), which always
+      resolves to the address the node listens on.
+    * **No cookie on the command line.** The cookie comes from a file
+      (`cookie_file:`, default `~/.erlang.cookie`) that only its owner can
+      read (`RingTracer.Cluster.Cookie`), and is set after the node has
+      started, so `ps` never shows it.
+    * **TLS** (`tls: DIR`, see `RingTracer.Cluster.TLS`) is chosen when the
+      VM boots; here it is only checked that the VM was booted with it.
+    * **Unique names.** A made-up name holds the OS process id and random
+      bytes; a name already registered with epmd is a clear error.
+
+  A VM that is already distributed (`elixir --sname X -S mix ...`) is used
+  as it is, apart from the cookie when `cookie_file:` is given.
+
+  ## Options
+
+    * `:sname` — a short name (`w1`, or `w1@host`)
+    * `:name` — a long name (`w1@host.example`)
+    * `:generate` — make up a short name when neither is given (default false)
+    * `:cookie_file` — the cookie file (default `~/.erlang.cookie`)
+    * `:listen` — the address to listen on, e.g. `"10.0.0.5"` or `"0.0.0.0"`
+      (default `"127.0.0.1"`)
+    * `:ports` — `{min, max}` ports of the distribution listener (default:
+      any free port)
+    * `:tls` — the node's TLS folder (`RingTracer.Cluster.TLS`)
+  """
+
+  require Logger
+  alias RingTracer.Cluster.{Cookie, TLS}
+  alias RingTracer.Error
+
+  @epmd_port 4369
+  @loopback {127, 0, 0, 1}
+
+  @doc """
+  Starts distribution as `opts` say. Returns this node's name.
+
+      iex> RingTracer.Cluster.Distribution.start(cookie: "secret")
+      {:error, %RingTracer.Error{reason: :cookie, message: "--cookie puts the secret on the command line, where every user of this machine can read it (/proc/PID/cmdline); put it in a file only you can read and give --cookie-file PATH (create one with: ringtracer cookie PATH)"}}
+  """
+  @spec start(keyword()) :: {:ok, node()} | {:error, Error.t()}
+  def start(opts) do
+    with :ok <- refuse_cookie(opts),
+         {:ok, listen} <- listen_address(opts[:listen]),
+         {:ok, ports} <- ports(opts[:ports]),
+         :ok <- TLS.check_booted(opts[:tls]),
+         {:ok, cookie} <- cookie(opts[:cookie_file]) do
+      if Node.alive?() do
+        set_cookie(cookie)
+        {:ok, node()}
+      else
+        with {:ok, name, type} <- name(opts, listen),
+             :ok <- configure_listener(listen, ports),
+             :ok <- ensure_epmd(listen),
+             :ok <- free_name(name),
+             :ok <- start_node(name, type) do
+          set_cookie(cookie)
+          {:ok, node()}
+        end
+      end
+    end
+  end
+
+  @doc "Like `start/1`, but raises `RingTracer.Error`."
+  @spec start!(keyword()) :: node()
+  def start!(opts) do
+    case start(opts) do
+      {:ok, node} -> node
+      {:error, error} -> raise error
+    end
+  end
+
+  @doc """
+  A fresh short node name: a prefix, this OS process's id and random bytes,
+  unique across VMs and hosts.
+
+      iex> RingTracer.Cluster.Distribution.unique_name("ringtracer") =~ ~r/^ringtracer_\\d+_[0-9a-f]{8}$/
+      true
+  """
+  @spec unique_name(String.t()) :: String.t()
+  def unique_name(prefix) do
+    "#{prefix}_#{System.pid()}_#{Base.encode16(:crypto.strong_rand_bytes(4), case: :lower)}"
+  end
+
+  @doc """
+  Parses a listen address (`"127.0.0.1"`, `"::1"`, `"0.0.0.0"`, `"10.0.0.5"`).
+
+      iex> RingTracer.Cluster.Distribution.listen_address("10.0.0.5")
+      {:ok, {10, 0, 0, 5}}
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Distribution.listen_address("10.0.0")
+      iex> message
+      "--listen must be an IP address such as 127.0.0.1 or 10.0.0.5, got: \\"10.0.0\\""
+  """
+  @spec listen_address(String.t() | :inet.ip_address() | nil) ::
+          {:ok, :inet.ip_address()} | {:error, Error.t()}
+  def listen_address(nil), do: {:ok, @loopback}
+  def listen_address(ip) when is_tuple(ip), do: {:ok, ip}
+
+  def listen_address(text) when is_binary(text) do
+    case :inet.parse_strict_address(String.to_charlist(text)) do
+      {:ok, ip} ->
+        {:ok, ip}
+
+      {:error, _} ->
+        {:error,
+         Error.new(
+           :invalid_option,
+           "--listen must be an IP address such as 127.0.0.1 or 10.0.0.5, got: #{inspect(text)}"
+         )}
+    end
+  end
+
+  @doc """
+  Parses a port range, `"9100-9110"` (or `{9100, 9110}`).
+
+      iex> RingTracer.Cluster.Distribution.ports("9100-9110")
+      {:ok, {9100, 9110}}
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Distribution.ports("9110-9100")
+      iex> message
+      "--ports must be MIN-MAX with 1024 <= MIN <= MAX <= 65535, got: \\"9110-9100\\""
+  """
+  @spec ports(String.t() | {pos_integer(), pos_integer()} | nil) ::
+          {:ok, {pos_integer(), pos_integer()} | nil} | {:error, Error.t()}
+  def ports(nil), do: {:ok, nil}
+
+  def ports({min, max} = range)
+      when is_integer(min) and is_integer(max) and 1024 <= min and min <= max and max <= 65_535,
+      do: {:ok, range}
+
+  def ports(text) when is_binary(text) do
+    with [a, b] <- String.split(text, "-"),
+         {min, ""} <- Integer.parse(a),
+         {max, ""} <- Integer.parse(b),
+         {:ok, range} <- ports({min, max}) do
+      {:ok, range}
+    else
+      _ -> bad_ports(text)
+    end
+  end
+
+  def ports(other), do: bad_ports(other)
+
+  defp bad_ports(value) do
+    {:error,
+     Error.new(
+       :invalid_option,
+       "--ports must be MIN-MAX with 1024 <= MIN <= MAX <= 65535, got: #{inspect(value)}"
+     )}
+  end
+
+  @doc "Whether `ip` is a loopback address."
+  @spec loopback?(:inet.ip_address()) :: boolean()
+  def loopback?({127, _, _, _}), do: true
+  def loopback?({0, 0, 0, 0, 0, 0, 0, 1}), do: true
+  def loopback?(_), do: false
+
+  defp refuse_cookie(opts) do
+    if Keyword.has_key?(opts, :cookie) do
+      {:error,
+       Error.new(
+         :cookie,
+         "--cookie puts the secret on the command line, where every user of this machine can " <>
+           "read it (/proc/PID/cmdline); put it in a file only you can read and give " <>
+           "--cookie-file PATH (create one with: ringtracer cookie PATH)"
+       )}
+    else
+      :ok
+    end
+  end
+
+  # A given cookie file is read (and checked) before anything starts. The
+  # default one is left to Erlang, which reads it when the node starts (and
+  # makes one, mode 0400, if there is none); it is checked here first for a
+  # clearer message.
+  defp cookie(nil) do
+    path = Cookie.default_path()
+
+    if File.exists?(path) do
+      with {:ok, _} <- Cookie.read(path), do: {:ok, nil}
+    else
+      {:ok, nil}
+    end
+  end
+
+  defp cookie(path), do: Cookie.read(Path.expand(path))
+
+  defp set_cookie(nil), do: :ok
+  defp set_cookie(cookie), do: Node.set_cookie(cookie)
+
+  defp name(opts, listen) do
+    cond do
+      opts[:name] -> {:ok, opts[:name], :longnames}
+      opts[:sname] -> {:ok, short(opts[:sname], listen), :shortnames}
+      opts[:generate] -> {:ok, short(unique_name("ringtracer"), listen), :shortnames}
+      true -> {:error, Error.new(:distribution, "give the node a name: --sname NAME")}
+    end
+  end
+
+  # On loopback a short name lives on `localhost`: the host name of the
+  # machine may resolve to an address the node does not listen on.
+  defp short(name, listen) do
+    if String.contains?(name, "@") or not loopback?(listen),
+      do: name,
+      else: name <> "@localhost"
+  end
+
+  defp configure_listener(listen, ports) do
+    :ok = Application.put_env(:kernel, :inet_dist_use_interface, listen)
+
+    case ports do
+      nil ->
+        :ok
+
+      {min, max} ->
+        :ok = Application.put_env(:kernel, :inet_dist_listen_min, min)
+        :ok = Application.put_env(:kernel, :inet_dist_listen_max, max)
+    end
+  end
+
+  # epmd, the port-mapper other nodes ask for our port, must run before the
+  # node starts. One started here listens on loopback (and on the listen
+  # address, if another is given). One that already runs is kept; a check
+  # says whether it is reachable where it must be, and warns when it is
+  # reachable where it need not be.
+  defp ensure_epmd(listen) do
+    unless epmd_at?(@loopback), do: start_epmd(listen)
+
+    cond do
+      not wait_epmd(@loopback, 40) ->
+        {:error,
+         Error.new(:distribution, "epmd (the Erlang port mapper) did not start on 127.0.0.1:4369")}
+
+      not loopback?(listen) and not any_address?(listen) and not epmd_at?(listen) ->
+        {:error,
+         Error.new(
+           :distribution,
+           "epmd runs but does not listen on #{:inet.ntoa(listen)}, so other machines cannot " <>
+             "find this node; stop it (epmd -kill) and start again"
+         )}
+
+      true ->
+        if loopback?(listen), do: warn_exposed_epmd()
+        :ok
+    end
+  end
+
+  defp start_epmd(listen) do
+    env =
+      cond do
+        any_address?(listen) -> []
+        loopback?(listen) -> [{"ERL_EPMD_ADDRESS", "127.0.0.1"}]
+        true -> [{"ERL_EPMD_ADDRESS", "127.0.0.1,#{:inet.ntoa(listen)}"}]
+      end
+
+    case System.find_executable("epmd") do
+      nil -> :ok
+      epmd -> System.cmd(epmd, ["-daemon"], env: env, stderr_to_stdout: true)
+    end
+  end
+
+  defp any_address?({0, 0, 0, 0}), do: true
+  defp any_address?({0, 0, 0, 0, 0, 0, 0, 0}), do: true
+  defp any_address?(_), do: false
+
+  defp wait_epmd(_ip, 0), do: false
+
+  defp wait_epmd(ip, tries) do
+    epmd_at?(ip) or
+      (
+        Process.sleep(50)
+        wait_epmd(ip, tries - 1)
+      )
+  end
+
+  defp epmd_at?(ip) do
+    case :gen_tcp.connect(ip, @epmd_port, [:binary, active: false], 500) do
+      {:ok, socket} ->
+        :gen_tcp.close(socket)
+        true
+
+      {:error, _} ->
+        false
+    end
+  end
+
+  defp warn_exposed_epmd do
+    exposed = Enum.filter(own_addresses(), &epmd_at?/1)
+
+    if exposed != [] do
+      Logger.warning(
+        "epmd (port 4369) was started before, by someone else, and listens on " <>
+          "#{Enum.map_join(exposed, ", ", &:inet.ntoa/1)} too: it tells anyone there which " <>
+          "nodes run here. Restart it on loopback: epmd -kill, then " <>
+          "ERL_EPMD_ADDRESS=127.0.0.1 epmd -daemon"
+      )
+    end
+  end
+
+  # This machine's non-loopback IPv4 addresses.
+  defp own_addresses do
+    case :inet.getifaddrs() do
+      {:ok, ifs} ->
+        for {_, props} <- ifs,
+            {:addr, {_, _, _, _} = ip} <- props,
+            not loopback?(ip),
+            do: ip
+
+      _ ->
+        []
+    end
+  end
+
+  defp free_name(name) do
+    [short | _] = String.split(name, "@")
+
+    case :erl_epmd.names() do
+      {:ok, names} ->
+        if Enum.any?(names, fn {n, _port} -> List.to_string(n) == short end),
+          do:
+            {:error,
+             Error.new(
+               :distribution,
+               "the node name #{short} is in use on this machine (is a worker already " <>
+                 "running as #{name}?); choose another with --sname"
+             )},
+          else: :ok
+
+      _ ->
+        :ok
+    end
+  end
+
+  defp start_node(name, type) do
+    case Node.start(String.to_atom(name), type) do
+      {:ok, _} ->
+        :ok
+
+      {:error, reason} ->
+        {:error,
+         Error.new(
+           :distribution,
+           "could not start node #{name}: #{explain(reason)}"
+         )}
+    end
+  end
+
+  defp explain({{:shutdown, {:failed_to_start_child, :net_kernel, {:EXIT, :nodistribution}}}, _}),
+    do: "the name is in use, or epmd cannot be reached"
+
+  defp explain({{:shutdown, {:failed_to_start_child, :net_kernel, reason}}, _}),
+    do: inspect(reason)
+
+  defp explain(reason), do: inspect(reason)
+end

@@ -1,0 +1,83 @@
+defmodule RingTracer.LocalCluster do
+  @moduledoc """
+  Peer nodes on this machine, with OTP's `:peer`, for the distributed tests
+  and the multi-node benchmark: makes this node distributed
+  (`RingTracer.Cluster.Distribution`: loopback, epmd on loopback) and starts
+  peers, each a real OS process, that have this node's code paths and run
+  `:ring_tracer`. Peers listen on 127.0.0.1 and live on the host
+  `localhost`; they read the same cookie file as this node
+  (`~/.erlang.cookie`: nothing secret on their command lines). Each peer
+  stops when its controlling process, or this node, goes. For real
+  clusters, start workers with `ringtracer worker` instead.
+  """
+
+  alias RingTracer.Cluster.{Distribution, TLS}
+
+  @doc "Makes this node distributed (starting epmd first) unless it already is."
+  @spec ensure_distributed() :: :ok
+  def ensure_distributed do
+    {:ok, _} = Distribution.start(generate: true)
+    :ok
+  end
+
+  @doc """
+  Starts a peer node.
+
+  ## Options
+
+    * `:code` — with `true` (default) the peer gets this node's code paths
+      and starts `:ring_tracer`; with `false` it is a bare Erlang node
+    * `:tls` — a TLS folder (`RingTracer.Cluster.TLS`): the peer runs
+      distribution over TLS. This node cannot talk to it over distribution
+      then, so it is controlled through its standard input and output
+      (`call/4`), and this node need not be distributed
+    * `:connection` — `:stdio` to control the peer through its standard I/O
+      even without `:tls` (for a peer whose distribution this node cannot
+      join)
+    * `:args` — more VM arguments (strings)
+
+  Returns `{peer_pid, node}`.
+  """
+  @spec start(String.t(), keyword()) :: {pid(), node()}
+  def start(prefix, opts \\ []) do
+    code? = Keyword.get(opts, :code, true)
+    tls = opts[:tls]
+    stdio? = tls != nil or opts[:connection] == :stdio
+    unless stdio?, do: ensure_distributed()
+    paths = if code?, do: Enum.flat_map(:code.get_path(), &[~c"-pa", &1]), else: []
+    name = String.to_atom(Distribution.unique_name(prefix))
+
+    args =
+      [~c"-kernel", ~c"inet_dist_use_interface", ~c"{127,0,0,1}"] ++
+        Enum.map(if(tls, do: TLS.vm_args(tls), else: []), &String.to_charlist/1) ++
+        Enum.map(Keyword.get(opts, :args, []), &String.to_charlist/1) ++ paths
+
+    options = %{name: name, host: ~c"localhost", args: args, wait_boot: 30_000}
+    options = if stdio?, do: Map.put(options, :connection, :standard_io), else: options
+    {:ok, peer, node} = :peer.start(options)
+
+    if code? do
+      :ok = call(peer, node, Application, :put_env, [:logger, :level, :warning])
+      {:ok, _} = call(peer, node, Application, :ensure_all_started, [:ring_tracer])
+    end
+
+    {peer, node}
+  end
+
+  @doc "Calls `m.f(a...)` on a peer, over distribution or its standard I/O."
+  @spec call(pid(), node(), module(), atom(), [term()]) :: term()
+  def call(peer, node, m, f, a) do
+    if Node.alive?() and node in Node.list(),
+      do: :erpc.call(node, m, f, a, 60_000),
+      else: :peer.call(peer, m, f, a, 60_000)
+  end
+
+  @doc "Stops a peer (and its node) if it is still running."
+  @spec stop(pid()) :: :ok
+  def stop(peer) do
+    if Process.alive?(peer), do: :peer.stop(peer)
+    :ok
+  catch
+    :exit, _ -> :ok
+  end
+end

@@ -1,0 +1,254 @@
+defmodule RingTracer.Cluster.TLS do
+  @moduledoc """
+  Distribution over TLS with mutual authentication (OTP's `inet_tls_dist`).
+
+  A node's TLS folder holds three files, made by `ringtracer tls node`:
+
+    * `ca.pem` — the cluster's certificate authority (its key stays with
+      whoever runs `ringtracer tls ca`, never on the nodes);
+    * `node.pem` — this node's certificate, signed by that CA;
+    * `node.key` — its private key, mode 0600.
+
+  Both sides of every connection present their certificate and check the
+  other's against `ca.pem` (`verify_peer`, `fail_if_no_peer_cert`): a node
+  without a certificate, with one from another CA, or speaking plain TCP is
+  refused before any distribution message, and so before the cookie is
+  even asked for. The cookie is still checked after the handshake.
+
+  TLS is chosen when the VM boots (`vm_args/1`: `-proto_dist inet_tls` and
+  the certificate options, file paths only, no secret); the launcher
+  (`bin/ringtracer ... --tls DIR`) passes them, and `check_booted/1` makes
+  sure a node asked for TLS really runs it.
+  """
+
+  import Bitwise
+  alias RingTracer.Error
+
+  @files ["ca.pem", "node.pem", "node.key"]
+
+  @doc "The files a TLS folder must hold."
+  @spec files() :: [String.t()]
+  def files, do: @files
+
+  @doc """
+  The VM arguments that make a node run distribution over TLS with the
+  certificates in `dir`.
+
+      iex> args = RingTracer.Cluster.TLS.vm_args("/etc/rt")
+      iex> Enum.take(args, 2)
+      ["-proto_dist", "inet_tls"]
+      iex> "verify_peer" in args and "/etc/rt/node.key" in args
+      true
+  """
+  @spec vm_args(Path.t()) :: [String.t()]
+  def vm_args(dir) do
+    dir = Path.expand(dir)
+    [ca, cert, key] = Enum.map(@files, &Path.join(dir, &1))
+
+    side = fn s ->
+      [
+        "#{s}_certfile",
+        cert,
+        "#{s}_keyfile",
+        key,
+        "#{s}_cacertfile",
+        ca,
+        "#{s}_verify",
+        "verify_peer",
+        "#{s}_secure_renegotiate",
+        "true",
+        "#{s}_depth",
+        "2"
+      ]
+    end
+
+    ["-proto_dist", "inet_tls", "-ssl_dist_opt"] ++
+      side.("server") ++ ["server_fail_if_no_peer_cert", "true"] ++ side.("client")
+  end
+
+  @doc "Whether this VM runs distribution over TLS."
+  @spec enabled?() :: boolean()
+  def enabled? do
+    match?({:ok, [[~c"inet_tls" | _] | _]}, :init.get_argument(:proto_dist))
+  end
+
+  @doc """
+  Checks a node's TLS folder: the three files exist, the key is readable by
+  its owner only, and this VM was booted with TLS distribution. `nil` (no
+  TLS asked for) is fine.
+  """
+  @spec check_booted(Path.t() | nil) :: :ok | {:error, Error.t()}
+  def check_booted(nil), do: :ok
+
+  def check_booted(dir) do
+    with :ok <- check_dir(dir) do
+      if enabled?(),
+        do: :ok,
+        else:
+          {:error,
+           Error.new(
+             :distribution,
+             "--tls is chosen when the VM starts: run this through bin/ringtracer " <>
+               "(which passes the TLS flags), or start the VM with " <>
+               "ELIXIR_ERL_OPTIONS=\"#{Enum.join(vm_args(dir), " ")}\""
+           )}
+    end
+  end
+
+  @doc "Checks that `dir` holds the three files and that the key is private."
+  @spec check_dir(Path.t()) :: :ok | {:error, Error.t()}
+  def check_dir(dir) do
+    missing = Enum.reject(@files, &File.regular?(Path.join(dir, &1)))
+
+    cond do
+      not File.dir?(dir) ->
+        {:error,
+         Error.new(
+           :distribution,
+           "--tls #{dir}: no such folder (make one with: ringtracer tls node)"
+         )}
+
+      missing != [] ->
+        {:error,
+         Error.new(
+           :distribution,
+           "--tls #{dir}: missing #{Enum.join(missing, ", ")} (make them with: ringtracer tls node)"
+         )}
+
+      true ->
+        key = Path.join(dir, "node.key")
+        %File.Stat{mode: mode} = File.stat!(key)
+
+        if (mode &&& 0o077) != 0,
+          do:
+            {:error,
+             Error.new(
+               :distribution,
+               "#{key} can be read by other users; fix it with: chmod 600 #{key}"
+             )},
+          else: :ok
+    end
+  end
+
+  @doc """
+  Why a connection to `node` failed, as far as a TLS handshake with its
+  distribution port (from epmd) tells. A TLS node offers its own
+  certificates and reports what the handshake said; a plain node learns
+  whether the other side speaks TLS at all.
+  """
+  @spec diagnose(node()) :: String.t()
+  def diagnose(node) do
+    with {:ok, name, host} <- split(node),
+         {:port, port, _version} <- :erl_epmd.port_please(name, host, 5_000) do
+      handshake(host, port, enabled?())
+    else
+      :noport ->
+        "no node of that name runs on its host (epmd does not know it); " <>
+          "start it with: ringtracer worker --sname NAME"
+
+      {:error, why} when is_binary(why) ->
+        why
+
+      other ->
+        "epmd on its host could not be asked: #{inspect(other)}"
+    end
+  end
+
+  defp split(node) do
+    case String.split(Atom.to_string(node), "@") do
+      [name, host] -> {:ok, String.to_charlist(name), String.to_charlist(host)}
+      _ -> {:error, "#{node} is not a node name (NAME@HOST)"}
+    end
+  end
+
+  @cookie_hint "each node reads its cookie from --cookie-file, default ~/.erlang.cookie"
+
+  defp handshake(host, port, true) do
+    opts = [active: false, versions: [:"tlsv1.2"]] ++ client_opts()
+
+    case ssl_connect(host, port, opts) do
+      {:ok, socket} ->
+        :ssl.close(socket)
+        "the TLS handshake succeeds, so the cookies differ (#{@cookie_hint})"
+
+      {:error, reason} ->
+        describe(reason)
+    end
+  end
+
+  defp handshake(host, port, false) do
+    # Only whether it speaks TLS at all: nothing is trusted or sent.
+    case ssl_connect(host, port, active: false, verify: :verify_none, log_level: :none) do
+      {:ok, socket} ->
+        :ssl.close(socket)
+        tls_only()
+
+      {:error, {:tls_alert, _}} ->
+        tls_only()
+
+      {:error, _} ->
+        "it refused the connection: the cookies differ (#{@cookie_hint})"
+    end
+  end
+
+  defp tls_only, do: "the node runs distribution over TLS only: give --tls DIR"
+
+  defp ssl_connect(host, port, opts) do
+    {:ok, _} = Application.ensure_all_started(:ssl)
+    :ssl.connect(host, port, opts, 5_000)
+  end
+
+  # This node's client options, from its boot arguments.
+  defp client_opts do
+    pairs =
+      case :init.get_argument(:ssl_dist_opt) do
+        {:ok, args} -> args |> Enum.concat() |> chunk_pairs()
+        :error -> []
+      end
+
+    for {"client_" <> key, value} <- pairs,
+        key in ["certfile", "keyfile", "cacertfile", "verify"] do
+      case key do
+        "verify" -> {:verify, String.to_existing_atom(value)}
+        _ -> {String.to_existing_atom(key), String.to_charlist(value)}
+      end
+    end
+  end
+
+  defp chunk_pairs(words) do
+    words
+    |> Enum.map(&List.to_string/1)
+    |> Enum.chunk_every(2)
+    |> Enum.flat_map(fn
+      [k, v] -> [{k, v}]
+      _ -> []
+    end)
+  end
+
+  @doc false
+  @spec describe(term()) :: String.t()
+  def describe({:tls_alert, {kind, detail}}), do: alert(kind, to_string(detail))
+  def describe({:tls_alert, kind}) when is_atom(kind), do: alert(kind, "")
+
+  def describe({:options, _} = reason),
+    do: "this node's TLS options are wrong: #{inspect(reason)}"
+
+  def describe(reason) when reason in [:closed, :timeout],
+    do: "it did not take part in a TLS handshake: it speaks plain TCP distribution"
+
+  def describe(reason), do: "the TLS handshake failed: #{inspect(reason)}"
+
+  defp alert(:unknown_ca, _),
+    do: "the TLS handshake failed: its certificate is not signed by our CA (unknown CA)"
+
+  defp alert(:certificate_required, _),
+    do: "the TLS handshake failed: it requires a client certificate"
+
+  defp alert(:bad_certificate, detail),
+    do: "the TLS handshake failed: a certificate was refused (#{detail})"
+
+  defp alert(:handshake_failure, detail),
+    do: "the TLS handshake failed (#{detail})"
+
+  defp alert(kind, detail), do: "the TLS handshake failed: #{kind} #{detail}"
+end

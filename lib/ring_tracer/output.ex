@@ -1,0 +1,226 @@
+defmodule RingTracer.Output do
+  @moduledoc """
+  The files a render writes: checked before any tracing, written atomically.
+
+  `check/2` runs before a job starts and refuses, with the option and the
+  path in the message:
+
+    * an extension the output's kind does not have (an image is `.png` or
+      `.exr`, statistics `.json` or `.csv`, a timeline `.svg`, an ownership
+      map `.png`);
+    * a folder that does not exist or cannot be written;
+    * an existing path that is not a regular file (a folder, a FIFO, ...);
+    * two outputs that are the same file (also through a symlink or a hard
+      link);
+    * an output that is one of the render's inputs: the scene or a file it
+      references.
+
+  `write/2` writes to a temporary file in the same folder and renames it
+  over the target, so a failed, cancelled or interrupted render leaves any
+  earlier file untouched and never a partial one.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{System.unique_integer([:positive])}")
+      iex> File.mkdir_p!(dir)
+      iex> scene = Path.join(dir, "scene.nff")
+      iex> File.write!(scene, "v\\n")
+      iex> RingTracer.Output.check([image: Path.join(dir, "a.png"), stats: Path.join(dir, "a.json")], [scene])
+      :ok
+      iex> {:error, error} = RingTracer.Output.check([timeline: scene], [scene])
+      iex> error.message =~ "--timeline"
+      true
+      iex> :ok = RingTracer.Output.write(Path.join(dir, "a.json"), "{}")
+      iex> File.read!(Path.join(dir, "a.json"))
+      "{}"
+  """
+
+  alias RingTracer.Error
+
+  @typedoc "What an output is: it decides the allowed extensions and the option named in errors."
+  @type kind :: :image | :stats | :timeline | :ownership
+
+  @extensions %{
+    image: [".png", ".exr"],
+    stats: [".json", ".csv"],
+    timeline: [".svg"],
+    ownership: [".png"]
+  }
+
+  @option %{image: "--out", stats: "--stats", timeline: "--timeline", ownership: "--ownership"}
+
+  @doc "The extensions an output of `kind` may have."
+  @spec extensions(kind()) :: [String.t()]
+  def extensions(kind), do: Map.fetch!(@extensions, kind)
+
+  @doc """
+  Checks `outputs` (`[{kind, path}]`) against each other and against
+  `inputs` (paths the render reads). Returns `:ok` or the first problem.
+  """
+  @spec check([{kind(), Path.t()}], [Path.t()]) :: :ok | {:error, Error.t()}
+  def check(outputs, inputs) do
+    inputs = Enum.map(inputs, &{&1, identity(&1)})
+
+    outputs
+    |> Enum.reduce_while([], fn {kind, path}, seen ->
+      with :ok <- extension(kind, path),
+           :ok <- target(kind, path),
+           :ok <- folder(kind, path),
+           id = identity(path),
+           :ok <- distinct(kind, path, id, seen),
+           :ok <- not_input(kind, path, id, inputs) do
+        {:cont, [{kind, path, id} | seen]}
+      else
+        {:error, _} = error -> {:halt, error}
+      end
+    end)
+    |> case do
+      {:error, _} = error -> error
+      _ -> :ok
+    end
+  end
+
+  @doc """
+  Writes `data` to `path` atomically: into a temporary file in the same
+  folder, then renamed over `path`.
+  """
+  @spec write(Path.t(), iodata()) :: :ok | {:error, Error.t()}
+  def write(path, data) do
+    tmp = temporary(path)
+
+    with :ok <- File.write(tmp, data, [:exclusive]),
+         :ok <- File.rename(tmp, path) do
+      :ok
+    else
+      {:error, reason} ->
+        File.rm(tmp)
+        {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
+    end
+  end
+
+  @doc "A fresh temporary name beside `path` (hidden, unique)."
+  @spec temporary(Path.t()) :: Path.t()
+  def temporary(path) do
+    rand = Base.encode16(:crypto.strong_rand_bytes(6), case: :lower)
+    Path.join(Path.dirname(path), ".#{Path.basename(path)}.#{rand}.tmp")
+  end
+
+  defp extension(kind, path) do
+    ext = String.downcase(Path.extname(path))
+    allowed = extensions(kind)
+
+    if ext in allowed,
+      do: :ok,
+      else:
+        error(
+          kind,
+          path,
+          "#{noun(kind)} must end in #{Enum.join(allowed, " or ")}, " <>
+            "not #{if ext == "", do: "a file without an extension", else: ext}"
+        )
+  end
+
+  defp target(kind, path) do
+    case File.lstat(path) do
+      {:error, :enoent} ->
+        :ok
+
+      {:ok, %File.Stat{type: :symlink}} ->
+        case File.stat(path) do
+          {:ok, %File.Stat{type: :regular}} ->
+            :ok
+
+          {:error, :enoent} ->
+            :ok
+
+          {:ok, %File.Stat{type: type}} ->
+            error(kind, path, "exists and is a #{type}, not a file")
+
+          {:error, reason} ->
+            error(kind, path, :file.format_error(reason))
+        end
+
+      {:ok, %File.Stat{type: :regular}} ->
+        :ok
+
+      {:ok, %File.Stat{type: type}} ->
+        error(kind, path, "exists and is a #{type}, not a file")
+
+      {:error, reason} ->
+        error(kind, path, :file.format_error(reason))
+    end
+  end
+
+  # The folder must exist and take a new file: tried for real, since
+  # permission bits do not tell the whole story (root, ACLs, read-only
+  # mounts).
+  defp folder(kind, path) do
+    dir = Path.dirname(path)
+
+    cond do
+      not File.dir?(dir) ->
+        error(kind, path, "the folder #{dir} does not exist")
+
+      true ->
+        probe = temporary(path)
+
+        case File.write(probe, "", [:exclusive]) do
+          :ok ->
+            File.rm(probe)
+            :ok
+
+          {:error, reason} ->
+            error(kind, path, "cannot write in #{dir}: #{:file.format_error(reason)}")
+        end
+    end
+  end
+
+  defp distinct(kind, path, id, seen) do
+    case Enum.find(seen, fn {_, _, other} -> other == id end) do
+      nil ->
+        :ok
+
+      {other_kind, other_path, _} ->
+        error(
+          kind,
+          path,
+          "is the same file as #{@option[other_kind]} #{other_path}; " <>
+            "each output needs a file of its own"
+        )
+    end
+  end
+
+  defp not_input(kind, path, id, inputs) do
+    case Enum.find(inputs, fn {_, input} -> input == id end) do
+      nil ->
+        :ok
+
+      {input, _} ->
+        error(kind, path, "would overwrite #{input}, which this render reads")
+    end
+  end
+
+  # What a path names: an existing file by device and inode (so symlinks
+  # and hard links compare equal), a new one by its folder's and its name.
+  defp identity(path) do
+    case File.stat(path) do
+      {:ok, %File.Stat{major_device: dev, inode: inode}} ->
+        {:file, dev, inode}
+
+      _ ->
+        case File.stat(Path.dirname(path)) do
+          {:ok, %File.Stat{major_device: dev, inode: inode}} ->
+            {:new, dev, inode, Path.basename(path)}
+
+          _ ->
+            {:path, Path.expand(path)}
+        end
+    end
+  end
+
+  defp noun(:image), do: "the image"
+  defp noun(:stats), do: "the statistics"
+  defp noun(:timeline), do: "the timeline"
+  defp noun(:ownership), do: "the ownership map"
+
+  defp error(kind, path, message),
+    do: {:error, Error.new(:file, "#{@option[kind]} #{path}: #{message}")}
+end
