@@ -118,9 +118,26 @@ defmodule RingTracer.StrategyTest do
     reference = TestScenes.reference(@scene, 40, 30)
 
     for {aim, boards} <- [{true, 2}, {false, 0}] do
-      {result, observed} = render_traced(children: 5, atoms: 6, speeds: [1, 3, 1, 2, 1], aim: aim)
+      {result, _observed} =
+        render_traced(children: 5, atoms: 6, speeds: [1, 3, 1, 2, 1], aim: aim)
 
       assert result.pixels == reference
+
+      # The board waits for the work preview and for one atom from every
+      # child: on the simulated kernel the preview is instant and every atom
+      # takes 20 ms, so the board always leaves while work remains (a tiny
+      # native render can end before its preview, on a busy machine).
+      {:ok, _, observed} =
+        traced(fn ->
+          RingTracer.simulate(
+            children: 5,
+            atoms: 6,
+            costs: 20_000,
+            speeds: [1, 3, 1, 2, 1],
+            aim: aim
+          )
+        end)
+
       assert Map.get(observed, :board, 0) == boards, "aim: #{aim}"
     end
   end
@@ -143,10 +160,17 @@ defmodule RingTracer.StrategyTest do
   # A 40x30 render with every send by the job's processes traced: the
   # result, and the sends observed, by kind.
   defp render_traced(opts) do
+    {:ok, result, observed} =
+      traced(fn -> RingTracer.render(TestScenes.path(@scene), [width: 40, height: 30] ++ opts) end)
+
+    {result, observed}
+  end
+
+  defp traced(fun) do
     :erlang.trace(:new_processes, true, [:send])
-    {:ok, result} = RingTracer.render(TestScenes.path(@scene), [width: 40, height: 30] ++ opts)
+    {:ok, result} = fun.()
     :erlang.trace(:new_processes, false, [:send])
-    {result, collect_sends(%{})}
+    {:ok, result, collect_sends(%{})}
   end
 
   # A send to a process that has already exited is traced apart: as the job
