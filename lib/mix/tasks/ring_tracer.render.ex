@@ -108,6 +108,8 @@ defmodule Mix.Tasks.RingTracer.Render do
         _ -> Mix.raise("usage: mix ring_tracer.render SCENE --out FILE [options]")
       end
 
+    ok!(RingTracer.Cluster.Distribution.refuse_cookie(opts))
+
     opts =
       Paths.expand(opts, [:out, :stats, :timeline, :ownership, :cookie_file, :tls, :allow_dir])
 

@@ -162,7 +162,9 @@ defmodule RingTracer.Cluster.Distribution do
   def loopback?({0, 0, 0, 0, 0, 0, 0, 1}), do: true
   def loopback?(_), do: false
 
-  defp refuse_cookie(opts) do
+  @doc "Refuses a `:cookie` option: a cookie never goes on a command line."
+  @spec refuse_cookie(keyword()) :: :ok | {:error, Error.t()}
+  def refuse_cookie(opts) do
     if Keyword.has_key?(opts, :cookie) do
       {:error,
        Error.new(

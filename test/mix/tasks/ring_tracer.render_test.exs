@@ -29,6 +29,18 @@ defmodule Mix.Tasks.RingTracer.RenderTest do
     assert <<137, "PNG", _::binary>> = File.read!(out)
   end
 
+  test "--cookie is refused even without --nodes: the secret would be on the command line" do
+    assert_raise Mix.Error, ~r/--cookie-file/, fn ->
+      Mix.Tasks.RingTracer.Render.run([
+        "priv/scenes/tetra_s1.nff",
+        "--out",
+        "x.png",
+        "--cookie",
+        "s"
+      ])
+    end
+  end
+
   test "a missing scene stops with its name" do
     assert_raise Mix.Error, ~r/missing\.nff/, fn ->
       Mix.Tasks.RingTracer.Render.run(["missing.nff", "--out", "x.png"])
