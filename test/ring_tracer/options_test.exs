@@ -27,4 +27,19 @@ defmodule RingTracer.OptionsTest do
       assert m =~ message
     end
   end
+
+  test "the documented maxima are checked before any work, and the largest ring runs" do
+    %{children: max_n, atoms: max_atoms} = Options.maxima()
+    assert {:error, %RingTracer.Error{message: m}} = Options.validate(children: max_n + 1)
+    assert m =~ ":children must be at most #{max_n}"
+
+    assert {:error, %RingTracer.Error{message: m}} =
+             Options.validate(children: 1, atoms: 1_000_000_000)
+
+    assert m =~ "at most #{max_atoms} atoms"
+    assert {:ok, _} = Options.validate(children: max_n, atoms: div(max_atoms, max_n))
+    # Reduced here; the maxima were run at full size (see RingTracer.Options).
+    {:ok, result} = RingTracer.simulate(children: 2048, atoms: 2, costs: 100)
+    assert length(result.atoms) == 4096
+  end
 end
