@@ -118,34 +118,14 @@ defmodule RingTracer.Output do
         )
   end
 
+  # An existing target (through symlinks) must be a regular file; a
+  # dangling symlink or a new name is fine.
   defp target(kind, path) do
-    case File.lstat(path) do
-      {:error, :enoent} ->
-        :ok
-
-      {:ok, %File.Stat{type: :symlink}} ->
-        case File.stat(path) do
-          {:ok, %File.Stat{type: :regular}} ->
-            :ok
-
-          {:error, :enoent} ->
-            :ok
-
-          {:ok, %File.Stat{type: type}} ->
-            error(kind, path, "exists and is a #{type}, not a file")
-
-          {:error, reason} ->
-            error(kind, path, :file.format_error(reason))
-        end
-
-      {:ok, %File.Stat{type: :regular}} ->
-        :ok
-
-      {:ok, %File.Stat{type: type}} ->
-        error(kind, path, "exists and is a #{type}, not a file")
-
-      {:error, reason} ->
-        error(kind, path, :file.format_error(reason))
+    case File.stat(path) do
+      {:ok, %File.Stat{type: :regular}} -> :ok
+      {:ok, %File.Stat{type: type}} -> error(kind, path, "exists and is a #{type}, not a file")
+      {:error, :enoent} -> :ok
+      {:error, reason} -> error(kind, path, :file.format_error(reason))
     end
   end
 

@@ -1,5 +1,7 @@
 defmodule RingTracer.FailureTest do
   use ExUnit.Case, async: false
+
+  import RingTracer.Test.Wait
   @moduletag timeout: 20_000
 
   alias RingTracer.TestScenes
@@ -186,14 +188,6 @@ defmodule RingTracer.FailureTest do
       assert {:error, %RingTracer.Error{reason: :not_running}} = RingTracer.simulate()
     after
       {:ok, _} = Application.ensure_all_started(:ring_tracer)
-    end
-  end
-
-  defp eventually(fun, tries \\ 200) do
-    cond do
-      fun.() -> true
-      tries == 0 -> false
-      true -> Process.sleep(10) && eventually(fun, tries - 1)
     end
   end
 end

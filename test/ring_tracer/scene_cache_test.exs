@@ -1,6 +1,8 @@
 defmodule RingTracer.SceneCacheTest do
   use ExUnit.Case, async: false
 
+  import RingTracer.Test.Wait
+
   alias RingTracer.{SceneCache, TestScenes}
 
   setup do
@@ -43,13 +45,5 @@ defmodule RingTracer.SceneCacheTest do
     assert_receive {:DOWN, ^ref, _, _, _}
     # The cache's own monitor fires too; its DOWN may come after our call.
     assert eventually(fn -> not Map.has_key?(SceneCache.info(), scene.source.hash) end)
-  end
-
-  defp eventually(fun, tries \\ 100) do
-    cond do
-      fun.() -> true
-      tries == 0 -> false
-      true -> Process.sleep(10) && eventually(fun, tries - 1)
-    end
   end
 end

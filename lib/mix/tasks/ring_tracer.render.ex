@@ -62,37 +62,30 @@ defmodule Mix.Tasks.RingTracer.Render do
   alias RingTracer.CLI.Paths
 
   @switches [
-    out: :string,
-    children: :integer,
-    atoms: :integer,
-    width: :integer,
-    height: :integer,
-    depth: :integer,
-    cutoff: :float,
-    samples: :integer,
-    spd: :boolean,
-    strategy: :string,
-    layout: :string,
-    aim: :boolean,
-    speeds: :string,
-    stats: :string,
-    timeline: :string,
-    ownership: :string,
-    nodes: :string,
-    children_per_node: :integer,
-    local: :boolean,
-    sname: :string,
-    name: :string,
-    cookie: :string,
-    cookie_file: :string,
-    listen: :string,
-    ports: :string,
-    tls: :string,
-    allow_dir: :keep
-  ]
+              out: :string,
+              children: :integer,
+              atoms: :integer,
+              width: :integer,
+              height: :integer,
+              depth: :integer,
+              cutoff: :float,
+              samples: :integer,
+              spd: :boolean,
+              strategy: :string,
+              layout: :string,
+              aim: :boolean,
+              speeds: :string,
+              stats: :string,
+              timeline: :string,
+              ownership: :string,
+              nodes: :string,
+              children_per_node: :integer,
+              local: :boolean,
+              allow_dir: :keep
+            ] ++ RingTracer.CLI.Worker.switches()
 
   @outputs [out: :image, stats: :stats, timeline: :timeline, ownership: :ownership]
-  @distribution [:sname, :name, :cookie, :cookie_file, :listen, :ports, :tls]
+  @distribution Keyword.keys(RingTracer.CLI.Worker.switches())
 
   @impl Mix.Task
   def run(argv) do

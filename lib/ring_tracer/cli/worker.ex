@@ -29,6 +29,10 @@ defmodule RingTracer.CLI.Worker do
     tls: :string
   ]
 
+  @doc "The command-line switches that make a node distributed (also the render's)."
+  @spec switches() :: OptionParser.options()
+  def switches, do: @switches
+
   @doc """
   Parses `argv`, makes this node distributed and starts the application.
   Returns the node's name and a line to print, or an error message.
