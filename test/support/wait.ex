@@ -7,7 +7,12 @@ defmodule RingTracer.Test.Wait do
     cond do
       fun.() -> true
       tries == 0 -> false
-      true -> Process.sleep(10) && eventually(fun, tries - 1)
+      true -> sleep_then(fn -> eventually(fun, tries - 1) end)
     end
+  end
+
+  defp sleep_then(fun) do
+    Process.sleep(10)
+    fun.()
   end
 end

@@ -30,7 +30,7 @@ defmodule RingTracer.CLI.Worker do
   ]
 
   @doc "The command-line switches that make a node distributed (also the render's)."
-  @spec switches() :: OptionParser.options()
+  @spec switches() :: [{atom(), :string}]
   def switches, do: @switches
 
   @doc """

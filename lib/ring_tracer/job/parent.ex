@@ -56,7 +56,8 @@ defmodule RingTracer.Job.Parent do
       idle: MapSet.new(),
       recovering: false,
       redone: 0,
-      node_bytes: %{}
+      node_bytes: %{},
+      helpers: []
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -194,6 +195,31 @@ defmodule RingTracer.Job.Parent do
   end
 
   def handle_info({:DOWN, ref, :process, _pid, reason}, state) do
+    if List.keymember?(state.helpers, ref, 1),
+      do: {:noreply, %{state | helpers: List.keydelete(state.helpers, ref, 1)}},
+      else: down(state, ref, reason)
+  end
+
+  # A process a strategy started for the job (e.g. the ring's work preview):
+  # no process of the job outlives it.
+  def handle_info({:job_helper, pid, ref}, state),
+    do: {:noreply, %{state | helpers: [{pid, ref} | state.helpers]}}
+
+  def handle_info({:child_idle, index}, %{stopping: nil} = state) do
+    state = %{state | idle: MapSet.put(state.idle, index)}
+    {:noreply, maybe_reassign(state)}
+  end
+
+  # Anything else is for the strategy, if it listens (`parent_info/2`).
+  def handle_info(other, %{stopping: nil} = state) do
+    if function_exported?(state.spec.strategy, :parent_info, 2),
+      do: {:noreply, state.spec.strategy.parent_info(state, other)},
+      else: {:noreply, state}
+  end
+
+  def handle_info(_other, state), do: {:noreply, state}
+
+  defp down(state, ref, reason) do
     case Map.pop(state.monitors, ref) do
       {nil, _} ->
         # The caller went away: nobody wants the image.
@@ -209,20 +235,6 @@ defmodule RingTracer.Job.Parent do
         end
     end
   end
-
-  def handle_info({:child_idle, index}, %{stopping: nil} = state) do
-    state = %{state | idle: MapSet.put(state.idle, index)}
-    {:noreply, maybe_reassign(state)}
-  end
-
-  # Anything else is for the strategy, if it listens (`parent_info/2`).
-  def handle_info(other, %{stopping: nil} = state) do
-    if function_exported?(state.spec.strategy, :parent_info, 2),
-      do: {:noreply, state.spec.strategy.parent_info(state, other)},
-      else: {:noreply, state}
-  end
-
-  def handle_info(_other, state), do: {:noreply, state}
 
   # A child (or its whole node) is gone. The ring is re-linked around the gap,
   # every child is told (a child whose offer may have died with the sibling
@@ -410,7 +422,18 @@ defmodule RingTracer.Job.Parent do
           {:error, message}
       end
 
+    stop_helpers(state.helpers)
     send(spec.caller, {RingTracer, spec.id, reply})
     {:stop, :normal, state}
+  end
+
+  defp stop_helpers(helpers) do
+    for {pid, ref} <- helpers do
+      Process.exit(pid, :kill)
+
+      receive do
+        {:DOWN, ^ref, _, _, _} -> :ok
+      end
+    end
   end
 end

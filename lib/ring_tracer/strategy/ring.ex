@@ -30,7 +30,12 @@ defmodule RingTracer.Strategy.Ring do
   def parent_start(%{spec: %{aim: true, kernel: {kernel, opts}} = spec} = parent) do
     if function_exported?(kernel, :atom_work, 2) do
       me = self()
-      Task.start(fn -> send(me, {:atom_work, spec.id, kernel.atom_work(spec, opts)}) end)
+
+      {pid, ref} =
+        spawn_monitor(fn -> send(me, {:atom_work, spec.id, kernel.atom_work(spec, opts)}) end)
+
+      # The parent ends it (and waits for it) when the job ends.
+      send(me, {:job_helper, pid, ref})
     end
 
     %{parent | strategy_state: %{work: nil, heard_from: MapSet.new(), board: false}}
