@@ -1,6 +1,7 @@
 //! Shared driver of the fuzz targets: parse arbitrary bytes as a scene and, when that succeeds,
 //! trace a few pixels at a tiny resolution so the BVH and the integrator see odd scenes too.
 
+use ring_tracer_kernel::files::Unreadable;
 use ring_tracer_kernel::{trace_span, Format, Scene, Settings};
 
 /// A small fixed mesh (a quad as two triangles, with normals) that every mesh reference resolves
@@ -10,11 +11,11 @@ vn 0 0 1\nusemtl red\nf 1//1 2//1 3//1 4//1\n";
 /// The material library returned for `.mtl` paths.
 pub const MESH_MTL: &[u8] = b"newmtl red\nKd 1 0 0\nKs 0.5 0.5 0.5\nNs 30\n";
 
-fn resolve(path: &str) -> Result<Vec<u8>, String> {
+fn resolve(path: &str) -> Result<Vec<u8>, Unreadable> {
     if path.ends_with(".mtl") {
         Ok(MESH_MTL.to_vec())
     } else if path.contains("missing") {
-        Err(format!("{path}: no such file"))
+        Err(format!("{path}: no such file").into())
     } else {
         Ok(MESH_OBJ.to_vec())
     }

@@ -35,6 +35,33 @@ use std::io::Read;
 use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
 use std::path::{Component, Path, PathBuf};
 
+/// Why a file a scene references could not be had, as a resolver (see
+/// [`crate::Scene::parse`]) says it. The two cases differ: a missing OBJ material library
+/// falls back to a grey material, a refused one stops the load.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Unreadable {
+    /// There is no such file (or it was not shipped with the scene).
+    #[error("{0}")]
+    Missing(String),
+    /// The file is there but may not be read: outside the allowed folders, not a regular
+    /// file, on a pseudo-filesystem, too large, or unreadable.
+    #[error("{0}")]
+    Refused(String),
+}
+
+/// A resolver's own message (a test's, a fuzz driver's) counts as a missing file.
+impl From<String> for Unreadable {
+    fn from(message: String) -> Self {
+        Unreadable::Missing(message)
+    }
+}
+
+impl From<&str> for Unreadable {
+    fn from(message: &str) -> Self {
+        Unreadable::Missing(message.to_string())
+    }
+}
+
 /// At most this many characters of a path or reference are shown in a message.
 const PATH_CHARS: usize = 1024;
 
@@ -54,9 +81,9 @@ fn io_error(path: &Path, message: impl Into<String>) -> Error {
     }
 }
 
-/// What a file is, for a message refusing it.
-fn kind(ft: &FileType) -> &'static str {
-    if ft.is_dir() {
+/// Why a file that is not a regular file is refused, naming what it is where it can.
+fn not_regular(path: &Path, ft: &FileType) -> Error {
+    let what = if ft.is_dir() {
         "a directory"
     } else if ft.is_fifo() {
         "a FIFO (named pipe)"
@@ -69,18 +96,9 @@ fn kind(ft: &FileType) -> &'static str {
     } else if ft.is_symlink() {
         "a symbolic link"
     } else {
-        "not a regular file"
-    }
-}
-
-fn not_regular(path: &Path, ft: &FileType) -> Error {
-    let what = kind(ft);
-    let message = if what == "not a regular file" {
-        what.to_string()
-    } else {
-        format!("is {what}, not a regular file")
+        return io_error(path, "not a regular file");
     };
-    io_error(path, message)
+    io_error(path, format!("is {what}, not a regular file"))
 }
 
 /// The pseudo-filesystem a file is on (by `fstatfs`), if any.
@@ -270,35 +288,41 @@ impl Confinement {
     /// outside the scene's folder /x/y (allow it with --allow-dir)` or `'m.obj' does not
     /// exist (/x/y/m.obj)`. A reference that leaves the folders by its text alone is refused
     /// before anything on disk is looked at (so whether a file exists outside is not told).
-    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, String> {
+    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, Unreadable> {
+        use Unreadable::{Missing, Refused};
         let quoted = escape_bounded(reference, PATH_CHARS);
         if reference.is_empty() {
-            return Err("'' is an empty file name".to_string());
+            return Err(Refused("'' is an empty file name".to_string()));
         }
         let base = std::fs::canonicalize(base_dir)
-            .map_err(|e| format!("'{quoted}': the folder {}: {e}", shown(base_dir)))?;
+            .map_err(|e| Refused(format!("'{quoted}': the folder {}: {e}", shown(base_dir))))?;
         let written = lexical(&base.join(reference));
         if !self.contains(&written) {
-            return Err(self.outside(reference, &written, ""));
+            return Err(Refused(self.outside(reference, &written, "")));
         }
         let canonical = std::fs::canonicalize(&written).map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
-                format!("'{quoted}' does not exist ({})", shown(&written))
+                Missing(format!("'{quoted}' does not exist ({})", shown(&written)))
             } else {
-                format!("'{quoted}': {}: {e}", shown(&written))
+                Refused(format!("'{quoted}': {}: {e}", shown(&written)))
             }
         })?;
         if !self.contains(&canonical) {
-            return Err(self.outside(reference, &canonical, " (through a symbolic link)"));
+            return Err(Refused(self.outside(
+                reference,
+                &canonical,
+                " (through a symbolic link)",
+            )));
         }
         Ok(canonical)
     }
 
     /// Reads a referenced file: [`Confinement::resolve`], then [`read_regular`] with
     /// [`limits::MAX_FILE_BYTES`]. Returns the bytes and the canonical path read.
-    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), String> {
+    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), Unreadable> {
         let path = self.resolve(base_dir, reference)?;
-        read_regular_with_path(&path, limits::MAX_FILE_BYTES).map_err(|e| e.to_string())
+        read_regular_with_path(&path, limits::MAX_FILE_BYTES)
+            .map_err(|e| Unreadable::Refused(e.to_string()))
     }
 }
 
@@ -307,6 +331,22 @@ mod tests {
     use super::*;
     use std::os::unix::fs::symlink;
     use std::time::{Duration, Instant};
+
+    /// The message of a refusal (and that it is one).
+    fn refused(e: Unreadable) -> String {
+        match e {
+            Unreadable::Refused(m) => m,
+            other => panic!("expected a refusal, got {other:?}"),
+        }
+    }
+
+    /// The message of a missing file (and that it is one).
+    fn missing(e: Unreadable) -> String {
+        match e {
+            Unreadable::Missing(m) => m,
+            other => panic!("expected a missing file, got {other:?}"),
+        }
+    }
 
     /// A temporary folder `root` holding `scene/m.obj` and `outside.txt`.
     fn tree() -> (tempfile::TempDir, PathBuf) {
@@ -336,7 +376,7 @@ mod tests {
         );
         let abs = canon(&scene.join("m.obj"));
         assert_eq!(c.resolve(&scene, abs.to_str().unwrap()).unwrap(), abs);
-        let e = c.resolve(&scene, "nope.obj").unwrap_err();
+        let e = missing(c.resolve(&scene, "nope.obj").unwrap_err());
         assert!(e.starts_with("'nope.obj' does not exist ("), "{e}");
     }
 
@@ -344,7 +384,7 @@ mod tests {
     fn dot_dot_escape_is_refused() {
         let (t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
-        let e = c.resolve(&scene, "../outside.txt").unwrap_err();
+        let e = refused(c.resolve(&scene, "../outside.txt").unwrap_err());
         let root = canon(t.path());
         assert_eq!(
             e,
@@ -355,15 +395,16 @@ mod tests {
                 canon(&scene).display()
             )
         );
-        let e = c
-            .read(&scene, "../../../../../../../../etc/passwd")
-            .unwrap_err();
+        let e = refused(
+            c.read(&scene, "../../../../../../../../etc/passwd")
+                .unwrap_err(),
+        );
         assert!(
             e.starts_with("'../../../../../../../../etc/passwd' resolves to /etc/passwd, outside"),
             "{e}"
         );
         // whether a file exists outside is not told
-        let e = c.resolve(&scene, "../no_such_file").unwrap_err();
+        let e = refused(c.resolve(&scene, "../no_such_file").unwrap_err());
         assert!(e.contains("outside the scene's folder"), "{e}");
         // allowed with a second root
         let c2 = Confinement::new([scene.clone(), t.path().to_path_buf()]).unwrap();
@@ -379,7 +420,7 @@ mod tests {
         let (_t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
         for r in ["/etc/shadow", "/etc/passwd", "/proc/self/environ"] {
-            let e = c.read(&scene, r).unwrap_err();
+            let e = refused(c.read(&scene, r).unwrap_err());
             assert!(
                 e.starts_with(&format!(
                     "'{r}' resolves to {r}, outside the scene's folder"
@@ -394,7 +435,7 @@ mod tests {
         let (t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
         symlink(t.path().join("outside.txt"), scene.join("out.obj")).unwrap();
-        let e = c.read(&scene, "out.obj").unwrap_err();
+        let e = refused(c.read(&scene, "out.obj").unwrap_err());
         assert!(
             e.starts_with(&format!(
                 "'out.obj' resolves to {} (through a symbolic link), outside the scene's folder",
@@ -403,7 +444,7 @@ mod tests {
             "{e}"
         );
         symlink("/etc", scene.join("etc")).unwrap();
-        let e = c.read(&scene, "etc/passwd").unwrap_err();
+        let e = refused(c.read(&scene, "etc/passwd").unwrap_err());
         assert!(
             e.contains("resolves to /etc/passwd (through a symbolic link)"),
             "{e}"
@@ -429,7 +470,7 @@ mod tests {
         std::fs::write(bc.join("x.obj"), "v 0 0 0\n").unwrap();
         let c = Confinement::new([&b]).unwrap();
         assert!(!c.contains(&canon(&bc.join("x.obj"))));
-        let e = c.resolve(&b, "../bc/x.obj").unwrap_err();
+        let e = refused(c.resolve(&b, "../bc/x.obj").unwrap_err());
         assert!(e.contains("outside the scene's folder"), "{e}");
         let abs = canon(&bc).join("x.obj");
         assert!(c.resolve(&b, abs.to_str().unwrap()).is_err());
@@ -465,7 +506,7 @@ mod tests {
                 "{e}"
             );
         }
-        assert!(confined.unwrap_err().contains("is a FIFO"));
+        assert!(refused(confined.unwrap_err()).contains("is a FIFO"));
     }
 
     #[test]
@@ -557,17 +598,17 @@ mod tests {
     fn references_are_escaped_in_messages() {
         let (_t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
-        let e = c.resolve(&scene, "../\x1b[31mred\n.obj").unwrap_err();
+        let e = refused(c.resolve(&scene, "../\x1b[31mred\n.obj").unwrap_err());
         assert!(
             e.starts_with("'../\\u{1b}[31mred\\n.obj' resolves to "),
             "{e}"
         );
         assert!(!e.contains('\x1b') && !e.contains('\n'), "{e}");
         assert_eq!(
-            c.resolve(&scene, "").unwrap_err(),
+            refused(c.resolve(&scene, "").unwrap_err()),
             "'' is an empty file name"
         );
-        let e = c.read(&scene, ".").unwrap_err();
+        let e = refused(c.read(&scene, ".").unwrap_err());
         assert!(e.contains("is a directory"), "{e}");
     }
 }

@@ -11,6 +11,7 @@
 //! weight, `Ns` the Phong exponent. Missing MTL files fall back to a light-grey material.
 
 use crate::camera::Camera;
+use crate::files::Unreadable;
 use crate::geometry::Aabb;
 use crate::light::Light;
 use crate::limits;
@@ -33,7 +34,7 @@ fn grey() -> Material {
 pub(crate) fn load_mesh(
     bytes: &[u8],
     name: &str,
-    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
     xf: Affine3A,
     material: Option<u32>,
     smooth: bool,
@@ -63,10 +64,9 @@ pub(crate) fn load_mesh(
             let rel = p.to_string_lossy();
             match resolve(&rel) {
                 Ok(data) => tobj::load_mtl_buf(&mut std::io::BufReader::new(data.as_slice())),
-                Err(e) => {
-                    if !(e.contains("does not exist") || e.contains("not shipped")) {
-                        refused.borrow_mut().get_or_insert(e);
-                    }
+                Err(Unreadable::Missing(_)) => Err(tobj::LoadError::OpenFileFailed),
+                Err(Unreadable::Refused(e)) => {
+                    refused.borrow_mut().get_or_insert(e);
                     Err(tobj::LoadError::OpenFileFailed)
                 }
             }
@@ -186,7 +186,7 @@ pub fn default_camera(bounds: Aabb) -> Camera {
 pub(crate) fn parse_scene(
     bytes: &[u8],
     name: &str,
-    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
     let mut b = SceneBuilder::new();
     let bounds = load_mesh(bytes, name, resolve, Affine3A::IDENTITY, None, true, &mut b)?;

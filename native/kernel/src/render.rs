@@ -170,7 +170,7 @@ pub fn trace_span(
 /// use ring_tracer_kernel::{trace_span, trace_span_into, Format, Scene, Settings};
 /// let nff = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n\
 ///            l 0 5 5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n";
-/// let no_files = |_: &str| Err("no files".to_string());
+/// let no_files = |_: &str| Err("no files".into());
 /// let scene = Scene::parse(nff.as_bytes(), Format::Nff, "doc.nff", &no_files).unwrap();
 /// let settings = Settings::for_scene(&scene);
 /// let mut out = vec![0.0; 5 * 3];

@@ -3,6 +3,7 @@
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
 use crate::files;
+use crate::files::Unreadable;
 use crate::geometry::{ear_clip, hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
 use crate::light::Light;
 use crate::limits;
@@ -104,12 +105,12 @@ pub struct Scene {
 impl Scene {
     /// Parse scene bytes. `name` is used in error messages (the file name). `resolve` loads files
     /// the scene references (OBJ meshes, MTL) by the relative path written in the scene; it
-    /// returns their bytes or an error string.
+    /// returns their bytes or why it could not ([`files::Unreadable`]).
     pub fn parse(
         bytes: &[u8],
         format: Format,
         name: &str,
-        resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+        resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
     ) -> Result<Scene, Error> {
         limits::check_file_size(format!("the size of {name}"), bytes.len() as u64)?;
         match format {
@@ -134,7 +135,7 @@ impl Scene {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or(shown);
-        let resolve = move |rel: &str| -> Result<Vec<u8>, String> {
+        let resolve = move |rel: &str| -> Result<Vec<u8>, Unreadable> {
             confinement.read(&dir, rel).map(|(bytes, _)| bytes)
         };
         Scene::parse(&bytes, format, &name, &resolve)

@@ -78,6 +78,7 @@
 
 use crate::camera::Camera;
 use crate::error::{quoted_snippets, snippet};
+use crate::files::Unreadable;
 use crate::light::{spd_intensity, Light};
 use crate::limits;
 use crate::material::{Checker, Material};
@@ -291,7 +292,7 @@ impl Ctx<'_> {
 pub fn parse(
     bytes: &[u8],
     file: &str,
-    resolve: &dyn Fn(&str) -> Result<Vec<u8>, String>,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
         Error::parse(
@@ -567,7 +568,7 @@ fn matrix_transform(m: &[Vec<f32>]) -> Option<Affine3A> {
 mod tests {
     use super::*;
 
-    fn no_files(_: &str) -> Result<Vec<u8>, String> {
+    fn no_files(_: &str) -> Result<Vec<u8>, Unreadable> {
         Err("no files in this test".into())
     }
 
@@ -594,11 +595,11 @@ mod tests {
             .collect::<Vec<_>>()
             .join("\n");
         let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
-        let resolve = |p: &str| -> Result<Vec<u8>, String> {
+        let resolve = |p: &str| -> Result<Vec<u8>, Unreadable> {
             if p == "meshes/teapot.obj" {
                 Ok(obj.as_bytes().to_vec())
             } else {
-                Err(format!("no {p}"))
+                Err(format!("no {p}").into())
             }
         };
         let s = parse(src.as_bytes(), "doc.toml", &resolve).unwrap();

@@ -1,11 +1,12 @@
 //! End-to-end tests: golden pixels, determinism across spans and threads, image round trips.
 
+use ring_tracer_kernel::files::Unreadable;
 use ring_tracer_kernel::{
     encode_png, render_image, to_srgb8, trace_span, trace_span_into, work_by_row, write_image,
     Format, RayStats, Scene, Settings,
 };
 
-fn no_files(_: &str) -> Result<Vec<u8>, String> {
+fn no_files(_: &str) -> Result<Vec<u8>, Unreadable> {
     Err("no files".into())
 }
 
@@ -333,7 +334,7 @@ fn obj_scene_and_format() {
     assert!(e.contains("scene.txt"), "{e}");
     let obj = "mtllib m.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nusemtl red\nf 1 2 3 4\n";
     let mtl = "newmtl red\nKd 1 0 0\n";
-    let resolve = |p: &str| -> Result<Vec<u8>, String> {
+    let resolve = |p: &str| -> Result<Vec<u8>, Unreadable> {
         if p == "m.mtl" {
             Ok(mtl.as_bytes().to_vec())
         } else {

@@ -1,8 +1,9 @@
 //! Malformed input must give errors, never panics; limits are checked before allocation.
 
+use ring_tracer_kernel::files::Unreadable;
 use ring_tracer_kernel::{render_image, trace_span, Error, Format, Scene, Settings};
 
-fn resolve(_: &str) -> Result<Vec<u8>, String> {
+fn resolve(_: &str) -> Result<Vec<u8>, Unreadable> {
     Err("no files here".into())
 }
 
@@ -370,7 +371,7 @@ fn limit_mesh_triangles() {
     );
     // the same through a TOML mesh reference
     let toml = "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n[[objects]]\ntype = \"mesh\"\nfile = \"big.obj\"\n";
-    let big = move |_: &str| -> Result<Vec<u8>, String> { Ok(obj.clone()) };
+    let big = move |_: &str| -> Result<Vec<u8>, Unreadable> { Ok(obj.clone()) };
     let e = Scene::parse(toml.as_bytes(), Format::Toml, "m.toml", &big)
         .unwrap_err()
         .to_string();
@@ -453,7 +454,7 @@ fn load_confines_references() {
 // ---- the fuzz seeds (native/fuzz/corpus/<target>/) on stable, through the fuzz driver's steps ----
 
 /// What the fuzz targets' resolver returns: a small quad mesh, or its material library.
-fn fuzz_resolve(path: &str) -> Result<Vec<u8>, String> {
+fn fuzz_resolve(path: &str) -> Result<Vec<u8>, Unreadable> {
     if path.ends_with(".mtl") {
         Ok(b"newmtl red\nKd 1 0 0\nKs 0.5 0.5 0.5\nNs 30\n".to_vec())
     } else {
@@ -494,4 +495,26 @@ fn fuzz_seed_corpora_parse_and_trace() {
         }
     }
     assert!(seen >= 6, "only {seen} seeds");
+}
+
+#[test]
+fn a_refused_mtllib_stops_the_load_and_a_missing_one_falls_back_to_grey() {
+    let obj = b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    let refused = |_: &str| -> Result<Vec<u8>, Unreadable> {
+        Err(Unreadable::Refused(
+            "'m.mtl' resolves to /etc/passwd, outside".into(),
+        ))
+    };
+    let e = match Scene::parse(obj, Format::Obj, "m.obj", &refused) {
+        Ok(_) => panic!("a refused mtllib is an error"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        e.starts_with("m.obj: cannot load its mtllib: 'm.mtl'"),
+        "{e}"
+    );
+    let missing = |_: &str| -> Result<Vec<u8>, Unreadable> {
+        Err(Unreadable::Missing("'m.mtl' does not exist".into()))
+    };
+    assert!(Scene::parse(obj, Format::Obj, "m.obj", &missing).is_ok());
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::sync::Mutex;
 
-use ring_tracer_kernel::files::{self, Confinement};
+use ring_tracer_kernel::files::{self, Confinement, Unreadable};
 use ring_tracer_kernel::{limits, Format, Scene};
 use rustler::{Binary, Env, NifMap, OwnedBinary, ResourceArc};
 
@@ -95,7 +95,7 @@ fn scene_parse<'a>(
     };
     let used: Mutex<Vec<(String, Vec<u8>)>> = Mutex::new(Vec::new());
     let read: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
-    let resolve = |rel: &str| -> Result<Vec<u8>, String> {
+    let resolve = |rel: &str| -> Result<Vec<u8>, Unreadable> {
         let data = if let Some(data) = shipped.get(rel) {
             data.clone()
         } else if let Some((dir, confinement)) = &disk {
@@ -108,7 +108,9 @@ fn scene_parse<'a>(
             data
         } else {
             // `rel` is not echoed: the caller names the reference, escaped
-            return Err("referenced file was not shipped with the scene".to_string());
+            return Err(Unreadable::Missing(
+                "referenced file was not shipped with the scene".to_string(),
+            ));
         };
         if let Ok(mut used) = used.lock() {
             used.push((rel.to_string(), data.clone()));
