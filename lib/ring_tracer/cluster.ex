@@ -65,14 +65,12 @@ defmodule RingTracer.Cluster do
            "(the cookie comes from --cookie-file, default ~/.erlang.cookie)"}
 
       not Node.connect(n) ->
-        {:error, "cannot connect to node #{n}: #{refusal(n)}"}
+        {:error, "cannot connect to node #{n}: #{RingTracer.Cluster.TLS.diagnose(n)}"}
 
       true ->
         remote_check(n)
     end
   end
-
-  defp refusal(n), do: RingTracer.Cluster.TLS.diagnose(n)
 
   defp remote_check(n) do
     apps = :erpc.call(n, Application, :started_applications, [], 5_000)

@@ -79,6 +79,23 @@ defmodule RingTracer.Output do
   end
 
   @doc """
+  Only the last of `check/2`'s rules: none of `outputs` is one of `inputs`.
+  For inputs known later (the files a scene references, once it is read)
+  than the outputs were checked.
+  """
+  @spec check_inputs([{kind(), Path.t()}], [Path.t()]) :: :ok | {:error, Error.t()}
+  def check_inputs(outputs, inputs) do
+    inputs = Enum.map(inputs, &{&1, identity(&1)})
+
+    Enum.find_value(outputs, :ok, fn {kind, path} ->
+      case not_input(kind, path, identity(path), inputs) do
+        :ok -> nil
+        error -> error
+      end
+    end)
+  end
+
+  @doc """
   Writes `data` to `path` atomically: into a temporary file in the same
   folder, then renamed over `path`.
   """

@@ -132,7 +132,7 @@ defmodule Mix.Tasks.RingTracer.Render do
 
     # Then the scene, whose references are inputs too; then the job.
     {:ok, loaded} = ok!(RingTracer.Scene.load(scene, allow_dirs: allow_dirs))
-    ok!(RingTracer.Output.check(outputs, [scene | loaded.files]))
+    ok!(RingTracer.Output.check_inputs(outputs, loaded.files))
 
     with {:ok, result} <- render(loaded, render_opts),
          :ok <- RingTracer.Image.write(result, out),

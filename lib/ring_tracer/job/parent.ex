@@ -33,6 +33,17 @@ defmodule RingTracer.Job.Parent do
   @spec send_counted(map(), pid(), atom(), term()) :: map()
   def send_counted(state, pid, kind, msg), do: Child.send_counted(state, pid, kind, msg)
 
+  @doc """
+  Runs `fun` in a process of the job's (for a strategy: the ring's work
+  preview), monitored by the parent, which ends it and waits for it when
+  the job ends: no process of a job outlives it. Returns the parent's state.
+  """
+  @spec start_helper(map(), (() -> term())) :: map()
+  def start_helper(state, fun) do
+    {pid, ref} = spawn_monitor(fun)
+    %{state | helpers: [{pid, ref} | state.helpers]}
+  end
+
   @impl GenServer
   def init(%Spec{} = spec) do
     Process.monitor(spec.caller)
@@ -199,11 +210,6 @@ defmodule RingTracer.Job.Parent do
       do: {:noreply, %{state | helpers: List.keydelete(state.helpers, ref, 1)}},
       else: down(state, ref, reason)
   end
-
-  # A process a strategy started for the job (e.g. the ring's work preview):
-  # no process of the job outlives it.
-  def handle_info({:job_helper, pid, ref}, state),
-    do: {:noreply, %{state | helpers: [{pid, ref} | state.helpers]}}
 
   def handle_info({:child_idle, index}, %{stopping: nil} = state) do
     state = %{state | idle: MapSet.put(state.idle, index)}

@@ -28,15 +28,16 @@ defmodule RingTracer.Strategy.Ring do
   # (`RingTracer.Ring.Aim.board/4`) once every child has sent an atom.
   @impl true
   def parent_start(%{spec: %{aim: true, kernel: {kernel, opts}} = spec} = parent) do
-    if function_exported?(kernel, :atom_work, 2) do
-      me = self()
+    parent =
+      if function_exported?(kernel, :atom_work, 2) do
+        me = self()
 
-      {pid, ref} =
-        spawn_monitor(fn -> send(me, {:atom_work, spec.id, kernel.atom_work(spec, opts)}) end)
-
-      # The parent ends it (and waits for it) when the job ends.
-      send(me, {:job_helper, pid, ref})
-    end
+        Parent.start_helper(parent, fn ->
+          send(me, {:atom_work, spec.id, kernel.atom_work(spec, opts)})
+        end)
+      else
+        parent
+      end
 
     %{parent | strategy_state: %{work: nil, heard_from: MapSet.new(), board: false}}
   end

@@ -89,6 +89,21 @@ defmodule Mix.Tasks.RingTracer.RenderTest do
     end
 
     @tag :tmp_dir
+    test "a file the scene references is an input too", %{tmp_dir: dir} do
+      mesh = Path.join(dir, "m.obj")
+      File.write!(mesh, "mtllib colours.svg\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+      library = Path.join(dir, "colours.svg")
+      File.write!(library, "newmtl red\nKd 1 0 0\n")
+
+      assert_raise Mix.Error, ~r/--timeline .*colours\.svg: would overwrite/, fn ->
+        render!([mesh, "--out", Path.join(dir, "a.png"), "--timeline", library])
+      end
+
+      assert File.read!(library) == "newmtl red\nKd 1 0 0\n"
+      refute File.exists?(Path.join(dir, "a.png"))
+    end
+
+    @tag :tmp_dir
     test "two outputs that are one file are refused", %{tmp_dir: dir, scene: scene} do
       out = Path.join(dir, "a.png")
 
