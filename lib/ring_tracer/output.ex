@@ -109,9 +109,16 @@ defmodule RingTracer.Output do
     else
       {:error, reason} ->
         File.rm(tmp)
-        {:error, Error.new(:file, "#{path}: #{:file.format_error(reason)}")}
+        {:error, Error.new(:file, "#{path}: #{write_error(path, reason)}")}
     end
   end
+
+  defp write_error(path, :enoent) do
+    dir = Path.dirname(path)
+    if File.dir?(dir), do: :file.format_error(:enoent), else: "the folder #{dir} does not exist"
+  end
+
+  defp write_error(_path, reason), do: :file.format_error(reason)
 
   @doc "A fresh temporary name beside `path` (hidden, unique)."
   @spec temporary(Path.t()) :: Path.t()
@@ -119,6 +126,10 @@ defmodule RingTracer.Output do
     rand = Base.encode16(:crypto.strong_rand_bytes(6), case: :lower)
     Path.join(Path.dirname(path), ".#{Path.basename(path)}.#{rand}.tmp")
   end
+
+  @doc "Only the extension rule of `check/2`, for one output."
+  @spec check_extension(kind(), Path.t()) :: :ok | {:error, Error.t()}
+  def check_extension(kind, path), do: extension(kind, path)
 
   defp extension(kind, path) do
     ext = String.downcase(Path.extname(path))

@@ -282,8 +282,8 @@ defmodule RingTracer.Cluster.Distribution do
       )
   end
 
-  defp epmd_at?(ip) do
-    case :gen_tcp.connect(ip, @epmd_port, [:binary, active: false], 500) do
+  defp epmd_at?(ip, timeout \\ 500) do
+    case :gen_tcp.connect(ip, @epmd_port, [:binary, active: false], timeout) do
       {:ok, socket} ->
         :gen_tcp.close(socket)
         true
@@ -294,7 +294,7 @@ defmodule RingTracer.Cluster.Distribution do
   end
 
   defp warn_exposed_epmd do
-    exposed = Enum.filter(own_addresses(), &epmd_at?/1)
+    exposed = Enum.filter(own_addresses(), &epmd_at?(&1, 200))
 
     if exposed != [] do
       Logger.warning(

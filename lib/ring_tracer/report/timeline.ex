@@ -87,7 +87,7 @@ defmodule RingTracer.Report.Timeline do
   """
   @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
   def write(%Result{} = result, path) when is_binary(path) do
-    with :ok <- RingTracer.Output.check([timeline: path], []),
+    with :ok <- RingTracer.Output.check_extension(:timeline, path),
          do: RingTracer.Output.write(path, svg(result))
   end
 
