@@ -9,6 +9,7 @@ defmodule RingTracer.Application do
     children = [
       RingTracer.SceneCache,
       RingTracer.Job.Pipe,
+      RingTracer.Job.Directory,
       {DynamicSupervisor, name: Names.jobs(), strategy: :one_for_one},
       {DynamicSupervisor, name: Names.children(), strategy: :one_for_one},
       %{id: :pg, start: {:pg, :start_link, [RingTracer.Cluster.scope()]}},

@@ -3,7 +3,8 @@ defmodule RingTracer.Names do
   Every registered name RingTracer uses, built in one place.
 
   Per node: the jobs supervisor (parents), the children supervisor (children
-  started on this node by any job's parent) and the scene cache.
+  started on this node by any job's parent), the scene cache and the
+  tables of the job directory and the grandchildren's pipes.
   """
 
   @doc "Supervisor of parents, one per running job, on this node."
@@ -15,6 +16,10 @@ defmodule RingTracer.Names do
   def children(node \\ node())
   def children(node) when node == node(), do: RingTracer.Children
   def children(node), do: {RingTracer.Children, node}
+
+  @doc "The ETS table, on every node, where a job's children look each other up."
+  @spec directory_table() :: atom()
+  def directory_table, do: RingTracer.Job.Directory
 
   @doc "The ETS table, on every node, where a child and its grandchild race for the queued atom."
   @spec pipe_table() :: atom()

@@ -19,7 +19,7 @@ defmodule RingTracer.Output do
   over the target, so a failed, cancelled or interrupted render leaves any
   earlier file untouched and never a partial one.
 
-      iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{System.unique_integer([:positive])}")
+      iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
       iex> File.mkdir_p!(dir)
       iex> scene = Path.join(dir, "scene.nff")
       iex> File.write!(scene, "v\\n")

@@ -27,7 +27,12 @@ defmodule RingTracer.TestScenes do
   @doc "Writes a scene file with `contents` to a temporary directory and returns its path."
   @spec tmp_scene(String.t(), String.t()) :: String.t()
   def tmp_scene(name, contents) do
-    dir = Path.join(System.tmp_dir!(), "ring_tracer_test_#{System.unique_integer([:positive])}")
+    dir =
+      Path.join(
+        System.tmp_dir!(),
+        "ring_tracer_test_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}"
+      )
+
     File.mkdir_p!(dir)
     path = Path.join(dir, name)
     File.write!(path, contents)

@@ -12,7 +12,7 @@ defmodule RingTracer.Cluster.Cookie do
   the command that fixes it. `create/1` makes a new file with mode 0600 and
   a random cookie.
 
-      iex> dir = Path.join(System.tmp_dir!(), "rt_cookie_doc_#{System.unique_integer([:positive])}")
+      iex> dir = Path.join(System.tmp_dir!(), "rt_cookie_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
       iex> File.mkdir_p!(dir)
       iex> path = Path.join(dir, "cookie")
       iex> {:ok, ^path} = RingTracer.Cluster.Cookie.create(path)
@@ -23,6 +23,8 @@ defmodule RingTracer.Cluster.Cookie do
       iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Cookie.read(path)
       iex> message =~ "chmod 600"
       true
+      iex> File.rm_rf!(dir) |> length()
+      2
   """
 
   import Bitwise

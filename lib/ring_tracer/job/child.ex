@@ -48,6 +48,13 @@ defmodule RingTracer.Job.Child do
 
   ## Helpers for strategies
 
+  @doc """
+  The pid of sibling `index`, from the job's directory on this node
+  (`RingTracer.Job.Directory`): children do not carry the ring.
+  """
+  @spec sibling(map(), non_neg_integer()) :: pid()
+  def sibling(state, index), do: RingTracer.Job.Directory.sibling(state.spec.id, index)
+
   @doc "Sends `msg` to `pid`, counting it under `kind` with its external size."
   @spec send_counted(map(), pid(), atom(), term()) :: map()
   def send_counted(state, pid, kind, msg) do
@@ -133,9 +140,15 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  @doc "Hands `atoms` over to `pid` (possibly none: a refusal)."
-  @spec hand_over(map(), pid(), [Layout.atom_id()], term()) :: map()
-  def hand_over(state, pid, atoms, news \\ nil) do
+  @doc """
+  Hands `atoms` over to sibling `to` at `pid` (possibly none: a refusal),
+  then tells the parent, which keeps account of where atoms are
+  (`RingTracer.Job.Ledger`): first the hand-over, so that a child dying
+  between the two leaves the atoms on its own account, to be traced again,
+  never lost.
+  """
+  @spec hand_over(map(), pid(), non_neg_integer(), [Layout.atom_id()], term()) :: map()
+  def hand_over(state, pid, to, atoms, news \\ nil) do
     msg =
       if news == nil,
         do: {:handover, state.index, atoms},
@@ -144,6 +157,11 @@ defmodule RingTracer.Job.Child do
     state = count(state, :handover, msg)
 
     deliver(state.spec, pid, msg, state.spec.handover_delay)
+
+    state =
+      if atoms == [],
+        do: state,
+        else: send_counted(state, state.parent, :control, {:gave, state.index, to, atoms})
 
     update_in(state.stats.given, &(&1 + length(atoms)))
   end
@@ -210,7 +228,7 @@ defmodule RingTracer.Job.Child do
       kernel: nil,
       left: nil,
       left_index: nil,
-      siblings: {},
+      ring_size: 0,
       t0: 0,
       grandchild: nil,
       queue: queue,
@@ -219,8 +237,6 @@ defmodule RingTracer.Job.Child do
       attempts: %{},
       done: 0,
       status: :waiting,
-      notify_idle: false,
-      idle_notified: false,
       dead: [],
       strategy_state: %{},
       early: [],
@@ -248,12 +264,7 @@ defmodule RingTracer.Job.Child do
   end
 
   @impl GenServer
-  def handle_info(msg, state) do
-    case handle(msg, state) do
-      {:noreply, state} -> {:noreply, notify_idle(state)}
-      other -> other
-    end
-  end
+  def handle_info(msg, state), do: handle(msg, state)
 
   defp handle({:ring, ring}, state) do
     state =
@@ -261,7 +272,7 @@ defmodule RingTracer.Job.Child do
         state
         | left: ring.left,
           left_index: ring.left_index,
-          siblings: ring.siblings,
+          ring_size: ring.size,
           t0: ring.t0,
           status: :working
       }
@@ -355,18 +366,27 @@ defmodule RingTracer.Job.Child do
       state
       | left: ring.left,
         left_index: ring.left_index,
-        dead: ring.dead,
-        notify_idle: true,
-        idle_notified: false
+        dead: ring.dead
     }
 
     state =
       case state.status do
-        # Our offer may have died with a sibling: send a fresh one.
-        :offered -> maybe_idle(%{state | status: :working})
+        # Our offer went to a sibling that died: send a fresh one. (One
+        # passed on to it later is lost too, but sending afresh whenever that
+        # may be doubled every idle child's offers after each failure; the
+        # job ends anyway, since the parent hands the dead child's atoms out
+        # again itself.)
+        :offered ->
+          if Map.get(state.strategy_state, :sent_to, hd(ring.dead)) in ring.dead,
+            do: maybe_idle(%{state | status: :working}),
+            else: state
+
         # The sibling we asked may be gone; the others still trace what they hold.
-        :stealing -> %{state | status: :finished}
-        _ -> state
+        :stealing ->
+          %{state | status: :finished}
+
+        _ ->
+          state
       end
 
     {:noreply, state}
@@ -375,7 +395,11 @@ defmodule RingTracer.Job.Child do
   defp handle(msg, %{left: nil} = state),
     do: {:noreply, %{state | early: [msg | state.early]}}
 
-  defp handle(msg, state) do
+  # Lost atoms handed out again by the parent, which has heard from every
+  # child it needed to: no more news of idleness until the next failure.
+  defp handle(msg, state), do: strategy(msg, state)
+
+  defp strategy(msg, state) do
     case state.spec.strategy.handle_message(msg, state) do
       {:ok, state} ->
         {:noreply, state}
@@ -452,19 +476,6 @@ defmodule RingTracer.Job.Child do
     do: state.spec.strategy.idle(state)
 
   defp maybe_idle(state), do: state
-
-  # After a failure the parent wants to know when each child has nothing
-  # left, so that it can hand out the atoms that were lost. A child waiting on
-  # its offer counts as idle: the offer may have been lost with the dead child
-  # (passed to it by a sibling that had not yet heard of the death).
-  defp notify_idle(%{notify_idle: true, idle_notified: false, status: status} = state)
-       when status in [:finished, :waiting, :offered, :stealing] do
-    state = send_counted(state, state.parent, :control, {:child_idle, state.index})
-    %{state | idle_notified: true}
-  end
-
-  defp notify_idle(%{status: :working} = state), do: %{state | idle_notified: false}
-  defp notify_idle(state), do: state
 
   defp now, do: System.monotonic_time(:microsecond)
 

@@ -11,12 +11,14 @@ defmodule RingTracer.Job.Parent do
   its statistics (a child kills its grandchild first), sends the result to
   the caller and stops: no process of the job outlives it.
 
-  If the caller dies, the job stops. If a child dies or an atom fails for
-  good, the job fails with the reason.
+  If the caller dies, the job stops. If a child dies, the atoms it may have
+  held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
+  is re-linked around it; if an atom fails for good, or every child dies,
+  the job fails with the reason.
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Child, Spec}
+  alias RingTracer.Job.{Child, Directory, Ledger, Spec}
   alias RingTracer.Layout
 
   @doc false
@@ -32,6 +34,23 @@ defmodule RingTracer.Job.Parent do
   @doc "Sends `msg` to `pid`, counting it under `kind` (see `RingTracer.Job.Child.send_counted/4`)."
   @spec send_counted(map(), pid(), atom(), term()) :: map()
   def send_counted(state, pid, kind, msg), do: Child.send_counted(state, pid, kind, msg)
+
+  @doc """
+  Hands `atoms` to child `index` (a strategy's hand-out, or atoms lost
+  with a dead child), and records it in the job's `RingTracer.Job.Ledger`.
+  """
+  @spec hand_out(map(), non_neg_integer(), [Layout.atom_id()]) :: map()
+  def hand_out(state, index, atoms) do
+    state =
+      send_counted(
+        state,
+        Map.fetch!(state.children, index),
+        :handover,
+        {:handover, :parent, atoms}
+      )
+
+    %{state | ledger: Ledger.moved(state.ledger, :parent, index, atoms)}
+  end
 
   @doc """
   Runs `fun` in a process of the job's (for a strategy: the ring's work
@@ -64,8 +83,8 @@ defmodule RingTracer.Job.Parent do
       traffic: %{},
       duplicates: 0,
       dead: %{},
-      idle: MapSet.new(),
-      recovering: false,
+      ledger: Ledger.new(spec.layout, spec.strategy),
+      relinking: false,
       redone: 0,
       node_bytes: %{},
       helpers: []
@@ -79,8 +98,16 @@ defmodule RingTracer.Job.Parent do
     %Spec{layout: layout, nodes: nodes, kernel: {kernel, kernel_opts}} = state.spec
     n = layout.children
     placement = placement(nodes, n)
-    # The scene travels once per node; children get its hash and name only.
-    child_spec = %{state.spec | source: RingTracer.Scene.Source.strip(state.spec.source)}
+    # The scene travels once per node; children get its hash and name only,
+    # and each its own speed: nothing in a child's spec grows with the ring.
+    child_spec = %{
+      state.spec
+      | source: RingTracer.Scene.Source.strip(state.spec.source),
+        nodes: [],
+        speeds: []
+    }
+
+    speeds = List.to_tuple(state.spec.speeds)
 
     prepared =
       placement
@@ -98,7 +125,7 @@ defmodule RingTracer.Job.Parent do
           placement
           |> Enum.with_index()
           |> Enum.reduce_while({:ok, []}, fn {node, i}, {:ok, acc} ->
-            case Child.start(node, child_spec, i, self()) do
+            case Child.start(node, %{child_spec | speeds: [speed(speeds, i)]}, i, self()) do
               {:ok, pid} ->
                 {:cont, {:ok, [{i, pid} | acc]}}
 
@@ -119,7 +146,7 @@ defmodule RingTracer.Job.Parent do
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
         state = %{state | children: children, monitors: monitors}
-        siblings = List.to_tuple(for i <- 0..(n - 1), do: Map.fetch!(children, i))
+        publish(state, placement)
 
         state =
           Enum.reduce(children, state, fn {i, pid}, st ->
@@ -128,7 +155,7 @@ defmodule RingTracer.Job.Parent do
             ring = %{
               left: Map.fetch!(children, left),
               left_index: left,
-              siblings: siblings,
+              size: n,
               t0: st.t0
             }
 
@@ -147,6 +174,24 @@ defmodule RingTracer.Job.Parent do
         send(state.spec.caller, {RingTracer, state.spec.id, {:error, message}})
         {:stop, :normal, state}
     end
+  end
+
+  # The ring, once per node its children run on (`RingTracer.Job.Directory`).
+  # A node that does not answer within the liveness timeout loses its
+  # children: they are killed, and the job goes on as after any death.
+  defp publish(state, placement) do
+    n = map_size(state.children)
+    pids = List.to_tuple(for i <- 0..(n - 1), do: Map.fetch!(state.children, i))
+
+    placement
+    |> Enum.with_index()
+    |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
+    |> Enum.each(fn {node, indices} ->
+      case Directory.publish(node, state.spec.id, self(), pids, state.spec.liveness) do
+        :ok -> :ok
+        {:error, _} -> for i <- indices, do: Process.exit(Map.fetch!(state.children, i), :kill)
+      end
+    end)
   end
 
   @impl GenServer
@@ -211,9 +256,17 @@ defmodule RingTracer.Job.Parent do
       else: down(state, ref, reason)
   end
 
-  def handle_info({:child_idle, index}, %{stopping: nil} = state) do
-    state = %{state | idle: MapSet.put(state.idle, index)}
-    {:noreply, maybe_reassign(state)}
+  def handle_info(:relink, %{stopping: nil} = state),
+    do: {:noreply, relink(%{state | relinking: false})}
+
+  def handle_info({:gave, from, to, atoms}, %{stopping: nil} = state) do
+    if is_map_key(state.dead, to) do
+      # Given to a child already dead: lost with it, so handed out again.
+      state = %{state | ledger: Ledger.moved(state.ledger, from, :nobody, atoms)}
+      {:noreply, reassign(state, atoms)}
+    else
+      {:noreply, %{state | ledger: Ledger.moved(state.ledger, from, to, atoms)}}
+    end
   end
 
   # Anything else is for the strategy, if it listens (`parent_info/2`).
@@ -242,11 +295,11 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  # A child (or its whole node) is gone. The ring is re-linked around the gap,
-  # every child is told (a child whose offer may have died with the sibling
-  # sends a fresh one: the lost token is regenerated), and from now on
-  # children say when they are idle. When every living child is idle, the
-  # atoms that never arrived are handed out again.
+  # A child (or its whole node) is gone. The atoms it may have held are
+  # handed out again at once (`RingTracer.Job.Ledger`); the ring is
+  # re-linked around the gap and every child is told (a child whose offer
+  # went to the dead sibling sends a fresh one: the lost token is
+  # regenerated).
   defp child_lost(state, index, reason) do
     children = Map.delete(state.children, index)
 
@@ -256,18 +309,27 @@ defmodule RingTracer.Job.Parent do
       at_us: System.monotonic_time(:microsecond) - state.started
     }
 
+    lost = Ledger.held(state.ledger, index)
+
     state = %{
       state
       | children: children,
         dead: Map.put(state.dead, index, failure),
-        recovering: true,
-        idle: MapSet.new()
+        ledger: Ledger.forget(state.ledger, index)
     }
 
-    if children == %{} do
-      fail(state, "every child exited; the last, child #{index}: #{inspect(reason)}")
-    else
-      {:noreply, relink(state)}
+    cond do
+      children == %{} ->
+        fail(state, "every child exited; the last, child #{index}: #{inspect(reason)}")
+
+      state.relinking ->
+        {:noreply, reassign(state, lost)}
+
+      true ->
+        # Deaths already in the mailbox (a node's children die together)
+        # are marked before this message arrives: one round of news for all.
+        send(self(), :relink)
+        {:noreply, reassign(%{state | relinking: true}, lost)}
     end
   end
 
@@ -281,28 +343,62 @@ defmodule RingTracer.Job.Parent do
     end)
   end
 
-  defp maybe_reassign(%{recovering: true, missing: missing} = state) when missing > 0 do
-    live = Map.keys(state.children)
+  # Atoms lost with a child, less those traced since, to the live children
+  # in shares that follow their speeds.
+  defp reassign(state, atoms) do
+    case Enum.reject(atoms, &Map.has_key?(state.results, &1)) do
+      [] ->
+        state
 
-    if Enum.all?(live, &MapSet.member?(state.idle, &1)) do
-      lost = Enum.reject(Layout.atoms(state.spec.layout), &Map.has_key?(state.results, &1))
-      chunk = max(div(length(lost) + length(live) - 1, length(live)), 1)
-
-      state =
+      lost ->
         lost
-        |> Enum.chunk_every(chunk)
-        |> Enum.zip(Enum.sort(live))
-        |> Enum.reduce(state, fn {atoms, i}, st ->
-          send_counted(st, Map.fetch!(st.children, i), :handover, {:handover, :parent, atoms})
-        end)
-
-      %{state | idle: MapSet.new(), redone: state.redone + length(lost)}
-    else
-      state
+        |> shares(traced_counts(state))
+        |> Enum.reduce(state, fn {i, share}, st -> hand_out(st, i, share) end)
+        |> Map.update!(:redone, &(&1 + length(lost)))
     end
   end
 
-  defp maybe_reassign(state), do: state
+  # What each live child has traced so far (plus one, so that a child yet to
+  # trace an atom still gets a share): a measure of its speed.
+  defp traced_counts(state) do
+    counts = Enum.frequencies(Map.values(state.traced_by))
+    for i <- state.children |> Map.keys() |> Enum.sort(), do: {i, Map.get(counts, i, 0) + 1}
+  end
+
+  @doc """
+  `atoms` split into consecutive shares, one per child of `weights`
+  (`{index, weight}`), each in proportion to its weight (largest
+  remainders); children whose share is empty are left out.
+
+      iex> RingTracer.Job.Parent.shares(Enum.to_list(1..10), [{0, 3}, {2, 1}, {5, 1}])
+      [{0, [1, 2, 3, 4, 5, 6]}, {2, [7, 8]}, {5, [9, 10]}]
+      iex> RingTracer.Job.Parent.shares([7], [{0, 1}, {1, 1}])
+      [{0, [7]}]
+  """
+  @spec shares([Layout.atom_id()], [{non_neg_integer(), pos_integer()}]) ::
+          [{non_neg_integer(), [Layout.atom_id()]}]
+  def shares(atoms, weights) do
+    n = length(atoms)
+    total = weights |> Enum.map(&elem(&1, 1)) |> Enum.sum()
+    exact = Enum.map(weights, fn {i, w} -> {i, n * w / total} end)
+    floors = Enum.map(exact, fn {i, x} -> {i, trunc(x)} end)
+    short = n - Enum.sum(Enum.map(floors, &elem(&1, 1)))
+
+    extra =
+      exact
+      |> Enum.sort_by(fn {i, x} -> {x - trunc(x), -i} end, :desc)
+      |> Enum.take(short)
+      |> MapSet.new(&elem(&1, 0))
+
+    floors
+    |> Enum.map(fn {i, k} -> {i, if(MapSet.member?(extra, i), do: k + 1, else: k)} end)
+    |> Enum.map_reduce(atoms, fn {i, k}, rest ->
+      {mine, rest} = Enum.split(rest, k)
+      {{i, mine}, rest}
+    end)
+    |> elem(0)
+    |> Enum.reject(&(elem(&1, 1) == []))
+  end
 
   defp progress(%{spec: %Spec{progress: nil}}), do: :ok
 
@@ -330,6 +426,9 @@ defmodule RingTracer.Job.Parent do
     for {_i, pid} <- state.children, do: Process.exit(pid, :kill)
     {:stop, :normal, state}
   end
+
+  defp speed({}, _index), do: 1
+  defp speed(speeds, index), do: elem(speeds, rem(index, tuple_size(speeds)))
 
   # `nodes` is one node per child, or a list to place children on round robin.
   defp placement([], n), do: List.duplicate(node(), n)

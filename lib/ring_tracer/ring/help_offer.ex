@@ -31,6 +31,8 @@ defmodule RingTracer.Ring.HelpOffer do
     * the child is tracing its last atom, which should end within half of
       one of the offerer's atoms, and the offer has walked `hold_after` hops
       without finding work -> `:hold`;
+    * the offer has walked as many hops as the ring has live children
+      without reaching its origin -> `:home` (see "Strays");
     * otherwise -> `:pass` to the left sibling.
 
   ## Gossip (our addition to the paper)
@@ -91,6 +93,20 @@ defmodule RingTracer.Ring.HelpOffer do
   of one. A child never waits on a held offer, so holding makes no cycles.
   In a ring of a few children an offer goes home long before it has walked
   16 hops, so there it does not wait.
+
+  ## Strays (our addition to the paper)
+
+  In a ring of L live children an offer is back at its origin after at most
+  L hops (fewer where finished children were spliced out or a giver took a
+  parked offer on). One that has walked L hops and is still elsewhere walks
+  a ring its origin is no longer on: after a failure the parent hands the
+  lost atoms to children that had finished, and that their siblings had
+  spliced out; such a child's next offer would circle the others until the
+  job ends (thousands of messages, or a child passing an offer to itself
+  when it is the last one left). So it goes straight home, where it counts
+  as returned: every live child it visited had nothing to give. An offer
+  whose origin has died is dropped by the first child that knows of the
+  death.
 
   ## Splicing (our addition to the paper)
 
@@ -169,7 +185,7 @@ defmodule RingTracer.Ring.HelpOffer do
           optional(:hold_after) => pos_integer()
         }
 
-  @type decision :: :returned | :drop | :park | :hold | :pass | {:give, pos_integer()}
+  @type decision :: :returned | :drop | :park | :hold | :home | :pass | {:give, pos_integer()}
 
   @doc """
   What the child described by `view` does with `offer`.
@@ -192,6 +208,8 @@ defmodule RingTracer.Ring.HelpOffer do
       :hold
       iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 9_000}, far)
       :pass
+      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, ring_size: 16}, far)
+      :home
   """
   @spec decide(view(), t()) :: decision()
   def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
@@ -201,10 +219,15 @@ defmodule RingTracer.Ring.HelpOffer do
   def decide(view, %__MODULE__{rate: rate, wrapped: wrapped} = offer) do
     case Share.give(view.remaining, view.in_flight, rate, view.rate, helper_rate(view, offer)) do
       0 when view.offer_seq != nil and not wrapped -> :park
-      0 -> if holds?(view, offer), do: :hold, else: :pass
+      0 -> if holds?(view, offer), do: :hold, else: walk_on(view, offer)
       g -> {:give, g}
     end
   end
+
+  # An offer that has walked as many hops as the ring has live children
+  # without reaching its origin goes home (see "Strays").
+  defp walk_on(%{ring_size: live}, %__MODULE__{hops: hops}) when hops >= live, do: :home
+  defp walk_on(_view, _offer), do: :pass
 
   # The share rule's third helper: the fastest sibling heard of other than
   # the two; none heard of, one as fast as the faster of the two if the ring

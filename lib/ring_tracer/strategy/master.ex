@@ -37,15 +37,7 @@ defmodule RingTracer.Strategy.Master do
   # nothing is handed to the dead; the living keep asking.
   defp hand_out(%{strategy_state: [atom | rest], children: children} = parent, index)
        when is_map_key(children, index) do
-    parent =
-      Parent.send_counted(
-        parent,
-        Map.fetch!(children, index),
-        :handover,
-        {:handover, :parent, [atom]}
-      )
-
-    %{parent | strategy_state: rest}
+    %{Parent.hand_out(parent, index, [atom]) | strategy_state: rest}
   end
 
   defp hand_out(parent, _index), do: parent

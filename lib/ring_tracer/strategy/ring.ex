@@ -95,7 +95,7 @@ defmodule RingTracer.Strategy.Ring do
 
     {to, to_index} =
       if target,
-        do: {elem(child.siblings, target), target},
+        do: {Child.sibling(child, target), target},
         else: {child.left, child.left_index}
 
     offer =
@@ -135,7 +135,7 @@ defmodule RingTracer.Strategy.Ring do
     |> Child.event(:offer, to_index)
     |> then(&Enum.reduce(held, &1, fn _, c -> Child.event(c, :pass, child.left_index) end))
     |> Child.bump(:offers_sent)
-    |> put_strategy(seq: seq, current: seq)
+    |> put_strategy(seq: seq, current: seq, sent_to: to_index)
     |> Map.put(:status, :offered)
   end
 
@@ -178,7 +178,12 @@ defmodule RingTracer.Strategy.Ring do
 
   def handle_message(_msg, _child), do: :unhandled
 
+  # An offer whose origin has died goes no further (see HelpOffer, "Strays").
   defp offer(child, offer, released_by \\ nil) do
+    if offer.origin in child.dead, do: child, else: answer(child, offer, released_by)
+  end
+
+  defp answer(child, offer, released_by) do
     {remaining, in_flight} = Child.giveable(child)
 
     # What the offer heard goes into what we know; what we know goes on with
@@ -194,7 +199,7 @@ defmodule RingTracer.Strategy.Ring do
       in_flight: in_flight,
       rate: rate,
       heard: heard,
-      ring_size: tuple_size(child.siblings) - length(child.dead),
+      ring_size: child.ring_size - length(child.dead),
       offer_seq: if(child.status == :offered, do: child.strategy_state[:current]),
       remaining_us: if(in_flight > 0, do: Child.expected_remaining_us(child)),
       hold_after: child.spec.hold_after
@@ -227,7 +232,7 @@ defmodule RingTracer.Strategy.Ring do
         {atoms, child} = Child.take_last(child, g)
 
         child
-        |> hand_over(offer.pid, atoms)
+        |> hand_over(offer.pid, offer.origin, atoms)
         |> Child.event(:give, offer.origin)
         |> Child.bump(:offers_consumed)
 
@@ -240,6 +245,12 @@ defmodule RingTracer.Strategy.Ring do
       :park ->
         keep(child, :parked, offer)
 
+      :home ->
+        child
+        |> Child.send_counted(offer.pid, :offer, {:help_offer, offer})
+        |> Child.event(:back, offer.origin)
+        |> Child.bump(:offers_passed)
+
       :hold ->
         keep(child, :held, %{offer | held: true})
 
@@ -249,7 +260,7 @@ defmodule RingTracer.Strategy.Ring do
         {to, to_index} =
           if is_integer(released_by) and released_by != child.index and
                released_by not in child.dead,
-             do: {elem(child.siblings, released_by), released_by},
+             do: {Child.sibling(child, released_by), released_by},
              else: {child.left, child.left_index}
 
         child
@@ -278,12 +289,12 @@ defmodule RingTracer.Strategy.Ring do
 
   # Atoms to an offerer; where children aim, with our own load (just
   # lowered) and the latest-ending ones we know of.
-  defp hand_over(%{spec: %{aim: true}} = child, pid, atoms) do
+  defp hand_over(%{spec: %{aim: true}} = child, pid, to, atoms) do
     {known, child} = learn_loads(child, [])
-    Child.hand_over(child, pid, atoms, Aim.news(known, own_load(child)))
+    Child.hand_over(child, pid, to, atoms, Aim.news(known, own_load(child)))
   end
 
-  defp hand_over(child, pid, atoms), do: Child.hand_over(child, pid, atoms)
+  defp hand_over(child, pid, to, atoms), do: Child.hand_over(child, pid, to, atoms)
 
   # A finished child asks whoever sent it an offer to skip it from now on.
   defp splice(child, %HelpOffer{via: via}) when is_pid(via) and via != self() do

@@ -17,26 +17,22 @@ defmodule RingTracer.Strategy.Steal do
 
   @impl true
   def idle(child) do
-    victims =
-      case child.strategy_state do
-        %{victims: v} -> v
-        _ -> shuffled_siblings(child)
-      end
+    plan = Map.get(child.strategy_state, :victims) || victims(child)
 
-    case Enum.reject(victims, &(&1 in child.dead)) do
-      [] ->
-        %{child | status: :finished, strategy_state: %{victims: []}}
+    case next_victim(plan, child) do
+      nil ->
+        %{child | status: :finished, strategy_state: %{victims: plan}}
 
-      [victim | rest] ->
+      {victim, plan} ->
         child
         |> Child.send_counted(
-          elem(child.siblings, victim),
+          Child.sibling(child, victim),
           :offer,
           {:steal, self(), child.index}
         )
         |> Child.event(:steal, victim)
         |> Child.bump(:offers_sent)
-        |> Map.merge(%{status: :stealing, strategy_state: %{victims: rest}})
+        |> Map.merge(%{status: :stealing, strategy_state: %{victims: plan}})
     end
   end
 
@@ -50,7 +46,7 @@ defmodule RingTracer.Strategy.Steal do
 
     {:ok,
      child
-     |> Child.hand_over(thief, atoms)
+     |> Child.hand_over(thief, thief_index, atoms)
      |> Child.event(if(g > 0, do: :give, else: :refuse), thief_index)}
   end
 
@@ -61,12 +57,30 @@ defmodule RingTracer.Strategy.Steal do
 
   def handle_message(_msg, _child), do: :unhandled
 
-  defp shuffled_siblings(child) do
-    :rand.seed(:exsss, {child.index + 1, 7, 13})
+  # The order of victims, in constant space whatever the ring's size: the
+  # k-th victim is `index + k * step (mod N)` for k = 1..N-1, a permutation
+  # of the siblings because `step` is coprime with N. `step` is drawn with a
+  # seed of the child's index, so a job is repeatable.
+  defp victims(%{index: index, ring_size: n}) do
+    step =
+      if n > 2 do
+        :rand.seed(:exsss, {index + 1, 7, 13})
+        coprime(:rand.uniform(n - 1), n)
+      else
+        1
+      end
 
-    0..(tuple_size(child.siblings) - 1)
-    |> Enum.to_list()
-    |> List.delete(child.index)
-    |> Enum.shuffle()
+    %{k: 1, step: step, n: n}
+  end
+
+  defp coprime(s, n), do: if(Integer.gcd(s, n) == 1, do: s, else: coprime(rem(s, n - 1) + 1, n))
+
+  # The next victim not known dead, or nil when every sibling has been asked.
+  defp next_victim(%{k: k, n: n}, _child) when k >= n, do: nil
+
+  defp next_victim(%{k: k, step: step, n: n} = plan, child) do
+    victim = rem(child.index + k * step, n)
+    plan = %{plan | k: k + 1}
+    if victim in child.dead, do: next_victim(plan, child), else: {victim, plan}
   end
 end

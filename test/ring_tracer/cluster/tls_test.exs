@@ -12,7 +12,9 @@ defmodule RingTracer.Cluster.TLSTest do
   @scene "balls_s2.nff"
 
   setup_all do
-    dir = Path.join(System.tmp_dir!(), "rt_tls_#{System.unique_integer([:positive])}")
+    dir =
+      Path.join(System.tmp_dir!(), "rt_tls_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
+
     File.mkdir_p!(dir)
     ca = Path.join(dir, "ca")
     other_ca = Path.join(dir, "other_ca")

@@ -4,7 +4,7 @@ defmodule RingTracer.Strategy.RingTest do
   # grandchild, and reads what the child sends in its mailbox.
   use ExUnit.Case, async: true
 
-  alias RingTracer.Job.{Child, Spec}
+  alias RingTracer.Job.{Child, Directory, Spec}
   alias RingTracer.Ring.HelpOffer
   alias RingTracer.Strategy.Ring
 
@@ -19,13 +19,18 @@ defmodule RingTracer.Strategy.RingTest do
       caller: me
     }
 
+    # The ring, published where a child looks its siblings up, for as long
+    # as this test's process lives.
+    {siblings, fields} = Keyword.pop(fields, :siblings, {me, me, me, me})
+    :ok = Directory.publish(node(), spec.id, me, siblings, 5_000)
+
     base = %{
       spec: spec,
       index: 1,
       parent: me,
       left: me,
       left_index: 0,
-      siblings: {me, me, me, me},
+      ring_size: tuple_size(siblings),
       t0: 0,
       grandchild: me,
       queue: [],

@@ -1,0 +1,102 @@
+defmodule RingTracer.Job.Ledger do
+  @moduledoc """
+  Where the parent believes each atom may be, so that when a child dies it
+  can hand out again, at once, exactly the atoms that died with it.
+
+  Every child starts with its strategy's initial atoms. After that an atom
+  moves only by a hand-over, and whoever moves it tells the parent: a
+  child that gives atoms to a sibling sends the hand-over first and then
+  `{:gave, from, to, atoms}` to the parent; the parent records its own
+  hand-outs as it sends them. Reports from different children can arrive
+  in any order (a sibling may report passing an atom on before the report
+  of it receiving it arrives), so the ledger keeps counts, not places: per
+  child and atom, one for each time it was given the atom and minus one
+  for each time it gave it away. A child may hold an atom if its count is
+  positive; once every report has arrived, exactly one child has a
+  positive count.
+
+  When a child dies the parent hands out again every atom the child may
+  hold and that has not been traced. Because a child reports after it has
+  sent the hand-over, a child that dies between the two leaves its atoms
+  on its own account: they are handed out again and traced twice, never
+  lost. A report of atoms given to a child already dead hands them out
+  again too. Counting what may be held, not what is, errs only towards
+  tracing an atom twice (the parent keeps the first copy).
+  """
+
+  alias RingTracer.Layout
+
+  @enforce_keys [:layout, :strategy]
+  defstruct [:layout, :strategy, moves: %{}]
+
+  @typedoc "Per child, the atoms whose count differs from the initial one, by how much."
+  @type t :: %__MODULE__{
+          layout: Layout.t(),
+          strategy: module(),
+          moves: %{non_neg_integer() => %{Layout.atom_id() => integer()}}
+        }
+
+  @doc """
+  A ledger where each child holds its strategy's initial atoms.
+
+      iex> layout = RingTracer.Layout.new(8, 8, 2, 2)
+      iex> ledger = RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring)
+      iex> RingTracer.Job.Ledger.held(ledger, 1)
+      [2, 3]
+  """
+  @spec new(Layout.t(), module()) :: t()
+  def new(layout, strategy), do: %__MODULE__{layout: layout, strategy: strategy}
+
+  @doc """
+  `atoms` moved from child `from` (or `:parent`) to child `to` (or
+  `:nobody`, for a child already dead).
+
+      iex> layout = RingTracer.Layout.new(8, 8, 3, 2)
+      iex> l = RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring)
+      iex> # Child 1 reports giving atom 3 to child 2 before child 0's report
+      iex> # of giving it to child 1 arrives: for a moment 0 and 2 may hold it.
+      iex> l = RingTracer.Job.Ledger.moved(l, 1, 2, [1])
+      iex> {RingTracer.Job.Ledger.held(l, 0), RingTracer.Job.Ledger.held(l, 2)}
+      {[0, 1], [1, 4, 5]}
+      iex> l = RingTracer.Job.Ledger.moved(l, 0, 1, [1])
+      iex> {RingTracer.Job.Ledger.held(l, 0), RingTracer.Job.Ledger.held(l, 1), RingTracer.Job.Ledger.held(l, 2)}
+      {[0], [2, 3], [1, 4, 5]}
+  """
+  @spec moved(t(), non_neg_integer() | :parent, non_neg_integer() | :nobody, [Layout.atom_id()]) ::
+          t()
+  def moved(ledger, from, to, atoms) do
+    ledger |> add(from, atoms, -1) |> add(to, atoms, 1)
+  end
+
+  defp add(ledger, who, _atoms, _d) when who in [:parent, :nobody], do: ledger
+
+  defp add(ledger, who, atoms, d) do
+    mine =
+      Enum.reduce(atoms, Map.get(ledger.moves, who, %{}), fn a, acc ->
+        Map.update(acc, a, d, &(&1 + d))
+      end)
+
+    %{ledger | moves: Map.put(ledger.moves, who, mine)}
+  end
+
+  @doc "The atoms child `index` may hold (traced ones included), in order."
+  @spec held(t(), non_neg_integer()) :: [Layout.atom_id()]
+  def held(ledger, index) do
+    initial = MapSet.new(ledger.strategy.initial_atoms(ledger.layout, index))
+    moves = Map.get(ledger.moves, index, %{})
+
+    initial
+    |> MapSet.union(MapSet.new(Map.keys(moves)))
+    |> Enum.filter(fn a ->
+      if(MapSet.member?(initial, a), do: 1, else: 0) + Map.get(moves, a, 0) > 0
+    end)
+    |> Enum.sort()
+  end
+
+  @doc """
+  Forgets child `index`'s moves (it is dead and its atoms handed out
+  again; moves to it are recorded as to `:nobody` from now on).
+  """
+  @spec forget(t(), non_neg_integer()) :: t()
+  def forget(ledger, index), do: %{ledger | moves: Map.delete(ledger.moves, index)}
+end
