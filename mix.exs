@@ -19,6 +19,7 @@ defmodule RingTracer.MixProject do
       elixirc_paths: elixirc_paths(Mix.env()),
       test_coverage: [summary: [threshold: 0]],
       dialyzer_ignore: [],
+      xref: [exclude: [:ssl]],
       aliases: aliases()
     ]
   end
@@ -26,7 +27,10 @@ defmodule RingTracer.MixProject do
   def application do
     [
       # Debian's erlang-jiffy writes --stats JSON; PropEr and xmerl serve the tests.
-      extra_applications: [:logger, :crypto, :ssl, :jiffy] ++ test_applications(Mix.env()),
+      # :ssl is not started with the application (a tenth of a second of every
+      # command's start-up): TLS distribution starts it at boot, and
+      # RingTracer.Cluster.TLS starts it before its own handshakes.
+      extra_applications: [:logger, :crypto, :jiffy] ++ test_applications(Mix.env()),
       mod: {RingTracer.Application, []}
     ]
   end

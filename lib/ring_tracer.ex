@@ -26,7 +26,8 @@ defmodule RingTracer do
 
     * `:children` — ring size N (default: schedulers online)
     * `:atoms` — atoms per child K (default 16)
-    * `:width`, `:height` — image size (default: the scene's)
+    * `:width`, `:height` — image size (default: the scene's; one of them
+      alone keeps the scene's aspect ratio)
     * `:depth` — ray-tree depth limit, eye ray = 1 (default 5)
     * `:cutoff` — adaptive cut-off: a branch whose weight falls below it is
       not traced (default 1/255; 0 disables)
@@ -146,9 +147,11 @@ defmodule RingTracer do
   """
   @spec settings(Scene.t(), keyword()) :: {:ok, Settings.t()} | {:error, Error.t()}
   def settings(%Scene{} = scene, opts) do
+    {width, height} = size(scene, opts[:width], opts[:height])
+
     settings = %Settings{
-      width: opts[:width] || scene.width,
-      height: opts[:height] || scene.height,
+      width: width,
+      height: height,
       depth: opts[:depth],
       cutoff: opts[:cutoff] / 1,
       samples: opts[:samples],
@@ -161,6 +164,12 @@ defmodule RingTracer do
       {:error, message} -> {:error, Error.new(:invalid_option, message)}
     end
   end
+
+  # One side given: the other follows the scene's aspect ratio.
+  defp size(scene, nil, nil), do: {scene.width, scene.height}
+  defp size(scene, w, nil), do: {w, max(1, round(w * scene.height / scene.width))}
+  defp size(scene, nil, h), do: {max(1, round(h * scene.width / scene.height)), h}
+  defp size(_scene, w, h), do: {w, h}
 
   @doc """
   Starts a render and returns at once with a handle. The calling process then
@@ -239,7 +248,7 @@ defmodule RingTracer do
   (unless the render had finished: then its result was the final message).
   Returns `:ok`.
   """
-  @spec cancel(%{pid: pid()}) :: :ok
+  @spec cancel(%{:pid => pid(), optional(atom()) => term()}) :: :ok
   def cancel(%{pid: pid}) do
     ref = Process.monitor(pid)
     send(pid, {:cancel, self(), ref})

@@ -134,4 +134,15 @@ defmodule RingTracerTest do
   test "render! raises RingTracer.Error" do
     assert_raise RingTracer.Error, ~r/no\/such/, fn -> RingTracer.render!("no/such.nff") end
   end
+
+  test "one side alone keeps the scene's aspect ratio" do
+    scene = RingTracer.Scene.load!("priv/scenes/whitted.toml")
+    {:ok, r} = RingTracer.render(scene, width: scene.width * 2, children: 1, atoms: 1, depth: 1)
+    assert {r.width, r.height} == {scene.width * 2, scene.height * 2}
+
+    {:ok, r} =
+      RingTracer.render(scene, height: div(scene.height, 2), children: 1, atoms: 1, depth: 1)
+
+    assert {r.width, r.height} == {div(scene.width, 2), div(scene.height, 2)}
+  end
 end

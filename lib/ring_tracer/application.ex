@@ -7,6 +7,7 @@ defmodule RingTracer.Application do
   @impl Application
   def start(_type, _args) do
     children = [
+      RingTracer.Telemetry,
       RingTracer.SceneCache,
       RingTracer.Job.Pipe,
       RingTracer.Job.Directory,

@@ -1,39 +1,174 @@
 defmodule RingTracer.CLI do
   @moduledoc """
-  The command line, booted straight from `erl` (no Mix):
+  The command line, booted straight from `erl` by the launcher
+  (`bin/ringtracer`), without Mix:
 
-      erl -noshell -pa ... -s Elixir.RingTracer.CLI main -extra worker --sname w1
+      erl -noshell +Bi -pa ... -s Elixir.RingTracer.CLI main -extra render scene.nff -o a.png
 
-  Commands: `worker` (`RingTracer.CLI.Worker`). Exit status: 0 ok, 1 a
-  failure, 2 a usage error.
+  Commands: `render` (`RingTracer.CLI.Render`), `worker`
+  (`RingTracer.CLI.Worker`), `cookie`, `tls-args` (the VM flags for `--tls
+  DIR`, for the launcher). `--help`/`-h` works on each. Exit status: 0 ok,
+  1 a failure, 2 a usage error, 130/143 interrupted.
   """
 
-  @doc "Runs the command in the VM's plain arguments (those after `-extra`)."
+  alias RingTracer.CLI.{Args, Paths}
+
+  @commands ~w(render worker cookie)
+
+  @doc "Runs the command in the VM's plain arguments (those after `-extra`) and halts."
   @spec main() :: no_return()
-  def main, do: main(Enum.map(:init.get_plain_arguments(), &List.to_string/1))
+  def main do
+    args = Enum.map(:init.get_plain_arguments(), &List.to_string/1)
+    # What Mix's config would set (config/config.exs): booted from erl, no config is read.
+    Application.put_env(:logger, :level, :info)
+    # halt/1 flushes stdout and stderr before the VM goes.
+    System.halt(run(args, true))
+  end
 
-  @doc "Runs a command."
-  @spec main([String.t()]) :: no_return()
-  def main(args) do
-    case args do
-      ["worker" | argv] ->
-        case RingTracer.CLI.Worker.start(argv) do
-          {:ok, _node, line} ->
-            IO.puts(line)
-            Process.sleep(:infinity)
+  @doc """
+  Runs a command and returns its exit status (the worker runs until the
+  VM stops). `signals?`: whether interrupts reach this process.
+  """
+  @spec run([String.t()], boolean()) :: non_neg_integer()
+  def run(args, signals? \\ false)
 
-          {:error, message} ->
-            halt(message, 1)
-        end
+  def run(["render" | argv], signals?), do: RingTracer.CLI.Render.run(argv, signals?)
 
-      other ->
-        halt("unknown command: #{Enum.join(other, " ")}; known: worker", 2)
+  def run(["worker" | argv], signals?) do
+    if help?(argv) do
+      IO.write(worker_help())
+      0
+    else
+      case RingTracer.CLI.Worker.start(argv) do
+        {:ok, _node, line} ->
+          IO.puts(line)
+          if signals?, do: RingTracer.CLI.Signals.forward_to(self())
+
+          # Until Ctrl-C or SIGTERM: the children it hosts die with it, and
+          # their parents trace their atoms elsewhere.
+          receive do
+            {RingTracer.CLI.Signals, signal} -> RingTracer.CLI.Signals.exit_status(signal)
+          end
+
+        {:error, message} ->
+          error("worker", message, 1)
+      end
     end
   end
 
-  @spec halt(String.t(), non_neg_integer()) :: no_return()
-  defp halt(message, status) do
-    IO.puts(:stderr, "ringtracer: #{message}")
-    System.halt(status)
+  def run(["cookie" | argv], _signals?) do
+    cond do
+      help?(argv) ->
+        IO.write(cookie_help())
+        0
+
+      length(argv) > 1 ->
+        error("cookie", "usage: ringtracer cookie [PATH]", 2)
+
+      true ->
+        path =
+          if argv == [],
+            do: RingTracer.Cluster.Cookie.default_path(),
+            else: Paths.expand(hd(argv))
+
+        case RingTracer.Cluster.Cookie.create(path) do
+          {:ok, path} ->
+            IO.puts("wrote a new cookie to #{path} (mode 0600)")
+            0
+
+          {:error, e} ->
+            error("cookie", e.message, 1)
+        end
+    end
+  end
+
+  def run(["tls-args", dir], _signals?) do
+    IO.puts(Enum.join(RingTracer.Cluster.TLS.vm_args(Paths.expand(dir)), " "))
+    0
+  end
+
+  def run([help], _signals?) when help in ["help", "--help", "-h"] do
+    IO.write(help())
+    0
+  end
+
+  def run([], _signals?) do
+    IO.write(:stderr, help())
+    2
+  end
+
+  def run([other | _], _signals?) do
+    hint =
+      case Args.suggest(other, Enum.map(@commands, &{String.to_atom(&1), nil})) do
+        nil -> ""
+        "--" <> best -> " (did you mean #{best}?)"
+      end
+
+    error(
+      "",
+      "unknown command #{other}#{hint}; commands: #{Enum.join(@commands, ", ")} (see --help)",
+      2
+    )
+  end
+
+  defp help?(argv), do: Enum.any?(argv, &(&1 in ["--help", "-h"]))
+
+  defp error(command, message, status) do
+    prefix = if command == "", do: "ringtracer", else: "ringtracer #{command}"
+    IO.puts(:stderr, "#{prefix}: #{message}")
+    status
+  end
+
+  @doc "The launcher's own help."
+  @spec help() :: String.t()
+  def help do
+    """
+    Usage: ringtracer COMMAND [options]      (ringtracer COMMAND --help for each)
+
+    Commands:
+      render SCENE --out FILE   render a scene to an image (.png or .exr)
+      worker --sname NAME       a node that hosts children of renders started elsewhere
+      cookie [PATH]             make a cookie file, mode 0600 (default ~/.erlang.cookie)
+      tls ca DIR | tls node CA_DIR OUT_DIR [HOST...]   certificates for a TLS cluster
+      test                      every check and test (Rust and Elixir, dialyzer)
+      setup                     install what is missing (Debian packages) and build
+      mix ARGS...               any mix command, with the set-up done
+
+    Examples:
+      ringtracer render priv/scenes/balls_s2.nff --out balls.png
+      ringtracer worker --sname w1 &
+      ringtracer render scene.toml -o scene.png --nodes w1@localhost
+
+    Exit status: 0 ok, 1 failed, 2 usage error, 130 interrupted, 143 terminated.
+    """
+  end
+
+  defp worker_help do
+    """
+    Usage: ringtracer worker --sname NAME [options]
+
+    A node that hosts children of renders started on other nodes, until stopped (Ctrl-C).
+
+      --sname NAME            a short name (on loopback: NAME@localhost)
+      --name NAME@HOST        a long name
+      --cookie-file PATH      the cookie, in a file only you can read (default ~/.erlang.cookie)
+      --listen ADDR           the address to listen on (default 127.0.0.1: this machine only)
+      --ports MIN-MAX         the distribution listener's ports, for firewalls
+      --tls DIR               distribution over TLS with the certificates in DIR
+
+    Example:
+      ringtracer worker --sname w1 &
+      ringtracer render priv/scenes/balls_s2.nff -o b.png --nodes w1@localhost
+    """
+  end
+
+  defp cookie_help do
+    """
+    Usage: ringtracer cookie [PATH]
+
+    Writes a new random cookie to PATH (default ~/.erlang.cookie), mode 0600; refuses to
+    replace an existing file. Copy it, keeping its mode, to every machine of the cluster:
+    whoever has it can run any code on every node.
+    """
   end
 end

@@ -47,6 +47,27 @@ defmodule RingTracer.Image do
     bytes
   end
 
+  @doc """
+  The result's image as PNG bytes (8-bit sRGB), e.g. to show in Livebook
+  (`Kino.Image.new(bytes, :png)`) or to send over HTTP.
+
+      iex> {:ok, result} = RingTracer.render("priv/scenes/tetra_s1.nff", width: 8, height: 8, children: 1, atoms: 1)
+      iex> {:ok, <<0x89, "PNG", _::binary>>} = RingTracer.Image.to_png(result)
+      iex> :ok
+      :ok
+  """
+  @spec to_png(Result.t()) :: {:ok, binary()} | {:error, Error.t()}
+  def to_png(%Result{width: w, height: h, pixels: pixels}), do: png(w, h, pixels)
+
+  @doc "Like `to_png/1`, but returns the bytes or raises `RingTracer.Error`."
+  @spec to_png!(Result.t()) :: binary()
+  def to_png!(result) do
+    case to_png(result) do
+      {:ok, bytes} -> bytes
+      {:error, error} -> raise error
+    end
+  end
+
   @doc "A PNG file's bytes for `width` x `height` linear RGB float `pixels`."
   @spec png(pos_integer(), pos_integer(), binary()) :: {:ok, binary()} | {:error, Error.t()}
   def png(width, height, pixels) do

@@ -148,3 +148,20 @@ defmodule RingTracer.Result do
     %{messages: count / n, bytes: bytes / n}
   end
 end
+
+defimpl Inspect, for: RingTracer.Result do
+  # One line in iex, not the pixels and every atom's record.
+  def inspect(r, _opts) do
+    rays = r.rays.eye + r.rays.reflected + r.rays.refracted + r.rays.shadow
+    ms = :erlang.float_to_binary(r.elapsed_us / 1000, decimals: 1)
+
+    failures =
+      case r.failures do
+        [] -> ""
+        f -> ", #{length(f)} failed"
+      end
+
+    "#RingTracer.Result<#{r.width}x#{r.height}, #{ms} ms, #{length(r.children)} children " <>
+      "(#{r.strategy}), #{length(r.atoms)} atoms, #{rays} rays#{failures}>"
+  end
+end

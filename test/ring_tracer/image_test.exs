@@ -1,5 +1,6 @@
 defmodule RingTracer.ImageTest do
   use ExUnit.Case, async: true
+  doctest RingTracer.Image
 
   alias RingTracer.Image
 

@@ -95,6 +95,17 @@ defmodule RingTracer.Job.Parent do
 
   @impl GenServer
   def handle_continue(:start_ring, state) do
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :job, :start],
+      %{system_time: System.system_time()},
+      %{
+        job: state.spec.id,
+        children: state.spec.layout.children,
+        atoms: state.missing,
+        strategy: state.spec.strategy
+      }
+    )
+
     %Spec{layout: layout, nodes: nodes, kernel: {kernel, kernel_opts}} = state.spec
     n = layout.children
     placement = placement(nodes, n)
@@ -203,7 +214,7 @@ defmodule RingTracer.Job.Parent do
     {:noreply, %{state | duplicates: state.duplicates + 1}}
   end
 
-  def handle_info({:atom_done, child, atom, pixels, _rays, _us}, %{stopping: nil} = state) do
+  def handle_info({:atom_done, child, atom, pixels, rays, us}, %{stopping: nil} = state) do
     {_first, count} = Layout.span(state.spec.layout, atom)
 
     cond do
@@ -222,6 +233,7 @@ defmodule RingTracer.Job.Parent do
         }
 
         progress(state)
+        atom_event(state, child, atom, rays, us)
 
         cond do
           state.missing == 0 ->
@@ -400,6 +412,16 @@ defmodule RingTracer.Job.Parent do
     |> Enum.reject(&(elem(&1, 1) == []))
   end
 
+  defp atom_event(state, child, atom, rays, us) do
+    total = Layout.atom_count(state.spec.layout)
+
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :atom, :stop],
+      %{rays: rays.eye + rays.reflected + rays.refracted + rays.shadow, trace_us: us},
+      %{job: state.spec.id, atom: atom, child: child, done: total - state.missing, total: total}
+    )
+  end
+
   defp progress(%{spec: %Spec{progress: nil}}), do: :ok
 
   defp progress(%{spec: spec} = state) do
@@ -528,6 +550,13 @@ defmodule RingTracer.Job.Parent do
       end
 
     stop_helpers(state.helpers)
+
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :job, :stop],
+      %{duration: System.convert_time_unit(now - state.started, :microsecond, :native)},
+      %{job: spec.id, outcome: elem(reply, 0)}
+    )
+
     send(spec.caller, {RingTracer, spec.id, reply})
     {:stop, :normal, state}
   end

@@ -5,8 +5,14 @@ defmodule RingTracer.Job.DirectoryTest do
 
   alias RingTracer.Job.Directory
 
+  defp published?(id) do
+    Directory.sibling(id, 0)
+    true
+  rescue
+    ArgumentError -> false
+  end
+
   test "a job's ring is published on a node until its parent ends" do
-    before = Directory.jobs()
     id = make_ref()
     parent = spawn(fn -> receive(do: (:stop -> :ok)) end)
     pids = {self(), parent, self()}
@@ -14,11 +20,10 @@ defmodule RingTracer.Job.DirectoryTest do
     assert :ok = Directory.publish(node(), id, parent, pids, 1_000)
     assert Directory.sibling(id, 1) == parent
     assert Directory.sibling(id, 2) == self()
-    assert Directory.jobs() == before + 1
+    assert Directory.jobs() >= 1
 
     send(parent, :stop)
-    assert eventually(fn -> Directory.jobs() == before end)
-    assert_raise ArgumentError, fn -> Directory.sibling(id, 0) end
+    assert eventually(fn -> not published?(id) end)
   end
 
   test "publishing on a node that does not answer is an error, not a hang" do

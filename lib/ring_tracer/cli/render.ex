@@ -1,0 +1,506 @@
+defmodule RingTracer.CLI.Render do
+  @moduledoc """
+  `ringtracer render`: renders a scene file through the ring and writes the
+  image. Shared by the launcher (booted straight from `erl`) and `mix
+  ring_tracer.render`; `help/0` is the text of `--help`.
+
+  Exit status: 0 the image was written, 1 the render failed (a bad scene, a
+  failed job, an output that could not be written), 2 a usage error (an
+  unknown option, a bad value), 130 interrupted (SIGINT), 143 terminated
+  (SIGTERM).
+  """
+
+  alias RingTracer.CLI.{Args, Paths, Progress}
+  alias RingTracer.Cluster.Distribution
+
+  @render_switches [
+    out: :string,
+    children: :integer,
+    atoms: :integer,
+    width: :integer,
+    height: :integer,
+    depth: :integer,
+    cutoff: :float,
+    samples: :integer,
+    spd: :boolean,
+    strategy: :string,
+    layout: :string,
+    aim: :boolean,
+    speeds: :string,
+    stats: :string,
+    timeline: :string,
+    ownership: :string,
+    nodes: :string,
+    children_per_node: :integer,
+    local: :boolean,
+    allow_dir: :keep,
+    quiet: :boolean,
+    progress: :string
+  ]
+  @switches @render_switches ++ RingTracer.CLI.Worker.switches()
+  @aliases [o: :out, q: :quiet, w: :width]
+
+  @max RingTracer.Options.maxima()
+  @ranges [
+    children: 1..@max.children,
+    atoms: 1..@max.atoms,
+    width: 1..16_384,
+    height: 1..16_384,
+    depth: 1..64,
+    samples: 1..16,
+    children_per_node: 1..@max.children
+  ]
+  @accepted Map.merge(
+              Map.new(@ranges, fn {k, a..b//1} -> {k, "an integer from #{a} to #{b}"} end),
+              %{cutoff: "a number from 0 (no cut-off) to 1"}
+            )
+
+  @outputs [out: :image, stats: :stats, timeline: :timeline, ownership: :ownership]
+  @distribution Keyword.keys(RingTracer.CLI.Worker.switches())
+
+  @doc "The switches `render` accepts."
+  @spec switches() :: keyword()
+  def switches, do: @switches
+
+  @doc "The text of `ringtracer render --help`."
+  @spec help() :: String.t()
+  def help do
+    """
+    Usage: ringtracer render SCENE --out FILE [options]
+
+    Renders SCENE (.nff, .toml or .obj) through a ring of children and writes FILE
+    (.png, 8-bit sRGB, or .exr, linear float). Paths are relative to this folder.
+
+    Image:
+      -o, --out FILE          the image to write (required)
+      -w, --width W           image width; alone, keeps the scene's aspect ratio
+          --height H          image height; alone, keeps the scene's aspect ratio
+          --depth D           ray-tree depth, eye ray = 1 (1-64, default 5)
+          --samples S         S x S samples per pixel (1-16, default 1)
+          --cutoff C          adaptive cut-off weight (default 1/255, 0 disables)
+          --spd               the SPD testing procedure (pixel corners, no cut-off)
+
+    Ring:
+          --children N        ring size (1-#{@max.children}, default: schedulers online)
+          --atoms K           atoms per child (default 16; N x K at most #{@max.atoms})
+          --strategy S        ring (default), static, master or steal
+          --layout L          strips (default) or interleaved
+          --aim, --no-aim     ring: offers straight to the busiest sibling (default on strips)
+          --speeds 1,1,4      slowdown factor of each child, cyclic (1-1000)
+
+    Reports:
+          --stats FILE        the job's statistics, .json or .csv
+          --timeline FILE     one lane per child, .svg
+          --ownership FILE    the image tinted by the child that traced each atom, .png
+      -q, --quiet             print nothing but errors
+          --progress MODE     bar (a terminal's default), log (a line every 5 s), none
+
+    Cluster (start workers with `ringtracer worker`):
+          --nodes a@host,...  also place children on these nodes, round robin
+          --children-per-node C   C children on each node instead
+          --no-local          no children on this node
+          --sname NAME, --name NAME@HOST    this node's name
+          --cookie-file PATH  the cookie, in a file only you can read (default ~/.erlang.cookie)
+          --listen ADDR, --ports MIN-MAX    where this node listens (default 127.0.0.1)
+          --tls DIR           distribution over TLS (ringtracer tls ...)
+
+    Files:
+          --allow-dir DIR     a folder besides the scene's own it may read meshes from (repeatable)
+
+    Examples:
+      ringtracer render priv/scenes/balls_s2.nff --out balls.png
+      ringtracer render scene.toml -o scene.exr --width 1920 --children 8
+      ringtracer render balls.nff -o b.png --speeds 1,1,4 --timeline b.svg --stats b.json
+
+    Exit status: 0 written, 1 render failed, 2 usage error, 130 interrupted (Ctrl-C),
+    143 terminated (SIGTERM).
+    """
+  end
+
+  @doc """
+  Runs the command with `argv`, printing its errors, and returns the exit
+  status (see the moduledoc). `signals?`: whether interrupts reach this
+  process (`RingTracer.CLI.Signals`).
+  """
+  @spec run([String.t()], boolean()) :: non_neg_integer()
+  def run(argv, signals? \\ false) do
+    case execute(argv, signals?) do
+      :ok ->
+        0
+
+      {:error, status, message} ->
+        IO.puts(:stderr, "ringtracer render: #{message}")
+        status
+    end
+  end
+
+  @doc """
+  Runs the command with `argv`: `:ok`, or the exit status and the message
+  to show. Writes what was written and the statistics to stdout, progress
+  to stderr.
+  """
+  @spec execute([String.t()], boolean()) :: :ok | {:error, pos_integer(), String.t()}
+  def execute(argv, signals? \\ false) do
+    case Args.parse(argv, @switches, @accepted, @aliases) do
+      :help ->
+        IO.write(help())
+        :ok
+
+      {:error, message} ->
+        usage(message)
+
+      {:ok, opts, [scene]} ->
+        case prepare(scene, opts) do
+          {:ok, job} -> go(job, signals?)
+          {:usage, message} -> usage(message)
+          {:error, message} -> failed(message)
+        end
+
+      {:ok, _opts, []} ->
+        usage("give a scene file: ringtracer render SCENE --out FILE")
+
+      {:ok, _opts, extra} ->
+        usage("one scene at a time, got: #{Enum.join(extra, " ")}")
+    end
+  end
+
+  defp usage(message), do: {:error, 2, message}
+  defp failed(message), do: {:error, 1, message}
+
+  # Everything that can be known before the scene is read, in the order a
+  # user fixes things: options, then outputs, then the cluster.
+  defp prepare(scene, opts) do
+    with :ok <- check_ranges(opts),
+         :ok <- usage_of(Distribution.refuse_cookie(opts)),
+         opts =
+           Paths.expand(opts, [
+             :out,
+             :stats,
+             :timeline,
+             :ownership,
+             :cookie_file,
+             :tls,
+             :allow_dir
+           ]),
+         {:ok, out} <- required_out(opts),
+         {:ok, render_opts} <- render_opts(opts),
+         {:ok, mode} <- progress_mode(opts),
+         outputs = for({key, kind} <- @outputs, path = opts[key], do: {kind, path}),
+         scene = Paths.expand(scene),
+         :ok <- usage_of(RingTracer.Output.check(outputs, [scene])),
+         :ok <- start(opts) do
+      {:ok,
+       %{
+         scene: scene,
+         out: out,
+         opts: opts,
+         render_opts: render_opts,
+         outputs: outputs,
+         mode: mode,
+         allow_dirs: Keyword.get_values(opts, :allow_dir)
+       }}
+    end
+  end
+
+  defp check_ranges(opts) do
+    Enum.reduce_while(@ranges, :ok, fn {key, range}, :ok ->
+      case Args.in_range(opts, key, range) do
+        :ok -> {:cont, :ok}
+        {:error, message} -> {:halt, {:usage, message}}
+      end
+    end)
+    |> case do
+      :ok ->
+        if (opts[:cutoff] || 0.0) < 0,
+          do: {:usage, "--cutoff takes #{@accepted.cutoff}, got: #{opts[:cutoff]}"},
+          else: :ok
+
+      other ->
+        other
+    end
+  end
+
+  defp usage_of({:error, %RingTracer.Error{message: message}}), do: {:usage, message}
+  defp usage_of(ok), do: ok
+
+  defp required_out(opts) do
+    case opts[:out] do
+      nil -> {:usage, "--out FILE is required (a .png or .exr file)"}
+      out -> {:ok, out}
+    end
+  end
+
+  defp progress_mode(opts) do
+    tty? = match?({:ok, _}, :io.columns(:standard_error))
+
+    case {opts[:quiet], opts[:progress]} do
+      {true, _} -> {:ok, :quiet}
+      {_, nil} -> {:ok, if(tty?, do: :tty, else: :log)}
+      {_, "bar"} -> {:ok, :tty}
+      {_, "log"} -> {:ok, :log}
+      {_, "none"} -> {:ok, :quiet}
+      {_, other} -> {:usage, "--progress takes bar, log or none, got: #{other}"}
+    end
+  end
+
+  defp start(opts) do
+    with :ok <- distribution(opts) do
+      case Application.ensure_all_started(:ring_tracer) do
+        {:ok, _} -> :ok
+        {:error, reason} -> {:error, "could not start :ring_tracer: #{inspect(reason)}"}
+      end
+    end
+  end
+
+  defp distribution(opts) do
+    if opts[:nodes] do
+      case Distribution.start(Keyword.take(opts, @distribution) ++ [generate: true]) do
+        {:ok, _} -> :ok
+        {:error, %RingTracer.Error{message: message}} -> {:error, message}
+      end
+    else
+      :ok
+    end
+  end
+
+  defp render_opts(opts) do
+    base =
+      Keyword.drop(opts, [
+        :out,
+        :stats,
+        :timeline,
+        :ownership,
+        :allow_dir,
+        :quiet,
+        :progress | @distribution
+      ])
+
+    with {:ok, o} <- choice(base, :strategy, RingTracer.Strategy.names()),
+         {:ok, o} <- choice(o, :layout, RingTracer.Layout.orders()),
+         {:ok, o} <- speeds(o) do
+      {:ok, nodes(o)}
+    end
+  end
+
+  defp nodes(opts) do
+    case opts[:nodes] do
+      nil ->
+        opts
+
+      text ->
+        list = text |> String.split(",", trim: true) |> Enum.map(&String.to_atom(String.trim(&1)))
+        Keyword.put(opts, :nodes, list)
+    end
+  end
+
+  defp choice(opts, key, choices) do
+    case opts[key] do
+      nil ->
+        {:ok, opts}
+
+      name ->
+        case Enum.find(choices, &(Atom.to_string(&1) == name)) do
+          nil ->
+            {:usage, "#{Args.flag(key)} takes one of #{Enum.join(choices, ", ")}, got: #{name}"}
+
+          choice ->
+            {:ok, Keyword.put(opts, key, choice)}
+        end
+    end
+  end
+
+  defp speeds(opts) do
+    case opts[:speeds] do
+      nil ->
+        {:ok, opts}
+
+      text ->
+        parsed =
+          for part <- String.split(text, ",", trim: true) do
+            case Float.parse(String.trim(part)) do
+              {f, ""} when f >= 1 and f <= 1000 -> if f == trunc(f), do: trunc(f), else: f
+              _ -> nil
+            end
+          end
+
+        if parsed != [] and nil not in parsed,
+          do: {:ok, Keyword.put(opts, :speeds, parsed)},
+          else:
+            {:usage, "--speeds takes numbers from 1 to 1000 separated by commas, got: #{text}"}
+    end
+  end
+
+  defp go(job, signals?) do
+    t_load = System.monotonic_time(:microsecond)
+
+    with {:ok, scene} <- error_text(RingTracer.Scene.load(job.scene, allow_dirs: job.allow_dirs)),
+         load_us = System.monotonic_time(:microsecond) - t_load,
+         :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
+         {:ok, result} <- render(scene, job, signals?),
+         :ok <- write_all(result, job) do
+      if job.mode != :quiet, do: IO.write(report(job, result, load_us))
+      :ok
+    else
+      {:usage, message} -> usage(message)
+      {:interrupted, signal} -> interrupted(signal)
+      {:error, message} -> failed(message)
+    end
+  end
+
+  defp error_text({:error, %RingTracer.Error{message: message}}), do: {:error, message}
+  defp error_text(ok), do: ok
+
+  defp usage_text({:error, %RingTracer.Error{message: message}}), do: {:usage, message}
+  defp usage_text(ok), do: ok
+
+  defp interrupted(signal) do
+    what = if signal == :sigint, do: "interrupted", else: "terminated"
+    {:error, RingTracer.CLI.Signals.exit_status(signal), "#{what}; nothing written"}
+  end
+
+  defp write_all(result, job) do
+    o = job.opts
+
+    with :ok <- RingTracer.Image.write(result, job.out),
+         :ok <- maybe(o[:stats], &RingTracer.Report.Stats.write(result, &1)),
+         :ok <- maybe(o[:timeline], &RingTracer.Report.Timeline.write(result, &1)),
+         :ok <- maybe(o[:ownership], &RingTracer.Report.Ownership.write(result, &1)) do
+      :ok
+    else
+      {:error, %RingTracer.Error{message: message}} -> {:error, message}
+    end
+  end
+
+  defp maybe(nil, _fun), do: :ok
+  defp maybe(path, fun), do: fun.(path)
+
+  # The job runs asynchronously: atoms feed the progress display (through
+  # the job's telemetry events), ticks redraw it, and an interrupt cancels
+  # the job and ends the command.
+  defp render(scene, job, signals?) do
+    me = self()
+    handler = {__MODULE__, make_ref()}
+    total = job.render_opts |> Keyword.get(:children, :erlang.system_info(:schedulers_online))
+
+    :ok =
+      RingTracer.Telemetry.attach(
+        handler,
+        [:ring_tracer, :atom, :stop],
+        fn _e, m, md, _ -> send(me, {handler, md.job, m.rays, md.total}) end,
+        nil
+      )
+
+    if signals?, do: RingTracer.CLI.Signals.forward_to(me)
+
+    try do
+      {:ok, handle} = RingTracer.render_async(scene, job.render_opts)
+      now = System.monotonic_time(:millisecond)
+      progress = Progress.new(job.mode, total * Keyword.get(job.render_opts, :atoms, 16), now)
+      schedule(job.mode)
+      await(handle, handler, progress)
+    after
+      RingTracer.Telemetry.detach(handler)
+    end
+  end
+
+  defp schedule(mode) do
+    case Progress.interval(mode) do
+      nil -> :ok
+      ms -> Process.send_after(self(), {__MODULE__, :tick}, ms)
+    end
+  end
+
+  defp await(handle, handler, progress) do
+    id = handle.id
+
+    receive do
+      {^handler, _job, rays, total} ->
+        progress = %{progress | total: total}
+        {progress, _} = Progress.atom(progress, rays, System.monotonic_time(:millisecond))
+        await(handle, handler, progress)
+
+      {__MODULE__, :tick} ->
+        {progress, text} = Progress.tick(progress, System.monotonic_time(:millisecond))
+        if text, do: IO.write(:stderr, text)
+        schedule(progress.mode)
+        await(handle, handler, progress)
+
+      {RingTracer, ^id, {:progress, _, _}} ->
+        await(handle, handler, progress)
+
+      {RingTracer.CLI.Signals, signal} ->
+        IO.write(:stderr, Progress.finish(progress))
+        :ok = RingTracer.cancel(handle)
+        flush(id)
+        {:interrupted, signal}
+
+      {RingTracer, ^id, result} ->
+        IO.write(:stderr, Progress.finish(progress))
+
+        case result do
+          {:ok, r} -> {:ok, r}
+          {:error, %RingTracer.Error{message: message}} -> {:error, message}
+        end
+    end
+  end
+
+  defp flush(id) do
+    receive do
+      {RingTracer, ^id, _} -> flush(id)
+    after
+      0 -> :ok
+    end
+  end
+
+  @doc false
+  # POV-Ray-style statistics: what was written, times, rays by kind, the
+  # rate, peak memory, and a line per child.
+  @spec report(map(), RingTracer.Result.t(), non_neg_integer()) :: iodata()
+  def report(job, result, load_us) do
+    r = result.rays
+    rays = r.eye + r.reflected + r.refracted + r.shadow
+    secs = result.elapsed_us / 1_000_000
+
+    children =
+      for c <- result.children do
+        node = if c.node != node(), do: " on #{c.node}", else: ""
+
+        "  child #{c.index}#{node}: own #{c.own}, given #{c.given}, received #{c.received}, " <>
+          "traced #{c.traced}; offers sent #{c.offers_sent}, passed #{c.offers_passed}, " <>
+          "consumed #{c.offers_consumed}\n"
+      end
+
+    [
+      "wrote #{job.out} (#{result.width}x#{result.height})\n",
+      "parse #{seconds(load_us / 1_000_000)}, trace #{seconds(secs)} with #{length(result.children)} children\n",
+      "rays: #{rays} (eye #{r.eye}, #{r.eye_hits} hit; reflected #{r.reflected}; ",
+      "refracted #{r.refracted}; shadow #{r.shadow}), #{mrays(rays, secs)} Mrays/s\n",
+      peak_memory(),
+      children,
+      for(k <- [:stats, :timeline, :ownership], p = job.opts[k], do: "wrote #{p}\n")
+    ]
+  end
+
+  defp seconds(s), do: :erlang.float_to_binary(s / 1, decimals: 3) <> " s"
+
+  defp mrays(rays, secs),
+    do: :erlang.float_to_binary(rays / max(secs, 1.0e-6) / 1.0e6, decimals: 2)
+
+  # The process's peak resident memory (Linux), else the VM's current total.
+  defp peak_memory do
+    kb =
+      case File.read("/proc/self/status") do
+        {:ok, status} ->
+          case Regex.run(~r/VmHWM:\s+(\d+) kB/, status) do
+            [_, kb] -> String.to_integer(kb)
+            _ -> nil
+          end
+
+        _ ->
+          nil
+      end
+
+    mib = if kb, do: kb / 1024, else: :erlang.memory(:total) / 1_048_576
+    "peak memory #{:erlang.float_to_binary(mib, decimals: 1)} MiB\n"
+  end
+end

@@ -1,0 +1,55 @@
+defmodule RingTracer.CLI.Signals do
+  @moduledoc """
+  Interrupting a command booted by the launcher.
+
+  The BEAM cannot catch SIGINT (Ctrl-C opens its break menu), so the
+  launcher boots it with the break handler off (`+Bi`), stays its parent,
+  and turns a SIGINT it receives into SIGUSR2 for the VM; SIGTERM it
+  passes on as is. In the VM this handler, added to OTP's
+  `erl_signal_server`, tells the command's process
+  `{RingTracer.CLI.Signals, :sigint | :sigterm}`, and the command cancels
+  its job and exits with 130 or 143. A second Ctrl-C makes the launcher
+  kill the VM outright.
+  """
+  @behaviour :gen_event
+
+  @doc "From now on, SIGUSR2 (the launcher's SIGINT) and SIGTERM go to `pid` as messages."
+  @spec forward_to(pid()) :: :ok
+  def forward_to(pid) do
+    # OTP's own handler would stop the VM on SIGTERM: ours replaces it.
+    :ok =
+      :gen_event.swap_handler(
+        :erl_signal_server,
+        {:erl_signal_handler, :swap},
+        {__MODULE__, pid}
+      )
+
+    :os.set_signal(:sigusr2, :handle)
+    :os.set_signal(:sigterm, :handle)
+    :ok
+  end
+
+  @doc "The exit status for an interrupt: 128 plus the signal's number."
+  @spec exit_status(:sigint | :sigterm) :: 130 | 143
+  def exit_status(:sigint), do: 130
+  def exit_status(:sigterm), do: 143
+
+  @impl :gen_event
+  def init({pid, _old}) when is_pid(pid), do: {:ok, pid}
+
+  @impl :gen_event
+  def handle_event(:sigusr2, pid), do: tell(pid, :sigint)
+  def handle_event(:sigterm, pid), do: tell(pid, :sigterm)
+  def handle_event(_other, pid), do: {:ok, pid}
+
+  @impl :gen_event
+  def handle_call(_request, pid), do: {:ok, :ok, pid}
+
+  @impl :gen_event
+  def handle_info(_msg, pid), do: {:ok, pid}
+
+  defp tell(pid, signal) do
+    send(pid, {__MODULE__, signal})
+    {:ok, pid}
+  end
+end

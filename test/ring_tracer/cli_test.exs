@@ -1,0 +1,135 @@
+defmodule RingTracer.CLITest do
+  # The launcher as users run it: a real OS process, from another folder,
+  # through a symlink on the PATH, interrupted with real signals.
+  use ExUnit.Case, async: false
+
+  @moduletag :distributed
+  @moduletag timeout: 180_000
+  @launcher Path.expand("bin/ringtracer")
+
+  setup_all do
+    dir =
+      Path.join(System.tmp_dir!(), "rt_cli_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
+
+    bin = Path.join(dir, "bin")
+    scenes = Path.join(dir, "scenes")
+    File.mkdir_p!(bin)
+    File.mkdir_p!(scenes)
+    File.ln_s!(@launcher, Path.join(bin, "ringtracer"))
+    File.cp!("priv/scenes/balls_s2.nff", Path.join(scenes, "mine.nff"))
+    on_exit(fn -> File.rm_rf!(dir) end)
+    # The first run builds the application (MIX_ENV=prod) if it is stale.
+    {_, 0} = System.cmd(@launcher, ["render", "--help"], stderr_to_stdout: true)
+    {:ok, dir: dir, bin: bin, scenes: scenes}
+  end
+
+  defp start(ctx, args) do
+    port =
+      Port.open({:spawn_executable, Path.join(ctx.bin, "ringtracer")}, [
+        :binary,
+        :exit_status,
+        :stderr_to_stdout,
+        args: args,
+        cd: ctx.scenes,
+        env: [{~c"PATH", String.to_charlist("#{ctx.bin}:#{System.get_env("PATH")}")}]
+      ])
+
+    {:os_pid, pid} = Port.info(port, :os_pid)
+    {port, pid}
+  end
+
+  defp collect(port, out \\ "") do
+    receive do
+      {^port, {:data, data}} -> collect(port, out <> data)
+      {^port, {:exit_status, status}} -> {status, out}
+    after
+      120_000 -> flunk("the command did not end; output: #{out}")
+    end
+  end
+
+  defp until(port, text, out \\ "") do
+    if String.contains?(out, text) do
+      out
+    else
+      receive do
+        {^port, {:data, data}} ->
+          until(port, text, out <> data)
+
+        {^port, {:exit_status, status}} ->
+          flunk("exited #{status} before #{inspect(text)}: #{out}")
+      after
+        120_000 -> flunk("no #{inspect(text)}; output: #{out}")
+      end
+    end
+  end
+
+  defp run(ctx, args) do
+    {port, _} = start(ctx, args)
+    collect(port)
+  end
+
+  test "renders from any folder through a symlink, paths against the caller's folder", ctx do
+    {status, out} = run(ctx, ["render", "mine.nff", "--out", "mine.png", "--width", "64"])
+    assert status == 0, out
+    assert File.exists?(Path.join(ctx.scenes, "mine.png"))
+    # --width alone keeps the scene's aspect ratio (balls is square).
+    assert out =~ "mine.png (64x64)"
+    assert out =~ ~r/rays: \d+ .*Mrays\/s/
+    assert out =~ "peak memory"
+  end
+
+  test "--help on every command, with examples; exit 0", ctx do
+    for args <- [
+          ["--help"],
+          ["render", "--help"],
+          ["render", "-h"],
+          ["worker", "--help"],
+          ["cookie", "-h"]
+        ] do
+      {status, out} = run(ctx, args)
+      assert status == 0, "#{inspect(args)}: #{out}"
+      assert out =~ "Usage: ringtracer"
+    end
+
+    {_, out} = run(ctx, ["render", "--help"])
+    assert out =~ "Examples:"
+    assert out =~ "Exit status"
+  end
+
+  test "usage errors name the option or value and exit 2; a failed render exits 1", ctx do
+    {2, out} = run(ctx, ["render", "mine.nff", "-o", "x.png", "--childs", "4"])
+    assert out =~ "unknown option --childs (did you mean --children?)"
+
+    {2, out} = run(ctx, ["render", "mine.nff", "-o", "x.png", "--children", "abc"])
+    assert out =~ "--children takes an integer from 1 to 16384, got: abc"
+
+    {2, out} = run(ctx, ["render", "mine.nff", "-o", "x.png", "--depth", "0"])
+    assert out =~ "--depth takes an integer from 1 to 64, got: 0"
+
+    {2, out} = run(ctx, ["rendr"])
+    assert out =~ "did you mean render?"
+
+    {1, out} = run(ctx, ["render", "missing.nff", "-o", "x.png"])
+    assert out =~ "missing.nff"
+  end
+
+  for {signal, status} <- [{"INT", 130}, {"TERM", 143}] do
+    test "SIG#{signal} cancels the render: status #{status}, every process gone, no file", ctx do
+      # A slowed render with its progress bar forced on, so that we know it runs.
+      {port, pid} =
+        start(ctx, ~w(render mine.nff -o slow.png --width 256 --speeds 400 --progress bar))
+
+      until(port, "atoms")
+      {_, 0} = System.cmd("kill", ["-#{unquote(signal)}", "#{pid}"])
+      {status, out} = collect(port)
+
+      assert status == unquote(status), out
+      assert out =~ ~r/interrupted|terminated/
+      refute File.exists?(Path.join(ctx.scenes, "slow.png"))
+      assert Enum.filter(File.ls!(ctx.scenes), &String.contains?(&1, "slow")) == []
+      # No VM of it is left: the launcher's children are gone with it.
+      {ps, _} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{pid}"])
+      assert String.trim(ps) == ""
+    end
+  end
+end
