@@ -4,6 +4,8 @@ defmodule RingTracer.Result do
 
     * `:pixels` — `width * height * 3` native-endian 32-bit floats, row-major
       from the top-left, linear light (write it with `RingTracer.Image`);
+    * `:started_at_us` — when the job's parent started, wall clock
+      (`System.system_time(:microsecond)`); the times below count from it;
     * `:elapsed_us` — the makespan: from starting the parent (children
       included) to the moment the parent holds every atom, in microseconds;
     * `:teardown_us` — from then until every child had stopped and reported;
@@ -47,6 +49,7 @@ defmodule RingTracer.Result do
     :width,
     :height,
     :pixels,
+    :started_at_us,
     :elapsed_us,
     :teardown_us,
     :ideal_us,
@@ -69,6 +72,7 @@ defmodule RingTracer.Result do
           width: pos_integer(),
           height: pos_integer(),
           pixels: binary(),
+          started_at_us: integer() | nil,
           elapsed_us: non_neg_integer(),
           teardown_us: non_neg_integer(),
           ideal_us: non_neg_integer(),
@@ -101,6 +105,7 @@ defmodule RingTracer.Result do
       width: settings.width,
       height: settings.height,
       pixels: raw.pixels,
+      started_at_us: raw.started_at_us,
       elapsed_us: raw.elapsed_us,
       teardown_us: raw.teardown_us,
       ideal_us: ideal_us(raw.atoms, Enum.map(children, & &1.speed), capacity_cap),

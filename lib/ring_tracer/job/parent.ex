@@ -531,6 +531,7 @@ defmodule RingTracer.Job.Parent do
           {:ok,
            %{
              pixels: pixels,
+             started_at_us: state.t0,
              elapsed_us: elapsed,
              teardown_us: now - state.completed,
              children: Enum.map(reports, & &1.stats),

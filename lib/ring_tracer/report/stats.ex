@@ -34,6 +34,8 @@ defmodule RingTracer.Report.Stats do
   A summary of `result`:
 
     * `:strategy`, `:layout`, `:aim`, `:width`, `:height`, `:atoms` (count), `:children_count`;
+    * `:started_at_us` (wall clock, when the job started), `:first_atom_us`
+      (when the first atom's pixels were ready, from the start);
     * `:makespan_us`, `:ideal_us`, `:ratio` (makespan / ideal, `nil` when the
       ideal is 0), `:idle_pct` (the children's summed idle time as a
       percentage of `children * makespan`);
@@ -65,6 +67,9 @@ defmodule RingTracer.Report.Stats do
       height: result.height,
       atoms: atoms,
       children_count: n,
+      started_at_us: result.started_at_us,
+      first_atom_us:
+        result.atoms |> List.wrap() |> Enum.map(& &1.end_us) |> Enum.min(fn -> nil end),
       makespan_us: makespan,
       ideal_us: ideal,
       ratio: if(ideal > 0, do: makespan / ideal, else: nil),
