@@ -34,6 +34,10 @@ defmodule RingTracer do
     * `:samples` — S x S stratified samples per pixel (default 1)
     * `:spd` — SPD testing procedure: rays through pixel corners, no
       cut-off (default false)
+    * `:region` — trace only part of the image, `{x0, y0, x1, y1}`: pixels
+      (integers, x1 and y1 excluded) or fractions (floats 0.0 to 1.0, like
+      POV-Ray's `+SC +EC +SR +ER`); the result is that part, with exactly the
+      pixels the whole render has there
     * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
       (see `RingTracer.Strategy`)
     * `:layout` — which atoms each child owns at the start: `:strips` (the
@@ -156,7 +160,8 @@ defmodule RingTracer do
       cutoff: opts[:cutoff] / 1,
       samples: opts[:samples],
       spd: opts[:spd],
-      fail_pixel: opts[:fail_pixel]
+      fail_pixel: opts[:fail_pixel],
+      region: region(opts[:region], width, height)
     }
 
     case Native.validate_settings(Settings.to_native(settings)) do
@@ -164,6 +169,17 @@ defmodule RingTracer do
       {:error, message} -> {:error, Error.new(:invalid_option, message)}
     end
   end
+
+  # `{x0, y0, x1, y1}` in pixels (x1, y1 excluded) or fractions, as
+  # `{x0, y0, width, height}` in pixels; the kernel checks it is inside.
+  defp region(nil, _w, _h), do: nil
+
+  defp region({x0, y0, x1, y1}, w, h) when is_float(x0) do
+    {a, b} = {round(x0 * w), round(y0 * h)}
+    {a, b, max(round(x1 * w) - a, 1), max(round(y1 * h) - b, 1)}
+  end
+
+  defp region({x0, y0, x1, y1}, _w, _h), do: {x0, y0, x1 - x0, y1 - y0}
 
   # One side given: the other follows the scene's aspect ratio.
   defp size(scene, nil, nil), do: {scene.width, scene.height}
@@ -311,7 +327,13 @@ defmodule RingTracer do
       source: source,
       settings: settings,
       layout:
-        Layout.new(settings.width, settings.height, opts[:children], opts[:atoms], opts[:layout]),
+        Layout.new(
+          elem(Settings.traced_size(settings), 0),
+          elem(Settings.traced_size(settings), 1),
+          opts[:children],
+          opts[:atoms],
+          opts[:layout]
+        ),
       caller: self(),
       nodes: opts[:nodes],
       liveness: opts[:liveness],

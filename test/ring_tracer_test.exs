@@ -145,4 +145,45 @@ defmodule RingTracerTest do
 
     assert {r.width, r.height} == {div(scene.width, 2), div(scene.height, 2)}
   end
+
+  test "a region holds exactly the whole render's pixels there, whatever the ring" do
+    full = TestScenes.reference(@scene, 64, 48)
+
+    expected =
+      IO.iodata_to_binary(for y <- 5..29, do: binary_part(full, (y * 64 + 10) * 12, 30 * 12))
+
+    for {strategy, n, k} <- [{:ring, 3, 4}, {:static, 1, 1}, {:steal, 4, 7}, {:master, 2, 3}] do
+      {:ok, r} =
+        RingTracer.render(TestScenes.path(@scene),
+          width: 64,
+          height: 48,
+          region: {10, 5, 40, 30},
+          strategy: strategy,
+          children: n,
+          atoms: k
+        )
+
+      assert {r.width, r.height} == {30, 25}
+      assert r.pixels == expected, "#{strategy}"
+    end
+
+    {:ok, r} =
+      RingTracer.render(TestScenes.path(@scene),
+        width: 64,
+        height: 48,
+        region: {0.5, 0.0, 1.0, 0.5}
+      )
+
+    assert {r.width, r.height} == {32, 24}
+
+    assert {:error, %RingTracer.Error{message: m}} =
+             RingTracer.render(TestScenes.path(@scene),
+               width: 64,
+               height: 48,
+               region: {10, 5, 90, 30}
+             )
+
+    assert m =~ "not inside the 64x48 image"
+    assert {:error, _} = RingTracer.render(TestScenes.path(@scene), region: {5, 5, 5, 9})
+  end
 end

@@ -16,6 +16,7 @@ defmodule RingTracer.Options do
     cutoff: {:non_neg_number, 1 / 255},
     samples: {:pos_integer, 1},
     spd: {:boolean, false},
+    region: {:region, nil},
     nodes: {:nodes, []},
     timeout: {:timeout, :infinity},
     handover_delay: {:non_neg_integer, 0},
@@ -157,6 +158,23 @@ defmodule RingTracer.Options do
   defp check(:timeout, :infinity), do: :ok
   defp check(:timeout, v) when is_integer(v) and v > 0, do: :ok
   defp check(:timeout, _), do: {:error, "a positive integer (ms) or :infinity"}
+
+  defp check(:region, nil), do: :ok
+
+  defp check(:region, {x0, y0, x1, y1} = r) do
+    ints? = Enum.all?([x0, y0, x1, y1], &(is_integer(&1) and &1 >= 0))
+    fracs? = Enum.all?([x0, y0, x1, y1], &(is_float(&1) and &1 >= 0 and &1 <= 1))
+
+    if (ints? or fracs?) and x0 < x1 and y0 < y1,
+      do: :ok,
+      else: check(:region, {:bad, r})
+  end
+
+  defp check(:region, _),
+    do:
+      {:error,
+       "{x0, y0, x1, y1}: pixels (integers, x1 and y1 excluded) or fractions of the " <>
+         "image (floats from 0.0 to 1.0), with x0 < x1 and y0 < y1"}
 
   defp check(:nodes, v) when is_list(v) do
     if Enum.all?(v, &is_atom/1), do: :ok, else: {:error, "a list of node names (atoms)"}

@@ -101,9 +101,11 @@ defmodule RingTracer.Result do
 
     children = Enum.map(raw.children, &Map.put(&1, :idle_us, max(raw.elapsed_us - &1.busy_us, 0)))
 
+    {width, height} = RingTracer.Settings.traced_size(settings)
+
     %__MODULE__{
-      width: settings.width,
-      height: settings.height,
+      width: width,
+      height: height,
       pixels: raw.pixels,
       started_at_us: raw.started_at_us,
       elapsed_us: raw.elapsed_us,

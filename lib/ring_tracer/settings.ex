@@ -1,7 +1,9 @@
 defmodule RingTracer.Settings do
   @moduledoc """
   What the kernel needs to trace a pixel: image size, ray-tree depth,
-  adaptive cut-off, samples per pixel, SPD corner mode. The same settings and
+  adaptive cut-off, samples per pixel, SPD corner mode, and the region of
+  the image traced (the camera still frames the whole image, so a region
+  holds exactly the whole render's pixels there). The same settings and
   scene give the same bytes for every pixel wherever it is traced.
 
   `:fail_pixel` is a test hook: the kernel panics when it traces that pixel
@@ -15,7 +17,8 @@ defmodule RingTracer.Settings do
             cutoff: 1 / 255,
             samples: 1,
             spd: false,
-            fail_pixel: nil
+            fail_pixel: nil,
+            region: nil
 
   @type t :: %__MODULE__{
           width: pos_integer(),
@@ -24,8 +27,24 @@ defmodule RingTracer.Settings do
           cutoff: float(),
           samples: pos_integer(),
           spd: boolean(),
-          fail_pixel: non_neg_integer() | nil
+          fail_pixel: non_neg_integer() | nil,
+          region: region() | nil
         }
+
+  @typedoc "Part of the image, in pixels: `{x0, y0, width, height}` (y = 0 is the top row)."
+  @type region :: {non_neg_integer(), non_neg_integer(), pos_integer(), pos_integer()}
+
+  @doc """
+  The size of what is traced: the region's, or the whole image's.
+
+      iex> RingTracer.Settings.traced_size(%RingTracer.Settings{width: 64, height: 48, region: {8, 4, 16, 10}})
+      {16, 10}
+      iex> RingTracer.Settings.traced_size(%RingTracer.Settings{width: 64, height: 48})
+      {64, 48}
+  """
+  @spec traced_size(t()) :: {pos_integer(), pos_integer()}
+  def traced_size(%__MODULE__{region: {_, _, w, h}}), do: {w, h}
+  def traced_size(%__MODULE__{width: w, height: h}), do: {w, h}
 
   @doc "The map the NIF decodes."
   @spec to_native(t()) :: map()
@@ -37,7 +56,8 @@ defmodule RingTracer.Settings do
       cutoff: s.cutoff / 1,
       samples: s.samples,
       spd: s.spd,
-      fail_pixel: s.fail_pixel
+      fail_pixel: s.fail_pixel,
+      region: s.region
     }
   end
 end

@@ -35,7 +35,8 @@ defmodule RingTracer.CLI.Render do
     local: :boolean,
     allow_dir: :keep,
     quiet: :boolean,
-    progress: :string
+    progress: :string,
+    region: :string
   ]
   @switches @render_switches ++ RingTracer.CLI.Worker.switches()
   @aliases [o: :out, q: :quiet, w: :width]
@@ -79,6 +80,8 @@ defmodule RingTracer.CLI.Render do
           --samples S         S x S samples per pixel (1-16, default 1)
           --cutoff C          adaptive cut-off weight (default 1/255, 0 disables)
           --spd               the SPD testing procedure (pixel corners, no cut-off)
+          --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
+                              fractions (0.25,0,0.75,0.5); exactly the whole render's pixels
 
     Ring:
           --children N        ring size (1-#{@max.children}, default: schedulers online)
@@ -277,7 +280,8 @@ defmodule RingTracer.CLI.Render do
 
     with {:ok, o} <- choice(base, :strategy, RingTracer.Strategy.names()),
          {:ok, o} <- choice(o, :layout, RingTracer.Layout.orders()),
-         {:ok, o} <- speeds(o) do
+         {:ok, o} <- speeds(o),
+         {:ok, o} <- region(o) do
       {:ok, nodes(o)}
     end
   end
@@ -306,6 +310,33 @@ defmodule RingTracer.CLI.Render do
           choice ->
             {:ok, Keyword.put(opts, key, choice)}
         end
+    end
+  end
+
+  # Four numbers; with a decimal point they are fractions of the image.
+  defp region(opts) do
+    case opts[:region] do
+      nil ->
+        {:ok, opts}
+
+      text ->
+        parts = text |> String.split(",") |> Enum.map(&String.trim/1)
+        fractions? = Enum.any?(parts, &String.contains?(&1, "."))
+        parse = if fractions?, do: &Float.parse/1, else: &Integer.parse/1
+
+        values =
+          for p <- parts do
+            case parse.(p) do
+              {v, ""} -> if fractions?, do: v / 1, else: v
+              _ -> nil
+            end
+          end
+
+        if length(values) == 4 and nil not in values,
+          do: {:ok, Keyword.put(opts, :region, List.to_tuple(values))},
+          else:
+            {:usage,
+             "--region takes X0,Y0,X1,Y1 in pixels (0,0,320,240) or fractions (0.25,0,0.75,0.5), got: #{text}"}
     end
   end
 
@@ -338,7 +369,7 @@ defmodule RingTracer.CLI.Render do
          :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
          {:ok, result} <- render(scene, job, signals?),
          :ok <- write_all(result, job) do
-      if job.mode != :quiet, do: IO.write(report(job, result, load_us))
+      if !job.opts[:quiet], do: IO.write(report(job, result, load_us))
       :ok
     else
       {:usage, message} -> usage(message)

@@ -43,6 +43,9 @@ defmodule RingTracer.Kernel.Native do
   row taking the work of the preview row it falls in.
   """
   @impl RingTracer.Kernel
+  def atom_work(%{settings: %Settings{region: region}}, _opts) when region != nil,
+    do: {:error, "no preview of a region"}
+
   def atom_work(%{settings: %Settings{width: w, height: h} = settings} = spec, opts) do
     scale = max(1.0, :math.sqrt(w * h / @preview_pixels))
     {pw, ph} = {max(1, round(w / scale)), max(1, round(h / scale))}

@@ -66,6 +66,6 @@ pub use integrator::{Integrator, Whitted};
 pub use light::Light;
 pub use material::{Checker, Material};
 pub use ray::Ray;
-pub use render::{render_image, trace_span, trace_span_into, work_by_row, Settings};
+pub use render::{render_image, trace_span, trace_span_into, work_by_row, Region, Settings};
 pub use scene::{Format, Hit, Scene};
 pub use stats::RayStats;

@@ -35,6 +35,23 @@ pub struct Settings {
     pub spd: bool,
     /// test hook: tracing this pixel panics; None in normal use
     pub fail_pixel: Option<u64>,
+    /// Only this part of the `width` x `height` image is traced (the camera still frames the whole
+    /// image); span indices then count the region's pixels, row-major. `None`: the whole image.
+    pub region: Option<Region>,
+}
+
+/// A rectangle of an image, in pixels: columns `x0..x0 + width`, rows `y0..y0 + height` (y=0 is
+/// the top row).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Region {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
 }
 
 impl Settings {
@@ -49,12 +66,33 @@ impl Settings {
             samples: 1,
             spd: false,
             fail_pixel: None,
+            region: None,
+        }
+    }
+
+    /// The size of what is traced: the region's, or the whole image's.
+    pub fn traced_size(&self) -> (u32, u32) {
+        match self.region {
+            Some(r) => (r.width, r.height),
+            None => (self.width, self.height),
         }
     }
 
     /// Checks the settings against [`crate::limits`].
     pub fn validate(&self) -> Result<(), Error> {
         limits::check_resolution(self.width, self.height)?;
+        if let Some(r) = self.region {
+            let inside = r.width > 0
+                && r.height > 0
+                && r.x0 as u64 + r.width as u64 <= self.width as u64
+                && r.y0 as u64 + r.height as u64 <= self.height as u64;
+            if !inside {
+                return Err(Error::InvalidArgument(format!(
+                    "region {}x{} at ({}, {}) is not inside the {}x{} image",
+                    r.width, r.height, r.x0, r.y0, self.width, self.height
+                )));
+            }
+        }
         if self.depth == 0 {
             return Err(Error::InvalidArgument("depth must be at least 1".into()));
         }
@@ -129,18 +167,19 @@ impl Settings {
     ///     samples: 1,
     ///     spd: false,
     ///     fail_pixel: None,
+    ///     region: None,
     /// };
     /// assert_eq!(s.span_end(5, 3).unwrap(), 8);
     /// assert!(s.span_end(5, 4).is_err());
     /// ```
     pub fn span_end(&self, start: u64, count: u64) -> Result<u64, Error> {
         self.validate()?;
-        let total = self.width as u64 * self.height as u64;
+        let (w, h) = self.traced_size();
+        let total = w as u64 * h as u64;
         match start.checked_add(count) {
             Some(end) if end <= total => Ok(end),
             _ => Err(Error::InvalidArgument(format!(
-                "pixel span {start}+{count} is outside the {}x{} image ({total} pixels)",
-                self.width, self.height
+                "pixel span {start}+{count} is outside the {w}x{h} image ({total} pixels)"
             ))),
         }
     }
@@ -192,6 +231,9 @@ pub fn trace_span_into(
     }
     let count = (out.len() / 3) as u64;
     let end = settings.span_end(start, count)?;
+    if let Some(r) = settings.region {
+        return trace_region_into(scene, settings, r, start, end, out);
+    }
     if let Some(p) = settings.fail_pixel {
         if (start..end).contains(&p) {
             panic!("test hook: tracing pixel {p} (Settings::fail_pixel)");
@@ -258,6 +300,36 @@ pub fn trace_span_into(
         out.iter_mut().for_each(|v| *v = crate::film::from_srgb(*v));
     }
     stats.work = scratch.work + stats.total();
+    Ok(stats)
+}
+
+/// A span of a region: each run of it within one row of the region is the span of the whole
+/// image that holds those pixels, traced as such, so a region gives exactly the whole render's
+/// pixels (samples, SPD corners and all).
+fn trace_region_into(
+    scene: &Scene,
+    settings: &Settings,
+    r: Region,
+    start: u64,
+    end: u64,
+    out: &mut [f32],
+) -> Result<RayStats, Error> {
+    let whole = Settings {
+        region: None,
+        ..settings.clone()
+    };
+    let (rw, w) = (r.width as u64, settings.width as u64);
+    let mut stats = RayStats::default();
+    let mut p = start;
+    while p < end {
+        let (row, col) = (p / rw, p % rw);
+        let run = (rw - col).min(end - p);
+        let from = (r.y0 as u64 + row) * w + r.x0 as u64 + col;
+        let at = ((p - start) * 3) as usize;
+        let part = trace_span_into(scene, &whole, from, &mut out[at..at + run as usize * 3])?;
+        stats += part;
+        p += run;
+    }
     Ok(stats)
 }
 
@@ -342,8 +414,9 @@ fn spd_span(
 /// it to guess how much work a sibling they have not heard from yet still holds.
 pub fn work_by_row(scene: &Scene, settings: &Settings) -> Result<Vec<u64>, Error> {
     settings.validate()?;
-    let w = settings.width as u64;
-    (0..settings.height as u64)
+    let (w, h) = settings.traced_size();
+    let w = w as u64;
+    (0..h as u64)
         .map(|y| trace_span(scene, settings, y * w, w).map(|(_, stats)| stats.work))
         .collect()
 }
@@ -359,7 +432,8 @@ pub fn render_image(
     threads: usize,
 ) -> Result<(Vec<f32>, RayStats), Error> {
     settings.validate()?;
-    let (w, h) = (settings.width as u64, settings.height as u64);
+    let (w, h) = settings.traced_size();
+    let (w, h) = (w as u64, h as u64);
     let threads = threads.clamp(1, 256);
     // SPD mode re-traces one corner row per chunk, so use taller chunks there
     let rows_per_chunk = if settings.spd { 16 } else { 2 }.min(h.max(1));

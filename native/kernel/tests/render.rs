@@ -3,7 +3,7 @@
 use ring_tracer_kernel::files::Unreadable;
 use ring_tracer_kernel::{
     encode_png, render_image, to_srgb8, trace_span, trace_span_into, work_by_row, write_image,
-    Format, RayStats, Scene, Settings,
+    Format, RayStats, Region, Scene, Settings,
 };
 
 fn no_files(_: &str) -> Result<Vec<u8>, Unreadable> {
@@ -390,4 +390,60 @@ fn fail_pixel_hook_panics_only_on_its_pixel() {
         trace_span(&scene, &hooked, 0, 17).unwrap().0,
         trace_span(&scene, &s, 0, 17).unwrap().0
     );
+}
+
+/// A region traces exactly the whole render's pixels there, in every mode (pixel centres, jittered
+/// samples, SPD corners), whatever spans it is cut into.
+#[test]
+fn a_region_gives_exactly_the_whole_renders_pixels() {
+    let scene = nff(GOLDEN);
+    let r = Region {
+        x0: 2,
+        y0: 1,
+        width: 5,
+        height: 4,
+    };
+    for (samples, spd) in [(1, false), (2, false), (1, true)] {
+        let whole = Settings {
+            samples,
+            spd,
+            ..Settings::for_scene(&scene)
+        };
+        let (full, _) = render_image(&scene, &whole, 1).unwrap();
+        let part = Settings {
+            region: Some(r),
+            ..whole.clone()
+        };
+        let (region, _) = render_image(&scene, &part, 2).unwrap();
+        let mut expected = Vec::new();
+        for y in r.y0..r.y0 + r.height {
+            let from = ((y * whole.width + r.x0) * 3) as usize;
+            expected.extend_from_slice(&full[from..from + r.width as usize * 3]);
+        }
+        assert_eq!(region, expected, "samples {samples}, spd {spd}");
+        // cut into odd spans that cross the region's rows
+        let mut pieces = Vec::new();
+        let mut start = 0;
+        for count in [3u64, 7, 1, 9] {
+            pieces.extend(trace_span(&scene, &part, start, count).unwrap().0);
+            start += count;
+        }
+        assert_eq!(pieces, expected);
+    }
+}
+
+#[test]
+fn a_region_outside_the_image_is_refused() {
+    let scene = nff(GOLDEN);
+    let s = Settings {
+        region: Some(Region {
+            x0: 6,
+            y0: 0,
+            width: 3,
+            height: 1,
+        }),
+        ..Settings::for_scene(&scene)
+    };
+    let e = trace_span(&scene, &s, 0, 1).unwrap_err().to_string();
+    assert!(e.contains("not inside the 8x6 image"), "{e}");
 }

@@ -1,6 +1,6 @@
 //! Term conversions shared by the NIFs.
 
-use ring_tracer_kernel::{Error, RayStats, Settings};
+use ring_tracer_kernel::{Error, RayStats, Region, Settings};
 use rustler::{Binary, Env, NifMap, OwnedBinary};
 
 /// Render settings as the Elixir side sends them: a map with atom keys.
@@ -14,6 +14,8 @@ pub struct SettingsTerm {
     pub spd: bool,
     /// Test hook: tracing this pixel panics (rustler turns it into an Erlang exception).
     pub fail_pixel: Option<u64>,
+    /// Only this part of the image, `{x0, y0, width, height}`, or nil.
+    pub region: Option<(u32, u32, u32, u32)>,
 }
 
 impl SettingsTerm {
@@ -27,6 +29,12 @@ impl SettingsTerm {
             samples: self.samples,
             spd: self.spd,
             fail_pixel: self.fail_pixel,
+            region: self.region.map(|(x0, y0, width, height)| Region {
+                x0,
+                y0,
+                width,
+                height,
+            }),
         };
         settings.validate().map_err(|e| e.to_string())?;
         Ok(settings)
