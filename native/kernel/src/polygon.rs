@@ -2,9 +2,10 @@
 //! the crossing rule O(log n) per ray for the rest.
 //!
 //! A polygon of up to `MAX_EAR_CLIP` (1024) vertices that is simple becomes triangles
-//! (`ear_clip`). Every other one (larger, or self-intersecting) is kept whole: a ray meets its
-//! plane, and the hit point `(u, v)`, in the projection that drops the normal's dominant axis,
-//! is inside by the even-odd crossing rule. An edge from vertex `a` (vertex `i`) to `b`
+//! (`ear_clip`). Every other one (larger, or one ear clipping gives up on, as on most
+//! self-intersecting ones) is kept whole: a ray meets its plane, and the hit point `(u, v)`,
+//! in the projection that drops the normal's dominant axis, is inside by the even-odd
+//! crossing rule. An edge from vertex `a` (vertex `i`) to `b`
 //! (vertex `i - 1`, cyclically) crosses the ray from the point towards `+u` when
 //!
 //! ```text
