@@ -1,13 +1,15 @@
 //! Primitive shapes and their ray intersection routines.
 //!
 //! Shapes are stored in an enum (no dynamic dispatch in the intersection loop); bulky ones
-//! (polygons, cones) live in side arrays and the enum holds an index. All routines take unit-length
-//! ray directions and report the nearest hit in the open interval `(tmin, tmax)`.
+//! (polygons, see [`crate::polygon`], and cones) live in side arrays and the enum holds an
+//! index. All routines take unit-length ray directions and report the nearest hit in the open
+//! interval `(tmin, tmax)`.
 //!
 //! Sidedness: spheres, cones and polygons are intersected from both sides (the integrator flips
 //! the normal towards the viewer), except shapes given with negative radii, which only exist from
 //! the inside (NFF: "only the inside of the object is visible").
 
+use crate::polygon::Polygons;
 use crate::ray::Ray;
 use glam::Vec3A;
 
@@ -73,18 +75,6 @@ impl Aabb {
     }
 }
 
-/// A planar polygon of any vertex count (convex or concave), tested with the crossing rule in
-/// the projection that drops the normal's dominant axis.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PolygonData {
-    pub normal: Vec3A,
-    pub d: f32,
-    pub axis_u: u8,
-    pub axis_v: u8,
-    pub first: u32,
-    pub count: u32,
-}
-
 /// A cone or cylinder frustum without end caps.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ConeData {
@@ -120,18 +110,8 @@ pub(crate) enum Shape {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Geometry {
     pub shapes: Vec<Shape>,
-    pub polys: Vec<PolygonData>,
-    pub poly_verts: Vec<[f32; 2]>,
+    pub polygons: Polygons,
     pub cones: Vec<ConeData>,
-}
-
-#[inline]
-fn comp(v: Vec3A, axis: u8) -> f32 {
-    match axis {
-        0 => v.x,
-        1 => v.y,
-        _ => v.z,
-    }
 }
 
 #[inline]
@@ -192,45 +172,6 @@ pub(crate) fn hit_triangle(
     let t = e2.dot(q) * inv;
     if t > tmin && t < tmax {
         Some((t, u, v))
-    } else {
-        None
-    }
-}
-
-#[inline]
-fn hit_polygon(
-    p: &PolygonData,
-    verts: &[[f32; 2]],
-    ray: &Ray,
-    tmin: f32,
-    tmax: f32,
-) -> Option<f32> {
-    let dn = p.normal.dot(ray.dir);
-    if dn == 0.0 {
-        return None;
-    }
-    let t = (p.d - p.normal.dot(ray.origin)) / dn;
-    if !(t > tmin && t < tmax) {
-        return None;
-    }
-    let hit = ray.at(t);
-    let tx = comp(hit, p.axis_u);
-    let ty = comp(hit, p.axis_v);
-    let start = p.first as usize;
-    let vs = verts.get(start..start + p.count as usize)?;
-    let mut inside = false;
-    let mut j = vs.len() - 1;
-    for (i, vi) in vs.iter().enumerate() {
-        let vj = vs[j];
-        if (vi[1] > ty) != (vj[1] > ty)
-            && tx < (vj[0] - vi[0]) * (ty - vi[1]) / (vj[1] - vi[1]) + vi[0]
-        {
-            inside = !inside;
-        }
-        j = i;
-    }
-    if inside {
-        Some(t)
     } else {
         None
     }
@@ -316,10 +257,7 @@ impl Geometry {
                 radius,
                 inside,
             } => hit_sphere(center, radius, inside, ray, tmin, tmax),
-            Shape::Polygon(k) => {
-                let p = self.polys.get(k as usize)?;
-                hit_polygon(p, &self.poly_verts, ray, tmin, tmax)
-            }
+            Shape::Polygon(k) => self.polygons.hit(k, ray, tmin, tmax),
             Shape::Cone(k) => hit_cone(self.cones.get(k as usize)?, ray, tmin, tmax),
         }
     }
@@ -341,7 +279,7 @@ impl Geometry {
                     n
                 }
             }
-            Shape::Polygon(k) => self.polys.get(k as usize).map_or(Vec3A::Z, |q| q.normal),
+            Shape::Polygon(k) => self.polygons.normal(k).unwrap_or(Vec3A::Z),
             Shape::Cone(k) => self.cones.get(k as usize).map_or(Vec3A::Z, |c| {
                 let n = c.outward_normal(p);
                 if c.inside {
@@ -410,48 +348,6 @@ impl ConeData {
         };
         disc(s0).union(disc(s1))
     }
-}
-
-/// Builds polygon data from 3D vertices; `None` if the polygon is degenerate (zero area).
-/// The normal comes from Newell's method, which follows the CCW winding for any simple polygon.
-pub(crate) fn make_polygon(
-    verts: &[Vec3A],
-    first: u32,
-    out2d: &mut Vec<[f32; 2]>,
-) -> Option<PolygonData> {
-    if verts.len() < 3 {
-        return None;
-    }
-    let mut n = Vec3A::ZERO;
-    for (i, a) in verts.iter().enumerate() {
-        let b = verts[(i + 1) % verts.len()];
-        n += Vec3A::new(
-            (a.y - b.y) * (a.z + b.z),
-            (a.z - b.z) * (a.x + b.x),
-            (a.x - b.x) * (a.y + b.y),
-        );
-    }
-    let normal = n.try_normalize()?;
-    let an = normal.abs();
-    let (axis_u, axis_v) = if an.x >= an.y && an.x >= an.z {
-        (1u8, 2u8)
-    } else if an.y >= an.z {
-        (2, 0)
-    } else {
-        (0, 1)
-    };
-    let centroid = verts.iter().copied().sum::<Vec3A>() / verts.len() as f32;
-    for v in verts {
-        out2d.push([comp(*v, axis_u), comp(*v, axis_v)]);
-    }
-    Some(PolygonData {
-        normal,
-        d: normal.dot(centroid),
-        axis_u,
-        axis_v,
-        first,
-        count: verts.len() as u32,
-    })
 }
 
 /// Builds cone data; `None` if the axis has zero length or both radii are zero.
@@ -541,9 +437,9 @@ mod tests {
     fn poly(vs: &[[f32; 3]]) -> (Geometry, Shape) {
         let mut g = Geometry::default();
         let v: Vec<Vec3A> = vs.iter().map(|a| Vec3A::from_array(*a)).collect();
-        let p = make_polygon(&v, 0, &mut g.poly_verts).unwrap();
-        g.polys.push(p);
-        (g, Shape::Polygon(0))
+        let plane = crate::polygon::plane(&v).unwrap();
+        let k = g.polygons.add(&v, plane).unwrap();
+        (g, Shape::Polygon(k))
     }
 
     #[test]
@@ -699,145 +595,5 @@ mod tests {
         assert!((t - 4.5).abs() < 1e-5);
         let n = g.geometric_normal(&s, Vec3A::new(0.5, 0.0, 0.5));
         assert!((n - Vec3A::new(1.0, 0.0, 1.0).normalize()).length() < 1e-5);
-    }
-}
-
-/// Largest polygon that is triangulated (ear clipping is quadratic); larger ones keep the
-/// crossing test.
-pub(crate) const MAX_EAR_CLIP: usize = 1024;
-
-/// Triangulates a simple planar polygon (convex or concave) by ear clipping in the projection
-/// that drops the normal's dominant axis. Returns vertex-index triples in the polygon's own
-/// winding, or `None` if the polygon is not simple (then the caller keeps the crossing test).
-/// Zero-area ears (collinear vertices) are clipped without emitting a triangle.
-pub(crate) fn ear_clip(verts: &[Vec3A], normal: Vec3A) -> Option<Vec<[usize; 3]>> {
-    let n = verts.len();
-    if !(3..=MAX_EAR_CLIP).contains(&n) {
-        return None;
-    }
-    let an = normal.abs();
-    let (u, v) = if an.x >= an.y && an.x >= an.z {
-        (1u8, 2u8)
-    } else if an.y >= an.z {
-        (2, 0)
-    } else {
-        (0, 1)
-    };
-    let p: Vec<[f32; 2]> = verts.iter().map(|q| [comp(*q, u), comp(*q, v)]).collect();
-    // orientation of the projection
-    let mut area = 0.0f32;
-    for i in 0..n {
-        let a = p[i];
-        let b = p[(i + 1) % n];
-        area += a[0] * b[1] - b[0] * a[1];
-    }
-    if area == 0.0 {
-        return None;
-    }
-    let sign = area.signum();
-    let cross = |a: [f32; 2], b: [f32; 2], c: [f32; 2]| -> f32 {
-        ((b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])) * sign
-    };
-    let inside = |q: [f32; 2], a: [f32; 2], b: [f32; 2], c: [f32; 2]| -> bool {
-        let d1 = ((b[0] - a[0]) * (q[1] - a[1]) - (b[1] - a[1]) * (q[0] - a[0])) * sign;
-        let d2 = ((c[0] - b[0]) * (q[1] - b[1]) - (c[1] - b[1]) * (q[0] - b[0])) * sign;
-        let d3 = ((a[0] - c[0]) * (q[1] - c[1]) - (a[1] - c[1]) * (q[0] - c[0])) * sign;
-        d1 >= 0.0 && d2 >= 0.0 && d3 >= 0.0
-    };
-    let mut idx: Vec<usize> = (0..n).collect();
-    let mut out = Vec::with_capacity(n - 2);
-    let mut i = 0;
-    let mut since_clip = 0;
-    while idx.len() > 3 {
-        let m = idx.len();
-        let (ia, ib, ic) = (idx[(i + m - 1) % m], idx[i % m], idx[(i + 1) % m]);
-        let (a, b, c) = (p[ia], p[ib], p[ic]);
-        let cr = cross(a, b, c);
-        let is_ear = if cr == 0.0 {
-            true
-        } else if cr > 0.0 {
-            !idx.iter().any(|&k| {
-                k != ia
-                    && k != ib
-                    && k != ic
-                    && p[k] != a
-                    && p[k] != b
-                    && p[k] != c
-                    && inside(p[k], a, b, c)
-            })
-        } else {
-            false
-        };
-        if is_ear {
-            if cr != 0.0 {
-                out.push([ia, ib, ic]);
-            }
-            idx.remove(i % m);
-            since_clip = 0;
-            if i >= idx.len() {
-                i = 0;
-            }
-        } else {
-            i = (i + 1) % m;
-            since_clip += 1;
-            if since_clip > m {
-                return None;
-            }
-        }
-    }
-    if let [a, b, c] = idx[..] {
-        if cross(p[a], p[b], p[c]) != 0.0 {
-            out.push([a, b, c]);
-        }
-    }
-    Some(out)
-}
-
-#[cfg(test)]
-mod ear_tests {
-    use super::*;
-
-    fn area(vs: &[Vec3A], tris: &[[usize; 3]]) -> f32 {
-        tris.iter()
-            .map(|t| (vs[t[1]] - vs[t[0]]).cross(vs[t[2]] - vs[t[0]]).z * 0.5)
-            .sum()
-    }
-
-    #[test]
-    fn concave_polygon_triangulates_exactly() {
-        // "L" shape of area 3, CCW
-        let vs: Vec<Vec3A> = [[0., 0.], [2., 0.], [2., 1.], [1., 1.], [1., 2.], [0., 2.]]
-            .iter()
-            .map(|a| Vec3A::new(a[0], a[1], 0.0))
-            .collect();
-        let t = ear_clip(&vs, Vec3A::Z).unwrap();
-        assert_eq!(t.len(), 4);
-        assert!((area(&vs, &t) - 3.0).abs() < 1e-6);
-        // every triangle keeps the winding (positive z area)
-        assert!(t
-            .iter()
-            .all(|t| (vs[t[1]] - vs[t[0]]).cross(vs[t[2]] - vs[t[0]]).z > 0.0));
-        // a gear-like star: 2k points alternating radius
-        let k = 72;
-        let star: Vec<Vec3A> = (0..2 * k)
-            .map(|i| {
-                let a = i as f32 / (2 * k) as f32 * std::f32::consts::TAU;
-                let r = if i % 2 == 0 { 1.0 } else { 0.8 };
-                Vec3A::new(r * a.cos(), r * a.sin(), 0.5)
-            })
-            .collect();
-        let t = ear_clip(&star, Vec3A::Z).unwrap();
-        assert_eq!(t.len(), 2 * k - 2);
-        let mut want = 0.0;
-        for i in 0..star.len() {
-            let a = star[i];
-            let b = star[(i + 1) % star.len()];
-            want += (a.x * b.y - b.x * a.y) * 0.5;
-        }
-        assert!((area(&star, &t) - want).abs() < 1e-4);
-        // clockwise input keeps its (clockwise) winding
-        let rev: Vec<Vec3A> = vs.iter().rev().copied().collect();
-        let t = ear_clip(&rev, -Vec3A::Z).unwrap();
-        assert!((area(&rev, &t) + 3.0).abs() < 1e-6);
     }
 }

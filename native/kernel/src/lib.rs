@@ -23,9 +23,10 @@
 //!   allocating; [`files`]: the files a scene may read (regular files only, size-checked, and
 //!   referenced files confined to the scene's folder by [`files::Confinement`]).
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
-//!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (polygons
-//!   are ear-clipped into triangles, smooth patches keep vertex normals), cones/cylinders,
-//!   infinite planes; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes.
+//!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
+//!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
+//!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
+//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes.
 //! - [`camera`], [`ray`], [`material`], [`light`]: the Whitted model's ingredients;
 //!   [`integrator`]: the [`Integrator`] trait and [`Whitted`] (shading rules documented there).
 //! - [`render`]: [`Settings`], [`trace_span`], [`render_image`] (SPD corner mode, stratified
@@ -50,6 +51,7 @@ pub mod limits;
 pub mod material;
 pub mod nff;
 pub mod obj;
+pub mod polygon;
 pub mod ray;
 pub mod render;
 pub mod scene;

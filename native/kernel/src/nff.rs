@@ -11,8 +11,11 @@
 //! - the ambient term is that same value times the surface colour and Kd (ambient light is
 //!   reflected diffusely; so a clear glass with Kd 0.1 does not glow at every interface);
 //! - colours are display values, as the SPD's own pictures show them ([`Scene::display_referred`]);
-//! - a polygon with 3 vertices becomes a triangle; larger ones (also concave, e.g. the 144-gons
-//!   of `gears`) are tested with the crossing rule; degenerate (zero-area) ones are dropped;
+//! - a polygon with 3 vertices becomes a triangle; a simple one of up to 1024 (also concave,
+//!   e.g. the 144-gons of `gears`) is ear-clipped into triangles; any other (larger, or one
+//!   ear clipping gives up on, as on most self-intersecting ones) is tested with the even-odd
+//!   crossing rule, in O(log n) per ray ([`crate::polygon`]); degenerate (zero-area) ones are
+//!   dropped;
 //! - a `pp` patch is triangulated as a fan (SPD patches are always triangles) with its vertex
 //!   normals interpolated for smooth shading;
 //! - negative radii (both, for cones) make the object visible only from the inside.

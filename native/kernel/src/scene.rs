@@ -4,10 +4,11 @@ use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
 use crate::files;
 use crate::files::Unreadable;
-use crate::geometry::{ear_clip, hit_triangle, make_cone, make_polygon, Aabb, Geometry, Shape};
+use crate::geometry::{hit_triangle, make_cone, Aabb, Geometry, Shape};
 use crate::light::Light;
 use crate::limits;
 use crate::material::Material;
+use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
 use crate::Error;
 use glam::Vec3A;
@@ -514,31 +515,26 @@ impl SceneBuilder {
             return self.triangle([*a, *b, *c], None, material);
         }
         self.room()?;
+        let Some(plane) = polygon::plane(verts) else {
+            return Ok(());
+        };
         // triangulate: triangles are much cheaper to test and bound than large polygons
-        let mut scratch = Vec::new();
-        if let Some(p) = make_polygon(verts, 0, &mut scratch) {
-            if let Some(tris) = ear_clip(verts, p.normal) {
-                let before = self.geom.shapes.len();
-                for t in tris {
-                    let (Some(a), Some(b), Some(c)) =
-                        (verts.get(t[0]), verts.get(t[1]), verts.get(t[2]))
-                    else {
-                        continue;
-                    };
-                    self.triangle_inner([*a, *b, *c], None, material)?;
-                }
-                if self.geom.shapes.len() > before {
-                    self.source_count += 1;
-                }
-                return Ok(());
+        if let Some(tris) = ear_clip(verts, plane.normal) {
+            let before = self.geom.shapes.len();
+            for t in tris {
+                let (Some(a), Some(b), Some(c)) =
+                    (verts.get(t[0]), verts.get(t[1]), verts.get(t[2]))
+                else {
+                    continue;
+                };
+                self.triangle_inner([*a, *b, *c], None, material)?;
             }
-        } else {
+            if self.geom.shapes.len() > before {
+                self.source_count += 1;
+            }
             return Ok(());
         }
-        let first = self.geom.poly_verts.len() as u32;
-        if let Some(p) = make_polygon(verts, first, &mut self.geom.poly_verts) {
-            let k = self.geom.polys.len() as u32;
-            self.geom.polys.push(p);
+        if let Some(k) = self.geom.polygons.add(verts, plane) {
             self.poly_bounds
                 .push(verts.iter().fold(Aabb::EMPTY, |b, v| b.grow(*v)));
             self.push(Shape::Polygon(k), material, NO_NORMALS);
@@ -609,6 +605,7 @@ impl SceneBuilder {
             .filter_map(|r| src(r).and_then(|i| self.info.get(i as usize).copied()))
             .collect();
         self.geom.shapes = shapes;
+        self.geom.polygons.shrink_to_fit();
         let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
         let camera = self.camera.unwrap_or_else(|| {
             Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
