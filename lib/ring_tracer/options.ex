@@ -47,10 +47,6 @@ defmodule RingTracer.Options do
   @spec maxima() :: %{children: pos_integer(), atoms: pos_integer()}
   def maxima, do: %{children: @max_children, atoms: @max_atoms}
 
-  @doc "The option names and their defaults."
-  @spec defaults() :: keyword()
-  def defaults, do: Enum.map(@schema, fn {k, {_, d}} -> {k, d} end)
-
   @doc """
   Validates `opts` and fills in defaults.
 
