@@ -239,7 +239,7 @@ defmodule RingTracer do
   (unless the render had finished: then its result was the final message).
   Returns `:ok`.
   """
-  @spec cancel(%{pid: pid()}) :: :ok
+  @spec cancel(%{:pid => pid(), optional(atom()) => term()}) :: :ok
   def cancel(%{pid: pid}) do
     ref = Process.monitor(pid)
     send(pid, {:cancel, self(), ref})
