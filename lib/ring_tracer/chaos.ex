@@ -284,11 +284,15 @@ defmodule RingTracer.Chaos do
       {RingTracer, ^id, final} ->
         {st, final}
     after
-      left ->
-        :ok = RingTracer.cancel(st.handle)
-        drain(id)
-        {st, :hung}
+      left -> {cancel(st), :hung}
     end
+  end
+
+  # No result in time: the job is cancelled, and its last messages dropped.
+  defp cancel(%{handle: handle} = st) do
+    :ok = RingTracer.cancel(handle)
+    drain(handle.id)
+    st
   end
 
   defp drain(id) do
