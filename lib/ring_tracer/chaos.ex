@@ -74,6 +74,7 @@ defmodule RingTracer.Chaos do
           differs: boolean(),
           atoms_differing: non_neg_integer(),
           messages_per_atom: float() | nil,
+          messages: %{atom() => non_neg_integer()},
           children_lost: non_neg_integer(),
           grandchild_restarts: non_neg_integer(),
           redone: non_neg_integer(),
@@ -470,6 +471,7 @@ defmodule RingTracer.Chaos do
       differs: false,
       atoms_differing: 0,
       messages_per_atom: nil,
+      messages: %{},
       children_lost: 0,
       grandchild_restarts: 0,
       redone: 0,
@@ -511,6 +513,7 @@ defmodule RingTracer.Chaos do
       differs: result.pixels != reference,
       atoms_differing: differing,
       messages_per_atom: Result.per_atom(result).messages,
+      messages: Map.new(result.messages, fn {kind, m} -> {kind, m.count} end),
       children_lost: lost_children,
       grandchild_restarts: Enum.sum(Enum.map(result.children, & &1.grandchild_restarts)),
       redone: result.redone
@@ -641,31 +644,44 @@ defmodule RingTracer.Chaos do
         do: [],
         else: ["nodes that dropped without a fault: " <> Enum.join(report.pool.unplanned, ", ")]
 
+    worst =
+      if t.worst,
+        do: ["the most messages per atom: job #{t.worst.job.index}: " <> describe(t.worst)],
+        else: []
+
     Enum.join(
       [header | lines] ++
-        unplanned ++ if(bad == [], do: [], else: ["jobs that went wrong:" | bad]),
+        worst ++ unplanned ++ if(bad == [], do: [], else: ["jobs that went wrong:" | bad]),
       "\n"
     )
   end
 
   defp messages(%{median_messages_per_atom: nil}), do: "-"
 
-  defp messages(t) do
-    w = t.worst
+  defp messages(t),
+    do:
+      "#{fmt(t.median_messages_per_atom)} / #{fmt(t.worst.messages_per_atom)} (job #{t.worst.job.index})"
 
-    "#{fmt(t.median_messages_per_atom)} / #{fmt(w.messages_per_atom)} " <>
-      "(job #{w.job.index}: #{w.job.scene}, #{w.job.strategy}, #{w.job.children}x#{w.job.atoms}, " <>
-      "faults #{faults(w)})"
-  end
-
-  @doc "One line about a job: what it was, its faults and what went wrong."
+  @doc """
+  One line about a job: what it was, its faults, what its result says
+  happened (children lost, also to other jobs' node faults; grandchildren
+  restarted; atoms handed out again; messages by kind) and what went wrong.
+  """
   @spec describe(outcome()) :: String.t()
   def describe(o) do
     j = o.job
 
+    messages = o.messages |> Enum.sort() |> Enum.map_join(" ", fn {kind, n} -> "#{kind} #{n}" end)
+
     "#{o.status}, #{j.scene}, #{j.strategy}, #{j.children} children x #{j.atoms} atoms, " <>
-      "faults #{faults(o)}; lost #{o.lost}, twice #{o.twice}, " <>
-      "differing atoms #{o.atoms_differing}" <> if(o.error, do: "; #{o.error}", else: "")
+      "faults #{faults(o)}; children lost #{o.children_lost}, grandchildren restarted " <>
+      "#{o.grandchild_restarts}, atoms redone #{o.redone}; lost #{o.lost}, twice #{o.twice}, " <>
+      "differing atoms #{o.atoms_differing}; " <>
+      if(o.messages_per_atom,
+        do: "messages per atom #{fmt(o.messages_per_atom)} (#{messages}), ",
+        else: ""
+      ) <>
+      "#{o.elapsed_ms} ms" <> if(o.error, do: "; #{o.error}", else: "")
   end
 
   defp faults(o) do
