@@ -27,6 +27,7 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   use Mix.Task
 
   alias RingTracer.Chaos
+  alias RingTracer.Chaos.Plan
 
   @switches [
     seed: :integer,
@@ -111,20 +112,19 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   defp convert({:weights, text}) do
     given =
       Map.new(names(text), fn pair ->
-        with [kind, w] <- String.split(pair, "="),
-             kind when kind in ~w(grandchild child node freeze) <- kind,
+        with [name, w] <- String.split(pair, "="),
+             kind when kind != nil <- Enum.find(Plan.kinds(), &(Atom.to_string(&1) == name)),
              {w, ""} when w >= 0 <- Integer.parse(w) do
-          {String.to_existing_atom(kind), w}
+          {kind, w}
         else
           _ ->
             Mix.raise(
-              "--weights takes KIND=N,... with KIND grandchild, child, node or freeze; got #{pair}"
+              "--weights takes KIND=N,... with KIND one of #{Enum.join(Plan.kinds(), ", ")}; got #{pair}"
             )
         end
       end)
 
-    weights =
-      Enum.map(RingTracer.Chaos.Plan.default_weights(), fn {k, w} -> {k, Map.get(given, k, w)} end)
+    weights = Enum.map(Plan.default_weights(), fn {k, w} -> {k, Map.get(given, k, w)} end)
 
     if Enum.all?(weights, &(elem(&1, 1) == 0)), do: Mix.raise("--weights leaves no fault kind")
     {:weights, weights}
