@@ -149,6 +149,7 @@ defmodule RingTracer.Chaos do
     opts = Keyword.merge(defaults(), opts)
     opts = Keyword.put(opts, :freeze, opts[:freeze] || 2 * opts[:liveness])
     t0 = System.monotonic_time(:millisecond)
+    check_options(opts)
     paths = Map.new(opts[:scenes], &{&1, scene_path(&1)})
     references = Map.new(paths, fn {name, path} -> {name, reference(path, opts)} end)
 
@@ -200,6 +201,24 @@ defmodule RingTracer.Chaos do
       }
     after
       Pool.stop(pool)
+    end
+  end
+
+  # The largest job the plan can draw must be one render/2 accepts, or
+  # every job would fail on its options.
+  defp check_options(opts) do
+    job = [
+      children: opts[:children].last,
+      atoms: opts[:atoms].last,
+      speeds: [opts[:slowdown].first, opts[:slowdown].last],
+      width: opts[:width],
+      height: opts[:height],
+      liveness: opts[:liveness]
+    ]
+
+    case RingTracer.Options.validate(job) do
+      {:ok, _} -> :ok
+      {:error, error} -> raise ArgumentError, "chaos soak: " <> Exception.message(error)
     end
   end
 

@@ -12,10 +12,14 @@ defmodule Mix.Tasks.RingTracer.Chaos do
                             [--scenes balls_s2.nff,tetra_s3.nff,...] [--faults-per-job 2]
                             [--weights grandchild=3,child=3,node=1,freeze=1]
                             [--strategies ring,master,steal,static]
+                            [--children 3-6] [--atoms 4-8] [--slowdown 300-1000]
                             [--width 96] [--height 72] [--liveness 1500] [--freeze MS]
                             [--timeout 60000] [--only 4,17] [--verbose]
 
-  `--scenes` takes names under `priv/scenes` or paths; `--weights` how often
+  `--scenes` takes names under `priv/scenes` or paths; `--children`,
+  `--atoms` (per child) and `--slowdown` (each child's speed factor, see
+  `RingTracer.render/2`'s `:speeds`) are ranges the plan draws from, for
+  each job; `--weights` how often
   each fault kind is drawn (0 leaves it out); `--liveness` is the jobs'
   liveness timeout and `--freeze` how long a frozen node stays stopped
   (default twice the liveness); `--only` reruns some jobs of the seed's plan
@@ -38,6 +42,9 @@ defmodule Mix.Tasks.RingTracer.Chaos do
     faults_per_job: :integer,
     weights: :string,
     strategies: :string,
+    children: :string,
+    atoms: :string,
+    slowdown: :string,
     width: :integer,
     height: :integer,
     liveness: :integer,
@@ -62,6 +69,9 @@ defmodule Mix.Tasks.RingTracer.Chaos do
           if verbose,
             do: Mix.shell().info("job #{outcome.job.index}: #{Chaos.describe(outcome)}")
         end)
+      rescue
+        # A missing scene, or jobs that render/2 would refuse.
+        e in ArgumentError -> Mix.raise(Exception.message(e))
       after
         Logger.configure(level: previous)
       end
@@ -98,6 +108,19 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   end
 
   defp convert({:scenes, list}), do: {:scenes, names(list)}
+
+  defp convert({key, text}) when key in [:children, :atoms, :slowdown] do
+    range =
+      case Enum.map(String.split(text, "-"), &Integer.parse/1) do
+        [{n, ""}] -> n..n
+        [{a, ""}, {b, ""}] when a <= b -> a..b
+        _ -> nil
+      end
+
+    if range && range.first > 0,
+      do: {key, range},
+      else: Mix.raise("--#{key} takes N or MIN-MAX (positive integers), got #{text}")
+  end
 
   defp convert({:strategies, list}) do
     known = RingTracer.Strategy.names()

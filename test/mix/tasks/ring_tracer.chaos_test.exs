@@ -57,12 +57,32 @@ defmodule Mix.Tasks.RingTracer.ChaosTest do
     assert_raise Mix.Error, ~r/--jobs must be positive/, fn -> Task.parse(~w(--jobs 0)) end
     assert_raise Mix.Error, ~r/unexpected arguments/, fn -> Task.parse(~w(extra)) end
 
+    assert_raise Mix.Error, ~r/--children takes N or MIN-MAX/, fn ->
+      Task.parse(~w(--children 6-3))
+    end
+
+    assert Task.parse(~w(--children 8-16 --atoms 4 --slowdown 1-1)) == [
+             children: 8..16,
+             atoms: 4..4,
+             slowdown: 1..1
+           ]
+
     assert Task.parse(~w(--seed 4 --scenes a.nff,b.nff --only 2,5 --weights node=2)) == [
              seed: 4,
              scenes: ["a.nff", "b.nff"],
              only: [2, 5],
              weights: [grandchild: 3, child: 3, node: 2, freeze: 1]
            ]
+  end
+
+  test "a missing scene, or jobs render/2 would refuse, stop the soak before any job" do
+    Mix.Task.run("app.start")
+
+    assert_raise Mix.Error, ~r/no scene nowhere\.nff/, fn ->
+      Task.run(~w(--scenes nowhere.nff))
+    end
+
+    assert_raise Mix.Error, ~r/:speeds/, fn -> Task.run(~w(--slowdown 10-5000)) end
   end
 
   defp chaos_nodes,
