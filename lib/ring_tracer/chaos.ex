@@ -81,11 +81,16 @@ defmodule RingTracer.Chaos do
           elapsed_ms: non_neg_integer()
         }
 
-  @typedoc "What `run/1` returns: the options used, every job's outcome, the pool's figures."
+  @typedoc """
+  What `run/2` returns: the options used, every job's outcome, the pool's
+  figures, and the parents and children still alive on this node 5 s after
+  the last job ended (none should be: no process of a job outlives it).
+  """
   @type report :: %{
           options: keyword(),
           outcomes: [outcome()],
           pool: Pool.stats(),
+          left_behind: non_neg_integer(),
           elapsed_ms: non_neg_integer()
         }
 
@@ -197,10 +202,28 @@ defmodule RingTracer.Chaos do
         options: opts,
         outcomes: outcomes,
         pool: Pool.stats(pool),
+        left_behind: left_behind(),
         elapsed_ms: System.monotonic_time(:millisecond) - t0
       }
     after
       Pool.stop(pool)
+    end
+  end
+
+  # Parents and children of any job still alive on this node, once they
+  # have had 5 s to go.
+  defp left_behind(tries \\ 50) do
+    n =
+      Enum.sum(
+        for sup <- [RingTracer.Jobs, RingTracer.Children],
+            do: DynamicSupervisor.count_children(sup).active
+      )
+
+    if n == 0 or tries == 0 do
+      n
+    else
+      Process.sleep(100)
+      left_behind(tries - 1)
     end
   end
 
@@ -556,7 +579,7 @@ defmodule RingTracer.Chaos do
   atoms lost and traced twice, images differing, messages per atom.
   """
   @spec totals(report()) :: map()
-  def totals(%{outcomes: outcomes, pool: pool}) do
+  def totals(%{outcomes: outcomes, pool: pool} = report) do
     faults = Enum.flat_map(outcomes, & &1.faults)
     count = fn pred -> Enum.count(outcomes, pred) end
     sum = fn key -> outcomes |> Enum.map(&Map.fetch!(&1, key)) |> Enum.sum() end
@@ -584,6 +607,7 @@ defmodule RingTracer.Chaos do
       grandchild_restarts: sum.(:grandchild_restarts),
       redone: sum.(:redone),
       nodes_replaced: pool.replaced,
+      left_behind: report.left_behind,
       nodes_unplanned: length(pool.unplanned),
       atoms: sum.(:atoms),
       lost: sum.(:lost),
@@ -597,11 +621,14 @@ defmodule RingTracer.Chaos do
     }
   end
 
-  @doc "Whether the soak passed: no atom lost or traced twice, no image differing."
+  @doc """
+  Whether the soak passed: no atom lost or traced twice, no image
+  differing, no process of a job left behind.
+  """
   @spec passed?(report()) :: boolean()
   def passed?(report) do
     t = totals(report)
-    t.lost == 0 and t.twice == 0 and t.images_differing == 0
+    t.lost == 0 and t.twice == 0 and t.images_differing == 0 and t.left_behind == 0
   end
 
   @doc "The report as the lines the mix task prints."
@@ -642,6 +669,7 @@ defmodule RingTracer.Chaos do
           {"atoms lost", "#{t.lost} of #{t.atoms}"},
           {"atoms traced twice", t.twice},
           {"images differing (atoms)", "#{t.images_differing} (#{t.atoms_differing})"},
+          {"parents and children left on this node", t.left_behind},
           {"messages per atom: median / worst", messages(t)}
         ]
 

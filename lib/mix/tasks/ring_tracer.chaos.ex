@@ -6,7 +6,9 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   nodes and freezes nodes at random moments; then prints jobs run, faults
   injected by kind, atoms lost or traced twice, images differing from a
   clean render, and the median and worst messages per atom. It fails (a
-  non-zero exit) if any atom was lost or traced twice or any image differs.
+  non-zero exit) if any atom was lost or traced twice, any image differs,
+  or a parent or child of a job is still alive on this node after the last
+  job.
 
       mix ring_tracer.chaos [--seed 1] [--jobs 100] [--concurrency 3] [--nodes 3]
                             [--scenes balls_s2.nff,tetra_s3.nff,...] [--faults-per-job 2]
@@ -83,7 +85,8 @@ defmodule Mix.Tasks.RingTracer.Chaos do
 
       Mix.raise(
         "chaos soak failed: #{t.lost} atoms lost, #{t.twice} traced twice, " <>
-          "#{t.images_differing} images differing (seed #{report.options[:seed]})"
+          "#{t.images_differing} images differing, #{t.left_behind} processes left " <>
+          "(seed #{report.options[:seed]})"
       )
     end
   end

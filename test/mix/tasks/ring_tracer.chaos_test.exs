@@ -21,6 +21,7 @@ defmodule Mix.Tasks.RingTracer.ChaosTest do
       assert output =~ ~r/atoms lost\s+0 of \d+\n/
       assert output =~ ~r/atoms traced twice\s+0\n/
       assert output =~ ~r/images differing \(atoms\)\s+0 \(0\)\n/
+      assert output =~ ~r/parents and children left on this node\s+0\n/
       refute output =~ "jobs that went wrong"
 
       [injected] = Regex.run(~r/faults injected\s+(\d+)\n/, output, capture: :all_but_first)
