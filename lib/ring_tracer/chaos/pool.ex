@@ -87,7 +87,7 @@ defmodule RingTracer.Chaos.Pool do
 
   @doc "Stops every peer node (resuming frozen ones first) and the pool."
   @spec stop(GenServer.server()) :: :ok
-  def stop(pool), do: GenServer.stop(pool, :normal, 60_000)
+  def stop(pool), do: GenServer.stop(pool, :normal, 120_000)
 
   ## GenServer
 
@@ -105,8 +105,11 @@ defmodule RingTracer.Chaos.Pool do
       count: count,
       # node => %{peer, os_pid, status: :up | :doomed | :frozen | :killed}
       nodes: %{},
-      booting: 0,
       starting: %{},
+      # processes booting a replacement node
+      boots: MapSet.new(),
+      # processes that will resume a frozen node
+      thaws: [],
       pending: [],
       waiting: [],
       started: 0,
@@ -160,15 +163,18 @@ defmodule RingTracer.Chaos.Pool do
   end
 
   @impl GenServer
-  def handle_info({:booted, {:ok, peer, node, os_pid}}, state) do
-    state = %{state | booting: state.booting - 1}
+  def handle_info({:booted, pid, {:ok, peer, node, os_pid}}, state) do
+    state = %{state | boots: MapSet.delete(state.boots, pid)}
     {:noreply, serve_waiting(add(state, {:ok, peer, node, os_pid}))}
   end
 
-  def handle_info({:booted, {:error, _reason}}, state) do
-    # Try again: the pool is kept at its size.
-    {:noreply, boot(%{state | booting: state.booting - 1})}
+  def handle_info({:booted, pid, {:error, _reason}}, state) do
+    # Try again a second later: the pool is kept at its size.
+    Process.send_after(self(), :boot, 1_000)
+    {:noreply, %{state | boots: MapSet.delete(state.boots, pid)}}
   end
+
+  def handle_info(:boot, state), do: {:noreply, boot(state)}
 
   def handle_info({:nodedown, node}, state) do
     case Map.pop(state.nodes, node) do
@@ -216,7 +222,21 @@ defmodule RingTracer.Chaos.Pool do
 
   @impl GenServer
   def terminate(_reason, state) do
-    for {_node, info} <- state.nodes do
+    # Nothing may signal an OS process after the pool: every node is
+    # resumed and stopped below.
+    Enum.each(state.thaws, &Process.exit(&1, :kill))
+    # A node still booting is waited for, so that none outlives the pool.
+    booted =
+      for pid <- state.boots do
+        receive do
+          {:booted, ^pid, {:ok, peer, node, os_pid}} -> {node, %{peer: peer, os_pid: os_pid}}
+          {:booted, ^pid, {:error, _}} -> nil
+        after
+          60_000 -> nil
+        end
+      end
+
+    for {_node, info} <- Map.to_list(state.nodes) ++ Enum.reject(booted, &is_nil/1) do
       signal(info.os_pid, "CONT")
       LocalCluster.stop(info.peer)
       signal(info.os_pid, "KILL")
@@ -273,12 +293,14 @@ defmodule RingTracer.Chaos.Pool do
     signal(info.os_pid, "STOP")
     pool = self()
 
-    spawn_link(fn ->
-      Process.sleep(ms)
-      signal(info.os_pid, "CONT")
-      send(pool, {:thawed, node})
-    end)
+    thaw =
+      spawn_link(fn ->
+        Process.sleep(ms)
+        signal(info.os_pid, "CONT")
+        send(pool, {:thawed, node})
+      end)
 
+    state = %{state | thaws: [thaw | Enum.filter(state.thaws, &Process.alive?/1)]}
     put_in(state.nodes[node], %{info | status: :frozen})
   end
 
@@ -293,8 +315,8 @@ defmodule RingTracer.Chaos.Pool do
   defp boot(state) do
     pool = self()
     %{prefix: prefix, log_level: level} = state
-    spawn(fn -> send(pool, {:booted, boot_now(prefix, level)}) end)
-    %{state | booting: state.booting + 1}
+    pid = spawn(fn -> send(pool, {:booted, self(), boot_now(prefix, level)}) end)
+    %{state | boots: MapSet.put(state.boots, pid)}
   end
 
   defp boot_now(prefix, log_level) do
