@@ -44,6 +44,7 @@ pub mod error;
 pub mod files;
 pub mod film;
 pub mod geometry;
+pub mod instance;
 pub mod integrator;
 pub mod light;
 pub mod limits;
