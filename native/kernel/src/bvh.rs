@@ -6,6 +6,9 @@
 //! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
 //! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
 //! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
+//! The same hierarchy serves two levels for mesh instances ([`crate::instance`]): one over the
+//! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
+//! stack ([`Scratch`] holds both).
 //!
 //! Traversal tests the four child boxes at once with SSE (`Vec4`), using per-ray precomputed
 //! reciprocal direction and near/far plane selection (no min/max per axis). For closest-hit

@@ -25,7 +25,9 @@
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (polygons
 //!   are ear-clipped into triangles, smooth patches keep vertex normals), cones/cylinders,
-//!   infinite planes; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes.
+//!   infinite planes; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes; [`instance`]: a mesh
+//!   referenced many times is stored once (triangles and BVH) and drawn by instances
+//!   (transform, inverse, material) under a top-level BVH.
 //! - [`camera`], [`ray`], [`material`], [`light`]: the Whitted model's ingredients;
 //!   [`integrator`]: the [`Integrator`] trait and [`Whitted`] (shading rules documented there).
 //! - [`render`]: [`Settings`], [`trace_span`], [`render_image`] (SPD corner mode, stratified
