@@ -376,28 +376,7 @@ pub fn parse(
 
     // Mesh references by (file as written, smooth): a mesh referenced once is flattened into
     // the scene, one referenced more often is read once and instanced.
-    let mut mesh_refs: BTreeMap<(&str, bool), usize> = BTreeMap::new();
-    let mut ref_count = 0u64;
-    let mut first_extra = 0..0;
-    for o in &def.objects {
-        if let ObjectDef::Mesh { file, smooth, .. } = o.get_ref() {
-            ref_count += 1;
-            if ref_count > limits::MAX_MESH_REFERENCES as u64 {
-                if first_extra.is_empty() {
-                    first_extra = o.span();
-                }
-            } else {
-                *mesh_refs.entry((file.as_str(), *smooth)).or_default() += 1;
-            }
-        }
-    }
-    limits::check(
-        "mesh reference count",
-        ref_count,
-        limits::MAX_MESH_REFERENCES as u64,
-        "MAX_MESH_REFERENCES",
-    )
-    .map_err(|e| cx.err(first_extra, e.to_string()))?;
+    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, &cx)?;
     let mut shared: BTreeMap<(&str, bool), u32> = BTreeMap::new();
 
     let mut names: BTreeMap<&str, u32> = BTreeMap::new();
@@ -605,6 +584,39 @@ pub fn parse(
     Ok(b.build())
 }
 
+/// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the
+/// first reference past `max` (which is [`limits::MAX_MESH_REFERENCES`]), before any mesh is
+/// read.
+fn mesh_references<'a>(
+    objects: &'a [Spanned<ObjectDef>],
+    max: usize,
+    cx: &Ctx,
+) -> Result<BTreeMap<(&'a str, bool), usize>, Error> {
+    let mut refs: BTreeMap<(&str, bool), usize> = BTreeMap::new();
+    let mut count = 0u64;
+    let mut first_extra = 0..0;
+    for o in objects {
+        if let ObjectDef::Mesh { file, smooth, .. } = o.get_ref() {
+            count += 1;
+            if count > max as u64 {
+                if first_extra.is_empty() {
+                    first_extra = o.span();
+                }
+            } else {
+                *refs.entry((file.as_str(), *smooth)).or_default() += 1;
+            }
+        }
+    }
+    limits::check(
+        "mesh reference count",
+        count,
+        max as u64,
+        "MAX_MESH_REFERENCES",
+    )
+    .map_err(|e| cx.err(first_extra, e.to_string()))?;
+    Ok(refs)
+}
+
 fn matrix_transform(m: &[Vec<f32>]) -> Option<Affine3A> {
     if !(m.len() == 3 || m.len() == 4)
         || m.iter()
@@ -701,6 +713,40 @@ mod tests {
         assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
         let e = err("[camera]\nfrom = [0, 0, 5\n");
         assert!(e.starts_with("s.toml:2:"), "{e}");
+    }
+
+    #[test]
+    fn mesh_references_are_counted_and_bounded_before_any_mesh_is_read() {
+        let mut src = CAM.to_string();
+        for (file, smooth) in [
+            ("a.obj", true),
+            ("b.obj", true),
+            ("a.obj", false),
+            ("a.obj", true),
+        ] {
+            src +=
+                &format!("\n[[objects]]\ntype = \"mesh\"\nfile = \"{file}\"\nsmooth = {smooth}\n");
+        }
+        let def: SceneDef = toml::from_str(&src).unwrap();
+        let cx = Ctx {
+            src: src.as_bytes(),
+            file: "m.toml",
+        };
+        let refs = mesh_references(&def.objects, 4, &cx).unwrap();
+        let want = [
+            (("a.obj", false), 1),
+            (("a.obj", true), 2),
+            (("b.obj", true), 1),
+        ];
+        assert_eq!(refs.into_iter().collect::<Vec<_>>(), want);
+        assert_eq!(
+            mesh_references(&def.objects, 2, &cx)
+                .unwrap_err()
+                .to_string(),
+            "m.toml:15: mesh reference count is 4, more than the limit of 2 \
+             (limits::MAX_MESH_REFERENCES); raise the constant in native/kernel/src/limits.rs \
+             and rebuild"
+        );
     }
 
     #[test]
