@@ -152,6 +152,7 @@ impl Instance {
 
 #[cfg(test)]
 pub(crate) mod tests {
+    use super::{Instance, OWN_MATERIAL};
     use crate::files::Unreadable;
     use crate::scene::{Hit, Scene, SceneBuilder};
     use crate::{render_image, to_srgb8, Material, Ray, Settings};
@@ -240,6 +241,51 @@ pub(crate) mod tests {
         "matrix = [[1, 0.4, 0, 0.2], [0, 0.8, 0.3, -0.1], [0.2, 0, -1.3, 0.5]]",
         "scale = [-1.5, 1, 1]",
     ];
+
+    /// The object-space ray keeps the world ray's `t`: the triangle test and the box test take
+    /// a direction of any length.
+    #[test]
+    fn tests_take_unnormalised_directions() {
+        let (v0, e1, e2) = (Vec3A::new(-1.0, -1.0, 0.0), Vec3A::X * 2.0, Vec3A::Y * 2.0);
+        let o = Vec3A::new(-0.3, -0.2, 4.0);
+        let d = Vec3A::new(0.05, -0.1, -1.0).normalize();
+        let unit = crate::geometry::hit_triangle(v0, e1, e2, &Ray::from_unit(o, d), 0.0, 1e30);
+        let (t, u, v) = unit.unwrap();
+        for k in [1e-3f32, 0.37, 3.0, 250.0] {
+            let (tk, uk, vk) =
+                crate::geometry::hit_triangle(v0, e1, e2, &Ray::scaled(o, d * k), 0.0, 1e30)
+                    .unwrap();
+            assert!((tk * k - t).abs() <= 1e-5 * t, "{k}: {tk}");
+            assert!((uk - u).abs() < 1e-6 && (vk - v).abs() < 1e-6, "{k}");
+        }
+        // through an instance scaled by 3 (the object ray's direction has length 1/3): the
+        // same t as the world ray's
+        let inst = Instance::new(
+            0,
+            Affine3A::from_scale(glam::Vec3::splat(3.0)),
+            OWN_MATERIAL,
+        );
+        let oray = inst.unwrap().object_ray(&Ray::from_unit(o * 3.0, d));
+        assert!((oray.dir.length() - 1.0 / 3.0).abs() < 1e-6);
+        let (ti, _, _) = crate::geometry::hit_triangle(v0, e1, e2, &oray, 0.0, 1e30).unwrap();
+        assert!((ti - 3.0 * t).abs() <= 1e-5 * ti, "{ti} vs {}", 3.0 * t);
+        let boxes = crate::bvh::Bvh::build(&[crate::Aabb {
+            min: Vec3A::new(-1.0, -1.0, -0.1),
+            max: Vec3A::new(1.0, 1.0, 0.1),
+        }])
+        .0;
+        // the box is entered at z = 0.1, t = 3 * 3.9 / |d.z| on the world ray
+        let entry = 3.0 * 3.9 / d.z.abs();
+        let mut scratch = crate::Scratch::new();
+        for (tmax, want) in [(entry * 0.999, false), (entry * 1.001, true)] {
+            let mut seen = false;
+            boxes.traverse::<true>(&oray, tmax, &mut scratch, |_, _, t| {
+                seen = true;
+                t
+            });
+            assert_eq!(seen, want, "tmax {tmax}, entry {entry}");
+        }
+    }
 
     fn close(a: Vec3A, b: Vec3A) -> bool {
         (a - b).abs().max_element() <= 1e-4
