@@ -60,9 +60,11 @@ fn main() {
         std::process::exit(1);
     }
     println!(
-        "{}: {} prims, setup {:.3}s, trace {:.3}s, {:?}",
+        "{}: {} prims ({} stored, {} mesh instances), setup {:.3}s, trace {:.3}s, {:?}",
         args[0],
         scene.primitive_count(),
+        scene.stored_primitive_count(),
+        scene.instance_count(),
         setup,
         trace,
         stats

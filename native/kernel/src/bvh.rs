@@ -6,6 +6,9 @@
 //! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
 //! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
 //! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
+//! The same hierarchy serves two levels for mesh instances ([`crate::instance`]): one over the
+//! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
+//! stack ([`Scratch`] holds both).
 //!
 //! Traversal tests the four child boxes at once with SSE (`Vec4`), using per-ray precomputed
 //! reciprocal direction and near/far plane selection (no min/max per axis). For closest-hit
@@ -202,12 +205,18 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
     (nodes, order)
 }
 
-/// Reusable traversal stack (one per thread; avoids allocation and zeroing per ray).
+/// A traversal stack: (node, unused, entry distance) per deferred inner node.
+pub(crate) type Stack = Vec<(u32, u32, f32)>;
+
+/// Reusable traversal stacks (one per thread; avoids allocation and zeroing per ray).
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
-    stack: Vec<(u32, u32, f32)>,
-    /// Last occluder found per shadow-cache slot (`u32::MAX` = none).
-    pub(crate) shadow_cache: Vec<u32>,
+    pub(crate) stack: Stack,
+    /// The stack of a mesh's own BVH, traversed from a leaf of the instances' BVH.
+    pub(crate) inner_stack: Stack,
+    /// Last occluder found per shadow-cache slot: (instance or `u32::MAX` for the scene's own
+    /// primitives, primitive); `(u32::MAX, u32::MAX)` = none.
+    pub(crate) shadow_cache: Vec<(u32, u32)>,
     /// Work done with this scratch so far: BVH nodes visited plus primitives handed to the
     /// leaf test (see [`crate::RayStats::work`]).
     pub(crate) work: u64,
@@ -218,6 +227,7 @@ impl Scratch {
     pub fn new() -> Scratch {
         Scratch {
             stack: Vec::new(),
+            inner_stack: Vec::new(),
             shadow_cache: Vec::new(),
             work: 0,
         }
@@ -362,16 +372,28 @@ impl Bvh {
     pub fn traverse<const ORDERED: bool>(
         &self,
         ray: &Ray,
-        mut tmax: f32,
+        tmax: f32,
         scratch: &mut Scratch,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
+        self.traverse_in::<ORDERED>(ray, tmax, &mut scratch.stack, &mut scratch.work, visit)
+    }
+
+    /// [`Bvh::traverse`] with the stack and the work counter given apart, so that a leaf visit
+    /// can traverse another hierarchy (a mesh instance's) with a second stack.
+    #[inline(always)]
+    pub fn traverse_in<const ORDERED: bool>(
+        &self,
+        ray: &Ray,
+        mut tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
         mut visit: impl FnMut(usize, usize, f32) -> f32,
     ) -> f32 {
         if self.nodes.is_empty() {
             return tmax;
         }
         let pre = RayPre::new(ray);
-        let stack = &mut scratch.stack;
-        let work = &mut scratch.work;
         let mut sp = 0usize;
         let mut cur = 0u32;
         loop {

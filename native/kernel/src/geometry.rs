@@ -143,7 +143,8 @@ pub(crate) fn hit_sphere(
     None
 }
 
-/// Möller–Trumbore; returns (t, u, v).
+/// Möller–Trumbore; returns (t, u, v). Linear in the direction, so it also takes directions
+/// of any length (t is then in units of it), as mesh instances need.
 #[inline]
 pub(crate) fn hit_triangle(
     v0: Vec3A,

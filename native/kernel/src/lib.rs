@@ -26,7 +26,9 @@
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
 //!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
 //!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
-//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes.
+//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes;
+//!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
+//!   by instances (transform, inverse, material) under a top-level BVH.
 //! - [`camera`], [`ray`], [`material`], [`light`]: the Whitted model's ingredients;
 //!   [`integrator`]: the [`Integrator`] trait and [`Whitted`] (shading rules documented there).
 //! - [`render`]: [`Settings`], [`trace_span`], [`render_image`] (SPD corner mode, stratified
@@ -45,6 +47,7 @@ pub mod error;
 pub mod files;
 pub mod film;
 pub mod geometry;
+pub mod instance;
 pub mod integrator;
 pub mod light;
 pub mod limits;

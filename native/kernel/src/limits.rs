@@ -6,10 +6,11 @@
 //! | [`MAX_PIXELS`] | 67 108 864 (64 Mpixel) | width x height | same, before any pixel buffer exists |
 //! | [`MAX_SAMPLES`] | 16 | S of the SxS samples per pixel | [`crate::Settings::validate`] |
 //! | [`MAX_DEPTH`] | 64 | ray-tree depth | [`crate::Settings::validate`] |
-//! | [`MAX_PRIMITIVES`] | 50 000 000 | internal primitives of a scene | before each primitive is added |
+//! | [`MAX_PRIMITIVES`] | 50 000 000 | primitives stored: internal primitives plus each shared mesh's triangles once | before each primitive is added |
 //! | [`MAX_FILE_BYTES`] | 1 GiB | scene file and each referenced mesh/MTL file | before reading / parsing |
 //! | [`MAX_POLYGON_VERTICES`] | 1 048 576 | vertices of one polygon or patch | NFF: before reading the vertices |
 //! | [`MAX_MESH_TRIANGLES`] | 20 000 000 | triangles of one mesh file | by a scan of the `f` lines before the OBJ reader runs, and again after |
+//! | [`MAX_MESH_REFERENCES`] | 1 000 000 | mesh references (`type = "mesh"` objects) of a TOML scene, so also its mesh instances | by a count of the references before any mesh is read, and before each instance is added |
 //! | [`MAX_LIGHTS`] | 65 536 | lights of a scene | before each light is added |
 //!
 //! Exceeding one gives [`Error::Limit`], whose message names the quantity, the value, the bound
@@ -27,7 +28,9 @@ pub const MAX_PIXELS: u64 = 64 * 1024 * 1024;
 pub const MAX_SAMPLES: u32 = 16;
 /// Largest ray-tree depth (the eye ray is depth 1).
 pub const MAX_DEPTH: u32 = 64;
-/// Largest number of primitives in a scene (after meshes are expanded to triangles).
+/// Largest number of primitives stored for a scene: its internal primitives (after polygons
+/// and flattened meshes are expanded to triangles) plus the triangles of each shared
+/// (instanced) mesh once, however many instances draw it (see [`crate::instance`]).
 pub const MAX_PRIMITIVES: usize = 50_000_000;
 /// Largest scene or mesh file in bytes (1 GiB).
 pub const MAX_FILE_BYTES: u64 = 1 << 30;
@@ -35,6 +38,10 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 pub const MAX_POLYGON_VERTICES: usize = 1 << 20;
 /// Largest number of triangles in one mesh file.
 pub const MAX_MESH_TRIANGLES: usize = 20_000_000;
+/// Largest number of mesh references in a scene, and so of mesh instances. Each instance
+/// costs a few hundred bytes (its transform, inverse, normal matrix and box, and its share
+/// of the instances' BVH), so this bounds them to a few hundred MiB.
+pub const MAX_MESH_REFERENCES: usize = 1_000_000;
 /// Largest number of lights.
 pub const MAX_LIGHTS: usize = 65_536;
 

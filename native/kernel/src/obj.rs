@@ -4,7 +4,9 @@
 //! - as a standalone scene ([`Format::Obj`](crate::Format::Obj)): the mesh with a default
 //!   camera looking at the centre of its bounding box from `centre + (0.3, 0.3, 1.1) * diagonal`
 //!   (45 degrees, +y up), one white light above and behind the camera, 640x480;
-//! - inside a TOML scene (`type = "mesh"`) with a transform.
+//! - inside a TOML scene (`type = "mesh"`) with a transform: flattened into the scene when
+//!   referenced once, else loaded once in its own space and instanced (see
+//!   [`crate::toml_scene`] and [`crate::instance`]).
 //!
 //! Faces are triangulated (fan). Vertex normals, when the file has them, give smooth shading.
 //! MTL `Kd` becomes the material colour (Kd coefficient 0.9), `Ks` (max channel) the specular

@@ -3,6 +3,8 @@
 use glam::Vec3A;
 
 /// A ray `origin + t * dir` with a unit direction and a precomputed safe reciprocal direction.
+/// (Inside the kernel, a ray taken into a mesh instance's object space keeps the length its
+/// direction gets from the transform, see `Ray::scaled`.)
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
     /// Start point.
@@ -33,6 +35,14 @@ impl Ray {
             dir,
             inv_dir: safe.recip(),
         }
+    }
+
+    /// A ray whose direction is used as given, of any non-zero length: a world ray taken into a
+    /// mesh instance's object space, where `t` must name the same points as on the world ray
+    /// (the intersection routines and the box test are linear in the direction).
+    #[inline]
+    pub(crate) fn scaled(origin: Vec3A, dir: Vec3A) -> Ray {
+        Ray::from_unit(origin, dir)
     }
 
     /// The point at distance `t`.

@@ -1,17 +1,19 @@
-//! The scene: camera, background, lights, materials, primitives and their BVH.
+//! The scene: camera, background, lights, materials, primitives and their BVH, and instances
+//! of shared meshes with theirs ([`crate::instance`]).
 
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
 use crate::files;
 use crate::files::Unreadable;
 use crate::geometry::{hit_triangle, make_cone, Aabb, Geometry, Shape};
+use crate::instance::{Instance, Mesh, Tri, OWN_MATERIAL};
 use crate::light::Light;
 use crate::limits;
 use crate::material::Material;
 use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
 use crate::Error;
-use glam::Vec3A;
+use glam::{Affine3A, Vec3A};
 use std::path::{Path, PathBuf};
 
 /// Scene file formats, chosen by extension.
@@ -66,10 +68,21 @@ pub(crate) struct Plane {
 pub struct Hit {
     /// Distance along the (unit-direction) ray.
     pub t: f32,
-    /// Internal primitive index, `0..internal_primitive_count()`: bounded primitives first (in
-    /// BVH order), then planes.
+    /// With `instance == Hit::NO_INSTANCE`: internal primitive index,
+    /// `0..internal_primitive_count()`: bounded primitives first (in BVH order), then planes.
+    /// Otherwise the triangle's index in the instance's mesh (in the mesh's BVH order).
     pub prim: u32,
+    /// Index of the mesh instance hit, `0..instance_count()`, or [`Hit::NO_INSTANCE`].
+    pub instance: u32,
 }
+
+impl Hit {
+    /// [`Hit::instance`] of a hit on one of the scene's own primitives.
+    pub const NO_INSTANCE: u32 = u32::MAX;
+}
+
+/// No shadow-cache entry.
+const NO_CACHE: (u32, u32) = (u32::MAX, u32::MAX);
 
 /// Local surface description at a hit.
 #[derive(Clone, Copy, Debug)]
@@ -96,6 +109,12 @@ pub struct Scene {
     pub(crate) patch_normals: Vec<[Vec3A; 3]>,
     pub(crate) planes: Vec<Plane>,
     pub(crate) bvh: Bvh,
+    /// Shared meshes, each stored once.
+    pub(crate) meshes: Vec<Mesh>,
+    /// References to them, in the order of `instance_bvh`'s leaves.
+    pub(crate) instances: Vec<Instance>,
+    /// The top-level BVH, over the instances' world boxes.
+    pub(crate) instance_bvh: Bvh,
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
     pub(crate) source_count: usize,
@@ -149,14 +168,34 @@ impl Scene {
 
     /// Number of primitives as the scene describes them (a polygon counts once even though it
     /// is triangulated internally; mesh triangles count one each; degenerate ones are dropped).
+    /// A mesh counts its triangles once per reference, whether it is instanced or flattened:
+    /// this is what the image holds, not what is stored (see
+    /// [`Scene::stored_primitive_count`]).
     pub fn primitive_count(&self) -> usize {
         self.source_count
     }
 
-    /// Number of internal primitives (triangles after polygon triangulation, spheres, cones,
-    /// planes); [`Hit::prim`] indexes these.
+    /// Number of the scene's own internal primitives (triangles after polygon triangulation,
+    /// spheres, cones, planes; the triangles of shared meshes are not among them);
+    /// [`Hit::prim`] indexes these when [`Hit::instance`] is [`Hit::NO_INSTANCE`].
     pub fn internal_primitive_count(&self) -> usize {
         self.geom.shapes.len() + self.planes.len()
+    }
+
+    /// Number of primitives held in memory: the internal ones plus each shared mesh's
+    /// triangles once, however many instances draw it. [`limits::MAX_PRIMITIVES`] bounds this.
+    pub fn stored_primitive_count(&self) -> usize {
+        self.internal_primitive_count() + self.meshes.iter().map(|m| m.tris.len()).sum::<usize>()
+    }
+
+    /// Number of shared meshes (each mesh file instanced by the scene, stored once).
+    pub fn mesh_count(&self) -> usize {
+        self.meshes.len()
+    }
+
+    /// Number of mesh instances (references drawn from a shared mesh).
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
     }
 
     /// Whether the scene's colours are display values rather than linear light. NFF scenes are:
@@ -186,7 +225,7 @@ impl Scene {
         &self.camera
     }
 
-    /// Bounding box of the bounded primitives (planes excluded).
+    /// Bounding box of the bounded primitives and the mesh instances (planes excluded).
     pub fn bounds(&self) -> Aabb {
         self.bounds
     }
@@ -221,6 +260,14 @@ impl Scene {
                 }
                 tm
             });
+        let mut instance = Hit::NO_INSTANCE;
+        if !self.instances.is_empty() {
+            if let Some((t, i, p)) = self.intersect_instances(ray, best, scratch) {
+                best = t;
+                instance = i;
+                prim = p;
+            }
+        }
         scratch.work += self.planes.len() as u64;
         for (k, pl) in self.planes.iter().enumerate() {
             let dn = pl.normal.dot(ray.dir);
@@ -229,14 +276,110 @@ impl Scene {
                 if t > 0.0 && t < best {
                     best = t;
                     prim = (shapes.len() + k) as u32;
+                    instance = Hit::NO_INSTANCE;
                 }
             }
         }
         if prim == u32::MAX {
             None
         } else {
-            Some(Hit { t: best, prim })
+            Some(Hit {
+                t: best,
+                prim,
+                instance,
+            })
         }
+    }
+
+    /// Closest hit on a mesh instance before `tmax`: (t, instance, triangle). Without
+    /// `ORDERED`, the first hit found (any-hit, for shadow rays; then t is negative).
+    #[inline]
+    fn instances_hit<const ORDERED: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<(f32, u32, u32)> {
+        let instances = &self.instances;
+        let meshes = &self.meshes;
+        let inner = &mut scratch.inner_stack;
+        let mut inner_work = 0u64;
+        let mut found = None;
+        let t = self.instance_bvh.traverse_in::<ORDERED>(
+            ray,
+            tmax,
+            &mut scratch.stack,
+            &mut scratch.work,
+            |first, count, tmax| {
+                let mut tm = tmax;
+                let Some(range) = instances.get(first..first + count) else {
+                    return tm;
+                };
+                for (k, inst) in range.iter().enumerate() {
+                    let Some(mesh) = meshes.get(inst.mesh as usize) else {
+                        continue;
+                    };
+                    let oray = inst.object_ray(ray);
+                    let r = mesh.bvh.traverse_in::<ORDERED>(
+                        &oray,
+                        tm,
+                        inner,
+                        &mut inner_work,
+                        |f, c, tm2| {
+                            let mut t2 = tm2;
+                            if let Some(tris) = mesh.tris.get(f..f + c) {
+                                for (j, tri) in tris.iter().enumerate() {
+                                    if let Some((t, _, _)) =
+                                        hit_triangle(tri[0], tri[1], tri[2], &oray, 0.0, t2)
+                                    {
+                                        found = Some(((first + k) as u32, (f + j) as u32));
+                                        if !ORDERED {
+                                            return -1.0;
+                                        }
+                                        t2 = t;
+                                    }
+                                }
+                            }
+                            t2
+                        },
+                    );
+                    if !ORDERED && r < 0.0 {
+                        return -1.0;
+                    }
+                    tm = r;
+                }
+                tm
+            },
+        );
+        scratch.work += inner_work;
+        found.map(|(i, p)| (t, i, p))
+    }
+
+    /// [`Scene::instances_hit`] for closest-hit queries.
+    #[inline]
+    fn intersect_instances(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<(f32, u32, u32)> {
+        self.instances_hit::<true>(ray, tmax, scratch)
+    }
+
+    /// Whether `ray` hits triangle `prim` of instance `instance` before `tmax`.
+    #[inline]
+    fn hits_instance_triangle(&self, instance: u32, prim: u32, ray: &Ray, tmax: f32) -> bool {
+        let Some(inst) = self.instances.get(instance as usize) else {
+            return false;
+        };
+        let Some(tri) = self
+            .meshes
+            .get(inst.mesh as usize)
+            .and_then(|m| m.tris.get(prim as usize))
+        else {
+            return false;
+        };
+        hit_triangle(tri[0], tri[1], tri[2], &inst.object_ray(ray), 0.0, tmax).is_some()
     }
 
     /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
@@ -261,15 +404,22 @@ impl Scene {
     ) -> bool {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
-        if let Some(&c) = scratch.shadow_cache.get(slot) {
-            if let Some(s) = shapes.get(c as usize) {
+        if let Some(&(ci, c)) = scratch.shadow_cache.get(slot) {
+            if ci == Hit::NO_INSTANCE {
+                if let Some(s) = shapes.get(c as usize) {
+                    scratch.work += 1;
+                    if geom.hit(s, ray, 0.0, tmax).is_some() {
+                        return true;
+                    }
+                }
+            } else {
                 scratch.work += 1;
-                if geom.hit(s, ray, 0.0, tmax).is_some() {
+                if self.hits_instance_triangle(ci, c, ray, tmax) {
                     return true;
                 }
             }
         }
-        let mut found = u32::MAX;
+        let mut found = NO_CACHE;
         let mut mailbox = Mailbox::default();
         let r = self
             .bvh
@@ -280,17 +430,28 @@ impl Scene {
                             continue;
                         }
                         if geom.hit(s, ray, 0.0, tmax).is_some() {
-                            found = (first + k) as u32;
+                            found = (Hit::NO_INSTANCE, (first + k) as u32);
                             return -1.0;
                         }
                     }
                 }
                 tmax
             });
+        let r = if r >= 0.0 && !self.instances.is_empty() {
+            match self.instances_hit::<false>(ray, tmax, scratch) {
+                Some((_, i, p)) => {
+                    found = (i, p);
+                    -1.0
+                }
+                None => r,
+            }
+        } else {
+            r
+        };
         if r < 0.0 {
             if slot != usize::MAX && slot < 1 << 20 {
                 if scratch.shadow_cache.len() <= slot {
-                    scratch.shadow_cache.resize(slot + 1, u32::MAX);
+                    scratch.shadow_cache.resize(slot + 1, NO_CACHE);
                 }
                 if let Some(c) = scratch.shadow_cache.get_mut(slot) {
                     *c = found;
@@ -312,6 +473,9 @@ impl Scene {
     #[inline]
     pub(crate) fn surface(&self, hit: &Hit, ray: &Ray) -> Surface {
         let p = ray.at(hit.t);
+        if hit.instance != Hit::NO_INSTANCE {
+            return self.instance_surface(hit, ray, p);
+        }
         let i = hit.prim as usize;
         if let Some(shape) = self.geom.shapes.get(i) {
             let ng = self.geom.geometric_normal(shape, p);
@@ -350,6 +514,58 @@ impl Scene {
                 ns: ng,
                 material,
             }
+        }
+    }
+
+    /// [`Scene::surface`] of a hit on a mesh instance: the geometric normal from the
+    /// transformed edges, vertex normals through the inverse transpose (each normalised, then
+    /// interpolated), as a flattened copy of the mesh would give them.
+    fn instance_surface(&self, hit: &Hit, ray: &Ray, p: Vec3A) -> Surface {
+        let none = Surface {
+            p,
+            ng: Vec3A::Z,
+            ns: Vec3A::Z,
+            material: 0,
+        };
+        let Some(inst) = self.instances.get(hit.instance as usize) else {
+            return none;
+        };
+        let Some(mesh) = self.meshes.get(inst.mesh as usize) else {
+            return none;
+        };
+        let i = hit.prim as usize;
+        let (Some(tri), Some(info)) = (mesh.tris.get(i), mesh.info.get(i)) else {
+            return none;
+        };
+        let ng = inst.geometric_normal(tri);
+        let mut ns = ng;
+        if let Some(nn) = mesh.patch_normals.get(info.normals as usize) {
+            let oray = inst.object_ray(ray);
+            let (u, v) = hit_triangle(
+                tri[0],
+                tri[1],
+                tri[2],
+                &oray,
+                f32::NEG_INFINITY,
+                f32::INFINITY,
+            )
+            .map_or((1.0 / 3.0, 1.0 / 3.0), |h| (h.1, h.2));
+            let n = inst.normal(nn[0]) * (1.0 - u - v)
+                + inst.normal(nn[1]) * u
+                + inst.normal(nn[2]) * v;
+            if let Some(n) = n.try_normalize() {
+                ns = if n.dot(ng) < 0.0 { -n } else { n };
+            }
+        }
+        Surface {
+            p,
+            ng,
+            ns,
+            material: if inst.material == OWN_MATERIAL {
+                info.material
+            } else {
+                inst.material
+            },
         }
     }
 
@@ -400,11 +616,54 @@ pub(crate) struct SceneBuilder {
     patch_normals: Vec<[Vec3A; 3]>,
     planes: Vec<Plane>,
     poly_bounds: Vec<Aabb>,
-    /// Primitives as the scene file counts them (a triangulated polygon is one).
+    /// Primitives as the scene file counts them (a triangulated polygon is one; an instanced
+    /// mesh counts its triangles once per instance).
     source_count: usize,
+    /// Shared meshes, built by [`SceneBuilder::add_mesh`].
+    meshes: Vec<Mesh>,
+    /// Instances of them, and their world boxes.
+    instances: Vec<Instance>,
+    instance_bounds: Vec<Aabb>,
+    /// Primitives stored elsewhere that count towards the bound: the triangles of the shared
+    /// meshes (and, in a builder from [`SceneBuilder::for_mesh`], the scene's primitives).
+    stored_elsewhere: usize,
     /// [`limits::MAX_PRIMITIVES`]; a field only so tests can reach the bound cheaply.
-    max_primitives: usize,
+    pub(crate) max_primitives: usize,
+    /// [`limits::MAX_MESH_REFERENCES`], likewise.
+    pub(crate) max_instances: usize,
     pub display_referred: bool,
+}
+
+/// A BVH over a geometry's shapes, with the shapes and their data put in its order, and the
+/// bounds of it all.
+fn ordered_bvh(
+    geom: &Geometry,
+    info: &[PrimInfo],
+    poly_bounds: &[Aabb],
+) -> (Bvh, Vec<Shape>, Vec<PrimInfo>, Aabb) {
+    // BVH references: (shape index, box); oblique cones get several tight boxes
+    let mut boxes: Vec<Aabb> = Vec::with_capacity(geom.shapes.len());
+    let mut owner: Vec<u32> = Vec::with_capacity(geom.shapes.len());
+    let mut tmp = Vec::new();
+    for (i, s) in geom.shapes.iter().enumerate() {
+        geom.split_bounds(s, poly_bounds, &mut tmp);
+        for b in &tmp {
+            boxes.push(*b);
+            owner.push(i as u32);
+        }
+    }
+    let (bvh, order) = Bvh::build(&boxes);
+    let src = |r: &u32| owner.get(*r as usize).copied();
+    let shapes: Vec<Shape> = order
+        .iter()
+        .filter_map(|r| src(r).and_then(|i| geom.shapes.get(i as usize).copied()))
+        .collect();
+    let info: Vec<PrimInfo> = order
+        .iter()
+        .filter_map(|r| src(r).and_then(|i| info.get(i as usize).copied()))
+        .collect();
+    let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+    (bvh, shapes, info, bounds)
 }
 
 impl SceneBuilder {
@@ -423,8 +682,99 @@ impl SceneBuilder {
             planes: Vec::new(),
             poly_bounds: Vec::new(),
             source_count: 0,
+            meshes: Vec::new(),
+            instances: Vec::new(),
+            instance_bounds: Vec::new(),
+            stored_elsewhere: 0,
             max_primitives: limits::MAX_PRIMITIVES,
+            max_instances: limits::MAX_MESH_REFERENCES,
         }
+    }
+
+    /// Primitives stored so far, what [`limits::MAX_PRIMITIVES`] bounds: this builder's own,
+    /// plus the shared meshes' triangles once each.
+    fn stored(&self) -> usize {
+        self.geom.shapes.len() + self.planes.len() + self.stored_elsewhere
+    }
+
+    /// A builder to load a shared mesh into (in object space, e.g. with
+    /// [`crate::obj::load_mesh`] under the identity), whose primitives count towards this
+    /// builder's bound; hand it to [`SceneBuilder::add_mesh`].
+    pub fn for_mesh(&self) -> SceneBuilder {
+        let mut b = SceneBuilder::new();
+        b.max_primitives = self.max_primitives;
+        b.stored_elsewhere = self.stored();
+        b
+    }
+
+    /// Adds a shared mesh from a builder made by [`SceneBuilder::for_mesh`] holding only
+    /// triangles (others are ignored): builds its BVH and takes over its materials. Returns
+    /// the mesh's index for [`SceneBuilder::instance`].
+    pub fn add_mesh(&mut self, mesh: SceneBuilder) -> u32 {
+        let base = self.materials.len() as u32;
+        self.materials.extend(mesh.materials.iter().copied());
+        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds);
+        let mut tris: Vec<Tri> = Vec::with_capacity(shapes.len());
+        let mut infos = Vec::with_capacity(shapes.len());
+        for (s, i) in shapes.iter().zip(&info) {
+            // only triangles are expected; anything else would break the BVH order, so the
+            // mesh is then dropped whole rather than drawn wrong
+            let Shape::Triangle { v0, e1, e2 } = *s else {
+                return self.add_empty_mesh();
+            };
+            tris.push([v0, e1, e2]);
+            infos.push(PrimInfo {
+                material: i.material.saturating_add(base),
+                normals: i.normals,
+            });
+        }
+        self.stored_elsewhere += tris.len();
+        self.meshes
+            .push(Mesh::new(tris, infos, mesh.patch_normals, bvh));
+        (self.meshes.len() - 1) as u32
+    }
+
+    fn add_empty_mesh(&mut self) -> u32 {
+        self.meshes.push(Mesh::new(
+            Vec::new(),
+            Vec::new(),
+            Vec::new(),
+            Bvh::default(),
+        ));
+        (self.meshes.len() - 1) as u32
+    }
+
+    /// Adds an instance of shared mesh `mesh` under `xf`, with `material` for all its
+    /// triangles or its own materials. The mesh's triangles count towards
+    /// [`SceneBuilder::primitive_count`] again, but not towards the stored primitives. An
+    /// instance of an empty mesh is not kept. `Ok(false)` if `xf` or its inverse is not
+    /// finite.
+    pub fn instance(
+        &mut self,
+        mesh: u32,
+        xf: Affine3A,
+        material: Option<u32>,
+    ) -> Result<bool, Error> {
+        limits::check(
+            "mesh instance count",
+            self.instances.len() as u64 + 1,
+            self.max_instances as u64,
+            "MAX_MESH_REFERENCES",
+        )?;
+        let Some(m) = self.meshes.get(mesh as usize) else {
+            return Err(Error::InvalidArgument(format!("no shared mesh {mesh}")));
+        };
+        let Some(inst) = Instance::new(mesh, xf, material.unwrap_or(OWN_MATERIAL)) else {
+            return Ok(false);
+        };
+        if m.tris.is_empty() {
+            return Ok(true);
+        }
+        let bounds = m.bounds_under(&xf);
+        self.source_count = self.source_count.saturating_add(m.tris.len());
+        self.instances.push(inst);
+        self.instance_bounds.push(bounds);
+        Ok(true)
     }
 
     /// Adds a material, reusing the last one if identical; returns its index.
@@ -443,7 +793,7 @@ impl SceneBuilder {
     fn room(&self) -> Result<(), Error> {
         limits::check(
             "primitive count",
-            (self.geom.shapes.len() + self.planes.len()) as u64 + 1,
+            self.stored() as u64 + 1,
             self.max_primitives as u64,
             "MAX_PRIMITIVES",
         )
@@ -583,30 +933,15 @@ impl SceneBuilder {
 
     /// Builds the BVH and the final scene. `camera` must be set.
     pub fn build(mut self) -> Scene {
-        // BVH references: (shape index, box); oblique cones get several tight boxes
-        let mut boxes: Vec<Aabb> = Vec::with_capacity(self.geom.shapes.len());
-        let mut owner: Vec<u32> = Vec::with_capacity(self.geom.shapes.len());
-        let mut tmp = Vec::new();
-        for (i, s) in self.geom.shapes.iter().enumerate() {
-            self.geom.split_bounds(s, &self.poly_bounds, &mut tmp);
-            for b in &tmp {
-                boxes.push(*b);
-                owner.push(i as u32);
-            }
-        }
-        let (bvh, order) = Bvh::build(&boxes);
-        let src = |r: &u32| owner.get(*r as usize).copied();
-        let shapes: Vec<Shape> = order
-            .iter()
-            .filter_map(|r| src(r).and_then(|i| self.geom.shapes.get(i as usize).copied()))
-            .collect();
-        let info: Vec<PrimInfo> = order
-            .iter()
-            .filter_map(|r| src(r).and_then(|i| self.info.get(i as usize).copied()))
-            .collect();
+        let (bvh, shapes, info, bounds) = ordered_bvh(&self.geom, &self.info, &self.poly_bounds);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
-        let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+        let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
+        let instances: Vec<Instance> = order
+            .iter()
+            .filter_map(|&i| self.instances.get(i as usize).copied())
+            .collect();
+        let bounds = self.instance_bounds.iter().fold(bounds, |a, b| a.union(*b));
         let camera = self.camera.unwrap_or_else(|| {
             Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
                 from: Vec3A::Z,
@@ -636,6 +971,9 @@ impl SceneBuilder {
             patch_normals: self.patch_normals,
             planes: self.planes,
             bvh,
+            meshes: self.meshes,
+            instances,
+            instance_bvh,
             epsilon,
             bounds,
             source_count: self.source_count,
@@ -704,6 +1042,7 @@ mod tuning {
                         let h = Hit {
                             t: tbest,
                             prim: hp as u32,
+                            instance: Hit::NO_INSTANCE,
                         };
                         let su = scene.surface(&h, &r);
                         let n = if su.ng.dot(r.dir) < 0.0 {

@@ -17,7 +17,9 @@ pub struct RayStats {
     /// Shadow rays actually cast towards lights.
     pub shadow: u64,
     /// Work units: BVH nodes visited, plus primitives handed to the leaf tests (and planes and
-    /// shadow-cache entries tested), plus one per ray traced. Unlike a time, it does not depend
+    /// shadow-cache entries tested), plus one per ray traced. With mesh instances, the nodes
+    /// of the instances' BVH and of the meshes' own BVHs all count, and so do the instances
+    /// handed to a leaf test and the triangles tested in a mesh. Unlike a time, it does not depend
     /// on the machine, and it follows the time a span takes closely, which ray counts alone do
     /// not (a ray that misses everything is cheap).
     pub work: u64,

@@ -74,7 +74,24 @@
 //! # matrix = [[1,0,0,0],[0,1,0,0],[0,0,1,0]]   # ... or a 3x4 / 4x4 row-major matrix instead
 //! smooth = true                     # use the OBJ's vertex normals (default true)
 //! material = "glass"                # overrides the MTL colours
+//!
+//! [[objects]]
+//! type = "mesh"                     # the same file again: read once, drawn twice
+//! file = "meshes/teapot.obj"
+//! matrix = [[0.5, 0, 0, 2], [0, 0.5, 0, 0], [0, 0, -0.5, -3]]   # a mirror image
 //! ```
+//!
+//! Meshes: every distinct (`file` as written, `smooth`) is read and parsed once. If the scene
+//! references it once, its triangles are transformed into the scene (flattened, as they
+//! always were). If it references it more than once, its triangles and their BVH are built
+//! once in the OBJ's own space and each reference is an instance of them: the transform and
+//! its inverse and the material (see [`crate::instance`]). So a mesh drawn 3 000 times costs
+//! one mesh in memory plus a few hundred bytes per reference, and its triangles count once
+//! towards [`limits::MAX_PRIMITIVES`]; [`Scene::primitive_count`] still counts them once per
+//! reference (what the image holds). An instance gives the hits a flattened copy would, up to
+//! rounding (distances and normals within 1e-4, mostly within 1e-6). Two spellings of one path
+//! (`a.obj`, `./a.obj`) are two meshes. At most [`limits::MAX_MESH_REFERENCES`] references;
+//! every transform must be invertible.
 
 use crate::camera::Camera;
 use crate::error::{quoted_snippets, snippet};
@@ -357,6 +374,11 @@ pub fn parse(
         b.lights.push(Light { position, color });
     }
 
+    // Mesh references by (file as written, smooth): a mesh referenced once is flattened into
+    // the scene, one referenced more often is read once and instanced.
+    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, &cx)?;
+    let mut shared: BTreeMap<(&str, bool), u32> = BTreeMap::new();
+
     let mut names: BTreeMap<&str, u32> = BTreeMap::new();
     let default_mat = b.material(Material::default());
     for (name, m) in &def.materials {
@@ -521,23 +543,78 @@ pub fn parse(
                         * Affine3A::from_rotation_y(r.to_radians())
                         * Affine3A::from_scale(s.into())
                 };
-                if xf.matrix3.determinant() == 0.0 {
+                // the inverse is what an instance keeps, so it must exist whatever the count
+                if xf.matrix3.determinant() == 0.0 || !xf.inverse().is_finite() {
                     return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
                 }
                 let shown = snippet(mesh_file);
-                let data = resolve(mesh_file).map_err(|e| {
-                    cx.err(span.clone(), format!("cannot load mesh '{shown}': {e}"))
-                })?;
                 let mat = match material {
                     Some(_) => Some(find(material)?),
                     None => None,
                 };
-                crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, &mut b)
-                    .map_err(|e| cx.err(span.clone(), e.to_string()))?;
+                let key = (mesh_file.as_str(), *smooth);
+                let load = |xf: Affine3A, mat: Option<u32>, b: &mut SceneBuilder| {
+                    let data = resolve(mesh_file).map_err(|e| {
+                        cx.err(span.clone(), format!("cannot load mesh '{shown}': {e}"))
+                    })?;
+                    crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, b)
+                        .map_err(|e| cx.err(span.clone(), e.to_string()))
+                };
+                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 {
+                    // referenced once: flattened, as it always was
+                    load(xf, mat, &mut b)?;
+                } else {
+                    let mesh = match shared.get(&key) {
+                        Some(&m) => m,
+                        None => {
+                            let mut mb = b.for_mesh();
+                            load(Affine3A::IDENTITY, None, &mut mb)?;
+                            let m = b.add_mesh(mb);
+                            shared.insert(key, m);
+                            m
+                        }
+                    };
+                    if !b.instance(mesh, xf, mat).map_err(lim)? {
+                        return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
+                    }
+                }
             }
         }
     }
     Ok(b.build())
+}
+
+/// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the
+/// first reference past `max` (which is [`limits::MAX_MESH_REFERENCES`]), before any mesh is
+/// read.
+fn mesh_references<'a>(
+    objects: &'a [Spanned<ObjectDef>],
+    max: usize,
+    cx: &Ctx,
+) -> Result<BTreeMap<(&'a str, bool), usize>, Error> {
+    let mut refs: BTreeMap<(&str, bool), usize> = BTreeMap::new();
+    let mut count = 0u64;
+    let mut first_extra = 0..0;
+    for o in objects {
+        if let ObjectDef::Mesh { file, smooth, .. } = o.get_ref() {
+            count += 1;
+            if count > max as u64 {
+                if first_extra.is_empty() {
+                    first_extra = o.span();
+                }
+            } else {
+                *refs.entry((file.as_str(), *smooth)).or_default() += 1;
+            }
+        }
+    }
+    limits::check(
+        "mesh reference count",
+        count,
+        max as u64,
+        "MAX_MESH_REFERENCES",
+    )
+    .map_err(|e| cx.err(first_extra, e.to_string()))?;
+    Ok(refs)
 }
 
 fn matrix_transform(m: &[Vec<f32>]) -> Option<Affine3A> {
@@ -604,7 +681,10 @@ mod tests {
         };
         let s = parse(src.as_bytes(), "doc.toml", &resolve).unwrap();
         assert_eq!(s.resolution(), (640, 480));
-        assert_eq!(s.primitive_count(), 7);
+        // the mesh's one triangle is stored once and drawn twice
+        assert_eq!(s.primitive_count(), 8);
+        assert_eq!(s.stored_primitive_count(), 8);
+        assert_eq!((s.mesh_count(), s.instance_count()), (1, 2));
         assert_eq!(s.light_count(), 1);
     }
 
@@ -633,6 +713,40 @@ mod tests {
         assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
         let e = err("[camera]\nfrom = [0, 0, 5\n");
         assert!(e.starts_with("s.toml:2:"), "{e}");
+    }
+
+    #[test]
+    fn mesh_references_are_counted_and_bounded_before_any_mesh_is_read() {
+        let mut src = CAM.to_string();
+        for (file, smooth) in [
+            ("a.obj", true),
+            ("b.obj", true),
+            ("a.obj", false),
+            ("a.obj", true),
+        ] {
+            src +=
+                &format!("\n[[objects]]\ntype = \"mesh\"\nfile = \"{file}\"\nsmooth = {smooth}\n");
+        }
+        let def: SceneDef = toml::from_str(&src).unwrap();
+        let cx = Ctx {
+            src: src.as_bytes(),
+            file: "m.toml",
+        };
+        let refs = mesh_references(&def.objects, 4, &cx).unwrap();
+        let want = [
+            (("a.obj", false), 1),
+            (("a.obj", true), 2),
+            (("b.obj", true), 1),
+        ];
+        assert_eq!(refs.into_iter().collect::<Vec<_>>(), want);
+        assert_eq!(
+            mesh_references(&def.objects, 2, &cx)
+                .unwrap_err()
+                .to_string(),
+            "m.toml:15: mesh reference count is 4, more than the limit of 2 \
+             (limits::MAX_MESH_REFERENCES); raise the constant in native/kernel/src/limits.rs \
+             and rebuild"
+        );
     }
 
     #[test]
