@@ -50,7 +50,8 @@ defmodule RingTracer.LocalCluster do
     args =
       [~c"-kernel", ~c"inet_dist_use_interface", ~c"{127,0,0,1}"] ++
         Enum.map(if(tls, do: TLS.vm_args(tls), else: []), &String.to_charlist/1) ++
-        Enum.map(Keyword.get(opts, :args, []), &String.to_charlist/1) ++ paths
+        Enum.map(Keyword.get(opts, :args, []), &String.to_charlist/1) ++
+        [~c"-kernel", ~c"prevent_overlapping_partitions", ~c"false"] ++ paths
 
     options = %{name: name, host: ~c"localhost", args: args, wait_boot: 30_000}
     options = if stdio?, do: Map.put(options, :connection, :standard_io), else: options

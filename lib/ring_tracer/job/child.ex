@@ -354,11 +354,14 @@ defmodule RingTracer.Job.Child do
   end
 
   defp handle({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
+    # Only atoms the grandchild had started count an attempt: the one
+    # waiting behind it in its pipe was never tried.
+    {started, waiting} = Enum.split_with(state.in_flight, &Pipe.claimed?(gc, &1))
     Pipe.forget(gc)
     state = %{state | grandchild: nil} |> bump(:grandchild_restarts)
+    message = "grandchild exited: #{inspect(reason)}"
 
-    {:noreply,
-     retry(spawn_grandchild(state), state.in_flight, "grandchild exited: #{inspect(reason)}")}
+    {:noreply, retry(spawn_grandchild(state), started, message, waiting)}
   end
 
   defp handle({:ring_changed, ring}, %{left: left} = state) when left != nil do
@@ -420,7 +423,7 @@ defmodule RingTracer.Job.Child do
 
   # Re-sends the given atoms to a (new) grandchild, or gives up on an atom
   # that has failed too often.
-  defp retry(state, atoms, message) do
+  defp retry(state, atoms, message, untried \\ []) do
     {state, failed} =
       Enum.reduce(atoms, {state, nil}, fn atom, {st, failed} ->
         n = Map.get(st.attempts, atom, 1)
@@ -436,7 +439,7 @@ defmodule RingTracer.Job.Child do
       nil ->
         state = if state.grandchild, do: state, else: spawn_grandchild(state)
 
-        Enum.each(atoms, fn atom ->
+        Enum.each(atoms ++ untried, fn atom ->
           Pipe.release(state.grandchild, atom)
           send(state.grandchild, {:trace, atom})
         end)

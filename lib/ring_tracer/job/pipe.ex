@@ -44,6 +44,10 @@ defmodule RingTracer.Job.Pipe do
     end
   end
 
+  @doc "Whether `gc` has claimed `atom` (started it, for a grandchild that is gone)."
+  @spec claimed?(pid(), non_neg_integer()) :: boolean()
+  def claimed?(gc, atom), do: :ets.member(@table, {gc, atom})
+
   @doc "The child takes `atom` back from `gc`'s pipe; `false` if `gc` has started it."
   @spec revoke(pid(), non_neg_integer()) :: boolean()
   def revoke(gc, atom), do: :ets.insert_new(@table, {{gc, atom}})
