@@ -11,14 +11,16 @@
 //! weight, `Ns` the Phong exponent. Missing MTL files fall back to a light-grey material.
 
 use crate::camera::Camera;
+use crate::error::snippet;
 use crate::files::Unreadable;
 use crate::geometry::Aabb;
 use crate::light::Light;
 use crate::limits;
-use crate::material::Material;
+use crate::material::{check_unit_colour, Material};
 use crate::scene::{Scene, SceneBuilder};
 use crate::Error;
 use glam::{Affine3A, Vec3A};
+use std::collections::HashSet;
 
 fn grey() -> Material {
     Material {
@@ -48,6 +50,8 @@ pub(crate) fn load_mesh(
         limits::MAX_MESH_TRIANGLES as u64,
         "MAX_MESH_TRIANGLES",
     )?;
+    // before the OBJ reader copies any line
+    limits::check_tokens(bytes, limits::Tokens::Words, name)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -58,13 +62,18 @@ pub(crate) fn load_mesh(
     // grey, as documented; one that is refused (outside the allowed folders,
     // not a regular file, too large) stops the load.
     let refused: std::cell::RefCell<Option<String>> = std::cell::RefCell::new(None);
+    // material libraries that are missing, as written (for the warning)
+    let missing: std::cell::RefCell<Vec<String>> = std::cell::RefCell::new(Vec::new());
     let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut reader = std::io::BufReader::new(bytes);
         tobj::load_obj_buf(&mut reader, &opts, |p| {
             let rel = p.to_string_lossy();
             match resolve(&rel) {
                 Ok(data) => tobj::load_mtl_buf(&mut std::io::BufReader::new(data.as_slice())),
-                Err(Unreadable::Missing(_)) => Err(tobj::LoadError::OpenFileFailed),
+                Err(Unreadable::Missing(_)) => {
+                    missing.borrow_mut().push(rel.into_owned());
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
                 Err(Unreadable::Refused(e)) => {
                     refused.borrow_mut().get_or_insert(e);
                     Err(tobj::LoadError::OpenFileFailed)
@@ -97,10 +106,19 @@ pub(crate) fn load_mesh(
             .map(|m| {
                 let ok3 = |v: Option<[f32; 3]>| v.filter(|a| a.iter().all(|x| x.is_finite()));
                 let mut mat = grey();
+                let clamped = |b: &mut SceneBuilder, what: &str, c: Vec3A| {
+                    if let Some(w) = check_unit_colour(what, c) {
+                        b.warnings.add(name, None, || {
+                            format!("material '{}': {w}; clamped to [0, 1]", snippet(&m.name))
+                        });
+                    }
+                };
                 if let Some(kd) = ok3(m.diffuse) {
+                    clamped(b, "Kd", Vec3A::from_array(kd));
                     mat.color = Vec3A::from_array(kd).clamp(Vec3A::ZERO, Vec3A::ONE);
                 }
                 if let Some(ks) = ok3(m.specular) {
+                    clamped(b, "Ks", Vec3A::from_array(ks));
                     mat.ks = Vec3A::from_array(ks).max_element().clamp(0.0, 1.0);
                 }
                 if let Some(ns) = m.shininess.filter(|s| s.is_finite() && *s >= 0.0) {
@@ -111,6 +129,15 @@ pub(crate) fn load_mesh(
             .collect(),
         _ => Vec::new(),
     };
+    scan_warnings(
+        bytes,
+        name,
+        &mtls,
+        &missing.into_inner(),
+        material.is_some(),
+        b,
+    );
+    let before = b.primitive_count();
     let nxf = xf.matrix3.inverse().transpose();
     let nxf_ok = nxf.is_finite();
     let mut bounds = Aabb::EMPTY;
@@ -161,7 +188,104 @@ pub(crate) fn load_mesh(
             b.triangle(v, normals, mat)?;
         }
     }
+    let added = b.primitive_count() - before;
+    if total == 0 {
+        b.warnings.add(name, None, || {
+            "the mesh has no faces: nothing of it is rendered".into()
+        });
+    } else if added < total {
+        b.warnings.add(name, None, || {
+            format!(
+                "{} of its {total} triangles have zero area (vertices equal or on one line) and \
+                 are not rendered",
+                total - added
+            )
+        });
+    }
     Ok(bounds)
+}
+
+/// The warnings a scan of the OBJ's lines finds: a material library that is missing or not
+/// MTL (faces grey), `usemtl` naming no material of the library (those faces grey), and
+/// elements that are not rendered (points, lines, curves and surfaces: only faces are). No
+/// material warnings when the scene gives the mesh its own material (`overridden`).
+fn scan_warnings(
+    bytes: &[u8],
+    name: &str,
+    mtls: &Result<Vec<tobj::Material>, tobj::LoadError>,
+    missing: &[String],
+    overridden: bool,
+    b: &mut SceneBuilder,
+) {
+    let known: HashSet<&str> = match mtls {
+        Ok(ms) => ms.iter().map(|m| m.name.as_str()).collect(),
+        Err(_) => HashSet::new(),
+    };
+    let mut libraries = 0usize;
+    let (mut unrendered, mut first_unrendered) = (0u64, 0usize);
+    for (i, raw) in bytes.split(|&c| c == b'\n').enumerate() {
+        let line = i + 1;
+        let text = String::from_utf8_lossy(raw);
+        let text = text.trim();
+        let (keyword, rest) = text
+            .split_once(|c: char| c.is_ascii_whitespace())
+            .map_or((text, ""), |(k, r)| (k, r.trim()));
+        match keyword {
+            "mtllib" if !overridden => {
+                libraries += 1;
+                if missing.iter().any(|m| m == rest) {
+                    b.warnings.add(name, Some(line), || {
+                        format!("mtllib '{}' not found: the faces are grey", snippet(rest))
+                    });
+                }
+            }
+            // the OBJ reader looks the name up when it reads the `usemtl`
+            "usemtl" if !overridden && libraries == 0 => {
+                b.warnings.add(name, Some(line), || {
+                    format!(
+                        "usemtl '{}' has no mtllib before it: its faces are grey",
+                        snippet(rest)
+                    )
+                });
+            }
+            "usemtl" if !overridden && mtls.is_ok() && !known.contains(rest) => {
+                b.warnings.add(name, Some(line), || {
+                    format!(
+                        "usemtl '{}' names no material of the mtllib: its faces are grey",
+                        snippet(rest)
+                    )
+                });
+            }
+            "p" | "l" | "curv" | "curv2" | "surf" => {
+                unrendered += 1;
+                if first_unrendered == 0 {
+                    first_unrendered = line;
+                }
+            }
+            "f" if rest.split_ascii_whitespace().count() < 3 => {
+                unrendered += 1;
+                if first_unrendered == 0 {
+                    first_unrendered = line;
+                }
+            }
+            _ => {}
+        }
+    }
+    if let Err(e) = mtls {
+        if libraries > 0 && missing.len() < libraries {
+            b.warnings.add(name, None, || {
+                format!("its mtllib could not be read ({e}): the faces are grey")
+            });
+        }
+    }
+    if unrendered > 0 {
+        b.warnings.add(name, Some(first_unrendered), || {
+            format!(
+                "{unrendered} point, line, curve or surface element(s), the first here, are not \
+                 rendered: only faces are"
+            )
+        });
+    }
 }
 
 /// The default view of a bounding box used for OBJ scenes (and the ray-casting benchmark):

@@ -9,6 +9,7 @@ use crate::light::Light;
 use crate::limits;
 use crate::material::Material;
 use crate::ray::Ray;
+use crate::warning::Warnings;
 use crate::Error;
 use glam::Vec3A;
 use std::path::{Path, PathBuf};
@@ -100,6 +101,8 @@ pub struct Scene {
     pub(crate) source_count: usize,
     /// Colours in the file are display values, as in the SPD (see [`Scene::display_referred`]).
     pub(crate) display_referred: bool,
+    /// What parsed but may not render as meant ([`Scene::warnings`]).
+    pub(crate) warnings: Warnings,
 }
 
 impl Scene {
@@ -139,6 +142,13 @@ impl Scene {
             confinement.read(&dir, rel).map(|(bytes, _)| bytes)
         };
         Scene::parse(&bytes, format, &name, &resolve)
+    }
+
+    /// What parsed but may not render as meant (a degenerate primitive left out, a colour
+    /// outside its useful range, an OBJ face whose material is missing), each with its file and
+    /// line: the first [`limits::MAX_WARNINGS`] and a count of the rest. Empty for a clean file.
+    pub fn warnings(&self) -> &Warnings {
+        &self.warnings
     }
 
     /// Default image size from the scene.
@@ -404,6 +414,8 @@ pub(crate) struct SceneBuilder {
     /// [`limits::MAX_PRIMITIVES`]; a field only so tests can reach the bound cheaply.
     max_primitives: usize,
     pub display_referred: bool,
+    /// Warnings found so far (the parsers add them; [`Scene::warnings`]).
+    pub warnings: Warnings,
 }
 
 impl SceneBuilder {
@@ -423,6 +435,7 @@ impl SceneBuilder {
             poly_bounds: Vec::new(),
             source_count: 0,
             max_primitives: limits::MAX_PRIMITIVES,
+            warnings: Warnings::default(),
         }
     }
 
@@ -435,6 +448,8 @@ impl SceneBuilder {
         (self.materials.len() - 1) as u32
     }
 
+    /// Primitives added so far, as the file counts them; a parser compares it before and after
+    /// adding one to learn that a degenerate one was left out.
     pub fn primitive_count(&self) -> usize {
         self.source_count
     }
@@ -556,7 +571,9 @@ impl SceneBuilder {
         material: u32,
     ) -> Result<(), Error> {
         self.room()?;
-        if let Some(c) = make_cone(base, r0, apex, r1) {
+        if let Some(mut c) = make_cone(base, r0, apex, r1) {
+            // inside-only when a radius is negative and none positive (`0` and `-1` too)
+            c.inside = (r0 < 0.0 || r1 < 0.0) && r0 <= 0.0 && r1 <= 0.0;
             let k = self.geom.cones.len() as u32;
             self.geom.cones.push(c);
             self.push(Shape::Cone(k), material, NO_NORMALS);
@@ -643,6 +660,7 @@ impl SceneBuilder {
             bounds,
             source_count: self.source_count,
             display_referred: self.display_referred,
+            warnings: self.warnings,
         }
     }
 }
