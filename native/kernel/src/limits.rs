@@ -11,6 +11,7 @@
 //! | [`MAX_POLYGON_VERTICES`] | 1 048 576 | vertices of one polygon or patch | NFF: before reading the vertices |
 //! | [`MAX_MESH_TRIANGLES`] | 20 000 000 | triangles of one mesh file | by a scan of the `f` lines before the OBJ reader runs, and again after |
 //! | [`MAX_LIGHTS`] | 65 536 | lights of a scene | before each light is added |
+//! | [`MAX_TOML_BYTES`] | 64 MiB | a TOML scene file (its reader needs about 50 bytes a byte) | before parsing |
 //! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
 //! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
 //!
@@ -40,6 +41,10 @@ pub const MAX_MESH_TRIANGLES: usize = 20_000_000;
 /// Largest number of lights.
 pub const MAX_LIGHTS: usize = 65_536;
 
+/// Largest TOML scene file in bytes (64 MiB). The TOML reader holds the whole document as a
+/// tree, about 50 bytes of memory per byte of file (see "Memory" above), where the NFF and OBJ
+/// readers stream; large geometry belongs in OBJ meshes (`type = "mesh"`).
+pub const MAX_TOML_BYTES: u64 = 64 << 20;
 /// Largest token in bytes: a whitespace-separated word of an NFF or OBJ file, or a key, string
 /// or bare value of a TOML file. Numbers and names are far shorter; a path is at most 4096 bytes
 /// (Linux's `PATH_MAX`). Checked by a scan before the parser copies any token.
@@ -49,6 +54,9 @@ pub const MAX_WARNINGS: usize = 100;
 
 /// How to raise a bound (the usual case).
 pub(crate) const RAISE: &str = "raise the constant in native/kernel/src/limits.rs and rebuild";
+/// How to get past the TOML size bound.
+pub(crate) const MESHES: &str = "put large geometry in OBJ meshes (type = \"mesh\") or raise the \
+     constant in native/kernel/src/limits.rs";
 /// How to get past the image-size bounds.
 pub(crate) const TILES: &str =
     "render in tiles or raise the constant in native/kernel/src/limits.rs";
@@ -227,7 +235,10 @@ pub(crate) fn first_long_token(bytes: &[u8], mode: Tokens) -> Option<(usize, u64
             while let Some(&d) = bytes.get(i) {
                 let ends = d.is_ascii_whitespace()
                     || (mode == Tokens::Toml
-                        && matches!(d, b'[' | b']' | b'{' | b'}' | b',' | b'=' | b'#'));
+                        && matches!(
+                            d,
+                            b'[' | b']' | b'{' | b'}' | b',' | b'=' | b'#' | b'"' | b'\''
+                        ));
                 if ends {
                     break;
                 }

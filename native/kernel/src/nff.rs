@@ -311,7 +311,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                 unused_fill = None;
                 let before = b.primitive_count();
                 let r = if patch {
-                    if normals.iter().any(|n| *n == Vec3A::ZERO) {
+                    if normals.contains(&Vec3A::ZERO) {
                         b.warnings.add(file, Some(line), || {
                             format!(
                                 "{what} has a zero vertex normal, which has no direction: the \

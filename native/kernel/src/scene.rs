@@ -604,6 +604,10 @@ impl SceneBuilder {
 
     /// Builds the BVH and the final scene. `camera` must be set.
     pub fn build(mut self) -> Scene {
+        // the growth slack of the primitive arrays goes before the BVH's arrays are made
+        self.geom.shapes.shrink_to_fit();
+        self.info.shrink_to_fit();
+        self.patch_normals.shrink_to_fit();
         // BVH references: (shape index, box); oblique cones get several tight boxes
         let mut boxes: Vec<Aabb> = Vec::with_capacity(self.geom.shapes.len());
         let mut owner: Vec<u32> = Vec::with_capacity(self.geom.shapes.len());
@@ -616,6 +620,8 @@ impl SceneBuilder {
             }
         }
         let (bvh, order) = Bvh::build(&boxes);
+        let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+        drop(boxes);
         let src = |r: &u32| owner.get(*r as usize).copied();
         let shapes: Vec<Shape> = order
             .iter()
@@ -626,7 +632,6 @@ impl SceneBuilder {
             .filter_map(|r| src(r).and_then(|i| self.info.get(i as usize).copied()))
             .collect();
         self.geom.shapes = shapes;
-        let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
         let camera = self.camera.unwrap_or_else(|| {
             Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
                 from: Vec3A::Z,

@@ -294,6 +294,14 @@ pub fn parse(
     file: &str,
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
+    limits::check_with(
+        format!("the size of {file}"),
+        bytes.len() as u64,
+        " bytes",
+        limits::MAX_TOML_BYTES,
+        "MAX_TOML_BYTES",
+        limits::MESHES,
+    )?;
     let text = std::str::from_utf8(bytes).map_err(|e| {
         Error::parse(
             file,
