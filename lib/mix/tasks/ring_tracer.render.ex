@@ -54,6 +54,10 @@ defmodule Mix.Tasks.RingTracer.Render do
   A progress bar (atoms done / total, rate, ETA) goes to stderr when it is a
   terminal.
 
+  Before rendering, prints the scene's warnings to stderr, one per line as
+  `file:line: warning: message` (what parsed but may not render as meant,
+  see `RingTracer.Scene.Warning`); the render goes on.
+
   Prints where it wrote the image, the job's time, the ray counts and a line
   per child.
   """
@@ -133,6 +137,9 @@ defmodule Mix.Tasks.RingTracer.Render do
     # Then the scene, whose references are inputs too; then the job.
     {:ok, loaded} = ok!(RingTracer.Scene.load(scene, allow_dirs: allow_dirs))
     ok!(RingTracer.Output.check_inputs(outputs, loaded.files))
+
+    for line <- RingTracer.Scene.Warning.lines(loaded.warnings, loaded.warnings_omitted),
+        do: IO.puts(:stderr, line)
 
     with {:ok, result} <- render(loaded, render_opts),
          :ok <- RingTracer.Image.write(result, out),
