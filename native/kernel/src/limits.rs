@@ -15,6 +15,25 @@
 //! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
 //! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
 //!
+//! ## Memory
+//!
+//! A parse, BVH included, needs at most about this multiple of the file's size at its peak
+//! (resident set of `examples/scene_memory`, the file's own bytes included, for the densest
+//! file of each kind; docs/scene-formats.md has the command and the table):
+//!
+//! | file | peak / file size | why |
+//! |---|---|---|
+//! | NFF of spheres (`s 1 2 3 1`, 10 bytes each) | 17x | ~160 bytes a primitive (shape, shading info, BVH build) |
+//! | NFF of triangles (`p 3` + 3 vertices) | 7x | |
+//! | OBJ (`v`/`f`), with or without normals | 7x | the OBJ reader's arrays, then the triangles (~230 bytes each with normals) |
+//! | TOML of sphere tables | 50x | the TOML reader holds the whole document as a tree: hence [`MAX_TOML_BYTES`] |
+//!
+//! So no parse needs more than the smaller of 17 times its file's size and ~12 GB
+//! ([`MAX_PRIMITIVES`] at ~230 bytes each, reached before a 1 GiB file of spheres is read
+//! through); a TOML file at [`MAX_TOML_BYTES`] needs at most ~3.2 GiB. Through the
+//! NIF add the scene's bytes once more (the binary the VM holds) and each referenced mesh twice
+//! (its bytes are returned to Elixir to ship to other nodes).
+//!
 //! Exceeding one gives [`Error::Limit`], whose message names the quantity, the value, the bound
 //! and its constant, and how to raise it, e.g. `resolution 100000x100000 is 10000000000 pixels,
 //! more than the limit of 67108864 (limits::MAX_PIXELS); render in tiles or raise the constant
@@ -42,7 +61,7 @@ pub const MAX_MESH_TRIANGLES: usize = 20_000_000;
 pub const MAX_LIGHTS: usize = 65_536;
 
 /// Largest TOML scene file in bytes (64 MiB). The TOML reader holds the whole document as a
-/// tree, about 50 bytes of memory per byte of file (see "Memory" above), where the NFF and OBJ
+/// tree, about 50 bytes of memory per byte of file (see "Memory" in the module docs), where the NFF and OBJ
 /// readers stream; large geometry belongs in OBJ meshes (`type = "mesh"`).
 pub const MAX_TOML_BYTES: u64 = 64 << 20;
 /// Largest token in bytes: a whitespace-separated word of an NFF or OBJ file, or a key, string

@@ -12,10 +12,23 @@
 //!   reflected diffusely; so a clear glass with Kd 0.1 does not glow at every interface);
 //! - colours are display values, as the SPD's own pictures show them ([`Scene::display_referred`]);
 //! - a polygon with 3 vertices becomes a triangle; larger ones (also concave, e.g. the 144-gons
-//!   of `gears`) are tested with the crossing rule; degenerate (zero-area) ones are dropped;
+//!   of `gears`) are tested with the crossing rule; degenerate (zero-area) ones are left out,
+//!   with a warning;
 //! - a `pp` patch is triangulated as a fan (SPD patches are always triangles) with its vertex
 //!   normals interpolated for smooth shading;
-//! - negative radii (both, for cones) make the object visible only from the inside.
+//! - negative radii (both, for cones) make the object visible only from the inside;
+//! - `hither` is read (it must be a number) and not used: a ray tracer needs no near plane;
+//! - a `v` without `resolution` renders at 512x512.
+//!
+//! Nothing is dropped or overridden silently (docs/scene-formats.md has the table). Errors,
+//! which stop the parse: a second `v` or `b` (the scene has one of each), a keyword given twice
+//! inside `v`, an `angle` outside (0, 180), cone radii of opposite signs, a transparent `f`
+//! (T > 0) with an index of refraction <= 0, and a token longer than
+//! [`limits::MAX_TOKEN_BYTES`]. Warnings, with file and line, on the scene
+//! ([`Scene::warnings`]): a zero-radius sphere, a degenerate cone, polygon or patch (left
+//! out), a zero patch normal, an `f` that no object uses, colours, Kd, Ks or T outside [0, 1],
+//! Ks + T > 1, a negative Phong exponent, negative light or background colours, and a scene
+//! without objects or lights.
 //!
 //! Errors carry the line: `balls.nff:12: polygon needs at least 3 vertices, got 2`. Numbers
 //! that are NaN or infinite (also after conversion to f32) are rejected.

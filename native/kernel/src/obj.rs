@@ -9,6 +9,12 @@
 //! Faces are triangulated (fan). Vertex normals, when the file has them, give smooth shading.
 //! MTL `Kd` becomes the material colour (Kd coefficient 0.9), `Ks` (max channel) the specular
 //! weight, `Ns` the Phong exponent. Missing MTL files fall back to a light-grey material.
+//!
+//! Warnings ([`Scene::warnings`](crate::Scene::warnings), naming the OBJ and, where there is
+//! one, the line): a missing or unreadable `mtllib` and a `usemtl` that names no material of it
+//! (those faces are grey), `Kd`/`Ks` outside [0, 1] (clamped), points, lines, curves and
+//! surfaces (not rendered: only faces are), zero-area triangles (left out, counted), and a mesh
+//! without faces. A word longer than [`limits::MAX_TOKEN_BYTES`] is an error.
 
 use crate::camera::Camera;
 use crate::error::snippet;

@@ -1,7 +1,15 @@
 //! RingTracer's native scene format (TOML).
 //!
-//! Unknown keys are errors; errors carry `file:line`. All numbers must be finite. Colours are
-//! linear RGB triples. Example with every feature:
+//! Unknown keys are errors, and so are keys and tables given twice (TOML forbids them); errors
+//! carry `file:line`. All numbers must be finite; `fov` must be in (0, 180); a cone's radii may
+//! not have opposite signs; a transparent material (`t > 0`) needs `ior > 0`. Input that
+//! renders but maybe not as meant gives a warning with file and line ([`Scene::warnings`]): a
+//! degenerate object (zero radius or area, base = apex), a zero vertex normal, colours, kd, ks
+//! or t outside [0, 1], ks + t > 1, a negative shine, negative light, ambient or background
+//! colours, and a scene without objects or lights (docs/scene-formats.md has the table). A file
+//! is at most [`limits::MAX_TOML_BYTES`], a key or string at most [`limits::MAX_TOKEN_BYTES`].
+//! Colours are linear RGB triples; a material no object uses is fine (a library of them).
+//! Example with every feature:
 //!
 //! ```toml
 //! background = [0.45, 0.65, 0.95]   # top-level keys come before the first [table]
@@ -32,7 +40,7 @@
 //! checker = { color2 = [1.0, 1.0, 0.1], scale = 1.0 }
 //!
 //! [[objects]]
-//! type = "sphere"
+//! type = "sphere"           # a negative radius: seen from inside only
 //! center = [0.0, 1.0, 0.0]
 //! radius = 1.0
 //! material = "glass"        # every object: optional, default white diffuse
