@@ -57,6 +57,15 @@ defmodule RingTracer.SceneTest do
     assert scene.warnings_omitted == 151
   end
 
+  test "a 60 MB single-token file gives a short error, before the token is copied" do
+    path = TestScenes.tmp_scene("token.nff", String.duplicate("x", 60_000_000))
+    assert {:error, %RingTracer.Error{reason: :invalid_scene, message: m}} = Scene.load(path)
+
+    assert m ==
+             "token.nff:1: a token is 60000000 bytes, more than the limit of 4096 " <>
+               "(limits::MAX_TOKEN_BYTES); raise the constant in native/kernel/src/limits.rs and rebuild"
+  end
+
   test "what cannot mean what it says is an error, not a warning" do
     path = TestScenes.tmp_scene("two.nff", @view <> "s 0 0 0 1\n" <> @view)
     assert {:error, %RingTracer.Error{reason: :invalid_scene, message: m}} = Scene.load(path)
