@@ -58,6 +58,7 @@ pub(crate) fn load_mesh(
     )?;
     // before the OBJ reader copies any line
     limits::check_tokens(bytes, limits::Tokens::Words, name)?;
+    check_face_indices(bytes, name)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -209,6 +210,76 @@ pub(crate) fn load_mesh(
         });
     }
     Ok(bounds)
+}
+
+/// Checks every index of the `f` and `l` lines before the OBJ reader sees them: OBJ indices
+/// count from 1, and a negative one counts back from the last element read so far. An index of
+/// 0, one that reaches back before the first element, or one past the file's last element of
+/// its kind cannot name anything (and the OBJ reader's arithmetic on such an index overflows).
+fn check_face_indices(bytes: &[u8], name: &str) -> Result<(), Error> {
+    const KINDS: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+    let kind_of = |keyword: &[u8]| match keyword {
+        b"v" => Some(0),
+        b"vt" => Some(1),
+        b"vn" => Some(2),
+        _ => None,
+    };
+    fn keyword(line: &[u8]) -> &[u8] {
+        line.split(|c| c.is_ascii_whitespace())
+            .find(|w| !w.is_empty())
+            .unwrap_or_default()
+    }
+    let mut totals = [0i64; 3];
+    for line in bytes.split(|&c| c == b'\n') {
+        if let Some(k) = kind_of(keyword(line)) {
+            totals[k] += 1;
+        }
+    }
+    let mut seen = [0i64; 3];
+    for (i, line) in bytes.split(|&c| c == b'\n').enumerate() {
+        let first = keyword(line);
+        if let Some(k) = kind_of(first) {
+            seen[k] += 1;
+            continue;
+        }
+        if first != b"f" && first != b"l" {
+            continue;
+        }
+        let words = line
+            .split(|c| c.is_ascii_whitespace())
+            .filter(|w| !w.is_empty())
+            .skip(1);
+        for word in words {
+            for (k, part) in word.split(|&c| c == b'/').enumerate().take(3) {
+                // what is not a number is the OBJ reader's to refuse
+                let Some(x) = std::str::from_utf8(part)
+                    .ok()
+                    .and_then(|p| p.parse::<i64>().ok())
+                else {
+                    continue;
+                };
+                let problem = if x == 0 {
+                    Some(format!("{} index 0: OBJ indices count from 1", KINDS[k]))
+                } else if x < 0 && seen[k] + x < 0 {
+                    Some(format!(
+                        "{} index {x} reaches back before the first {} (only {} so far)",
+                        KINDS[k], KINDS[k], seen[k]
+                    ))
+                } else if x > totals[k] {
+                    Some(format!(
+                        "{} index {x}, but the file has {} of them",
+                        KINDS[k], totals[k]
+                    ))
+                } else {
+                    None
+                };
+                if let Some(p) = problem {
+                    return Err(Error::parse(name, i + 1, p));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The warnings a scan of the OBJ's lines finds: a material library that is missing or not
