@@ -157,7 +157,8 @@ impl Scene {
     }
 
     /// Number of primitives as the scene describes them (a polygon counts once even though it
-    /// is triangulated internally; mesh triangles count one each; degenerate ones are dropped).
+    /// is triangulated internally; mesh triangles count one each; degenerate ones are left out,
+    /// each with a warning).
     pub fn primitive_count(&self) -> usize {
         self.source_count
     }
