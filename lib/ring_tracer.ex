@@ -70,6 +70,17 @@ defmodule RingTracer do
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
   for a missing or invalid scene, a bad option, or a job that failed.
+
+  ## Warnings
+
+  A scene that parses but may not render as meant (a zero-radius sphere, a
+  colour above 1, an OBJ face whose material is missing; see
+  `RingTracer.Scene.Warning`) still renders. Its warnings, each with file and
+  line, are returned in the result's `:warnings` (and `:warnings_omitted`
+  past the first 100), as they are in `RingTracer.Scene.load/2`'s scene, so
+  a caller can show them before rendering or after. This function prints
+  and logs nothing; `mix ring_tracer.render` prints them to stderr before
+  the render starts.
   """
   @spec render(Path.t() | Scene.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
   def render(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene) do
@@ -84,7 +95,10 @@ defmodule RingTracer do
          {:ok, scene} <- load(scene, opts),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
-      run(scene, settings, opts)
+
+      with {:ok, result} <- run(scene, settings, opts) do
+        {:ok, %{result | warnings: scene.warnings, warnings_omitted: scene.warnings_omitted}}
+      end
     end
   end
 

@@ -120,6 +120,33 @@ defmodule RingTracerTest do
     assert message =~ "bad.nff:9"
   end
 
+  test "a scene's warnings come back in the result, and nothing is printed" do
+    path =
+      TestScenes.tmp_scene(
+        "odd.nff",
+        "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 8 8\nl 1 2 3\n" <>
+          "s 0 0 0 0\ns 0 0 0 1\n"
+      )
+
+    printed =
+      ExUnit.CaptureIO.capture_io(:stderr, fn ->
+        stdout =
+          ExUnit.CaptureIO.capture_io(fn ->
+            assert {:ok, result} = RingTracer.render(path, children: 2, atoms: 2)
+
+            assert [%RingTracer.Scene.Warning{file: "odd.nff", line: 8}] = result.warnings
+            assert result.warnings_omitted == 0
+          end)
+
+        assert stdout == ""
+      end)
+
+    assert printed == ""
+    # a clean scene has none
+    assert {:ok, %{warnings: []}} =
+             RingTracer.render(TestScenes.path(@scene), children: 2, atoms: 2, width: 8, height: 8)
+  end
+
   test "bad options are errors, not crashes" do
     assert {:error, %RingTracer.Error{reason: :invalid_option}} =
              RingTracer.render(TestScenes.path(@scene), children: 0)

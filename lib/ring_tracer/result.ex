@@ -41,7 +41,10 @@ defmodule RingTracer.Result do
       (their entry in `:children` has `:failed` set and zero counts);
     * `:redone` — atoms handed out again by the parent after a failure;
     * `:nodes` — per node: `:children`, atoms `:traced` there, and
-      `:scene_bytes` shipped to it (0 for the parent's own node).
+      `:scene_bytes` shipped to it (0 for the parent's own node);
+    * `:warnings`, `:warnings_omitted` — the scene's warnings, as in
+      `RingTracer.Scene` (see `RingTracer.Scene.Warning`): what parsed but
+      may not render as meant. The library never prints them.
   """
 
   @enforce_keys [:width, :height, :pixels, :elapsed_us, :children, :rays, :settings]
@@ -65,7 +68,9 @@ defmodule RingTracer.Result do
     duplicates: 0,
     failures: [],
     redone: 0,
-    nodes: %{}
+    nodes: %{},
+    warnings: [],
+    warnings_omitted: 0
   ]
 
   @type t :: %__MODULE__{
@@ -88,7 +93,9 @@ defmodule RingTracer.Result do
           duplicates: non_neg_integer(),
           failures: [map()],
           redone: non_neg_integer(),
-          nodes: %{node() => map()}
+          nodes: %{node() => map()},
+          warnings: [RingTracer.Scene.Warning.t()],
+          warnings_omitted: non_neg_integer()
         }
 
   @doc false

@@ -19,15 +19,30 @@ defmodule RingTracer.Scene do
   """
 
   alias RingTracer.{Error, Native}
-  alias RingTracer.Scene.Source
+  alias RingTracer.Scene.{Source, Warning}
 
   @enforce_keys [:ref, :source, :width, :height, :primitives, :lights]
-  defstruct [:ref, :source, :width, :height, :primitives, :lights, path: nil, files: []]
+  defstruct [
+    :ref,
+    :source,
+    :width,
+    :height,
+    :primitives,
+    :lights,
+    path: nil,
+    files: [],
+    warnings: [],
+    warnings_omitted: 0
+  ]
 
   @typedoc """
   `:path` is the scene file (canonical, after symlinks) and `:files` every
   file it referenced, as read on this node; both empty for a scene parsed
   from a shipped source.
+
+  `:warnings` are what parsed but may not render as meant (see
+  `RingTracer.Scene.Warning`), the first 100 in the order found;
+  `:warnings_omitted` counts the rest.
   """
   @type t :: %__MODULE__{
           ref: reference(),
@@ -37,7 +52,9 @@ defmodule RingTracer.Scene do
           primitives: non_neg_integer(),
           lights: non_neg_integer(),
           path: Path.t() | nil,
-          files: [Path.t()]
+          files: [Path.t()],
+          warnings: [Warning.t()],
+          warnings_omitted: non_neg_integer()
         }
 
   @formats %{".nff" => "nff", ".toml" => "toml", ".obj" => "obj"}
@@ -52,6 +69,16 @@ defmodule RingTracer.Scene do
   `:allow_dirs`, and be a regular file of bounded size, or the load fails
   with the scene's file and line and the reference as written. Nothing is
   read before these checks pass.
+
+  Input that cannot mean what it says (a second viewpoint, a `fov` of 200,
+  a cone whose radii have opposite signs) is an error. Input that renders,
+  but maybe not as meant (a zero-radius sphere, a colour above 1), loads
+  with warnings in the scene's `:warnings`, each naming its file and line;
+  nothing is printed or logged (see `RingTracer.Scene.Warning`).
+
+      iex> {:ok, scene} = RingTracer.Scene.load("priv/scenes/balls_s1.nff")
+      iex> scene.warnings
+      []
 
   ## Options
 
@@ -102,7 +129,9 @@ defmodule RingTracer.Scene do
            height: info.height,
            primitives: info.primitives,
            lights: info.lights,
-           files: paths
+           files: paths,
+           warnings: Enum.map(info.warnings, &Warning.from_native/1),
+           warnings_omitted: info.warnings_omitted
          }}
 
       {:error, message} ->

@@ -7,7 +7,9 @@ defmodule Mix.Tasks.RingTracer.Render do
       mix ring_tracer.render SCENE --out FILE [options]
 
   `mix ring_tracer.render --help` lists the options. A status other than 0
-  (1 the render failed, 2 a usage error) ends Mix with that status.
+  (1 the render failed, 2 a usage error) ends Mix with that status. The
+  scene's warnings go to stderr before the render, as
+  `file:line: warning: message` (see `RingTracer.Scene.Warning`).
   """
   use Mix.Task
 

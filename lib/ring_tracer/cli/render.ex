@@ -367,6 +367,7 @@ defmodule RingTracer.CLI.Render do
     with {:ok, scene} <- error_text(RingTracer.Scene.load(job.scene, allow_dirs: job.allow_dirs)),
          load_us = System.monotonic_time(:microsecond) - t_load,
          :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
+         :ok <- warn(scene),
          {:ok, result} <- render(scene, job, signals?),
          :ok <- write_all(result, job) do
       if !job.opts[:quiet], do: IO.write(report(job, result, load_us))
@@ -376,6 +377,14 @@ defmodule RingTracer.CLI.Render do
       {:interrupted, signal} -> interrupted(signal)
       {:error, message} -> failed(message)
     end
+  end
+
+  # What parsed but may not render as meant, before the render (it goes on).
+  defp warn(scene) do
+    for line <- RingTracer.Scene.Warning.lines(scene.warnings, scene.warnings_omitted),
+        do: IO.puts(:stderr, line)
+
+    :ok
   end
 
   defp error_text({:error, %RingTracer.Error{message: message}}), do: {:error, message}

@@ -1,8 +1,9 @@
 //! Shared driver of the fuzz targets: parse arbitrary bytes as a scene and, when that succeeds,
-//! trace a few pixels at a tiny resolution so the BVH and the integrator see odd scenes too.
+//! check its warnings (at most `limits::MAX_WARNINGS` kept, each short) and trace a few pixels at
+//! a tiny resolution so the BVH and the integrator see odd scenes too.
 
 use ring_tracer_kernel::files::Unreadable;
-use ring_tracer_kernel::{trace_span, Format, Scene, Settings};
+use ring_tracer_kernel::{limits, trace_span, Format, Scene, Settings};
 
 /// A small fixed mesh (a quad as two triangles, with normals) that every mesh reference resolves
 /// to; files ending in `.mtl` get a small material library instead.
@@ -23,9 +24,22 @@ fn resolve(path: &str) -> Result<Vec<u8>, Unreadable> {
 
 /// Parses `data` as `format`; on success traces a 4x4 image at depth 3 and a 3x2 SPD image.
 pub fn run(data: &[u8], format: Format) {
-    let Ok(scene) = Scene::parse(data, format, "fuzz", &resolve) else {
-        return;
+    let scene = match Scene::parse(data, format, "fuzz", &resolve) {
+        Ok(scene) => scene,
+        Err(e) => {
+            // errors echo file text only cut short
+            assert!(e.to_string().len() < 2048, "long error: {e}");
+            return;
+        }
     };
+    let warnings = scene.warnings();
+    assert!(warnings.kept().len() <= limits::MAX_WARNINGS);
+    assert!(warnings.omitted() == 0 || warnings.kept().len() == limits::MAX_WARNINGS);
+    for w in warnings.kept() {
+        let shown = w.to_string();
+        assert!(shown.len() < 2048, "long warning: {shown}");
+        assert!(!shown.contains(['\n', '\x1b']), "unescaped warning: {shown:?}");
+    }
     let base = Settings {
         width: 4,
         height: 4,

@@ -20,7 +20,8 @@
 //! ## Map of the crate
 //! - [`nff`], [`toml_scene`], [`obj`]: scene formats (all errors are `file:line: problem`;
 //!   text of the file is echoed only escaped and cut short); [`limits`]: bounds checked before
-//!   allocating; [`files`]: the files a scene may read (regular files only, size-checked, and
+//!   allocating; [`warning`]: what parses but may not render as meant
+//!   ([`Scene::warnings`]); [`files`]: the files a scene may read (regular files only, size-checked, and
 //!   referenced files confined to the scene's folder by [`files::Confinement`]).
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
@@ -60,6 +61,7 @@ pub mod render;
 pub mod scene;
 pub mod stats;
 pub mod toml_scene;
+pub mod warning;
 
 pub use bvh::Scratch;
 pub use camera::Camera;
@@ -74,3 +76,4 @@ pub use ray::Ray;
 pub use render::{render_image, trace_span, trace_span_into, work_by_row, Region, Settings};
 pub use scene::{Format, Hit, Scene};
 pub use stats::RayStats;
+pub use warning::{Warning, Warnings};

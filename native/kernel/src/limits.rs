@@ -12,6 +12,28 @@
 //! | [`MAX_MESH_TRIANGLES`] | 20 000 000 | triangles of one mesh file | by a scan of the `f` lines before the OBJ reader runs, and again after |
 //! | [`MAX_MESH_REFERENCES`] | 1 000 000 | mesh references (`type = "mesh"` objects) of a TOML scene, so also its mesh instances | by a count of the references before any mesh is read, and before each instance is added |
 //! | [`MAX_LIGHTS`] | 65 536 | lights of a scene | before each light is added |
+//! | [`MAX_TOML_BYTES`] | 64 MiB | a TOML scene file (its reader needs about 50 bytes a byte) | before parsing |
+//! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
+//! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
+//!
+//! ## Memory
+//!
+//! A parse, BVH included, needs at most about this multiple of the file's size at its peak
+//! (resident set of `examples/scene_memory`, the file's own bytes included, for the densest
+//! file of each kind; docs/scene-formats.md has the command and the table):
+//!
+//! | file | peak / file size | why |
+//! |---|---|---|
+//! | NFF of spheres (`s 1 2 3 1`, 10 bytes each) | 17x | ~160 bytes a primitive (shape, shading info, BVH build) |
+//! | NFF of triangles (`p 3` + 3 vertices) | 7x | |
+//! | OBJ (`v`/`f`), with or without normals | 7x | the OBJ reader's arrays, then the triangles (~230 bytes each with normals) |
+//! | TOML of sphere tables | 50x | the TOML reader holds the whole document as a tree: hence [`MAX_TOML_BYTES`] |
+//!
+//! So no parse needs more than the smaller of 17 times its file's size and ~12 GB
+//! ([`MAX_PRIMITIVES`] at ~230 bytes each, reached before a 1 GiB file of spheres is read
+//! through); a TOML file at [`MAX_TOML_BYTES`] needs at most ~3.2 GiB. Through the
+//! NIF add the scene's bytes once more (the binary the VM holds) and each referenced mesh twice
+//! (its bytes are returned to Elixir to ship to other nodes).
 //!
 //! Exceeding one gives [`Error::Limit`], whose message names the quantity, the value, the bound
 //! and its constant, and how to raise it, e.g. `resolution 100000x100000 is 10000000000 pixels,
@@ -45,8 +67,22 @@ pub const MAX_MESH_REFERENCES: usize = 1_000_000;
 /// Largest number of lights.
 pub const MAX_LIGHTS: usize = 65_536;
 
+/// Largest TOML scene file in bytes (64 MiB). The TOML reader holds the whole document as a
+/// tree, about 50 bytes of memory per byte of file (see "Memory" in the module docs), where the NFF and OBJ
+/// readers stream; large geometry belongs in OBJ meshes (`type = "mesh"`).
+pub const MAX_TOML_BYTES: u64 = 64 << 20;
+/// Largest token in bytes: a whitespace-separated word of an NFF or OBJ file, or a key, string
+/// or bare value of a TOML file. Numbers and names are far shorter; a path is at most 4096 bytes
+/// (Linux's `PATH_MAX`). Checked by a scan before the parser copies any token.
+pub const MAX_TOKEN_BYTES: usize = 4096;
+/// Warnings kept per parsed scene; more are counted, not stored ([`crate::warning::Warnings`]).
+pub const MAX_WARNINGS: usize = 100;
+
 /// How to raise a bound (the usual case).
 pub(crate) const RAISE: &str = "raise the constant in native/kernel/src/limits.rs and rebuild";
+/// How to get past the TOML size bound.
+pub(crate) const MESHES: &str = "put large geometry in OBJ meshes (type = \"mesh\") or raise the \
+     constant in native/kernel/src/limits.rs";
 /// How to get past the image-size bounds.
 pub(crate) const TILES: &str =
     "render in tiles or raise the constant in native/kernel/src/limits.rs";
@@ -162,6 +198,107 @@ pub(crate) fn obj_triangle_bound(bytes: &[u8]) -> u64 {
     total
 }
 
+/// How a file is split into tokens for [`first_long_token`].
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Tokens {
+    /// Whitespace-separated words; `#` at the start of a word comments out the rest of the line
+    /// (NFF, OBJ, MTL).
+    Words,
+    /// TOML: bare keys and values end at whitespace or `[ ] { } , =`; a quoted string (basic,
+    /// literal, or multi-line) is one token, counted without its quotes; `#` outside strings starts a comment.
+    Toml,
+}
+
+/// The 1-based line and length of the first token longer than [`MAX_TOKEN_BYTES`], if any. One
+/// pass over the bytes, nothing allocated; comments are not tokens, so a long comment is fine.
+pub(crate) fn first_long_token(bytes: &[u8], mode: Tokens) -> Option<(usize, u64)> {
+    let mut line = 1usize;
+    let mut i = 0usize;
+    let long = |len: usize| len > MAX_TOKEN_BYTES;
+    while let Some(&c) = bytes.get(i) {
+        if c == b'\n' {
+            line += 1;
+            i += 1;
+        } else if c.is_ascii_whitespace() {
+            i += 1;
+        } else if c == b'#' {
+            while bytes.get(i).is_some_and(|&c| c != b'\n') {
+                i += 1;
+            }
+        } else if mode == Tokens::Toml && matches!(c, b'[' | b']' | b'{' | b'}' | b',' | b'=') {
+            i += 1;
+        } else if mode == Tokens::Toml && (c == b'"' || c == b'\'') {
+            let (start_line, start) = (line, i);
+            let triple = bytes.get(i..i + 3) == Some(&[c, c, c][..]);
+            i += if triple { 3 } else { 1 };
+            loop {
+                match bytes.get(i) {
+                    None => break,
+                    Some(b'\\') if c == b'"' => i += 2,
+                    Some(b'\n') if !triple => break,
+                    Some(&d)
+                        if d == c && (!triple || bytes.get(i..i + 3) == Some(&[c, c, c][..])) =>
+                    {
+                        i += if triple { 3 } else { 1 };
+                        break;
+                    }
+                    Some(&d) => {
+                        if d == b'\n' {
+                            line += 1;
+                        }
+                        i += 1;
+                    }
+                }
+            }
+            // the content, without its quotes
+            let quotes = if triple { 6 } else { 2 };
+            let len = (i.min(bytes.len()) - start).saturating_sub(quotes);
+            if long(len) {
+                return Some((start_line, len as u64));
+            }
+        } else {
+            let start = i;
+            while let Some(&d) = bytes.get(i) {
+                let ends = d.is_ascii_whitespace()
+                    || (mode == Tokens::Toml
+                        && matches!(
+                            d,
+                            b'[' | b']' | b'{' | b'}' | b',' | b'=' | b'#' | b'"' | b'\''
+                        ));
+                if ends {
+                    break;
+                }
+                i += 1;
+            }
+            if long(i - start) {
+                return Some((line, (i - start) as u64));
+            }
+        }
+    }
+    None
+}
+
+/// `Err(Error::Limit)` if a token of `len` bytes is longer than [`MAX_TOKEN_BYTES`].
+pub(crate) fn check_token(len: u64) -> Result<(), Error> {
+    check_with(
+        "a token",
+        len,
+        " bytes",
+        MAX_TOKEN_BYTES as u64,
+        "MAX_TOKEN_BYTES",
+        RAISE,
+    )
+}
+
+/// [`first_long_token`] as the error a parser returns: `file:line: a token is N bytes, more than
+/// the limit of 4096 (limits::MAX_TOKEN_BYTES); ...`.
+pub(crate) fn check_tokens(bytes: &[u8], mode: Tokens, file: &str) -> Result<(), Error> {
+    match first_long_token(bytes, mode) {
+        None => Ok(()),
+        Some((line, len)) => check_token(len).map_err(|e| Error::parse(file, line, e.to_string())),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,5 +328,46 @@ mod tests {
         assert_eq!(obj_triangle_bound(b"v 0 0 0\nf 1 2 3\nf 1 2 3 4\n"), 7);
         assert_eq!(obj_triangle_bound(b"f 1 2 \\\n 3 4\r\nvn 0 0 1\n"), 4);
         assert_eq!(obj_triangle_bound(b"fo 1 2 3\n# f 1 2 3\n"), 0);
+    }
+
+    #[test]
+    fn long_tokens_found_with_their_line() {
+        let big = "x".repeat(MAX_TOKEN_BYTES + 1);
+        let fits = "y".repeat(MAX_TOKEN_BYTES);
+        let words = format!("a b\n{fits}\n# {big}\nc {big} d\n");
+        assert_eq!(
+            first_long_token(words.as_bytes(), Tokens::Words),
+            Some((4, MAX_TOKEN_BYTES as u64 + 1))
+        );
+        assert_eq!(first_long_token(fits.as_bytes(), Tokens::Words), None);
+        // TOML: arrays split at their punctuation, strings are whole, comments are skipped
+        let many = "[0,".repeat(5000);
+        assert_eq!(first_long_token(many.as_bytes(), Tokens::Toml), None);
+        let spaced = format!("a = \"{}\"\n", "w ".repeat(3000));
+        assert_eq!(
+            first_long_token(spaced.as_bytes(), Tokens::Toml),
+            Some((1, 6000))
+        );
+        let multi = format!("# {big}\nb = \"\"\"\n{}\"\"\"\nc = 1\n", "z\n".repeat(3000));
+        assert_eq!(
+            first_long_token(multi.as_bytes(), Tokens::Toml),
+            Some((2, 6001))
+        );
+        let lit = format!("k = '{fits}'\nl = '{big}'\n");
+        assert_eq!(
+            first_long_token(lit.as_bytes(), Tokens::Toml),
+            Some((2, 4097))
+        );
+        let esc = "q = \"a\\\"b\"\n".to_string();
+        assert_eq!(first_long_token(esc.as_bytes(), Tokens::Toml), None);
+        let e = check_tokens(format!("\n{big}").as_bytes(), Tokens::Toml, "t.toml")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "t.toml:2: a token is 4097 bytes, more than the limit of 4096 \
+             (limits::MAX_TOKEN_BYTES); raise the constant in native/kernel/src/limits.rs and \
+             rebuild"
+        );
     }
 }

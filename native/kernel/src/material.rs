@@ -72,3 +72,129 @@ impl Material {
         }
     }
 }
+
+/// A colour as a warning shows it: `1.5 0 0`.
+pub(crate) fn show(c: Vec3A) -> String {
+    format!("{} {} {}", c.x, c.y, c.z)
+}
+
+/// A warning if a surface colour (`what`, e.g. `colour`) has a component outside [0, 1]: a
+/// surface reflects at most the light it receives, so above 1 it glows and below 0 it takes
+/// light away.
+pub(crate) fn check_unit_colour(what: &str, c: Vec3A) -> Option<String> {
+    (c.min_element() < 0.0 || c.max_element() > 1.0).then(|| {
+        format!(
+            "{what} {} is outside [0, 1]: a surface reflects at most the light it receives",
+            show(c)
+        )
+    })
+}
+
+/// A warning if a light or background colour (`what`) has a negative component (it would take
+/// light away). Above 1 is fine: lights may be bright.
+pub(crate) fn check_light_colour(what: &str, c: Vec3A) -> Option<String> {
+    (c.min_element() < 0.0).then(|| {
+        format!(
+            "{what} {} has a negative component, which takes light away",
+            show(c)
+        )
+    })
+}
+
+impl Material {
+    /// Checks the values against their useful ranges. `Err` when the material cannot mean
+    /// anything (a transparent surface, `t > 0`, with an index of refraction <= 0); otherwise the
+    /// warnings: colours outside [0, 1], `kd`, `ks` or `t` outside [0, 1], `ks + t > 1` (more
+    /// light reflected and transmitted than received), a negative Phong exponent. `names` are
+    /// the format's names of kd, ks, shine, t, ior (NFF `Kd`..., TOML `kd`...).
+    pub(crate) fn check(&self, names: [&str; 5]) -> Result<Vec<String>, String> {
+        let [kd, ks, shine, t, ior] = names;
+        if self.t > 0.0 && self.ior <= 0.0 {
+            return Err(format!(
+                "{ior} {} with {t} {}: a transparent surface needs an index of refraction > 0",
+                self.ior, self.t
+            ));
+        }
+        let mut w = Vec::new();
+        w.extend(check_unit_colour("colour", self.color));
+        if let Some(c) = self.checker {
+            w.extend(check_unit_colour("checker colour", c.color2));
+        }
+        for (name, v) in [(kd, self.kd), (ks, self.ks), (t, self.t)] {
+            if !(0.0..=1.0).contains(&v) {
+                w.push(format!("{name} {v} is outside [0, 1]"));
+            }
+        }
+        if self.ks + self.t > 1.0 && self.ks <= 1.0 && self.t <= 1.0 {
+            w.push(format!(
+                "{ks} + {t} is {}, more than 1: the surface reflects and transmits more light \
+                 than it receives",
+                self.ks + self.t
+            ));
+        }
+        if self.shine < 0.0 {
+            w.push(format!(
+                "{shine} {} is negative: a Phong exponent is 0 or more",
+                self.shine
+            ));
+        }
+        Ok(w)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NAMES: [&str; 5] = ["Kd", "Ks", "Shine", "T", "ior"];
+
+    #[test]
+    fn checks_useful_ranges() {
+        assert_eq!(Material::default().check(NAMES), Ok(vec![]));
+        let glass = Material {
+            t: 0.5,
+            ior: 0.0,
+            ..Material::default()
+        };
+        assert_eq!(
+            glass.check(NAMES),
+            Err("ior 0 with T 0.5: a transparent surface needs an index of refraction > 0".into())
+        );
+        // an index is not used by an opaque surface
+        let opaque = Material {
+            ior: 0.0,
+            ..Material::default()
+        };
+        assert_eq!(opaque.check(NAMES), Ok(vec![]));
+        let odd = Material {
+            color: Vec3A::new(1.5, 0.0, 0.0),
+            kd: -0.5,
+            ks: 0.6,
+            t: 0.6,
+            ior: 1.5,
+            shine: -2.0,
+            checker: Some(Checker {
+                color2: Vec3A::splat(-1.0),
+                scale: 1.0,
+            }),
+        };
+        assert_eq!(
+            odd.check(NAMES).unwrap(),
+            vec![
+                "colour 1.5 0 0 is outside [0, 1]: a surface reflects at most the light it \
+                 receives"
+                    .to_string(),
+                "checker colour -1 -1 -1 is outside [0, 1]: a surface reflects at most the light \
+                 it receives"
+                    .to_string(),
+                "Kd -0.5 is outside [0, 1]".to_string(),
+                "Ks + T is 1.2, more than 1: the surface reflects and transmits more light than \
+                 it receives"
+                    .to_string(),
+                "Shine -2 is negative: a Phong exponent is 0 or more".to_string(),
+            ]
+        );
+        assert!(check_light_colour("light colour", Vec3A::splat(3.0)).is_none());
+        assert!(check_light_colour("light colour", Vec3A::new(1.0, -1.0, 0.0)).is_some());
+    }
+}

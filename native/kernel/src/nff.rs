@@ -14,11 +14,23 @@
 //! - a polygon with 3 vertices becomes a triangle; a simple one of up to 1024 (also concave,
 //!   e.g. the 144-gons of `gears`) is ear-clipped into triangles; any other (larger, or one
 //!   ear clipping gives up on, as on most self-intersecting ones) is tested with the even-odd
-//!   crossing rule, in O(log n) per ray ([`crate::polygon`]); degenerate (zero-area) ones are
-//!   dropped;
+//!   crossing rule, in O(log n) per ray ([`crate::polygon`]); degenerate (zero-area) ones
+//!   are left out, with a warning;
 //! - a `pp` patch is triangulated as a fan (SPD patches are always triangles) with its vertex
 //!   normals interpolated for smooth shading;
-//! - negative radii (both, for cones) make the object visible only from the inside.
+//! - negative radii (both, for cones) make the object visible only from the inside;
+//! - `hither` is read (it must be a number) and not used: a ray tracer needs no near plane;
+//! - a `v` without `resolution` renders at 512x512.
+//!
+//! Nothing is dropped or overridden silently (docs/scene-formats.md has the table). Errors,
+//! which stop the parse: a second `v` or `b` (the scene has one of each), a keyword given twice
+//! inside `v`, an `angle` outside (0, 180), cone radii of opposite signs, a transparent `f`
+//! (T > 0) with an index of refraction <= 0, and a token longer than
+//! [`limits::MAX_TOKEN_BYTES`]. Warnings, with file and line, on the scene
+//! ([`Scene::warnings`]): a zero-radius sphere, a degenerate cone, polygon or patch (left
+//! out), a zero patch normal, an `f` that no object uses, colours, Kd, Ks or T outside [0, 1],
+//! Ks + T > 1, a negative Phong exponent, negative light or background colours, and a scene
+//! without objects or lights.
 //!
 //! Errors carry the line: `balls.nff:12: polygon needs at least 3 vertices, got 2`. Numbers
 //! that are NaN or infinite (also after conversion to f32) are rejected.
@@ -27,7 +39,7 @@ use crate::camera::Camera;
 use crate::error::snippet_bytes;
 use crate::light::{spd_intensity, Light};
 use crate::limits;
-use crate::material::Material;
+use crate::material::{check_light_colour, Material};
 use crate::scene::{Scene, SceneBuilder};
 use crate::Error;
 use glam::Vec3A;
@@ -40,11 +52,14 @@ struct Lexer<'a> {
 }
 
 impl<'a> Lexer<'a> {
-    /// Next token and its line, or `None` at the end.
-    fn next(&mut self) -> Option<(&'a [u8], usize)> {
+    /// Next token and its line, or `None` at the end. A token longer than
+    /// [`limits::MAX_TOKEN_BYTES`] is an error (found by the scan, before it is looked at).
+    fn next(&mut self) -> Result<Option<(&'a [u8], usize)>, Error> {
         let s = self.src;
         loop {
-            let c = *s.get(self.pos)?;
+            let Some(&c) = s.get(self.pos) else {
+                return Ok(None);
+            };
             match c {
                 b'\n' => {
                     self.line += 1;
@@ -63,15 +78,17 @@ impl<'a> Lexer<'a> {
         while self.pos < s.len() && !s[self.pos].is_ascii_whitespace() && s[self.pos] != b'#' {
             self.pos += 1;
         }
-        Some((&s[start..self.pos], self.line))
+        let len = self.pos - start;
+        limits::check_token(len as u64).map_err(|e| self.err(self.line, e.to_string()))?;
+        Ok(Some((&s[start..self.pos], self.line)))
     }
 
-    fn peek(&mut self) -> Option<&'a [u8]> {
+    fn peek(&mut self) -> Result<Option<&'a [u8]>, Error> {
         let (pos, line) = (self.pos, self.line);
-        let t = self.next().map(|t| t.0);
+        let t = self.next()?.map(|t| t.0);
         self.pos = pos;
         self.line = line;
-        t
+        Ok(t)
     }
 
     fn err(&self, line: usize, msg: impl Into<String>) -> Error {
@@ -79,7 +96,7 @@ impl<'a> Lexer<'a> {
     }
 
     fn number(&mut self, what: &str, entity_line: usize) -> Result<f32, Error> {
-        let Some((tok, line)) = self.next() else {
+        let Some((tok, line)) = self.next()? else {
             return Err(self.err(entity_line, format!("file ended in the middle of {what}")));
         };
         if let Some(v) = std::str::from_utf8(tok)
@@ -107,7 +124,7 @@ impl<'a> Lexer<'a> {
     }
 
     fn integer(&mut self, what: &str, entity_line: usize) -> Result<(u64, usize), Error> {
-        let Some((tok, line)) = self.next() else {
+        let Some((tok, line)) = self.next()? else {
             return Err(self.err(entity_line, format!("file ended in the middle of {what}")));
         };
         let text = String::from_utf8_lossy(tok);
@@ -150,7 +167,11 @@ fn is_number(tok: &[u8]) -> bool {
     matches!(tok.first(), Some(c) if c.is_ascii_digit() || *c == b'-' || *c == b'+' || *c == b'.')
 }
 
-/// Parses NFF bytes into a scene.
+/// Names of the `f` values in warnings.
+const FILL_NAMES: [&str; 5] = ["Kd", "Ks", "Shine", "T", "index of refraction"];
+
+/// Parses NFF bytes into a scene. What parses but may not render as meant becomes a warning of
+/// the scene ([`Scene::warnings`]); see the module docs.
 pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
     let mut lx = Lexer {
         src: bytes,
@@ -165,11 +186,42 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
     let mut verts: Vec<Vec3A> = Vec::new();
     let mut normals: Vec<Vec3A> = Vec::new();
     let mut last_line = 1;
-    while let Some((tok, line)) = lx.next() {
+    // lines of the `v` and `b` seen (each sets a single value: a second would replace it)
+    let (mut view_line, mut background_line) = (None::<usize>, None::<usize>);
+    // the line of the last `f`, while no object has used it yet
+    let mut unused_fill: Option<usize> = None;
+    while let Some((tok, line)) = lx.next()? {
         last_line = line;
         match tok {
-            b"v" => parse_view(&mut lx, &mut b, line)?,
-            b"b" => b.background = lx.vec3("background colour 'b'", line)?,
+            b"v" => {
+                if let Some(first) = view_line {
+                    return Err(lx.err(
+                        line,
+                        format!(
+                            "second viewpoint 'v' (the first is at line {first}): a scene has one \
+                             view, and this one would replace it"
+                        ),
+                    ));
+                }
+                view_line = Some(line);
+                parse_view(&mut lx, &mut b, line)?;
+            }
+            b"b" => {
+                if let Some(first) = background_line {
+                    return Err(lx.err(
+                        line,
+                        format!(
+                            "second background colour 'b' (the first is at line {first}): a \
+                             scene has one, and this one would replace it"
+                        ),
+                    ));
+                }
+                background_line = Some(line);
+                b.background = lx.vec3("background colour 'b'", line)?;
+                if let Some(w) = check_light_colour("background colour", b.background) {
+                    b.warnings.add(file, Some(line), || w);
+                }
+            }
             b"l" => {
                 let position = lx.vec3("light 'l'", line)?;
                 limits::check(
@@ -179,8 +231,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     "MAX_LIGHTS",
                 )
                 .map_err(|e| lx.err(line, e.to_string()))?;
-                let color = if lx.peek().is_some_and(is_number) {
-                    lx.vec3("light colour", line)?
+                let color = if lx.peek()?.is_some_and(is_number) {
+                    let c = lx.vec3("light colour", line)?;
+                    if let Some(w) = check_light_colour("light colour", c) {
+                        b.warnings.add(file, Some(line), || w);
+                    }
+                    c
                 } else {
                     colourless_lights.push(b.lights.len());
                     Vec3A::ZERO
@@ -199,13 +255,32 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     ior: lx.number(what, line)?,
                     checker: None,
                 };
+                for w in m.check(FILL_NAMES).map_err(|e| lx.err(line, e))? {
+                    b.warnings
+                        .add(file, Some(line), || format!("fill colour 'f': {w}"));
+                }
+                if let Some(unused) = unused_fill.replace(line) {
+                    b.warnings.add(file, Some(unused), || {
+                        format!(
+                            "fill colour 'f' is used by no object: the 'f' at line {line} \
+                             replaces it first"
+                        )
+                    });
+                }
                 material = b.material(m);
             }
             b"s" => {
                 let c = lx.vec3("sphere 's'", line)?;
                 let r = lx.number("sphere 's'", line)?;
+                unused_fill = None;
+                let before = b.primitive_count();
                 b.sphere(c, r, material)
                     .map_err(|e| lx.err(line, e.to_string()))?;
+                if b.primitive_count() == before {
+                    b.warnings.add(file, Some(line), || {
+                        "sphere 's' has radius 0 and is not rendered".into()
+                    });
+                }
             }
             b"c" => {
                 let what = "cone/cylinder 'c'";
@@ -213,8 +288,16 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                 let r0 = lx.number(what, line)?;
                 let apex = lx.vec3(what, line)?;
                 let r1 = lx.number(what, line)?;
+                check_cone_radii(r0, r1).map_err(|e| lx.err(line, format!("{what}: {e}")))?;
+                unused_fill = None;
+                let before = b.primitive_count();
                 b.cone(base, r0, apex, r1, material)
                     .map_err(|e| lx.err(line, e.to_string()))?;
+                if b.primitive_count() == before {
+                    b.warnings.add(file, Some(line), || {
+                        format!("{what} has a zero-length axis or both radii 0 and is not rendered")
+                    });
+                }
             }
             b"p" | b"pp" => {
                 let patch = tok == b"pp";
@@ -240,7 +323,17 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                         normals.push(lx.vec3(what, line)?);
                     }
                 }
+                unused_fill = None;
+                let before = b.primitive_count();
                 let r = if patch {
+                    if normals.contains(&Vec3A::ZERO) {
+                        b.warnings.add(file, Some(line), || {
+                            format!(
+                                "{what} has a zero vertex normal, which has no direction: the \
+                                 shading there follows the other vertices' normals"
+                            )
+                        });
+                    }
                     let mut r = Ok(());
                     for i in 1..verts.len() - 1 {
                         r = b.triangle(
@@ -257,6 +350,14 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     b.polygon(&verts, material)
                 };
                 r.map_err(|e| lx.err(line, e.to_string()))?;
+                if b.primitive_count() == before {
+                    b.warnings.add(file, Some(line), || {
+                        format!(
+                            "{what} has zero area (its vertices are equal or on one line) and is \
+                             not rendered"
+                        )
+                    });
+                }
             }
             _ => {
                 let message = if looks_like_keyword(tok) {
@@ -281,6 +382,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
     if b.camera.is_none() {
         return Err(lx.err(last_line, "no viewpoint: the file has no 'v' entity"));
     }
+    if let Some(unused) = unused_fill {
+        b.warnings.add(file, Some(unused), || {
+            "fill colour 'f' is used by no object: none follows it".into()
+        });
+    }
+    crate::warning::scene_warnings(&mut b, file);
     let intensity = spd_intensity(b.lights.len());
     for i in colourless_lights {
         if let Some(l) = b.lights.get_mut(i) {
@@ -290,15 +397,41 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
     Ok(b.build())
 }
 
+/// A cone's radii must not have opposite signs: NFF.TXT makes a cone with negative radii an
+/// "inside" object (seen from inside only), and positive ones are seen from outside; one of each
+/// means neither (a zero radius goes with either). TOML cones follow the same rule.
+pub(crate) fn check_cone_radii(r0: f32, r1: f32) -> Result<(), String> {
+    if (r0 < 0.0 && r1 > 0.0) || (r0 > 0.0 && r1 < 0.0) {
+        Err(format!(
+            "radii {r0} and {r1} have opposite signs (both negative: seen from inside only; both \
+             positive: from outside)"
+        ))
+    } else {
+        Ok(())
+    }
+}
+
 fn parse_view(lx: &mut Lexer, b: &mut SceneBuilder, line: usize) -> Result<(), Error> {
     let (mut from, mut at, mut up, mut angle) = (None, None, None, None);
     let mut resolution = (512u32, 512u32);
-    while let Some(tok) = lx.peek() {
+    // the line where each keyword was given, to refuse a second one
+    let mut seen: Vec<(&[u8], usize)> = Vec::new();
+    while let Some(tok) = lx.peek()? {
         let what = match tok {
             b"from" | b"at" | b"up" | b"angle" | b"hither" | b"resolution" => tok,
             _ => break,
         };
-        let Some((_, kline)) = lx.next() else { break };
+        let Some((_, kline)) = lx.next()? else { break };
+        if let Some((_, first)) = seen.iter().find(|(k, _)| *k == what) {
+            return Err(lx.err(
+                kline,
+                format!(
+                    "'{}' given twice in the viewpoint 'v' (first at line {first})",
+                    String::from_utf8_lossy(what)
+                ),
+            ));
+        }
+        seen.push((what, kline));
         match what {
             b"from" => from = Some(lx.vec3("'from'", kline)?),
             b"at" => at = Some(lx.vec3("'at'", kline)?),
@@ -321,10 +454,16 @@ fn parse_view(lx: &mut Lexer, b: &mut SceneBuilder, line: usize) -> Result<(), E
     let at = at.ok_or_else(|| missing("at"))?;
     let up = up.ok_or_else(|| missing("up"))?;
     let angle = angle.ok_or_else(|| missing("angle"))?;
+    if !(angle > 0.0 && angle < 180.0) {
+        return Err(lx.err(
+            line,
+            format!("viewpoint 'angle' {angle} is not in (0, 180) degrees"),
+        ));
+    }
     b.camera = Some(Camera::new(from, at, up, angle).ok_or_else(|| {
         lx.err(
             line,
-            "degenerate view: 'from' equals 'at', 'up' is parallel to the view direction, or 'angle' is not in (0, 180)",
+            "degenerate view: 'from' equals 'at', or 'up' is parallel to the view direction",
         )
     })?);
     b.resolution = resolution;

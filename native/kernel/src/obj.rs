@@ -11,16 +11,24 @@
 //! Faces are triangulated (fan). Vertex normals, when the file has them, give smooth shading.
 //! MTL `Kd` becomes the material colour (Kd coefficient 0.9), `Ks` (max channel) the specular
 //! weight, `Ns` the Phong exponent. Missing MTL files fall back to a light-grey material.
+//!
+//! Warnings ([`Scene::warnings`](crate::Scene::warnings), naming the OBJ and, where there is
+//! one, the line): a missing or unreadable `mtllib` and a `usemtl` that names no material of it
+//! (those faces are grey), `Kd`/`Ks` outside [0, 1] (clamped), points, lines, curves and
+//! surfaces (not rendered: only faces are), zero-area triangles (left out, counted), and a mesh
+//! without faces. A word longer than [`limits::MAX_TOKEN_BYTES`] is an error.
 
 use crate::camera::Camera;
+use crate::error::snippet;
 use crate::files::Unreadable;
 use crate::geometry::Aabb;
 use crate::light::Light;
 use crate::limits;
-use crate::material::Material;
+use crate::material::{check_unit_colour, Material};
 use crate::scene::{Scene, SceneBuilder};
 use crate::Error;
 use glam::{Affine3A, Vec3A};
+use std::collections::HashSet;
 
 fn grey() -> Material {
     Material {
@@ -50,6 +58,9 @@ pub(crate) fn load_mesh(
         limits::MAX_MESH_TRIANGLES as u64,
         "MAX_MESH_TRIANGLES",
     )?;
+    // before the OBJ reader copies any line
+    limits::check_tokens(bytes, limits::Tokens::Words, name)?;
+    check_face_indices(bytes, name)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -60,13 +71,18 @@ pub(crate) fn load_mesh(
     // grey, as documented; one that is refused (outside the allowed folders,
     // not a regular file, too large) stops the load.
     let refused: std::cell::RefCell<Option<String>> = std::cell::RefCell::new(None);
+    // material libraries that are missing, as written (for the warning)
+    let missing: std::cell::RefCell<Vec<String>> = std::cell::RefCell::new(Vec::new());
     let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut reader = std::io::BufReader::new(bytes);
         tobj::load_obj_buf(&mut reader, &opts, |p| {
             let rel = p.to_string_lossy();
             match resolve(&rel) {
                 Ok(data) => tobj::load_mtl_buf(&mut std::io::BufReader::new(data.as_slice())),
-                Err(Unreadable::Missing(_)) => Err(tobj::LoadError::OpenFileFailed),
+                Err(Unreadable::Missing(_)) => {
+                    missing.borrow_mut().push(rel.into_owned());
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
                 Err(Unreadable::Refused(e)) => {
                     refused.borrow_mut().get_or_insert(e);
                     Err(tobj::LoadError::OpenFileFailed)
@@ -99,10 +115,19 @@ pub(crate) fn load_mesh(
             .map(|m| {
                 let ok3 = |v: Option<[f32; 3]>| v.filter(|a| a.iter().all(|x| x.is_finite()));
                 let mut mat = grey();
+                let clamped = |b: &mut SceneBuilder, what: &str, c: Vec3A| {
+                    if let Some(w) = check_unit_colour(what, c) {
+                        b.warnings.add(name, None, || {
+                            format!("material '{}': {w}; clamped to [0, 1]", snippet(&m.name))
+                        });
+                    }
+                };
                 if let Some(kd) = ok3(m.diffuse) {
+                    clamped(b, "Kd", Vec3A::from_array(kd));
                     mat.color = Vec3A::from_array(kd).clamp(Vec3A::ZERO, Vec3A::ONE);
                 }
                 if let Some(ks) = ok3(m.specular) {
+                    clamped(b, "Ks", Vec3A::from_array(ks));
                     mat.ks = Vec3A::from_array(ks).max_element().clamp(0.0, 1.0);
                 }
                 if let Some(ns) = m.shininess.filter(|s| s.is_finite() && *s >= 0.0) {
@@ -113,6 +138,15 @@ pub(crate) fn load_mesh(
             .collect(),
         _ => Vec::new(),
     };
+    scan_warnings(
+        bytes,
+        name,
+        &mtls,
+        &missing.into_inner(),
+        material.is_some(),
+        b,
+    );
+    let before = b.primitive_count();
     let nxf = xf.matrix3.inverse().transpose();
     let nxf_ok = nxf.is_finite();
     let mut bounds = Aabb::EMPTY;
@@ -163,7 +197,174 @@ pub(crate) fn load_mesh(
             b.triangle(v, normals, mat)?;
         }
     }
+    let added = b.primitive_count() - before;
+    if total == 0 {
+        b.warnings.add(name, None, || {
+            "the mesh has no faces: nothing of it is rendered".into()
+        });
+    } else if added < total {
+        b.warnings.add(name, None, || {
+            format!(
+                "{} of its {total} triangles have zero area (vertices equal or on one line) and \
+                 are not rendered",
+                total - added
+            )
+        });
+    }
     Ok(bounds)
+}
+
+/// Checks every index of the `f` and `l` lines before the OBJ reader sees them: OBJ indices
+/// count from 1, and a negative one counts back from the last element read so far. An index of
+/// 0, one that reaches back before the first element, or one past the file's last element of
+/// its kind cannot name anything (and the OBJ reader's arithmetic on such an index overflows).
+fn check_face_indices(bytes: &[u8], name: &str) -> Result<(), Error> {
+    const KINDS: [&str; 3] = ["vertex", "texture coordinate", "normal"];
+    let kind_of = |keyword: &[u8]| match keyword {
+        b"v" => Some(0),
+        b"vt" => Some(1),
+        b"vn" => Some(2),
+        _ => None,
+    };
+    fn keyword(line: &[u8]) -> &[u8] {
+        line.split(|c| c.is_ascii_whitespace())
+            .find(|w| !w.is_empty())
+            .unwrap_or_default()
+    }
+    let mut totals = [0i64; 3];
+    for line in bytes.split(|&c| c == b'\n') {
+        if let Some(k) = kind_of(keyword(line)) {
+            totals[k] += 1;
+        }
+    }
+    let mut seen = [0i64; 3];
+    for (i, line) in bytes.split(|&c| c == b'\n').enumerate() {
+        let first = keyword(line);
+        if let Some(k) = kind_of(first) {
+            seen[k] += 1;
+            continue;
+        }
+        if first != b"f" && first != b"l" {
+            continue;
+        }
+        let words = line
+            .split(|c| c.is_ascii_whitespace())
+            .filter(|w| !w.is_empty())
+            .skip(1);
+        for word in words {
+            for (k, part) in word.split(|&c| c == b'/').enumerate().take(3) {
+                // what is not a number is the OBJ reader's to refuse
+                let Some(x) = std::str::from_utf8(part)
+                    .ok()
+                    .and_then(|p| p.parse::<i64>().ok())
+                else {
+                    continue;
+                };
+                let problem = if x == 0 {
+                    Some(format!("{} index 0: OBJ indices count from 1", KINDS[k]))
+                } else if x < 0 && seen[k] + x < 0 {
+                    Some(format!(
+                        "{} index {x} reaches back before the first {} (only {} so far)",
+                        KINDS[k], KINDS[k], seen[k]
+                    ))
+                } else if x > totals[k] {
+                    Some(format!(
+                        "{} index {x}, but the file has {} of them",
+                        KINDS[k], totals[k]
+                    ))
+                } else {
+                    None
+                };
+                if let Some(p) = problem {
+                    return Err(Error::parse(name, i + 1, p));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The warnings a scan of the OBJ's lines finds: a material library that is missing or not
+/// MTL (faces grey), `usemtl` naming no material of the library (those faces grey), and
+/// elements that are not rendered (points, lines, curves and surfaces: only faces are). No
+/// material warnings when the scene gives the mesh its own material (`overridden`).
+fn scan_warnings(
+    bytes: &[u8],
+    name: &str,
+    mtls: &Result<Vec<tobj::Material>, tobj::LoadError>,
+    missing: &[String],
+    overridden: bool,
+    b: &mut SceneBuilder,
+) {
+    let known: HashSet<&str> = match mtls {
+        Ok(ms) => ms.iter().map(|m| m.name.as_str()).collect(),
+        Err(_) => HashSet::new(),
+    };
+    let mut libraries = 0usize;
+    let (mut unrendered, mut first_unrendered) = (0u64, 0usize);
+    for (i, raw) in bytes.split(|&c| c == b'\n').enumerate() {
+        let line = i + 1;
+        let text = String::from_utf8_lossy(raw);
+        let text = text.trim();
+        let (keyword, rest) = text
+            .split_once(|c: char| c.is_ascii_whitespace())
+            .map_or((text, ""), |(k, r)| (k, r.trim()));
+        match keyword {
+            "mtllib" if !overridden => {
+                libraries += 1;
+                if missing.iter().any(|m| m == rest) {
+                    b.warnings.add(name, Some(line), || {
+                        format!("mtllib '{}' not found: the faces are grey", snippet(rest))
+                    });
+                }
+            }
+            // the OBJ reader looks the name up when it reads the `usemtl`
+            "usemtl" if !overridden && libraries == 0 => {
+                b.warnings.add(name, Some(line), || {
+                    format!(
+                        "usemtl '{}' has no mtllib before it: its faces are grey",
+                        snippet(rest)
+                    )
+                });
+            }
+            "usemtl" if !overridden && mtls.is_ok() && !known.contains(rest) => {
+                b.warnings.add(name, Some(line), || {
+                    format!(
+                        "usemtl '{}' names no material of the mtllib: its faces are grey",
+                        snippet(rest)
+                    )
+                });
+            }
+            "p" | "l" | "curv" | "curv2" | "surf" => {
+                unrendered += 1;
+                if first_unrendered == 0 {
+                    first_unrendered = line;
+                }
+            }
+            "f" if rest.split_ascii_whitespace().count() < 3 => {
+                unrendered += 1;
+                if first_unrendered == 0 {
+                    first_unrendered = line;
+                }
+            }
+            _ => {}
+        }
+    }
+    if let Err(e) = mtls {
+        if libraries > 0 && missing.len() < libraries {
+            b.warnings.add(name, None, || {
+                format!("its mtllib could not be read ({e}): the faces are grey")
+            });
+        }
+    }
+    if unrendered > 0 {
+        b.warnings.add(name, Some(first_unrendered), || {
+            format!(
+                "{unrendered} point, line, curve or surface element(s), the first here, are not \
+                 rendered: only faces are"
+            )
+        });
+    }
 }
 
 /// The default view of a bounding box used for OBJ scenes (and the ray-casting benchmark):

@@ -12,6 +12,7 @@ use crate::limits;
 use crate::material::Material;
 use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
+use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Vec3A};
 use std::path::{Path, PathBuf};
@@ -120,6 +121,8 @@ pub struct Scene {
     pub(crate) source_count: usize,
     /// Colours in the file are display values, as in the SPD (see [`Scene::display_referred`]).
     pub(crate) display_referred: bool,
+    /// What parsed but may not render as meant ([`Scene::warnings`]).
+    pub(crate) warnings: Warnings,
 }
 
 impl Scene {
@@ -161,13 +164,21 @@ impl Scene {
         Scene::parse(&bytes, format, &name, &resolve)
     }
 
+    /// What parsed but may not render as meant (a degenerate primitive left out, a colour
+    /// outside its useful range, an OBJ face whose material is missing), each with its file and
+    /// line: the first [`limits::MAX_WARNINGS`] and a count of the rest. Empty for a clean file.
+    pub fn warnings(&self) -> &Warnings {
+        &self.warnings
+    }
+
     /// Default image size from the scene.
     pub fn resolution(&self) -> (u32, u32) {
         self.resolution
     }
 
     /// Number of primitives as the scene describes them (a polygon counts once even though it
-    /// is triangulated internally; mesh triangles count one each; degenerate ones are dropped).
+    /// is triangulated internally; mesh triangles count one each; degenerate ones are left out,
+    /// each with a warning).
     /// A mesh counts its triangles once per reference, whether it is instanced or flattened:
     /// this is what the image holds, not what is stored (see
     /// [`Scene::stored_primitive_count`]).
@@ -632,6 +643,8 @@ pub(crate) struct SceneBuilder {
     /// [`limits::MAX_MESH_REFERENCES`], likewise.
     pub(crate) max_instances: usize,
     pub display_referred: bool,
+    /// Warnings found so far (the parsers add them; [`Scene::warnings`]).
+    pub warnings: Warnings,
 }
 
 /// A BVH over a geometry's shapes, with the shapes and their data put in its order, and the
@@ -653,6 +666,9 @@ fn ordered_bvh(
         }
     }
     let (bvh, order) = Bvh::build(&boxes);
+    let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
+    // the boxes go before the ordered arrays are made: a parse's peak memory
+    drop(boxes);
     let src = |r: &u32| owner.get(*r as usize).copied();
     let shapes: Vec<Shape> = order
         .iter()
@@ -662,7 +678,6 @@ fn ordered_bvh(
         .iter()
         .filter_map(|r| src(r).and_then(|i| info.get(i as usize).copied()))
         .collect();
-    let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
     (bvh, shapes, info, bounds)
 }
 
@@ -688,6 +703,7 @@ impl SceneBuilder {
             stored_elsewhere: 0,
             max_primitives: limits::MAX_PRIMITIVES,
             max_instances: limits::MAX_MESH_REFERENCES,
+            warnings: Warnings::default(),
         }
     }
 
@@ -710,7 +726,9 @@ impl SceneBuilder {
     /// Adds a shared mesh from a builder made by [`SceneBuilder::for_mesh`] holding only
     /// triangles (others are ignored): builds its BVH and takes over its materials. Returns
     /// the mesh's index for [`SceneBuilder::instance`].
-    pub fn add_mesh(&mut self, mesh: SceneBuilder) -> u32 {
+    pub fn add_mesh(&mut self, mut mesh: SceneBuilder) -> u32 {
+        // the mesh file's warnings are the scene's (read once, they are said once)
+        self.warnings.absorb(std::mem::take(&mut mesh.warnings));
         let base = self.materials.len() as u32;
         self.materials.extend(mesh.materials.iter().copied());
         let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds);
@@ -786,6 +804,8 @@ impl SceneBuilder {
         (self.materials.len() - 1) as u32
     }
 
+    /// Primitives added so far, as the file counts them; a parser compares it before and after
+    /// adding one to learn that a degenerate one was left out.
     pub fn primitive_count(&self) -> usize {
         self.source_count
     }
@@ -902,7 +922,9 @@ impl SceneBuilder {
         material: u32,
     ) -> Result<(), Error> {
         self.room()?;
-        if let Some(c) = make_cone(base, r0, apex, r1) {
+        if let Some(mut c) = make_cone(base, r0, apex, r1) {
+            // inside-only when a radius is negative and none positive (`0` and `-1` too)
+            c.inside = (r0 < 0.0 || r1 < 0.0) && r0 <= 0.0 && r1 <= 0.0;
             let k = self.geom.cones.len() as u32;
             self.geom.cones.push(c);
             self.push(Shape::Cone(k), material, NO_NORMALS);
@@ -933,6 +955,10 @@ impl SceneBuilder {
 
     /// Builds the BVH and the final scene. `camera` must be set.
     pub fn build(mut self) -> Scene {
+        // the growth slack of the primitive arrays goes before the BVH's arrays are made
+        self.geom.shapes.shrink_to_fit();
+        self.info.shrink_to_fit();
+        self.patch_normals.shrink_to_fit();
         let (bvh, shapes, info, bounds) = ordered_bvh(&self.geom, &self.info, &self.poly_bounds);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
@@ -978,6 +1004,7 @@ impl SceneBuilder {
             bounds,
             source_count: self.source_count,
             display_referred: self.display_referred,
+            warnings: self.warnings,
         }
     }
 }

@@ -1,7 +1,15 @@
 //! RingTracer's native scene format (TOML).
 //!
-//! Unknown keys are errors; errors carry `file:line`. All numbers must be finite. Colours are
-//! linear RGB triples. Example with every feature:
+//! Unknown keys are errors, and so are keys and tables given twice (TOML forbids them); errors
+//! carry `file:line`. All numbers must be finite; `fov` must be in (0, 180); a cone's radii may
+//! not have opposite signs; a transparent material (`t > 0`) needs `ior > 0`. Input that
+//! renders but maybe not as meant gives a warning with file and line ([`Scene::warnings`]): a
+//! degenerate object (zero radius or area, base = apex), a zero vertex normal, colours, kd, ks
+//! or t outside [0, 1], ks + t > 1, a negative shine, negative light, ambient or background
+//! colours, and a scene without objects or lights (docs/scene-formats.md has the table). A file
+//! is at most [`limits::MAX_TOML_BYTES`], a key or string at most [`limits::MAX_TOKEN_BYTES`].
+//! Colours are linear RGB triples; a material no object uses is fine (a library of them).
+//! Example with every feature:
 //!
 //! ```toml
 //! background = [0.45, 0.65, 0.95]   # top-level keys come before the first [table]
@@ -32,7 +40,7 @@
 //! checker = { color2 = [1.0, 1.0, 0.1], scale = 1.0 }
 //!
 //! [[objects]]
-//! type = "sphere"
+//! type = "sphere"           # a negative radius: seen from inside only
 //! center = [0.0, 1.0, 0.0]
 //! radius = 1.0
 //! material = "glass"        # every object: optional, default white diffuse
@@ -98,7 +106,7 @@ use crate::error::{quoted_snippets, snippet};
 use crate::files::Unreadable;
 use crate::light::{spd_intensity, Light};
 use crate::limits;
-use crate::material::{Checker, Material};
+use crate::material::{check_light_colour, Checker, Material};
 use crate::scene::{Scene, SceneBuilder};
 use crate::Error;
 use glam::{Affine3A, Mat3A, Vec3A};
@@ -311,6 +319,14 @@ pub fn parse(
     file: &str,
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
+    limits::check_with(
+        format!("the size of {file}"),
+        bytes.len() as u64,
+        " bytes",
+        limits::MAX_TOML_BYTES,
+        "MAX_TOML_BYTES",
+        limits::MESHES,
+    )?;
     let text = std::str::from_utf8(bytes).map_err(|e| {
         Error::parse(
             file,
@@ -318,11 +334,17 @@ pub fn parse(
             "the file is not valid UTF-8",
         )
     })?;
+    // before the TOML reader copies any key or string
+    limits::check_tokens(bytes, limits::Tokens::Toml, file)?;
     let def: SceneDef = toml::from_str(text).map_err(|e| {
         let line = e.span().map_or(1, |s| line_of(bytes, s.start));
         Error::parse(file, line, quoted_snippets(e.message().trim()))
     })?;
     let cx = Ctx { src: bytes, file };
+    let warn = |b: &mut SceneBuilder, span: &Range<usize>, w: String| {
+        b.warnings
+            .add(file, Some(line_of(bytes, span.start)), move || w)
+    };
     let mut b = SceneBuilder::new();
 
     let cspan = def.camera.span();
@@ -331,10 +353,16 @@ pub fn parse(
     let at = cx.v3(&cspan, "camera 'at'", c.at)?;
     let up = cx.v3(&cspan, "camera 'up'", c.up)?;
     cx.finite(&cspan, "camera 'fov'", &[c.fov])?;
+    if !(c.fov > 0.0 && c.fov < 180.0) {
+        return Err(cx.err(
+            cspan,
+            format!("camera 'fov' {} is not in (0, 180) degrees", c.fov),
+        ));
+    }
     b.camera = Some(Camera::new(from, at, up, c.fov).ok_or_else(|| {
         cx.err(
             cspan.clone(),
-            "degenerate camera: 'from' equals 'at', 'up' is parallel to the view direction, or 'fov' is not in (0, 180)",
+            "degenerate camera: 'from' equals 'at', or 'up' is parallel to the view direction",
         )
     })?);
     limits::check_resolution(c.width, c.height)
@@ -343,10 +371,16 @@ pub fn parse(
 
     if let Some(bg) = def.background {
         b.background = cx.v3(&bg.span(), "background", *bg.get_ref())?;
+        if let Some(w) = check_light_colour("background", b.background) {
+            warn(&mut b, &bg.span(), w);
+        }
     }
     if let Some(a) = def.ambient {
         let v = a.get_ref().vec();
         cx.finite(&a.span(), "ambient", &v.to_array())?;
+        if let Some(w) = check_light_colour("ambient", v) {
+            warn(&mut b, &a.span(), w);
+        }
         b.ambient = Some(v);
     }
     limits::check(
@@ -368,7 +402,13 @@ pub fn parse(
         let l = l.get_ref();
         let position = cx.v3(&span, "light 'position'", l.position)?;
         let color = match l.color {
-            Some(c) => cx.v3(&span, "light 'color'", c)?,
+            Some(c) => {
+                let c = cx.v3(&span, "light 'color'", c)?;
+                if let Some(w) = check_light_colour("light 'color'", c) {
+                    warn(&mut b, &span, w);
+                }
+                c
+            }
             None => Vec3A::splat(spd_intensity(n)),
         };
         b.lights.push(Light { position, color });
@@ -407,6 +447,13 @@ pub fn parse(
             ior: m.ior,
             checker,
         };
+        let keys = ["'kd'", "'ks'", "'shine'", "'t'", "'ior'"];
+        for w in mat
+            .check(keys)
+            .map_err(|e| cx.err(span.clone(), format!("{what}: {e}")))?
+        {
+            warn(&mut b, &span, format!("{what}: {w}"));
+        }
         let idx = b.material(mat);
         names.insert(name.as_str(), idx);
     }
@@ -422,6 +469,9 @@ pub fn parse(
             }
         };
         let lim = |e: Error| cx.err(span.clone(), e.to_string());
+        let before = b.primitive_count();
+        // what a degenerate object of this kind is, for the warning that it is left out
+        let mut degenerate: Option<&str> = None;
         match o.get_ref() {
             ObjectDef::Sphere {
                 center,
@@ -431,6 +481,7 @@ pub fn parse(
                 let c = cx.v3(&span, "sphere 'center'", *center)?;
                 cx.finite(&span, "sphere 'radius'", &[*radius])?;
                 b.sphere(c, *radius, find(material)?).map_err(lim)?;
+                degenerate = Some("sphere has 'radius' 0");
             }
             ObjectDef::Plane {
                 point,
@@ -454,17 +505,27 @@ pub fn parse(
                     cx.v3(&span, "triangle 'vertices'", vertices[2])?,
                 ];
                 let n = match normals {
-                    Some(n) => Some([
-                        cx.v3(&span, "triangle 'normals'", n[0])?
-                            .normalize_or(Vec3A::Z),
-                        cx.v3(&span, "triangle 'normals'", n[1])?
-                            .normalize_or(Vec3A::Z),
-                        cx.v3(&span, "triangle 'normals'", n[2])?
-                            .normalize_or(Vec3A::Z),
-                    ]),
+                    Some(n) => {
+                        let n = [
+                            cx.v3(&span, "triangle 'normals'", n[0])?,
+                            cx.v3(&span, "triangle 'normals'", n[1])?,
+                            cx.v3(&span, "triangle 'normals'", n[2])?,
+                        ];
+                        if n.contains(&Vec3A::ZERO) {
+                            warn(
+                                &mut b,
+                                &span,
+                                "triangle has a zero vertex normal, which has no direction: the \
+                                 shading there follows the other vertices' normals"
+                                    .into(),
+                            );
+                        }
+                        Some(n.map(Vec3A::normalize_or_zero))
+                    }
                     None => None,
                 };
                 b.triangle(v, n, find(material)?).map_err(lim)?;
+                degenerate = Some("triangle has zero area (its vertices are equal or on one line)");
             }
             ObjectDef::Polygon { vertices, material } => {
                 if vertices.len() < 3 {
@@ -485,6 +546,7 @@ pub fn parse(
                     .map(|v| cx.v3(&span, "polygon 'vertices'", *v))
                     .collect::<Result<Vec<_>, _>>()?;
                 b.polygon(&vs, find(material)?).map_err(lim)?;
+                degenerate = Some("polygon has zero area (its vertices are equal or on one line)");
             }
             ObjectDef::Cone {
                 base,
@@ -496,8 +558,11 @@ pub fn parse(
                 let b0 = cx.v3(&span, "cone 'base'", *base)?;
                 let a0 = cx.v3(&span, "cone 'apex'", *apex)?;
                 cx.finite(&span, "cone radii", &[*base_radius, *apex_radius])?;
+                crate::nff::check_cone_radii(*base_radius, *apex_radius)
+                    .map_err(|e| cx.err(span.clone(), format!("cone {e}")))?;
                 b.cone(b0, *base_radius, a0, *apex_radius, find(material)?)
                     .map_err(lim)?;
+                degenerate = Some("cone has base = apex or both radii 0");
             }
             ObjectDef::Cylinder {
                 base,
@@ -510,6 +575,7 @@ pub fn parse(
                 cx.finite(&span, "cylinder 'radius'", &[*radius])?;
                 b.cone(b0, *radius, a0, *radius, find(material)?)
                     .map_err(lim)?;
+                degenerate = Some("cylinder has base = apex or 'radius' 0");
             }
             ObjectDef::Mesh {
                 file: mesh_file,
@@ -580,7 +646,11 @@ pub fn parse(
                 }
             }
         }
+        if let Some(what) = degenerate.filter(|_| b.primitive_count() == before) {
+            warn(&mut b, &span, format!("{what} and is not rendered"));
+        }
     }
+    crate::warning::scene_warnings(&mut b, file);
     Ok(b.build())
 }
 
@@ -756,6 +826,14 @@ mod tests {
         assert!(e.len() < 700, "{} bytes", e.len());
         let e = err(&format!("{CAM}{long} = 1\n"));
         assert!(e.len() < 700, "{} bytes", e.len());
+        // longer ones stop at the token limit, before the TOML reader copies them
+        let e = err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"{long}\"\n"));
+        assert!(
+            e.starts_with("s.toml:9: a token is 10485760 bytes, more than the limit of 4096"),
+            "{e}"
+        );
+        // names up to the token limit reach the messages that echo them, cut short there
+        let long = "q".repeat(limits::MAX_TOKEN_BYTES - 20);
         let e = err(&format!("{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = \"\\u001b[31m{long}\"\n"));
         assert!(
             e.starts_with("s.toml:5: unknown material '\\u{1b}[31mqqq"),

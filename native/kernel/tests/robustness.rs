@@ -518,3 +518,41 @@ fn a_refused_mtllib_stops_the_load_and_a_missing_one_falls_back_to_grey() {
     };
     assert!(Scene::parse(obj, Format::Obj, "m.obj", &missing).is_ok());
 }
+
+/// Found by the obj fuzz target: a relative normal index reaching back before the first normal
+/// made the OBJ reader's index arithmetic overflow. Face indices are checked before it runs.
+#[test]
+fn obj_face_indices_that_name_nothing_are_errors() {
+    let quad = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\n";
+    for (face, message) in [
+        (
+            "f 1//-4 2//1 3//1",
+            "normal index -4 reaches back before the first normal (only 1 so far)",
+        ),
+        ("f 0 1 2", "vertex index 0: OBJ indices count from 1"),
+        (
+            "f 1 2 99999999999999999",
+            "vertex index 99999999999999999, but the file has 4 of them",
+        ),
+        (
+            "f 1/2/1 2 3",
+            "texture coordinate index 2, but the file has 0 of them",
+        ),
+        (
+            "l 1 -5",
+            "vertex index -5 reaches back before the first vertex (only 4 so far)",
+        ),
+    ] {
+        let src = format!("{quad}{face}\n");
+        let e = parse_err(src.as_bytes(), Format::Obj, "i.obj").to_string();
+        assert_eq!(e, format!("i.obj:6: {message}"));
+    }
+    // the fuzzer's own input, as it found it
+    let found = b"mtllib m.mtl\no qu\nv 5 0 0\nv 1 0 0\nv 2 1 0\nv\x030 1 0\nvn  5 0 0\nv 1 0 0\n\
+v 2 1 0\nv\x030 1 0\nvn -4 -3 -2\nf  0\nusemtl red\nf 2/1/-4 -3 -2\nf  0\nusemtl red\n\
+f 2/1/1 2/1/1 3/1/0 4/1/1\n";
+    assert!(Scene::parse(found, Format::Obj, "found.obj", &resolve).is_err());
+    // relative indices that stay inside are fine
+    let ok = format!("{quad}f -4//-1 -3//-1 -2//-1\n");
+    assert!(Scene::parse(ok.as_bytes(), Format::Obj, "ok.obj", &resolve).is_ok());
+}

@@ -43,6 +43,19 @@ pub struct SceneInfo {
     pub height: u32,
     pub primitives: u64,
     pub lights: u64,
+    /// The parse's warnings, at most `limits::MAX_WARNINGS` of them, in the order found.
+    pub warnings: Vec<WarningTerm>,
+    /// How many more warnings there were than those in `warnings`.
+    pub warnings_omitted: u64,
+}
+
+/// A kernel warning (`ring_tracer_kernel::Warning`) as a map; `line` is `nil` for a warning
+/// about a whole file.
+#[derive(NifMap)]
+pub struct WarningTerm {
+    pub file: String,
+    pub line: Option<u64>,
+    pub message: String,
 }
 
 /// A path as Erlang sees one: its bytes, as they are (no UTF-8 required).
@@ -57,7 +70,7 @@ fn path_binary<'a>(env: Env<'a>, path: &Path) -> Binary<'a> {
 /// `base_dir` and the `allow_dirs` folders (`files::Confinement`), and only if
 /// it is a regular file of at most `limits::MAX_FILE_BYTES`.
 ///
-/// Returns the resource, its info, every referenced file's bytes keyed by its
+/// Returns the resource, its info (with the parse's warnings), every referenced file's bytes keyed by its
 /// reference (to ship to other nodes), and the canonical absolute paths of the
 /// files read from disk, in the order first read (so that an output never
 /// overwrites an input).
@@ -124,6 +137,17 @@ fn scene_parse<'a>(
         height,
         primitives: scene.primitive_count() as u64,
         lights: scene.light_count() as u64,
+        warnings: scene
+            .warnings()
+            .kept()
+            .iter()
+            .map(|w| WarningTerm {
+                file: w.file.clone(),
+                line: w.line.map(|l| l as u64),
+                message: w.message.clone(),
+            })
+            .collect(),
+        warnings_omitted: scene.warnings().omitted(),
     };
     let used = used.into_inner().unwrap_or_default();
     let mut files = Vec::with_capacity(used.len());

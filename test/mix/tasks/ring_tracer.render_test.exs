@@ -29,6 +29,33 @@ defmodule Mix.Tasks.RingTracer.RenderTest do
     assert <<137, "PNG", _::binary>> = File.read!(out)
   end
 
+  @tag :tmp_dir
+  test "prints the scene's warnings to stderr with file and line, then renders", %{tmp_dir: dir} do
+    scene = Path.join(dir, "odd.nff")
+
+    File.write!(
+      scene,
+      "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nresolution 16 16\nl 1 2 3\n" <>
+        "s 0 0 0 0\ns 0 0 0 1\n"
+    )
+
+    out = Path.join(dir, "odd.png")
+    args = [scene, "--out", out, "--children", "2", "--atoms", "2"]
+    parent = self()
+
+    stderr =
+      capture_io(:stderr, fn ->
+        stdout = capture_io(fn -> Mix.Tasks.RingTracer.Render.run(args) end)
+        send(parent, {:stdout, stdout})
+      end)
+
+    assert stderr =~ "odd.nff:8: warning: sphere 's' has radius 0 and is not rendered\n"
+    assert_received {:stdout, stdout}
+    assert stdout =~ "wrote #{out} (16x16)"
+    refute stdout =~ "warning:"
+    assert <<137, "PNG", _::binary>> = File.read!(out)
+  end
+
   test "--cookie is refused even without --nodes: the secret would be on the command line" do
     assert_raise Mix.Error, ~r/--cookie-file/, fn ->
       Mix.Tasks.RingTracer.Render.run([
