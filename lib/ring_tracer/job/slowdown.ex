@@ -45,19 +45,41 @@ defmodule RingTracer.Job.Slowdown do
     do: balance + round((speed - 1) * trace_us)
 
   @doc """
+  What to do after an atom traced in `trace_us`: `{sleep_ms, owed_us}`,
+  milliseconds to sleep (0: none, what is owed is under half a
+  millisecond) and microseconds owed in all.
+
+      iex> alias RingTracer.Job.Slowdown
+      iex> Slowdown.plan(Slowdown.new(1), 50_000)
+      {0, 0}
+      iex> Slowdown.plan(%{Slowdown.new(4) | balance: -2_000}, 1_000)
+      {1, 1_000}
+  """
+  @spec plan(t(), non_neg_integer()) :: {non_neg_integer(), integer()}
+  def plan(%__MODULE__{} = slowdown, trace_us) do
+    owed = owed(slowdown, trace_us)
+    if owed >= 500, do: {div(owed + 500, 1000), owed}, else: {0, owed}
+  end
+
+  @doc "The balance once `slept_us` of what was `owed_us` have passed (late timers included)."
+  @spec settle(t(), integer(), non_neg_integer()) :: t()
+  def settle(%__MODULE__{} = slowdown, owed_us, slept_us),
+    do: %{slowdown | balance: owed_us - slept_us}
+
+  @doc """
   Waits after an atom traced in `trace_us` and returns the new balance. A
   child of speed 1 returns at once.
   """
   @spec wait(t(), non_neg_integer()) :: t()
   def wait(%__MODULE__{} = slowdown, trace_us) do
-    owed = owed(slowdown, trace_us)
+    case plan(slowdown, trace_us) do
+      {0, owed} ->
+        settle(slowdown, owed, 0)
 
-    if owed >= 500 do
-      t0 = System.monotonic_time(:microsecond)
-      Process.sleep(div(owed + 500, 1000))
-      %{slowdown | balance: owed - (System.monotonic_time(:microsecond) - t0)}
-    else
-      %{slowdown | balance: owed}
+      {ms, owed} ->
+        t0 = System.monotonic_time(:microsecond)
+        Process.sleep(ms)
+        settle(slowdown, owed, System.monotonic_time(:microsecond) - t0)
     end
   end
 end
