@@ -86,7 +86,7 @@ defmodule RingTracer.ProtocolPropertyTest do
 
               r.pixels == reference and length(r.failures) <= length(kill_at) and
                 ids == Enum.uniq(ids) and (lost_records or length(ids) == total) and
-                no_storm?(r, clean)
+                no_storm?(r, clean, strategy, n)
 
             _ ->
               false
@@ -118,12 +118,17 @@ defmodule RingTracer.ProtocolPropertyTest do
 
   # After kills, at most twice the messages of the same job without them
   # (the job's atoms are the same, so this is messages per atom). What a
-  # killed child sent is not counted: its report dies with it.
-  defp no_storm?(_result, nil), do: true
+  # killed child sent is not counted: its report dies with it. Steal's own
+  # end of a job is every idle child asking every sibling once (request and
+  # reply) before it is finished; a clean run cut short by its last atom
+  # may send a few of those N(N - 1) pairs and one lengthened by a kill all
+  # of them, so for steal one such round is allowed on top.
+  defp no_storm?(_result, nil, _strategy, _n), do: true
 
-  defp no_storm?(result, {:ok, clean}) do
+  defp no_storm?(result, {:ok, clean}, strategy, n) do
     total = fn r -> r.messages |> Map.values() |> Enum.map(& &1.count) |> Enum.sum() end
-    ok = total.(result) <= 2 * total.(clean)
+    sweeps = if strategy == :steal, do: 2 * n * (n - 1), else: 0
+    ok = total.(result) <= 2 * total.(clean) + sweeps
 
     if System.get_env("PROPER_VERBOSE") && not ok,
       do: IO.inspect({result.messages, clean.messages}, label: "storm")
@@ -131,7 +136,7 @@ defmodule RingTracer.ProtocolPropertyTest do
     ok
   end
 
-  defp no_storm?(_result, _clean), do: false
+  defp no_storm?(_result, _clean, _strategy, _n), do: false
 
   defp await(id, kill_at) do
     receive do

@@ -52,6 +52,12 @@ defmodule RingTracer.Strategy.Steal do
 
   def handle_message({:handover, _from, []}, child), do: {:ok, idle(child)}
 
+  # Atoms the parent hands out again after a failure: the child's sweep of
+  # victims goes on where it was (restarting it would ask every sibling
+  # again, most of them idle by then).
+  def handle_message({:handover, :parent, atoms}, child),
+    do: {:ok, Child.receive_atoms(child, atoms)}
+
   def handle_message({:handover, _from, atoms}, child),
     do: {:ok, Child.receive_atoms(%{child | strategy_state: %{}}, atoms)}
 
