@@ -335,19 +335,13 @@ defmodule RingTracer do
 
   defp run(source, settings, kernel, capacity_cap, opts) do
     {:ok, strategy} = RingTracer.Strategy.module(opts[:strategy])
+    {width, height} = Settings.traced_size(settings)
 
     spec = %Spec{
       id: make_ref(),
       source: source,
       settings: settings,
-      layout:
-        Layout.new(
-          elem(Settings.traced_size(settings), 0),
-          elem(Settings.traced_size(settings), 1),
-          opts[:children],
-          opts[:atoms],
-          opts[:layout]
-        ),
+      layout: Layout.new(width, height, opts[:children], opts[:atoms], opts[:layout]),
       caller: self(),
       nodes: opts[:nodes],
       liveness: opts[:liveness],

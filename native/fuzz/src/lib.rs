@@ -38,7 +38,10 @@ pub fn run(data: &[u8], format: Format) {
     for w in warnings.kept() {
         let shown = w.to_string();
         assert!(shown.len() < 2048, "long warning: {shown}");
-        assert!(!shown.contains(['\n', '\x1b']), "unescaped warning: {shown:?}");
+        assert!(
+            !shown.contains(['\n', '\x1b']),
+            "unescaped warning: {shown:?}"
+        );
     }
     let base = Settings {
         width: 4,
