@@ -11,9 +11,9 @@ defmodule RingTracer.CLI do
   1 a failure, 2 a usage error, 130/143 interrupted.
   """
 
-  alias RingTracer.CLI.{Args, Paths}
+  alias RingTracer.CLI.{Args, Console, Paths}
 
-  @commands ~w(render worker cookie)
+  @commands ~w(render serve worker cookie)
 
   @doc "Runs the command in the VM's plain arguments (those after `-extra`) and halts."
   @spec main() :: no_return()
@@ -56,6 +56,16 @@ defmodule RingTracer.CLI do
     end
   end
 
+  def run(["serve" | argv], signals?) do
+    case OptionParser.parse(argv, strict: [socket: :string, help: :boolean], aliases: [h: :help]) do
+      {opts, [], []} ->
+        if opts[:help], do: serve_help_status(), else: serve(opts, signals?)
+
+      {_opts, _args, _invalid} ->
+        error("serve", "usage: ringtracer serve [--socket PATH]", 2)
+    end
+  end
+
   def run(["cookie" | argv], _signals?) do
     cond do
       help?(argv) ->
@@ -93,7 +103,7 @@ defmodule RingTracer.CLI do
   end
 
   def run([], _signals?) do
-    IO.write(:stderr, help())
+    IO.write(Console.err(), help())
     2
   end
 
@@ -111,11 +121,54 @@ defmodule RingTracer.CLI do
     )
   end
 
+  defp serve_help_status do
+    IO.write(serve_help())
+    0
+  end
+
+  defp serve(opts, signals?) do
+    path = Paths.expand(opts[:socket] || System.get_env("RINGTRACER_SOCKET") || default_socket())
+
+    with {:ok, _} <- Application.ensure_all_started(:ring_tracer),
+         :ok <- warm_up(),
+         {:ok, pid} <- RingTracer.CLI.Server.start_link(path) do
+      IO.puts("ringtracer serve: rendering for this user's commands on #{path} (Ctrl-C stops)")
+      if signals?, do: RingTracer.CLI.Signals.forward_to(self())
+
+      receive do
+        {RingTracer.CLI.Signals, signal} ->
+          RingTracer.CLI.Server.stop(pid)
+          RingTracer.CLI.Signals.exit_status(signal)
+      end
+    else
+      {:error, message} when is_binary(message) -> error("serve", message, 1)
+      {:error, reason} -> error("serve", inspect(reason), 1)
+    end
+  end
+
+  defp default_socket do
+    base = System.get_env("XDG_RUNTIME_DIR") || Path.join(System.user_home!(), ".cache")
+    Path.join([base, "ringtracer", "serve.sock"])
+  end
+
+  # What the first command would otherwise load: every module of Elixir and
+  # of the application, and the kernel's first trace.
+  defp warm_up do
+    for app <- [:elixir, :logger, :ring_tracer],
+        {:ok, modules} = :application.get_key(app, :modules),
+        module <- modules,
+        do: Code.ensure_loaded(module)
+
+    scene = Path.join(:code.priv_dir(:ring_tracer), "scenes/whitted.toml")
+    _ = RingTracer.render(scene, width: 8, height: 8)
+    :ok
+  end
+
   defp help?(argv), do: Enum.any?(argv, &(&1 in ["--help", "-h"]))
 
   defp error(command, message, status) do
     prefix = if command == "", do: "ringtracer", else: "ringtracer #{command}"
-    IO.puts(:stderr, "#{prefix}: #{message}")
+    IO.puts(Console.err(), "#{prefix}: #{message}")
     status
   end
 
@@ -127,6 +180,7 @@ defmodule RingTracer.CLI do
 
     Commands:
       render SCENE --out FILE   render a scene to an image (.png or .exr)
+      serve                     keep a render node running: later renders start at once
       worker --sname NAME       a node that hosts children of renders started elsewhere
       cookie [PATH]             make a cookie file, mode 0600 (default ~/.erlang.cookie)
       tls ca DIR | tls node CA_DIR OUT_DIR [HOST...]   certificates for a TLS cluster
@@ -159,6 +213,26 @@ defmodule RingTracer.CLI do
     Example:
       ringtracer worker --sname w1 &
       ringtracer render priv/scenes/balls_s2.nff -o b.png --nodes w1@localhost
+    """
+  end
+
+  defp serve_help do
+    """
+    Usage: ringtracer serve [--socket PATH]
+
+    Keeps a render node running for this user, until stopped (Ctrl-C). While it runs,
+    `ringtracer render` hands its work to it instead of booting a VM of its own, so the
+    render starts at once. Output, progress, Ctrl-C and exit status are the same.
+    Renders on other nodes (--nodes, --tls, ...) still boot their own VM.
+
+      --socket PATH           the Unix socket (default $XDG_RUNTIME_DIR/ringtracer/serve.sock,
+                              else ~/.cache/ringtracer/serve.sock); its folder is mode 0700
+      RINGTRACER_SERVER=off   in the environment of `ringtracer render`: never use a server
+      RINGTRACER_SERVER=only  fail rather than boot a VM of its own
+
+    Example:
+      ringtracer serve &
+      ringtracer render priv/scenes/whitted.toml -o whitted.png
     """
   end
 

@@ -31,7 +31,12 @@ defmodule RingTracer.CLITest do
         :stderr_to_stdout,
         args: args,
         cd: ctx.scenes,
-        env: [{~c"PATH", String.to_charlist("#{ctx.bin}:#{System.get_env("PATH")}")}]
+        env: [
+          {~c"PATH", String.to_charlist("#{ctx.bin}:#{System.get_env("PATH")}")},
+          # A VM of its own, even if a `ringtracer serve` of this checkout runs
+          # (test/ring_tracer/cli/server_test.exs runs these through one).
+          {~c"RINGTRACER_SERVER", ~c"off"}
+        ]
       ])
 
     {:os_pid, pid} = Port.info(port, :os_pid)

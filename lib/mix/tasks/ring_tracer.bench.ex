@@ -185,60 +185,77 @@ defmodule Mix.Tasks.RingTracer.Bench do
     Mix.shell().info(
       "#{size}x#{size}, whole processes, median of #{runs} (alternating); " <>
         "first atom: from exec to the first atom's pixels reaching the parent; " <>
+        "own VM: the command boots one; served: through `ringtracer serve`; " <>
         "povray +WT2 -D -A" <> if(povray, do: "", else: " (povray not installed)")
     )
 
-    header = ~w(scene first_atom_s ours_s pov_s ours/pov)
+    socket = Path.join([tmp, "serve-#{System.pid()}", "serve.sock"])
+    server = start_server(launcher, socket)
+
+    header = ~w(scene first_atom_s ours_s served_first_s served_s pov_s ours/pov served/pov)
 
     rows =
-      for name <- scenes do
-        scene = Path.expand(Path.join(dir, name <> ".nff"))
-        pov = Path.expand(Path.join(pov_dir, name <> ".pov"))
+      try do
+        for name <- scenes do
+          scene = Path.expand(Path.join(dir, name <> ".nff"))
+          pov = Path.expand(Path.join(pov_dir, name <> ".pov"))
 
-        ours = fn ->
-          stats = Path.join(tmp, "stats.json")
+          ours = fn env ->
+            stats = Path.join(tmp, "stats.json")
 
-          args =
-            ~w(render #{scene} -o #{tmp}/ours.png --width #{size} --height #{size} -q --stats #{stats})
+            args =
+              ~w(render #{scene} -o #{tmp}/ours.png --width #{size} --height #{size} -q --stats #{stats})
 
-          t0 = System.system_time(:microsecond)
-          {_, 0} = System.cmd(launcher, args, stderr_to_stdout: true)
-          whole = System.system_time(:microsecond) - t0
-          summary = stats |> File.read!() |> :jiffy.decode([:return_maps])
-          {whole, summary["started_at_us"] + summary["first_atom_us"] - t0}
-        end
-
-        theirs = fn ->
-          if povray && File.exists?(pov) do
-            t0 = System.monotonic_time(:microsecond)
-
-            {_, _} =
-              System.cmd(
-                povray,
-                ~w(+I#{pov} +O#{tmp}/pov.png +W#{size} +H#{size} -D -A +WT2),
-                stderr_to_stdout: true
-              )
-
-            System.monotonic_time(:microsecond) - t0
+            t0 = System.system_time(:microsecond)
+            {_, 0} = System.cmd(launcher, args, stderr_to_stdout: true, env: env)
+            whole = System.system_time(:microsecond) - t0
+            summary = stats |> File.read!() |> :jiffy.decode([:return_maps])
+            {whole, summary["started_at_us"] + summary["first_atom_us"] - t0}
           end
+
+          theirs = fn ->
+            if povray && File.exists?(pov) do
+              t0 = System.monotonic_time(:microsecond)
+
+              {_, _} =
+                System.cmd(
+                  povray,
+                  ~w(+I#{pov} +O#{tmp}/pov.png +W#{size} +H#{size} -D -A +WT2),
+                  stderr_to_stdout: true
+                )
+
+              System.monotonic_time(:microsecond) - t0
+            end
+          end
+
+          own_vm = [{"RINGTRACER_SERVER", "off"}]
+          served = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+          samples = for _ <- 1..runs, do: {ours.(own_vm), ours.(served), theirs.()}
+          pick = fn f -> median(Enum.map(samples, f)) end
+          whole = pick.(fn {{w, _}, _, _} -> w end)
+          first = pick.(fn {{_, f}, _, _} -> f end)
+          s_whole = pick.(fn {_, {w, _}, _} -> w end)
+          s_first = pick.(fn {_, {_, f}, _} -> f end)
+          pov_samples = for {_, _, p} <- samples, p != nil, do: p
+          pov_us = if pov_samples != [], do: median(pov_samples)
+
+          [
+            name,
+            secs(first),
+            secs(whole),
+            secs(s_first),
+            secs(s_whole),
+            pov_us && secs(pov_us),
+            pov_us && fmt(whole / pov_us),
+            pov_us && fmt(s_whole / pov_us)
+          ]
         end
-
-        samples = for _ <- 1..runs, do: {ours.(), theirs.()}
-        whole = median(Enum.map(samples, fn {{w, _}, _} -> w end))
-        first = median(Enum.map(samples, fn {{_, f}, _} -> f end))
-        pov_samples = for {_, p} <- samples, p != nil, do: p
-        pov_us = if pov_samples != [], do: median(pov_samples)
-
-        [
-          name,
-          secs(first),
-          secs(whole),
-          pov_us && secs(pov_us),
-          pov_us && fmt(whole / pov_us)
-        ]
+      after
+        stop_server(server)
       end
 
     print_table(header, rows)
+    Mix.shell().info("targets: served_first_s <= 0.2, served/pov <= 0.4")
   end
 
   def run(["limits" | argv]) do
@@ -659,6 +676,42 @@ defmodule Mix.Tasks.RingTracer.Bench do
       |> Enum.zip(widths)
       |> Enum.map_join("  ", fn {cell, w} -> String.pad_leading(cell, w) end)
       |> Mix.shell().info()
+    end
+  end
+
+  # `ringtracer serve` on `socket`, ready when the socket appears.
+  defp start_server(launcher, socket) do
+    File.rm(socket)
+
+    port =
+      Port.open({:spawn_executable, launcher}, [
+        :binary,
+        :exit_status,
+        args: ["serve"],
+        env: [{~c"RINGTRACER_SOCKET", String.to_charlist(socket)}]
+      ])
+
+    wait_for = fn wait, n ->
+      cond do
+        File.exists?(socket) -> :ok
+        n == 0 -> Mix.raise("ringtracer serve did not start on #{socket}")
+        true -> Process.sleep(50) && wait.(wait, n - 1)
+      end
+    end
+
+    # The socket appears once the server has warmed up.
+    wait_for.(wait_for, 600)
+    port
+  end
+
+  defp stop_server(port) do
+    {:os_pid, pid} = Port.info(port, :os_pid)
+    System.cmd("kill", ["-TERM", Integer.to_string(pid)])
+
+    receive do
+      {^port, {:exit_status, _}} -> :ok
+    after
+      10_000 -> :ok
     end
   end
 end

@@ -10,7 +10,7 @@ defmodule RingTracer.CLI.Render do
   (SIGTERM).
   """
 
-  alias RingTracer.CLI.{Args, Paths, Progress}
+  alias RingTracer.CLI.{Args, Console, Paths, Progress}
   alias RingTracer.Cluster.Distribution
 
   @render_switches [
@@ -58,6 +58,24 @@ defmodule RingTracer.CLI.Render do
 
   @outputs [out: :image, stats: :stats, timeline: :timeline, ownership: :ownership]
   @distribution Keyword.keys(RingTracer.CLI.Worker.switches())
+
+  @doc """
+  Whether `argv` asks for a render that needs a VM of its own: one on other
+  nodes starts distribution, which the resident server
+  (`RingTracer.CLI.Server`) leaves to a command's own VM.
+
+      iex> RingTracer.CLI.Render.own_vm?(["a.nff", "-o", "a.png", "--nodes", "w1@localhost"])
+      true
+      iex> RingTracer.CLI.Render.own_vm?(["a.nff", "--tls=certs", "-o", "a.png"])
+      true
+      iex> RingTracer.CLI.Render.own_vm?(["a.nff", "-o", "a.png", "--children", "4"])
+      false
+  """
+  @spec own_vm?([String.t()]) :: boolean()
+  def own_vm?(argv) do
+    flags = Enum.map([:nodes | @distribution], &Args.flag/1)
+    Enum.any?(argv, fn arg -> hd(String.split(arg, "=", parts: 2)) in flags end)
+  end
 
   @doc "The switches `render` accepts."
   @spec switches() :: keyword()
@@ -132,7 +150,7 @@ defmodule RingTracer.CLI.Render do
         0
 
       {:error, status, message} ->
-        IO.puts(:stderr, "ringtracer render: #{message}")
+        IO.puts(Console.err(), "ringtracer render: #{message}")
         status
     end
   end
@@ -234,7 +252,7 @@ defmodule RingTracer.CLI.Render do
   end
 
   defp progress_mode(opts) do
-    tty? = match?({:ok, _}, :io.columns(:standard_error))
+    tty? = Console.tty?()
 
     case {opts[:quiet], opts[:progress]} do
       {true, _} -> {:ok, :quiet}
@@ -382,7 +400,7 @@ defmodule RingTracer.CLI.Render do
   # What parsed but may not render as meant, before the render (it goes on).
   defp warn(scene) do
     for line <- RingTracer.Scene.Warning.lines(scene.warnings, scene.warnings_omitted),
-        do: IO.puts(:stderr, line)
+        do: IO.puts(Console.err(), line)
 
     :ok
   end
@@ -461,7 +479,7 @@ defmodule RingTracer.CLI.Render do
 
       {__MODULE__, :tick} ->
         {progress, text} = Progress.tick(progress, System.monotonic_time(:millisecond))
-        if text, do: IO.write(:stderr, text)
+        if text, do: IO.write(Console.err(), text)
         schedule(progress.mode)
         await(handle, handler, progress)
 
@@ -469,13 +487,13 @@ defmodule RingTracer.CLI.Render do
         await(handle, handler, progress)
 
       {RingTracer.CLI.Signals, signal} ->
-        IO.write(:stderr, Progress.finish(progress))
+        IO.write(Console.err(), Progress.finish(progress))
         :ok = RingTracer.cancel(handle)
         flush(id)
         {:interrupted, signal}
 
       {RingTracer, ^id, result} ->
-        IO.write(:stderr, Progress.finish(progress))
+        IO.write(Console.err(), Progress.finish(progress))
 
         case result do
           {:ok, r} -> {:ok, r}

@@ -1,0 +1,159 @@
+defmodule RingTracer.CLI.Server do
+  @moduledoc """
+  A resident render node for the command line (`ringtracer serve`).
+
+  A command booted in a VM of its own pays for the boot: the emulator, then
+  loading Elixir and the application, a few tenths of a second before the
+  first atom. A running server has all of that done: `bin/ringtracer render`
+  finds its socket, and a small client (`native/client`, no BEAM) hands it
+  the arguments, the caller's folder and whether stderr is a terminal, then
+  relays what the command writes and its exit status. Interrupts go the
+  same way (the client's first Ctrl-C or SIGTERM cancels the job); a client
+  that goes away cancels its job too.
+
+  The socket is a Unix socket in a folder only its owner can enter (mode
+  0700, checked at start), so only that user (and root) can reach it; the
+  commands run with the server's rights, which are the same user's.
+  Renders on other nodes (`--nodes`, `--tls`, ...) start distribution,
+  which a command's own VM does: the server tells the client to boot one
+  (`RingTracer.CLI.Server.Session`).
+  """
+
+  use GenServer
+  require Logger
+
+  alias RingTracer.CLI.Server.Session
+
+  @typedoc "The listening socket and where it is."
+  @type t :: %__MODULE__{socket: :gen_tcp.socket(), path: Path.t(), acceptor: pid()}
+  defstruct [:socket, :path, :acceptor]
+
+  @doc "Listens on the Unix socket `path` (its folder is made, mode 0700, if missing)."
+  @spec start_link(Path.t()) :: GenServer.on_start()
+  def start_link(path), do: GenServer.start_link(__MODULE__, path)
+
+  @doc "Stops the server and removes its socket."
+  @spec stop(pid()) :: :ok
+  def stop(pid), do: GenServer.stop(pid)
+
+  @doc """
+  Checks that `dir` can hold the socket: made if missing, a folder owned by
+  this user that nobody else can enter.
+  """
+  @spec check_dir(Path.t()) :: :ok | {:error, String.t()}
+  def check_dir(dir) do
+    with :ok <- make_dir(dir),
+         {:ok, %File.Stat{type: :directory, mode: mode, uid: uid}} <- File.lstat(dir),
+         true <- uid == own_uid() || {:error, "#{dir} belongs to another user"},
+         true <-
+           Bitwise.band(mode, 0o077) == 0 ||
+             {:error, "#{dir} can be entered by others (chmod 700 #{dir})"} do
+      :ok
+    else
+      {:ok, %File.Stat{}} -> {:error, "#{dir} is not a folder"}
+      {:error, reason} when is_atom(reason) -> {:error, "#{dir}: #{:file.format_error(reason)}"}
+      {:error, message} -> {:error, message}
+    end
+  end
+
+  defp make_dir(dir) do
+    case File.mkdir_p(Path.dirname(dir)) do
+      :ok ->
+        case :file.make_dir(dir) do
+          :ok -> File.chmod(dir, 0o700)
+          {:error, :eexist} -> :ok
+          error -> error
+        end
+
+      error ->
+        error
+    end
+  end
+
+  defp own_uid do
+    # The uid of this OS process: that of a file it makes.
+    case File.stat("/proc/self") do
+      {:ok, %File.Stat{uid: uid}} -> uid
+      _ -> nil
+    end
+  end
+
+  @impl GenServer
+  def init(path) do
+    Process.flag(:trap_exit, true)
+
+    with :ok <- check_dir(Path.dirname(path)),
+         :ok <- clear_stale(path),
+         {:ok, socket} <- listen(path),
+         :ok <- File.chmod(path, 0o600) do
+      server = self()
+      acceptor = spawn_link(fn -> accept(socket, server) end)
+      {:ok, %__MODULE__{socket: socket, path: path, acceptor: acceptor}}
+    else
+      {:error, message} when is_binary(message) -> {:stop, message}
+      {:error, reason} -> {:stop, "cannot listen on #{path}: #{inspect(reason)}"}
+    end
+  end
+
+  # A socket file left by a server that died: nobody answers on it.
+  defp clear_stale(path) do
+    case File.lstat(path) do
+      {:error, :enoent} ->
+        :ok
+
+      {:ok, %File.Stat{type: :other}} ->
+        case :gen_tcp.connect({:local, path}, 0, [:local], 1_000) do
+          {:ok, s} ->
+            :gen_tcp.close(s)
+            {:error, "a server is already running on #{path}"}
+
+          {:error, _} ->
+            File.rm(path)
+        end
+
+      {:ok, _} ->
+        {:error, "#{path} exists and is not a socket"}
+    end
+  end
+
+  defp listen(path) do
+    :gen_tcp.listen(0, [
+      :binary,
+      :local,
+      {:ifaddr, {:local, path}},
+      {:packet, 4},
+      {:active, false},
+      {:backlog, 64}
+    ])
+  end
+
+  defp accept(socket, server) do
+    case :gen_tcp.accept(socket) do
+      {:ok, client} ->
+        {:ok, pid} = Session.start(client)
+        :ok = :gen_tcp.controlling_process(client, pid)
+        send(pid, :go)
+        accept(socket, server)
+
+      {:error, :closed} ->
+        :ok
+
+      {:error, reason} ->
+        Logger.warning("ringtracer serve: accept failed: #{inspect(reason)}")
+        accept(socket, server)
+    end
+  end
+
+  @impl GenServer
+  def handle_info({:EXIT, pid, reason}, %{acceptor: pid} = state),
+    do: {:stop, reason, state}
+
+  def handle_info(_msg, state), do: {:noreply, state}
+
+  @impl GenServer
+  def terminate(_reason, state) do
+    :gen_tcp.close(state.socket)
+    File.rm(state.path)
+    :ok
+  end
+end

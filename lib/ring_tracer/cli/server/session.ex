@@ -1,0 +1,157 @@
+defmodule RingTracer.CLI.Server.Session do
+  @moduledoc """
+  One client of the resident server (`RingTracer.CLI.Server`): it reads
+  the request, runs the command in a process of its own whose stdout and
+  stderr are the client's, and sends back the exit status.
+
+  The frames (each a 4-byte big-endian length, then a tag byte and the
+  data), client to server: `C` the caller's folder, `A` an argument (one
+  each, in order), `T` `1` if the client's stderr is a terminal, `G` run
+  it; later `I` interrupt (Ctrl-C) and `K` terminate. Server to client:
+  `O` bytes for stdout, `E` bytes for stderr, `X` the exit status (one
+  byte), or `F` alone: boot a VM of your own for this command (a render on
+  other nodes, or a command other than `render`).
+  """
+
+  alias RingTracer.CLI.{Console, Render, Signals}
+  alias RingTracer.CLI.Server.Device
+
+  @typedoc "What the client has said so far, and the command once it runs."
+  @type t :: %__MODULE__{
+          socket: :gen_tcp.socket(),
+          cwd: Path.t() | nil,
+          args: [String.t()],
+          tty?: boolean(),
+          command: {pid(), reference()} | nil
+        }
+  defstruct [:socket, :cwd, args: [], tty?: false, command: nil]
+
+  # How long a command may take to stop once its client has gone.
+  @stop_ms 2_000
+
+  @doc "A session for the accepted `socket`; it starts reading on `:go`."
+  @spec start(:gen_tcp.socket()) :: {:ok, pid()}
+  def start(socket) do
+    pid =
+      spawn(fn ->
+        receive do
+          :go -> loop(%__MODULE__{socket: socket})
+        end
+      end)
+
+    {:ok, pid}
+  end
+
+  @doc """
+  What the server does with a request: run it here, or tell the client to
+  boot a VM of its own.
+
+      iex> RingTracer.CLI.Server.Session.served?(["render", "a.nff", "-o", "a.png"])
+      true
+      iex> RingTracer.CLI.Server.Session.served?(["render", "a.nff", "-o", "a.png", "--nodes", "w1@h"])
+      false
+      iex> RingTracer.CLI.Server.Session.served?(["worker", "--sname", "w1"])
+      false
+  """
+  @spec served?([String.t()]) :: boolean()
+  def served?(["render" | argv]), do: not Render.own_vm?(argv)
+  def served?(_args), do: false
+
+  defp loop(state) do
+    :ok = :inet.setopts(state.socket, active: :once)
+
+    receive do
+      {:tcp, _, <<"C", cwd::binary>>} ->
+        loop(%{state | cwd: cwd})
+
+      {:tcp, _, <<"A", arg::binary>>} ->
+        loop(%{state | args: [arg | state.args]})
+
+      {:tcp, _, <<"T", flag::binary>>} ->
+        loop(%{state | tty?: flag == "1"})
+
+      {:tcp, _, "G"} ->
+        run(%{state | args: Enum.reverse(state.args)})
+
+      {:tcp, _, "I"} ->
+        loop(interrupt(state, :sigint))
+
+      {:tcp, _, "K"} ->
+        loop(interrupt(state, :sigterm))
+
+      {:tcp, _, _other} ->
+        finish(state, 2)
+
+      {:tcp_closed, _} ->
+        gone(state)
+
+      {:DOWN, ref, _, _, reason} when is_tuple(state.command) and elem(state.command, 1) == ref ->
+        status =
+          receive do
+            {:status, ^ref, status} -> status
+          after
+            0 ->
+              _ =
+                :gen_tcp.send(state.socket, [
+                  "E",
+                  "ringtracer: the command failed: #{inspect(reason)}\n"
+                ])
+
+              1
+          end
+
+        finish(state, status)
+    end
+  end
+
+  defp run(state) do
+    if served?(state.args) and is_binary(state.cwd) do
+      me = self()
+      out = Device.start(state.socket, "O", state.tty?, me)
+      err = Device.start(state.socket, "E", state.tty?, me)
+      console = %Console{err: err, cwd: state.cwd, tty?: state.tty?}
+      args = state.args
+
+      {pid, ref} =
+        spawn_monitor(fn ->
+          Process.group_leader(self(), out)
+          Console.put(console)
+          ref = receive do: ({:ref, ref} -> ref)
+          send(me, {:status, ref, RingTracer.CLI.run(args, false)})
+        end)
+
+      send(pid, {:ref, ref})
+      loop(%{state | command: {pid, ref}})
+    else
+      _ = :gen_tcp.send(state.socket, "F")
+      :gen_tcp.close(state.socket)
+    end
+  end
+
+  # The command takes an interrupt as it takes one from the launcher.
+  defp interrupt(%{command: {pid, _}} = state, signal) do
+    send(pid, {Signals, signal})
+    state
+  end
+
+  defp interrupt(state, _signal), do: state
+
+  defp finish(state, status) do
+    _ = :gen_tcp.send(state.socket, <<"X", status>>)
+    :gen_tcp.close(state.socket)
+  end
+
+  # The client went away (killed, or a second Ctrl-C): its job is cancelled
+  # as on an interrupt, and the command is stopped if it does not end.
+  defp gone(%{command: {pid, ref}}) do
+    send(pid, {Signals, :sigint})
+
+    receive do
+      {:DOWN, ^ref, _, _, _} -> :ok
+    after
+      @stop_ms -> Process.exit(pid, :kill)
+    end
+  end
+
+  defp gone(_state), do: :ok
+end

@@ -1,0 +1,76 @@
+//! One command through the server: send the request, relay the output.
+
+use crate::{frame, signals, FALLBACK};
+use std::ffi::OsString;
+use std::io::{IsTerminal, Write};
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::net::UnixStream;
+use std::path::Path;
+
+/// Runs the command `args` on the server at `socket`, for the folder `cwd`;
+/// returns the exit status.
+pub fn run(socket: &Path, cwd: &OsString, args: Vec<OsString>) -> u8 {
+    let Ok(mut stream) = UnixStream::connect(socket) else {
+        return FALLBACK;
+    };
+    if request(&mut stream, cwd, &args).is_err() {
+        return FALLBACK;
+    }
+    if let Ok(mut writer) = stream.try_clone() {
+        // Without signals a Ctrl-C still ends the command: the launcher's
+        // second one kills this process, and the server sees it go.
+        let _ = signals::watch(move |tag| {
+            let _ = frame::write(&mut writer, tag, b"");
+        });
+    }
+    relay(&mut stream)
+}
+
+fn request(stream: &mut UnixStream, cwd: &OsString, args: &[OsString]) -> std::io::Result<()> {
+    frame::write(stream, b'C', cwd.as_bytes())?;
+    for arg in args {
+        frame::write(stream, b'A', arg.as_bytes())?;
+    }
+    let tty = if std::io::stderr().is_terminal() {
+        b"1"
+    } else {
+        b"0"
+    };
+    frame::write(stream, b'T', tty)?;
+    frame::write(stream, b'G', b"")
+}
+
+fn relay(stream: &mut UnixStream) -> u8 {
+    let (mut out, mut err) = (std::io::stdout().lock(), std::io::stderr());
+    let mut wrote = false;
+    loop {
+        match frame::read(stream) {
+            // A closed stdout (`| head`) does not stop the command.
+            Ok(Some((b'O', data))) => {
+                wrote = true;
+                let _ = out.write_all(&data).and_then(|_| out.flush());
+            }
+            Ok(Some((b'E', data))) => {
+                wrote = true;
+                let _ = err.write_all(&data);
+            }
+            Ok(Some((b'X', data))) if data.len() == 1 => {
+                let _ = out.flush();
+                return data[0];
+            }
+            Ok(Some((b'F', _))) if !wrote => return FALLBACK,
+            Ok(Some((tag, _))) => {
+                eprintln!("ringtracer: unexpected frame {tag} from the server");
+                return 1;
+            }
+            Ok(None) | Err(_) => {
+                if !wrote {
+                    // The server went before it began: a VM of our own can still do it.
+                    return FALLBACK;
+                }
+                eprintln!("ringtracer: the server closed the connection");
+                return 1;
+            }
+        }
+    }
+}
