@@ -691,17 +691,17 @@ defmodule Mix.Tasks.RingTracer.Bench do
         env: [{~c"RINGTRACER_SOCKET", String.to_charlist(socket)}]
       ])
 
-    wait_for = fn wait, n ->
-      cond do
-        File.exists?(socket) -> :ok
-        n == 0 -> Mix.raise("ringtracer serve did not start on #{socket}")
-        true -> Process.sleep(50) && wait.(wait, n - 1)
-      end
-    end
-
-    # The socket appears once the server has warmed up.
-    wait_for.(wait_for, 600)
+    wait_for_socket(socket, 600)
     port
+  end
+
+  defp wait_for_socket(socket, 0), do: Mix.raise("ringtracer serve did not start on #{socket}")
+
+  defp wait_for_socket(socket, n) do
+    unless File.exists?(socket) do
+      Process.sleep(50)
+      wait_for_socket(socket, n - 1)
+    end
   end
 
   defp stop_server(port) do

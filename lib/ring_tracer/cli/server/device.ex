@@ -6,7 +6,7 @@ defmodule RingTracer.CLI.Server.Device do
   # has reached the socket.
 
   @doc "A device for `socket`, tagged `tag`, that stops with `owner`."
-  @spec start(:gen_tcp.socket(), byte(), boolean(), pid()) :: pid()
+  @spec start(:gen_tcp.socket(), String.t(), boolean(), pid()) :: pid()
   def start(socket, tag, tty?, owner) do
     spawn(fn ->
       ref = Process.monitor(owner)
