@@ -559,6 +559,8 @@ defmodule RingTracer.CLI.Render do
       end
 
     mib = if kb, do: kb / 1024, else: :erlang.memory(:total) / 1_048_576
-    "peak memory #{:erlang.float_to_binary(mib, decimals: 1)} MiB\n"
+    # Run by `ringtracer serve`, the process is the server, which outlives the job.
+    whose = if Console.get().cwd, do: " (the server's, over all its renders)", else: ""
+    "peak memory #{:erlang.float_to_binary(mib, decimals: 1)} MiB#{whose}\n"
   end
 end
