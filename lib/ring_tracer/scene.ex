@@ -9,7 +9,7 @@ defmodule RingTracer.Scene do
   hash; each node parses it once (see `RingTracer.SceneCache`).
 
   Formats, by file extension: `.nff` (Eric Haines' Neutral File Format),
-  `.toml` (RingTracer's own format, see the README) and `.obj` (a Wavefront
+  `.toml` (RingTracer's own format, see `docs/scene-format.md`) and `.obj` (a Wavefront
   mesh with a default camera and light).
 
       iex> {:ok, scene} = RingTracer.Scene.load("priv/scenes/tetra_s1.nff")

@@ -4,7 +4,7 @@ defmodule RingTracer.Scene.Warning do
   author meant: a zero-radius sphere that shows nothing, a colour outside
   [0, 1], an OBJ face whose material is not in its MTL. Input that cannot
   mean what it says is an error instead, and the scene does not load (the
-  table of which is which, and why, is in `docs/scene-formats.md`).
+  table of which is which, and why, is in `docs/scene-format.md`).
 
   A loaded `RingTracer.Scene` holds its warnings (`:warnings`, at most 100,
   in the order found, and `:warnings_omitted`, how many more there were), and

@@ -10,7 +10,7 @@
 //! `nff-triangles` (`p 3` and three vertices), `toml-spheres` (`[[objects]]` sphere tables),
 //! `obj` (a grid of vertices, two triangles per quad) or `obj-smooth` (the same with normals).
 //! `load` prints the file's size, the primitive count, the warnings and the parse time;
-//! docs/scene-formats.md has the table these give.
+//! docs/benchmarks.md has the table these give.
 
 use ring_tracer_kernel::Scene;
 use std::io::Write;

@@ -20,7 +20,7 @@
 //!
 //! A parse, BVH included, needs at most about this multiple of the file's size at its peak
 //! (resident set of `examples/scene_memory`, the file's own bytes included, for the densest
-//! file of each kind; docs/scene-formats.md has the command and the table):
+//! file of each kind; docs/benchmarks.md has the command and the table):
 //!
 //! | file | peak / file size | why |
 //! |---|---|---|

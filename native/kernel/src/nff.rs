@@ -22,7 +22,7 @@
 //! - `hither` is read (it must be a number) and not used: a ray tracer needs no near plane;
 //! - a `v` without `resolution` renders at 512x512.
 //!
-//! Nothing is dropped or overridden silently (docs/scene-formats.md has the table). Errors,
+//! Nothing is dropped or overridden silently (docs/scene-format.md has the table). Errors,
 //! which stop the parse: a second `v` or `b` (the scene has one of each), a keyword given twice
 //! inside `v`, an `angle` outside (0, 180), cone radii of opposite signs, a transparent `f`
 //! (T > 0) with an index of refraction <= 0, and a token longer than

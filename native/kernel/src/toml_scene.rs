@@ -6,9 +6,10 @@
 //! renders but maybe not as meant gives a warning with file and line ([`Scene::warnings`]): a
 //! degenerate object (zero radius or area, base = apex), a zero vertex normal, colours, kd, ks
 //! or t outside [0, 1], ks + t > 1, a negative shine, negative light, ambient or background
-//! colours, and a scene without objects or lights (docs/scene-formats.md has the table). A file
+//! colours, and a scene without objects or lights (docs/scene-format.md has the table). A file
 //! is at most [`limits::MAX_TOML_BYTES`], a key or string at most [`limits::MAX_TOKEN_BYTES`].
 //! Colours are linear RGB triples; a material no object uses is fine (a library of them).
+//! docs/scene-format.md is the reference of every key, with its type, default and bounds.
 //! Example with every feature:
 //!
 //! ```toml

@@ -2,7 +2,7 @@
 //! sphere that shows nothing, a colour above 1, an OBJ face whose material is not in its MTL).
 //!
 //! Input that cannot mean what it says is an [`Error`](crate::Error) instead, and stops the
-//! parse before any work; the table of which is which, and why, is in `docs/scene-formats.md`.
+//! parse before any work; the table of which is which, and why, is in `docs/scene-format.md`.
 //! A parsed [`Scene`](crate::Scene) keeps its warnings ([`Scene::warnings`](crate::Scene::warnings)):
 //! the first [`MAX_WARNINGS`], each with its file and line, and a
 //! count of the rest, so a huge file of degenerate lines costs no more memory than a small one.

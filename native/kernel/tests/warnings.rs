@@ -1,5 +1,5 @@
 //! Nothing is dropped or overridden silently: what cannot mean what it says is an error, what
-//! renders but maybe not as meant is a warning with file and line (docs/scene-formats.md has
+//! renders but maybe not as meant is a warning with file and line (docs/scene-format.md has
 //! the table). One test per case, in the table's order.
 
 use ring_tracer_kernel::files::Unreadable;
