@@ -55,9 +55,19 @@ pub struct Region {
 }
 
 impl Settings {
-    /// Defaults with the scene's resolution.
-    pub fn for_scene(scene: &Scene) -> Settings {
-        let (width, height) = scene.resolution();
+    /// A `width` x `height` image with every other setting at its default: depth 5, cut-off
+    /// 1/255, one sample through the pixel centre, no SPD corner mode, the whole image.
+    ///
+    /// The one place these defaults are written: the NIF hands them to the Elixir side
+    /// (`RingTracer.Native.settings_defaults/0`), which reads them when it compiles.
+    ///
+    /// ```
+    /// use ring_tracer_kernel::Settings;
+    /// let s = Settings::new(64, 48);
+    /// assert_eq!((s.depth, s.samples, s.spd, s.region), (5, 1, false, None));
+    /// assert_eq!(s.cutoff, 1.0 / 255.0);
+    /// ```
+    pub fn new(width: u32, height: u32) -> Settings {
         Settings {
             width,
             height,
@@ -68,6 +78,12 @@ impl Settings {
             fail_pixel: None,
             region: None,
         }
+    }
+
+    /// Defaults ([`Settings::new`]) with the scene's resolution.
+    pub fn for_scene(scene: &Scene) -> Settings {
+        let (width, height) = scene.resolution();
+        Settings::new(width, height)
     }
 
     /// The size of what is traced: the region's, or the whole image's.
