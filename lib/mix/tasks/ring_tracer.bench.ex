@@ -50,6 +50,7 @@ defmodule Mix.Tasks.RingTracer.Bench do
 
   def run([]), do: usage()
 
+  @spec usage() :: no_return()
   defp usage do
     Mix.raise(
       "usage: mix ring_tracer.bench #{Enum.map_join(@benchmarks, "|", &elem(&1, 0))} [options]" <>
