@@ -17,18 +17,18 @@ use crate::Error;
 use glam::Vec3A;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// How to render.
+/// How to render. [`Settings::new`] gives the defaults of every field but the size.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Maximum ray-tree depth; the eye ray is depth 1. Default 5.
+    /// Maximum ray-tree depth; the eye ray is depth 1.
     pub depth: u32,
-    /// Adaptive cut-off weight (default 1/255); 0 disables.
+    /// Adaptive cut-off weight: a branch whose weight falls below it is not traced; 0 disables.
     pub cutoff: f32,
-    /// S: SxS stratified jittered samples per pixel; 1 (default) shoots through the pixel centre.
+    /// S: SxS stratified jittered samples per pixel; 1 shoots through the pixel centre.
     pub samples: u32,
     /// SPD corner mode (SPD testing procedure): rays through the (W+1)x(H+1) pixel corners, the
     /// four corners of a pixel averaged; forces depth 5, no cut-off and one sample.
