@@ -4,9 +4,12 @@ defmodule RingTracer.Bench do
   benchmark module implements, and the helpers that make their tables
   (medians, number formats, the VM line, column alignment).
 
-  A benchmark is a module under `RingTracer.Bench` with `usage/0` and
-  `run/1`, named by one line in `Mix.Tasks.RingTracer.Bench`'s table.
+  A benchmark is a module under `RingTracer.Bench` with `help/0`, `usage/0`
+  and `run/1`, named by one line in `Mix.Tasks.RingTracer.Bench`'s table.
   """
+
+  @doc "What the benchmark measures and its options: its module's documentation, for `mix help`."
+  @callback help() :: String.t()
 
   @doc "The benchmark's command line, after `mix ring_tracer.bench`, e.g. `\"kernel [--runs R]\"`."
   @callback usage() :: String.t()

@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Balance do
-  @moduledoc """
+  @help """
   Strategy x scenario: makespan / ideal and messages per atom.
 
       mix ring_tracer.bench balance [--size 1024] [--atoms 16] [--runs 3] [--quick]
@@ -26,6 +26,7 @@ defmodule RingTracer.Bench.Balance do
   the targets of `RingTracer.Bench.Targets` against it, each "ok" or
   "MISSED".
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench
@@ -34,6 +35,9 @@ defmodule RingTracer.Bench.Balance do
   alias RingTracer.Job.{Grandchild, Pipe}
 
   @sim_atoms 64
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage, do: "balance [--size 1024] [--atoms 16] [--runs 3] [--quick]"

@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Kernel do
-  @moduledoc """
+  @help """
   The kernel against POV-Ray, and the ring against the kernel.
 
       mix ring_tracer.bench kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R]
@@ -17,11 +17,15 @@ defmodule RingTracer.Bench.Kernel do
   Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
   POV-Ray's own `Max Level 5` and ADC bailout do.
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench
   alias RingTracer.{Native, Rays, Scene, SceneCache, Settings}
   alias RingTracer.Bench.PovRay
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage,

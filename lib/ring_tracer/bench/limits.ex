@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Limits do
-  @moduledoc """
+  @help """
   Every documented maximum at full size.
 
       mix ring_tracer.bench limits [--quick]
@@ -9,9 +9,13 @@ defmodule RingTracer.Bench.Limits do
   1,048,576 atoms (simulated, and real on 64 children), and a 64 Mpixel
   image, printing time, the VM's memory growth and the outcome.
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage, do: "limits [--quick]"

@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Nodes do
-  @moduledoc """
+  @help """
   One node against three on this machine.
 
       mix ring_tracer.bench nodes [--scene FILE] [--children 6] [--runs 3]
@@ -8,9 +8,13 @@ defmodule RingTracer.Bench.Nodes do
   node alone and on all three, printing both makespans, their ratio and the
   scene bytes each node received (shipped once per node).
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage, do: "nodes [--scene FILE] [--children 6] [--runs 3]"

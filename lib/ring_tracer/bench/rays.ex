@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Rays do
-  @moduledoc """
+  @help """
   Closest-hit rays per second, in the kernel alone.
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
@@ -11,7 +11,11 @@ defmodule RingTracer.Bench.Rays do
   the kernel's own cargo example (`native/kernel/examples/bench.rs`), with
   no BEAM in the loop.
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage, do: "rays MESH.obj [MORE.obj ...]"

@@ -1,5 +1,5 @@
 defmodule RingTracer.Bench.Startup do
-  @moduledoc """
+  @help """
   The whole command against POV-Ray's whole process.
 
       mix ring_tracer.bench startup [--scenes a,b] [--runs 5] [--size 512]
@@ -10,10 +10,14 @@ defmodule RingTracer.Bench.Startup do
   (from the job's `started_at_us` and first atom in the statistics), both
   whole-process times and their ratio.
   """
+  @moduledoc @help
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench
   alias RingTracer.Bench.PovRay
+
+  @impl RingTracer.Bench
+  def help, do: @help
 
   @impl RingTracer.Bench
   def usage, do: "startup [--scenes a,b] [--runs 5] [--size 512]"
