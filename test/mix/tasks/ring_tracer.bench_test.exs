@@ -14,4 +14,12 @@ defmodule Mix.Tasks.RingTracer.BenchTest do
       Task.run(["rays"])
     end
   end
+
+  test "mix help shows every benchmark's own documentation" do
+    {:docs_v1, _, _, _, %{"en" => doc}, _, _} = Code.fetch_docs(Task)
+
+    for module <- [RingTracer.Bench.Kernel, RingTracer.Bench.Balance, RingTracer.Bench.Rays] do
+      assert doc =~ module.help()
+    end
+  end
 end
