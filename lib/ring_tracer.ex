@@ -28,12 +28,12 @@ defmodule RingTracer do
     * `:atoms` — atoms per child K (default 16)
     * `:width`, `:height` — image size (default: the scene's; one of them
       alone keeps the scene's aspect ratio)
-    * `:depth` — ray-tree depth limit, eye ray = 1 (default 5)
+    * `:depth` — ray-tree depth limit, eye ray = 1 (default #{RingTracer.Settings.shown_default(:depth)})
     * `:cutoff` — adaptive cut-off: a branch whose weight falls below it is
-      not traced (default 1/255; 0 disables)
-    * `:samples` — S x S stratified samples per pixel (default 1)
+      not traced (default #{RingTracer.Settings.shown_default(:cutoff)}; 0 disables)
+    * `:samples` — S x S stratified samples per pixel (default #{RingTracer.Settings.shown_default(:samples)})
     * `:spd` — SPD testing procedure: rays through pixel corners, no
-      cut-off (default false)
+      cut-off (default #{RingTracer.Settings.shown_default(:spd)})
     * `:region` — trace only part of the image, `{x0, y0, x1, y1}`: pixels
       (integers, x1 and y1 excluded) or fractions (floats 0.0 to 1.0, like
       POV-Ray's `+SC +EC +SR +ER`); the result is that part, with exactly the

@@ -10,8 +10,11 @@ defmodule Mix.Tasks.Compile.RingTracerNative do
   copy: overwriting a shared object that a running VM has mapped can crash it.
 
   Loaded by `mix.exs` and listed first in its compilers, so the library is in
-  place before Elixir's compiler loads `RingTracer.Native`. Set `RING_TRACER_SKIP_NATIVE=1` to skip the build (the
-  NIF module then reports that the library is missing when loaded).
+  place before Elixir's compiler loads `RingTracer.Native`: `RingTracer.Settings`
+  and `RingTracer.Rays` call it while they compile, to read the kernel's
+  defaults and counter names. Set `RING_TRACER_SKIP_NATIVE=1` to skip the
+  build; a library must then be in `priv/native/` already (without one, the
+  NIF module reports it missing and those two modules do not compile).
   """
   use Mix.Task.Compiler
 

@@ -27,4 +27,36 @@ defmodule RingTracer.Error do
   @spec new(atom(), String.t()) :: t()
   def new(reason, message) when is_atom(reason) and is_binary(message),
     do: %__MODULE__{reason: reason, message: message}
+
+  @doc """
+  A file operation on `path` that failed with `posix` (`:enoent`,
+  `:eacces`, ...), as the error of reason `reason`: `"path: why"`, with
+  `file_reason/2`'s words.
+
+      iex> RingTracer.Error.file(:cookie, "/proc/version", :eacces).message
+      "/proc/version: permission denied"
+  """
+  @spec file(atom(), Path.t(), atom()) :: t()
+  def file(reason, path, posix), do: new(reason, "#{path}: #{file_reason(path, posix)}")
+
+  @doc """
+  Why a file operation on `path` failed, in words: the system's for
+  `posix`, except that a missing file in a missing folder names the folder.
+
+      iex> RingTracer.Error.file_reason("/no/such/folder/image.png", :enoent)
+      "the folder /no/such/folder does not exist"
+      iex> RingTracer.Error.file_reason("/tmp/no-such-file", :enoent)
+      "no such file or directory"
+      iex> RingTracer.Error.file_reason("/x", :enospc)
+      "no space left on device"
+  """
+  @spec file_reason(Path.t(), atom()) :: String.t()
+  def file_reason(path, :enoent) do
+    dir = Path.dirname(path)
+    if File.dir?(dir), do: posix_words(:enoent), else: "the folder #{dir} does not exist"
+  end
+
+  def file_reason(_path, posix), do: posix_words(posix)
+
+  defp posix_words(posix), do: List.to_string(:file.format_error(posix))
 end

@@ -49,7 +49,7 @@ defmodule RingTracer.Kernel do
 
   @optional_callbacks atom_work: 2
 
-  @doc "Zeroed ray counters (and work units)."
-  @spec no_rays() :: map()
-  def no_rays, do: %{eye: 0, eye_hits: 0, reflected: 0, refracted: 0, shadow: 0, work: 0}
+  @doc "Zeroed ray counters (and work units): `RingTracer.Rays.zero/0`."
+  @spec no_rays() :: RingTracer.Rays.t()
+  def no_rays, do: RingTracer.Rays.zero()
 end

@@ -33,6 +33,8 @@ defmodule RingTracer.Native do
   def write_image(_path, _width, _height, _pixels), do: err()
   def encode_png(_width, _height, _pixels), do: err()
   def to_srgb8_binary(_pixels), do: err()
+  def settings_defaults, do: err()
+  def ray_counters, do: err()
 
   defp err, do: :erlang.nif_error(:nif_not_loaded)
 end

@@ -109,16 +109,9 @@ defmodule RingTracer.Output do
     else
       {:error, reason} ->
         File.rm(tmp)
-        {:error, Error.new(:file, "#{path}: #{write_error(path, reason)}")}
+        {:error, Error.file(:file, path, reason)}
     end
   end
-
-  defp write_error(path, :enoent) do
-    dir = Path.dirname(path)
-    if File.dir?(dir), do: :file.format_error(:enoent), else: "the folder #{dir} does not exist"
-  end
-
-  defp write_error(_path, reason), do: :file.format_error(reason)
 
   @doc "A fresh temporary name beside `path` (hidden, unique)."
   @spec temporary(Path.t()) :: Path.t()
@@ -153,7 +146,7 @@ defmodule RingTracer.Output do
       {:ok, %File.Stat{type: :regular}} -> :ok
       {:ok, %File.Stat{type: type}} -> error(kind, path, "exists and is a #{type}, not a file")
       {:error, :enoent} -> :ok
-      {:error, reason} -> error(kind, path, :file.format_error(reason))
+      {:error, reason} -> error(kind, path, Error.file_reason(path, reason))
     end
   end
 
@@ -176,7 +169,7 @@ defmodule RingTracer.Output do
             :ok
 
           {:error, reason} ->
-            error(kind, path, "cannot write in #{dir}: #{:file.format_error(reason)}")
+            error(kind, path, "cannot write in #{dir}: #{Error.file_reason(probe, reason)}")
         end
     end
   end

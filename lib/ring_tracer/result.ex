@@ -101,10 +101,7 @@ defmodule RingTracer.Result do
   @doc false
   @spec new(RingTracer.Settings.t(), atom(), non_neg_integer(), map()) :: t()
   def new(settings, strategy, capacity_cap, raw) do
-    rays =
-      Enum.reduce(raw.children, RingTracer.Kernel.no_rays(), fn c, acc ->
-        Map.merge(acc, c.rays, fn _, a, b -> a + b end)
-      end)
+    rays = Enum.reduce(raw.children, RingTracer.Rays.zero(), &RingTracer.Rays.add(&2, &1.rays))
 
     children = Enum.map(raw.children, &Map.put(&1, :idle_us, max(raw.elapsed_us - &1.busy_us, 0)))
 
@@ -166,7 +163,7 @@ end
 defimpl Inspect, for: RingTracer.Result do
   # One line in iex, not the pixels and every atom's record.
   def inspect(r, _opts) do
-    rays = r.rays.eye + r.rays.reflected + r.rays.refracted + r.rays.shadow
+    rays = RingTracer.Rays.total(r.rays)
     ms = :erlang.float_to_binary(r.elapsed_us / 1000, decimals: 1)
 
     failures =

@@ -10,13 +10,19 @@ defmodule RingTracer.Settings do
   (to show that a panic is contained). It is `nil` in normal use.
   """
 
+  # The kernel's defaults (`Settings::new` in native/kernel/src/render.rs),
+  # read through the NIF when this module compiles: they are written down
+  # nowhere else.
+  @external_resource "native/kernel/src/render.rs"
+  @defaults RingTracer.Native.settings_defaults()
+
   @enforce_keys [:width, :height]
   defstruct width: nil,
             height: nil,
-            depth: 5,
-            cutoff: 1 / 255,
-            samples: 1,
-            spd: false,
+            depth: @defaults.depth,
+            cutoff: @defaults.cutoff,
+            samples: @defaults.samples,
+            spd: @defaults.spd,
             fail_pixel: nil,
             region: nil
 
@@ -33,6 +39,33 @@ defmodule RingTracer.Settings do
 
   @typedoc "Part of the image, in pixels: `{x0, y0, width, height}` (y = 0 is the top row)."
   @type region :: {non_neg_integer(), non_neg_integer(), pos_integer(), pos_integer()}
+
+  @doc """
+  The defaults of the settings a render may leave out, the kernel's own.
+
+      iex> d = RingTracer.Settings.defaults()
+      iex> {d.depth, round(1 / d.cutoff), d.samples, d.spd}
+      {5, 255, 1, false}
+  """
+  @spec defaults() :: %{
+          depth: pos_integer(),
+          cutoff: float(),
+          samples: pos_integer(),
+          spd: boolean()
+        }
+  def defaults, do: @defaults
+
+  @doc """
+  A default as the docs and `--help` show it: the cut-off as a fraction.
+
+      iex> RingTracer.Settings.shown_default(:cutoff)
+      "1/255"
+      iex> RingTracer.Settings.shown_default(:depth)
+      "5"
+  """
+  @spec shown_default(:depth | :cutoff | :samples | :spd) :: String.t()
+  def shown_default(:cutoff), do: "1/#{round(1 / @defaults.cutoff)}"
+  def shown_default(key), do: to_string(Map.fetch!(@defaults, key))
 
   @doc """
   The size of what is traced: the region's, or the whole image's.

@@ -94,9 +94,9 @@ defmodule RingTracer.CLI.Render do
       -o, --out FILE          the image to write (required)
       -w, --width W           image width; alone, keeps the scene's aspect ratio
           --height H          image height; alone, keeps the scene's aspect ratio
-          --depth D           ray-tree depth, eye ray = 1 (1-64, default 5)
-          --samples S         S x S samples per pixel (1-16, default 1)
-          --cutoff C          adaptive cut-off weight (default 1/255, 0 disables)
+          --depth D           ray-tree depth, eye ray = 1 (1-64, default #{RingTracer.Settings.shown_default(:depth)})
+          --samples S         S x S samples per pixel (1-16, default #{RingTracer.Settings.shown_default(:samples)})
+          --cutoff C          adaptive cut-off weight (default #{RingTracer.Settings.shown_default(:cutoff)}, 0 disables)
           --spd               the SPD testing procedure (pixel corners, no cut-off)
           --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
                               fractions (0.25,0,0.75,0.5); exactly the whole render's pixels
@@ -516,7 +516,7 @@ defmodule RingTracer.CLI.Render do
   @spec report(map(), RingTracer.Result.t(), non_neg_integer()) :: iodata()
   def report(job, result, load_us) do
     r = result.rays
-    rays = r.eye + r.reflected + r.refracted + r.shadow
+    rays = RingTracer.Rays.total(r)
     secs = result.elapsed_us / 1_000_000
 
     children =

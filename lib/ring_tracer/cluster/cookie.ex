@@ -73,7 +73,7 @@ defmodule RingTracer.Cluster.Cookie do
       {:ok, path}
     else
       {:error, %Error{} = error} -> {:error, error}
-      {:error, reason} -> {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+      {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
     end
   end
 
@@ -86,7 +86,7 @@ defmodule RingTracer.Cluster.Cookie do
         {:error, Error.new(:cookie, "#{path} exists already; not replacing a cookie")}
 
       {:error, reason} ->
-        {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+        {:error, Error.file(:cookie, path, reason)}
     end
   end
 
@@ -104,7 +104,7 @@ defmodule RingTracer.Cluster.Cookie do
          )}
 
       {:error, reason} ->
-        {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+        {:error, Error.file(:cookie, path, reason)}
     end
   end
 
@@ -139,7 +139,7 @@ defmodule RingTracer.Cluster.Cookie do
   defp read_file(path) do
     case File.read(path) do
       {:ok, bytes} -> {:ok, bytes}
-      {:error, reason} -> {:error, Error.new(:cookie, "#{path}: #{:file.format_error(reason)}")}
+      {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
     end
   end
 

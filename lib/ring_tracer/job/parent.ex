@@ -417,7 +417,7 @@ defmodule RingTracer.Job.Parent do
 
     RingTracer.Telemetry.execute(
       [:ring_tracer, :atom, :stop],
-      %{rays: rays.eye + rays.reflected + rays.refracted + rays.shadow, trace_us: us},
+      %{rays: RingTracer.Rays.total(rays), trace_us: us},
       %{job: state.spec.id, atom: atom, child: child, done: total - state.missing, total: total}
     )
   end
@@ -452,10 +452,10 @@ defmodule RingTracer.Job.Parent do
   defp speed({}, _index), do: 1
   defp speed(speeds, index), do: elem(speeds, rem(index, tuple_size(speeds)))
 
-  # `nodes` is one node per child, or a list to place children on round robin.
+  # `nodes` is one node per child (`RingTracer.Options` places them), or []
+  # when every child runs on this node.
   defp placement([], n), do: List.duplicate(node(), n)
   defp placement(nodes, n) when length(nodes) == n, do: nodes
-  defp placement(nodes, n), do: for(i <- 0..(n - 1), do: Enum.at(nodes, rem(i, length(nodes))))
 
   defp node_summary(state, reports) do
     placement = placement(state.spec.nodes, state.spec.layout.children)

@@ -53,7 +53,7 @@ defmodule RingTracer.Kernel.Simulated do
     elapsed = System.monotonic_time(:microsecond) - t0
     # Its work units are the model's microseconds: what the atom costs on a
     # machine of speed 1.
-    {:ok, :binary.copy(<<0::96>>, count), %{RingTracer.Kernel.no_rays() | work: us}, elapsed}
+    {:ok, :binary.copy(<<0::96>>, count), %{RingTracer.Rays.zero() | work: us}, elapsed}
   end
 
   @doc "The cost in microseconds of `atom` under `costs`."

@@ -75,5 +75,5 @@ pub use material::{Checker, Material};
 pub use ray::Ray;
 pub use render::{render_image, trace_span, trace_span_into, work_by_row, Region, Settings};
 pub use scene::{Format, Hit, Scene};
-pub use stats::RayStats;
+pub use stats::{Counter, RayStats};
 pub use warning::{Warning, Warnings};

@@ -17,18 +17,18 @@ use crate::Error;
 use glam::Vec3A;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// How to render.
+/// How to render. [`Settings::new`] gives the defaults of every field but the size.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
     /// Image width in pixels.
     pub width: u32,
     /// Image height in pixels.
     pub height: u32,
-    /// Maximum ray-tree depth; the eye ray is depth 1. Default 5.
+    /// Maximum ray-tree depth; the eye ray is depth 1.
     pub depth: u32,
-    /// Adaptive cut-off weight (default 1/255); 0 disables.
+    /// Adaptive cut-off weight: a branch whose weight falls below it is not traced; 0 disables.
     pub cutoff: f32,
-    /// S: SxS stratified jittered samples per pixel; 1 (default) shoots through the pixel centre.
+    /// S: SxS stratified jittered samples per pixel; 1 shoots through the pixel centre.
     pub samples: u32,
     /// SPD corner mode (SPD testing procedure): rays through the (W+1)x(H+1) pixel corners, the
     /// four corners of a pixel averaged; forces depth 5, no cut-off and one sample.
@@ -55,9 +55,19 @@ pub struct Region {
 }
 
 impl Settings {
-    /// Defaults with the scene's resolution.
-    pub fn for_scene(scene: &Scene) -> Settings {
-        let (width, height) = scene.resolution();
+    /// A `width` x `height` image with every other setting at its default: depth 5, cut-off
+    /// 1/255, one sample through the pixel centre, no SPD corner mode, the whole image.
+    ///
+    /// The one place these defaults are written: the NIF hands them to the Elixir side
+    /// (`RingTracer.Native.settings_defaults/0`), which reads them when it compiles.
+    ///
+    /// ```
+    /// use ring_tracer_kernel::Settings;
+    /// let s = Settings::new(64, 48);
+    /// assert_eq!((s.depth, s.samples, s.spd, s.region), (5, 1, false, None));
+    /// assert_eq!(s.cutoff, 1.0 / 255.0);
+    /// ```
+    pub fn new(width: u32, height: u32) -> Settings {
         Settings {
             width,
             height,
@@ -68,6 +78,12 @@ impl Settings {
             fail_pixel: None,
             region: None,
         }
+    }
+
+    /// Defaults ([`Settings::new`]) with the scene's resolution.
+    pub fn for_scene(scene: &Scene) -> Settings {
+        let (width, height) = scene.resolution();
+        Settings::new(width, height)
     }
 
     /// The size of what is traced: the region's, or the whole image's.

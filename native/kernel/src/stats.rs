@@ -39,10 +39,48 @@ impl RayStats {
         }
     }
 
+    /// Every counter by its field's name, in the fields' order, and whether it counts rays
+    /// (eye hits and work units do not). The one list of the counters' names: the NIF sends
+    /// the counters under these names, and the Elixir side learns them from it.
+    ///
+    /// ```
+    /// use ring_tracer_kernel::RayStats;
+    /// let s = RayStats { eye: 4, eye_hits: 3, shadow: 2, work: 90, ..RayStats::default() };
+    /// let names: Vec<_> = s.counters().iter().map(|c| c.name).collect();
+    /// assert_eq!(names, ["eye", "eye_hits", "reflected", "refracted", "shadow", "work"]);
+    /// assert_eq!(s.total(), 6);
+    /// ```
+    pub fn counters(&self) -> [Counter; 6] {
+        let c = |name, value, ray| Counter { name, value, ray };
+        [
+            c("eye", self.eye, true),
+            c("eye_hits", self.eye_hits, false),
+            c("reflected", self.reflected, true),
+            c("refracted", self.refracted, true),
+            c("shadow", self.shadow, true),
+            c("work", self.work, false),
+        ]
+    }
+
     /// All rays of every kind.
     pub fn total(&self) -> u64 {
-        self.eye + self.reflected + self.refracted + self.shadow
+        self.counters()
+            .iter()
+            .filter(|c| c.ray)
+            .map(|c| c.value)
+            .sum()
     }
+}
+
+/// One of [`RayStats`]' counters, by name ([`RayStats::counters`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Counter {
+    /// The field's name.
+    pub name: &'static str,
+    /// Its value.
+    pub value: u64,
+    /// Whether it counts rays (and so is part of [`RayStats::total`]).
+    pub ray: bool,
 }
 
 impl Add for RayStats {

@@ -1,7 +1,7 @@
 //! Term conversions shared by the NIFs.
 
 use ring_tracer_kernel::{Error, RayStats, Region, Settings};
-use rustler::{Binary, Env, NifMap, OwnedBinary};
+use rustler::{Atom, Binary, Encoder, Env, NifMap, OwnedBinary, Term};
 
 /// Render settings as the Elixir side sends them: a map with atom keys.
 #[derive(NifMap)]
@@ -41,28 +41,30 @@ impl SettingsTerm {
     }
 }
 
-/// Ray counters as a map with atom keys.
-#[derive(NifMap)]
-pub struct RayStatsTerm {
-    pub eye: u64,
-    pub eye_hits: u64,
-    pub reflected: u64,
-    pub refracted: u64,
-    pub shadow: u64,
-    pub work: u64,
+/// Ray counters as a map with atom keys, the kernel's names ([`RayStats::counters`]).
+pub struct RayStatsTerm(pub RayStats);
+
+impl Encoder for RayStatsTerm {
+    fn encode<'a>(&self, env: Env<'a>) -> Term<'a> {
+        let pairs: Vec<(Atom, u64)> = self
+            .0
+            .counters()
+            .iter()
+            .map(|c| (atom(env, c.name), c.value))
+            .collect();
+        Term::map_from_pairs(env, &pairs).expect("distinct atom keys")
+    }
 }
 
 impl From<RayStats> for RayStatsTerm {
     fn from(s: RayStats) -> Self {
-        RayStatsTerm {
-            eye: s.eye,
-            eye_hits: s.eye_hits,
-            reflected: s.reflected,
-            refracted: s.refracted,
-            shadow: s.shadow,
-            work: s.work,
-        }
+        RayStatsTerm(s)
     }
+}
+
+/// The atom named `name` (created if new: the names come from the kernel, never from a term).
+pub fn atom(env: Env, name: &str) -> Atom {
+    Atom::from_str(env, name).expect("an atom name shorter than 256 characters")
 }
 
 /// A kernel error as the message Elixir shows (`file:line: problem`).

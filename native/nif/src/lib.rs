@@ -5,6 +5,7 @@
 //! Loaded by `RingTracer.Native` with `:erlang.load_nif/2`.
 
 mod convert;
+mod defaults;
 mod image;
 mod panic;
 mod scene;

@@ -1,0 +1,119 @@
+defmodule RingTracer.Bench.Kernel do
+  @help """
+  The kernel against POV-Ray, and the ring against the kernel.
+
+      mix ring_tracer.bench kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R]
+                                   [--size 512] [--threads 2] [--children 8] [--atoms 16]
+
+  For each SPD scene (default: the standard sizes in `priv/scenes/spd`):
+  our set-up time (read, parse, BVH) and trace time with the kernel's own
+  `--threads` threads; POV-Ray 3.7's parse and trace times for the matching
+  `.pov` file (`povray +W512 +H512 -D -A +WT2`, when `povray` is installed and
+  the `.pov` is in `--pov-dir`, by default `../shared/scenes/spd/pov`); the
+  same render through the ring with `--children` children; and the ratios
+  ours/POV-Ray and ring/kernel. Times are medians of `--runs` runs (default 3);
+  kernel and ring renders alternate, and ring/kernel is the median of the
+  pairs' ratios, so that both see the same drift in this machine's speed.
+  Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
+  POV-Ray's own `Max Level 5` and ADC bailout do.
+  """
+  @moduledoc @help
+  @behaviour RingTracer.Bench
+
+  import RingTracer.Bench
+  alias RingTracer.{Native, Rays, Scene, SceneCache, Settings}
+  alias RingTracer.Bench.PovRay
+
+  @impl RingTracer.Bench
+  def help, do: @help
+
+  @impl RingTracer.Bench
+  def usage,
+    do:
+      "kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R] [--size 512] " <>
+        "[--threads 2] [--children 8] [--atoms 16]"
+
+  @impl RingTracer.Bench
+  def run(argv) do
+    {opts, _, _} =
+      OptionParser.parse(argv,
+        strict: [
+          scenes: :string,
+          dir: :string,
+          pov_dir: :string,
+          runs: :integer,
+          size: :integer,
+          threads: :integer,
+          children: :integer,
+          atoms: :integer
+        ]
+      )
+
+    Mix.Task.run("app.start")
+    dir = opts[:dir] || "priv/scenes/spd"
+    pov_dir = opts[:pov_dir] || PovRay.default_dir()
+    scenes = if s = opts[:scenes], do: String.split(s, ","), else: PovRay.spd_scenes()
+    runs = opts[:runs] || 3
+    size = opts[:size] || 512
+    threads = opts[:threads] || 2
+    children = opts[:children] || 8
+    atoms = opts[:atoms] || 16
+    povray = PovRay.executable()
+
+    info(
+      "#{size}x#{size}, depth 5, #{threads} kernel threads, ring of #{children} children x #{atoms} atoms, " <>
+        "median of #{runs}; #{vm()}" <>
+        if(povray, do: "", else: "; povray not installed (apt-get install povray)")
+    )
+
+    header = ~w(scene setup_s trace_s Mrays/s pov_parse_s pov_trace_s ours/pov ring_s ring/kernel)
+
+    rows =
+      for name <- scenes do
+        path = Path.join(dir, name <> ".nff")
+        {setup_us, {:ok, scene}} = :timer.tc(fn -> Scene.load(path) end)
+        :ok = SceneCache.put(scene)
+        settings = %Settings{width: size, height: size}
+        native = Settings.to_native(settings)
+
+        kernel = fn ->
+          {us, {:ok, {_pixels, rays}}} =
+            :timer.tc(fn -> Native.render_image(scene.ref, native, threads) end)
+
+          {us, rays}
+        end
+
+        ring = fn ->
+          {:ok, result} =
+            RingTracer.render(path, children: children, atoms: atoms, width: size, height: size)
+
+          result.elapsed_us
+        end
+
+        # Kernel and ring alternate, so that both see the same drift of this
+        # machine's speed; ring/kernel is the median of the pairs' ratios.
+        {:ok, _} = RingTracer.render(path, children: children, atoms: 1, width: 8, height: 8)
+        pairs = for _ <- 1..runs, do: {kernel.(), ring.()}
+        {_, rays} = pairs |> List.last() |> elem(0)
+        trace_us = median(Enum.map(pairs, fn {{k, _}, _} -> k end))
+        ring_us = median(Enum.map(pairs, fn {_, r} -> r end))
+        ring_ratio = median(Enum.map(pairs, fn {{k, _}, r} -> r / k end))
+
+        pov = PovRay.times(povray, Path.join(pov_dir, name <> ".pov"), size, threads, runs)
+
+        [
+          name,
+          secs(setup_us),
+          secs(trace_us),
+          fmt(Rays.total(rays) / trace_us),
+          pov && secs(pov.parse_us),
+          pov && secs(pov.trace_us),
+          pov && fmt(trace_us / max(pov.trace_us, 1)),
+          secs(ring_us),
+          fmt(ring_ratio)
+        ]
+      end
+
+    print_table(header, rows)
+  end
+end

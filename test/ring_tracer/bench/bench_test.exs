@@ -1,0 +1,46 @@
+defmodule RingTracer.BenchTest do
+  # not async: the floor test checks that no process it started outlives it
+  use ExUnit.Case, async: false
+  doctest RingTracer.Bench
+  doctest RingTracer.Bench.PovRay
+  doctest RingTracer.Bench.Balance
+
+  alias RingTracer.Bench.Balance
+  alias RingTracer.TestScenes
+
+  test "median_result takes the run in the middle by makespan over ideal" do
+    runs = [
+      %{elapsed_us: 300, ideal_us: 100},
+      %{elapsed_us: 110, ideal_us: 100},
+      %{elapsed_us: 150, ideal_us: 100}
+    ]
+
+    {:ok, agent} = Agent.start_link(fn -> runs end)
+    next = fn -> {:ok, Agent.get_and_update(agent, fn [r | rest] -> {r, rest} end)} end
+    assert RingTracer.Bench.median_result(3, next) == %{elapsed_us: 150, ideal_us: 100}
+  end
+
+  test "a balance row from a job's result" do
+    {:ok, result} = RingTracer.simulate(children: 2, atoms: 2, costs: 1000)
+    row = Balance.row("simulated N=2", "ring", result)
+    assert %{scenario: "simulated N=2", strategy: "ring", msgs: msgs, bytes: bytes} = row
+    assert row.ratio == result.elapsed_us / result.ideal_us
+    assert msgs > 0 and bytes > 0
+    assert row.idle_pct >= 0 and row.idle_pct <= 100
+    assert length(Balance.cells(row)) == 8
+  end
+
+  test "the floor traces every atom through real grandchildren, and leaves none behind" do
+    scene = RingTracer.Scene.load!(TestScenes.path("balls_s1.nff"))
+    before = Process.list()
+    {:ok, %{elapsed_us: elapsed, ideal_us: ideal}} = Balance.floor(scene, 32, 2, 3, [1, 2])
+    assert ideal > 0 and elapsed > 0
+    # a speed of 2 makes the floor's capacity 1.5 atoms at once, so its ideal
+    # is the work over 1.5: the makespan cannot beat it by much
+    assert elapsed >= ideal * 0.5
+
+    assert RingTracer.Test.Wait.eventually(fn ->
+             Enum.all?(Process.list() -- before, &(not Process.alive?(&1)))
+           end)
+  end
+end
