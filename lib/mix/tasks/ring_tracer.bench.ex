@@ -466,6 +466,11 @@ defmodule Mix.Tasks.RingTracer.Bench do
     if status != 0, do: Mix.raise("the ray-casting benchmark failed (exit #{status})")
   end
 
+  def run(["network" | argv]) do
+    Mix.Task.run("app.start")
+    RingTracer.Bench.Network.run(argv)
+  end
+
   def run(_),
     do:
       Mix.raise(
