@@ -4,9 +4,9 @@ defmodule RingTracer.Bench.Network do
   delayed links between nodes in Linux network namespaces
   (`RingTracer.Bench.Network.Lab`; needs root).
 
-      mix ring_tracer.bench network [--delays 0,1,10,50] [--rate 100mbit] [--workers 2]
+      mix ring_tracer.bench network [--delays 0,1,10,50] [--rate 1gbit] [--workers 2]
         [--children 2] [--atoms 16] [--size 512] [--speeds 1,1,4,1] [--runs 3]
-        [--scene priv/scenes/balls_s2.nff] [--strategies static,master,ring,steal]
+        [--scene priv/scenes/spd/balls_s4.nff] [--strategies static,master,ring,steal]
 
   The parent runs on a node of its own (it hosts no children); the
   children are on `--workers` worker nodes, `--children` on each, with
@@ -26,8 +26,10 @@ defmodule RingTracer.Bench.Network do
       acknowledgements included (the veths' counters);
     * `parent_bytes%`, `parent_msgs%` — the share of that traffic that the
       parent sent or received;
-    * `parent_link%` — how busy the parent's link was towards the parent
-      over the makespan (bytes to it / (rate x makespan)): near 100 the
+    * `parent_link_ms` — the time the parent's link needs, at `--rate`, for
+      the bytes that came in to the parent during the run (every pixel
+      among them): a floor under the makespan that no strategy can go
+      below, since all pixels end at the parent. Near the makespan, the
       parent's link is the bottleneck.
 
   Every image is compared with a render on this VM alone; the last line
@@ -38,14 +40,14 @@ defmodule RingTracer.Bench.Network do
 
   @defaults [
     delays: "0,1,10,50",
-    rate: "100mbit",
+    rate: "1gbit",
     workers: 2,
     children: 2,
     atoms: 16,
     size: 512,
     speeds: "1,1,4,1",
     runs: 3,
-    scene: "priv/scenes/balls_s2.nff",
+    scene: "priv/scenes/spd/balls_s4.nff",
     strategies: "static,master,ring,steal"
   ]
 
@@ -79,7 +81,7 @@ defmodule RingTracer.Bench.Network do
 
     {:ok, _} = Application.ensure_all_started(:ring_tracer)
     delays = numbers(opts[:delays])
-    strategies = opts[:strategies] |> String.split(",") |> Enum.map(&String.to_existing_atom/1)
+    strategies = opts[:strategies] |> String.split(",") |> Enum.map(&strategy/1)
     job = job(opts)
     scene = Path.expand(opts[:scene])
 
@@ -101,7 +103,7 @@ defmodule RingTracer.Bench.Network do
             rtt = lab |> Lab.rtt_ms() |> Map.values()
 
             IO.puts(
-              "delay #{fmt(delay)} ms: round trip parent -> workers " <>
+              "one-way delay #{fmt(delay)} ms: round trip parent -> each worker, median of 7 pings: " <>
                 Enum.map_join(rtt, ", ", &"#{fmt(&1)} ms")
             )
 
@@ -202,15 +204,15 @@ defmodule RingTracer.Bench.Network do
 
   defp print_table(rows, rate_bps) do
     header =
-      ~w(delay_ms rtt_ms strategy makespan_ms ideal_ms makespan/ideal msgs/atom bytes/atom wire/atom parent_bytes% parent_msgs% parent_link%)
+      ~w(delay_ms rtt_ms strategy makespan_ms ideal_ms makespan/ideal msgs/atom bytes/atom wire/atom parent_bytes% parent_msgs% parent_link_ms)
 
     cells =
       for r <- rows do
-        link = 100 * r.parent_in * 8 / (rate_bps * r.elapsed_us / 1_000_000)
+        link_ms = r.parent_in * 8 * 1000 / rate_bps
 
         [fmt(r.delay), fmt(r.rtt), Atom.to_string(r.strategy), fmt(r.elapsed_us / 1000)] ++
           [fmt(r.ideal_us / 1000), fmt(r.ratio), fmt(r.msgs), int(r.bytes), int(r.wire)] ++
-          [fmt1(r.parent_bytes), fmt1(r.parent_msgs), fmt1(link)]
+          [fmt1(r.parent_bytes), fmt1(r.parent_msgs), fmt(link_ms)]
       end
 
     widths =
@@ -224,6 +226,12 @@ defmodule RingTracer.Bench.Network do
       |> Enum.map_join("  ", fn {cell, w} -> String.pad_leading(cell, w) end)
       |> IO.puts()
     end
+  end
+
+  defp strategy(name) do
+    Enum.find(RingTracer.Strategy.names(), &(Atom.to_string(&1) == name)) ||
+      raise ArgumentError,
+            "--strategies: one of #{Enum.join(RingTracer.Strategy.names(), ", ")}, got: #{inspect(name)}"
   end
 
   defp numbers(text) do

@@ -14,8 +14,8 @@ defmodule RingTracer.Bench.Network.Lab do
   to one hub namespace. Both ends of each veth get a `tbf` bandwidth limit
   (`rate`). No node can reach another directly: the only addresses a node
   knows are its own and the hub's end of its link, where the delaying
-  relay (`RingTracer.Bench.Network.Relay`, sockets in the hub, run by this
-  VM) listens for each other node and forwards to it. The nodes' port
+  relay (`RingTracer.Bench.Network.Relay`, an OS process in the hub)
+  listens for each other node and forwards to it. The nodes' port
   mapper (`RingTracer.Bench.Network.Epmd`) points every node name at the
   relay, so every distribution connection, parent to worker and worker to
   worker, crosses two rate-limited links and one delay.
@@ -58,7 +58,7 @@ defmodule RingTracer.Bench.Network.Lab do
   @type t :: %__MODULE__{
           id: String.t(),
           hub: String.t(),
-          relay: pid() | nil,
+          relay: Relay.t() | nil,
           dir: Path.t() | nil,
           rate: String.t(),
           nodes: [lab_node()],
@@ -123,6 +123,8 @@ defmodule RingTracer.Bench.Network.Lab do
   """
   @spec start(keyword()) :: t()
   def start(opts) do
+    # Built (if it is stale) before anything is made.
+    _ = Relay.executable!()
     sweep_stale()
     workers = Keyword.get(opts, :workers, 2)
     id = random_id()
@@ -204,9 +206,9 @@ defmodule RingTracer.Bench.Network.Lab do
     delay_us = round(Keyword.get(opts, :delay_ms, 0) * 1000)
 
     relay =
-      case Relay.start(Path.join(@netns_dir, lab.hub), routes, delay_us) do
-        {:ok, pid} -> pid
-        {:error, reason} -> raise "the relay could not listen in #{lab.hub}: #{inspect(reason)}"
+      case Relay.start(lab.hub, routes, delay_us) do
+        {:ok, relay} -> relay
+        {:error, reason} -> raise "the relay could not start in #{lab.hub}: #{reason}"
       end
 
     lab = remember(%{lab | relay: relay})
@@ -280,7 +282,7 @@ defmodule RingTracer.Bench.Network.Lab do
       ) ++ paths
 
     {:ok, peer, _nonode} =
-      :peer.start(%{
+      :peer.start_link(%{
         exec:
           {String.to_charlist(ip), Enum.map(["netns", "exec", n.ns, erl], &String.to_charlist/1)},
         connection: :standard_io,

@@ -1,244 +1,123 @@
 defmodule RingTracer.Bench.Network.Relay do
   @moduledoc """
-  A TCP relay that holds every byte for a one-way delay before passing it
-  on: the network benchmark's stand-in for a long link, since this kernel
-  has no `netem`.
+  The network benchmark's stand-in for long links, since this kernel has no
+  `netem`: `ringtracer-relay` (the crate `native/relay`, std-only Rust), a
+  TCP relay that holds every byte for a one-way delay before passing it on.
 
-  It runs in the calling VM, with its sockets in another network namespace
-  (gen_tcp's `netns` option: the benchmark's hub). Each route is a
-  listener at `{ip, port}` that forwards every connection it accepts to
-  `{to_ip, to_port}`. Per direction of a connection one process reads
-  what arrives, stamps it with `now + delay` and writes it out when that
-  time comes, in order, so the delay does not cut the throughput: a chunk
-  waits for its own deadline, not for the chunks before it to be
-  delivered. Reading pauses while more than #{div(4_194_304, 1_048_576)} MiB
-  wait, so a slow link (the `tbf` limit on the other side) pushes back to
-  the sender through TCP.
+  It runs as an OS process in the lab's hub namespace (`ip netns exec`),
+  controlled through a port: `set_delay/2` changes the delay of every
+  connection, open or future, and closing the port (`stop/1`, or this VM
+  going) ends it. Each route is a listener that forwards every connection
+  to one target. A thread per direction writes each chunk out at its
+  arrival time plus the delay (the OS sleeps with sub-millisecond
+  precision, which BEAM timers, whole milliseconds and late by one or
+  two, do not have); the delay does not cut the throughput, and a full
+  queue pushes back on the sender through TCP. The relay ends TCP on both
+  sides, so it delays data, not acknowledgements.
 
-  The relay ends the TCP connection on each side (it acknowledges data
-  itself), so it delays data and not acknowledgements: the delay shows as
-  latency, and TCP windows never limit throughput.
-
-  `set_delay/2` changes the delay of every connection, open or future.
+  The binary is built with cargo (`cargo build --release -p
+  ring_tracer_relay` in `native/`) when `executable!/0` is first asked for
+  it; cargo rebuilds only when its sources changed.
   """
 
-  @queue_limit 4_194_304
-
-  @typedoc "A listener `{ip, port}` and where it forwards to."
+  @typedoc "A route: a listener `{ip, port}` and the `{ip, port}` it forwards to."
   @type route ::
           {{:inet.ip_address(), :inet.port_number()}, {:inet.ip_address(), :inet.port_number()}}
 
-  @doc """
-  Starts the relay's listeners in the network namespace at `netns` (a
-  path such as `/var/run/netns/NAME`). Returns the relay's pid, linked to
-  the caller.
-  """
-  @spec start(Path.t(), [route()], non_neg_integer()) :: {:ok, pid()} | {:error, term()}
-  def start(netns, routes, delay_us) do
-    caller = self()
+  @type t :: %{port: port(), os_pid: non_neg_integer()}
 
-    pid =
-      spawn_link(fn ->
-        delay = :atomics.new(1, signed: false)
-        :atomics.put(delay, 1, delay_us)
+  @doc "The relay's executable, built first (cargo decides whether it is stale)."
+  @spec executable!() :: Path.t()
+  def executable! do
+    native = Path.join(File.cwd!(), "native")
+    bin = Path.join([native, "target", "release", "ringtracer-relay"])
+    cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
 
-        listeners =
-          Enum.map(routes, fn {{ip, port}, to} ->
-            {:gen_tcp.listen(port, [
-               :binary,
-               ip: ip,
-               netns: netns,
-               active: false,
-               reuseaddr: true,
-               nodelay: true,
-               backlog: 64
-             ]), to}
-          end)
-
-        case Enum.find(listeners, &match?({{:error, _}, _}, &1)) do
-          nil ->
-            owner = self()
-
-            for {{:ok, l}, to} <- listeners do
-              spawn_link(fn -> accept(l, to, netns, {owner, delay}) end)
-            end
-
-            send(caller, {self(), :ok})
-            owner(delay)
-
-          {{:error, reason}, _} ->
-            send(caller, {self(), {:error, reason}})
+    cond do
+      File.exists?(Path.join(native, "relay/Cargo.toml")) and File.exists?(cargo) ->
+        case System.cmd(cargo, ~w(build --release -q -p ring_tracer_relay),
+               cd: native,
+               stderr_to_stdout: true
+             ) do
+          {_, 0} -> bin
+          {out, status} -> raise "building ringtracer-relay failed (#{status}): #{out}"
         end
-      end)
 
-    receive do
-      {^pid, :ok} -> {:ok, pid}
-      {^pid, {:error, reason}} -> {:error, reason}
+      File.exists?(bin) ->
+        bin
+
+      true ->
+        raise "ringtracer-relay not found: run from the RingTracer checkout, with cargo installed"
     end
   end
 
-  @doc "Sets the one-way delay, in microseconds, for every byte from now on."
-  @spec set_delay(pid(), non_neg_integer()) :: :ok
-  def set_delay(relay, delay_us) do
-    send(relay, {:set_delay, self(), delay_us})
+  @doc """
+  Starts the relay in the network namespace `netns` (a name from `ip netns
+  list`) with `routes` and a first delay in microseconds. The port is owned
+  by the caller.
+  """
+  @spec start(String.t(), [route()], non_neg_integer()) :: {:ok, t()} | {:error, String.t()}
+  def start(netns, routes, delay_us) do
+    exe = executable!()
+    ip = System.find_executable("ip")
 
-    receive do
-      {^relay, :ok} -> :ok
+    args =
+      ["netns", "exec", netns, exe] ++
+        for {{lip, lport}, {tip, tport}} <- routes do
+          "#{:inet.ntoa(lip)}:#{lport}=#{:inet.ntoa(tip)}:#{tport}"
+        end
+
+    port =
+      Port.open({:spawn_executable, ip}, [
+        :binary,
+        :exit_status,
+        :stderr_to_stdout,
+        {:line, 1024},
+        args: args
+      ])
+
+    {:os_pid, os_pid} = Port.info(port, :os_pid)
+    relay = %{port: port, os_pid: os_pid}
+
+    case answer(port, 10_000) do
+      "ready" ->
+        :ok = set_delay(relay, delay_us)
+        {:ok, relay}
+
+      other ->
+        stop(relay)
+        {:error, "ringtracer-relay did not start: #{other}"}
     end
+  end
+
+  @doc "Sets the one-way delay, in microseconds, for every byte read from now on."
+  @spec set_delay(t(), non_neg_integer()) :: :ok
+  def set_delay(%{port: port}, delay_us) do
+    true = Port.command(port, "delay #{delay_us}\n")
+    "ok" = answer(port, 5_000)
+    :ok
   end
 
   @doc "Stops the relay: its listeners and every connection through it."
-  @spec stop(pid()) :: :ok
-  def stop(relay) do
-    ref = Process.monitor(relay)
-    Process.unlink(relay)
-    Process.exit(relay, :shutdown)
+  @spec stop(t()) :: :ok
+  def stop(%{port: port}) do
+    # Its input closed, it exits by itself (the lab then kills whatever is
+    # left in its namespace).
+    try do
+      Port.close(port)
+    rescue
+      ArgumentError -> :ok
+    end
 
+    :ok
+  end
+
+  defp answer(port, timeout) do
     receive do
-      {:DOWN, ^ref, _, _, _} -> :ok
+      {^port, {:data, {:eol, line}}} -> line
+      {^port, {:exit_status, status}} -> "exited with status #{status}"
+    after
+      timeout -> "no answer in #{timeout} ms"
     end
   end
-
-  defp owner(delay) do
-    receive do
-      {:set_delay, from, us} ->
-        :atomics.put(delay, 1, us)
-        send(from, {self(), :ok})
-        owner(delay)
-    end
-  end
-
-  defp accept(listener, {ip, port} = to, netns, shared) do
-    case :gen_tcp.accept(listener) do
-      {:ok, inbound} ->
-        opts = [:binary, netns: netns, active: false, nodelay: true]
-
-        case :gen_tcp.connect(ip, port, opts, 10_000) do
-          {:ok, outbound} ->
-            :ok = :inet.setopts(inbound, nodelay: true)
-            start_pumps(inbound, outbound, shared)
-
-          {:error, _} ->
-            :gen_tcp.close(inbound)
-        end
-
-        accept(listener, to, netns, shared)
-
-      {:error, :closed} ->
-        :ok
-    end
-  end
-
-  # Two processes per connection, linked to each other (when one side
-  # closes, both go), each owning the socket it reads and watching the
-  # relay's owner (when it stops, every connection goes).
-  defp start_pumps(a, b, shared) do
-    parent = self()
-
-    one =
-      spawn(fn ->
-        receive do: ({:go, ^parent} -> pump(a, b, shared))
-      end)
-
-    other =
-      spawn(fn ->
-        Process.link(one)
-        receive do: ({:go, ^parent} -> pump(b, a, shared))
-      end)
-
-    :ok = :gen_tcp.controlling_process(a, one)
-    :ok = :gen_tcp.controlling_process(b, other)
-    send(one, {:go, parent})
-    send(other, {:go, parent})
-  end
-
-  defp pump(from, to, {owner, delay}) do
-    Process.monitor(owner)
-    _ = :inet.setopts(from, active: :once)
-    loop(%{from: from, to: to, delay: delay, queue: :queue.new(), bytes: 0, reading: true})
-  end
-
-  defp loop(s) do
-    receive do
-      {:tcp, _, data} ->
-        s |> arrive(data) |> resume() |> loop()
-
-      {:timeout, _, :due} ->
-        s |> deliver() |> resume() |> loop()
-
-      {:tcp_closed, _} ->
-        finish(s)
-
-      {:tcp_error, _, _} ->
-        finish(s)
-
-      {:DOWN, _, :process, _, _} ->
-        exit(:shutdown)
-    end
-  end
-
-  defp arrive(s, data) do
-    s = %{s | reading: false}
-
-    case :atomics.get(s.delay, 1) do
-      0 when s.bytes == 0 ->
-        write(s, data)
-        s
-
-      us ->
-        was_empty = s.bytes == 0
-        due = now() + us
-        s = %{s | queue: :queue.in({due, data}, s.queue), bytes: s.bytes + byte_size(data)}
-        if was_empty, do: arm(due)
-        s
-    end
-  end
-
-  defp deliver(s) do
-    t = now()
-
-    case :queue.peek(s.queue) do
-      {:value, {due, data}} when due <= t ->
-        write(s, data)
-        deliver(%{s | queue: :queue.drop(s.queue), bytes: s.bytes - byte_size(data)})
-
-      {:value, {due, _}} ->
-        arm(due)
-        s
-
-      :empty ->
-        s
-    end
-  end
-
-  defp resume(%{reading: false, bytes: bytes} = s) when bytes < @queue_limit do
-    _ = :inet.setopts(s.from, active: :once)
-    %{s | reading: true}
-  end
-
-  defp resume(s), do: s
-
-  # The sending side closed: what it sent still arrives, each chunk at its
-  # time; then both ends close (the linked partner goes too).
-  defp finish(s) do
-    Enum.each(:queue.to_list(s.queue), fn {due, data} ->
-      wait = due - now()
-      if wait > 0, do: Process.sleep(div(wait + 999, 1000))
-      write(s, data)
-    end)
-
-    :gen_tcp.close(s.to)
-    exit(:closed)
-  end
-
-  defp write(s, data) do
-    case :gen_tcp.send(s.to, data) do
-      :ok -> :ok
-      {:error, _} -> exit(:closed)
-    end
-  end
-
-  defp arm(due_us), do: :erlang.start_timer(div(due_us + 999, 1000), self(), :due, abs: true)
-
-  defp now, do: System.monotonic_time(:microsecond)
 end
