@@ -6,7 +6,7 @@ defmodule RingTracer.Bench.Network do
 
       mix ring_tracer.bench network [--delays 0,1,10,50] [--rate 1gbit] [--workers 2]
         [--children 2] [--atoms 16] [--size 512] [--speeds 1,1,4,1] [--runs 3]
-        [--scene priv/scenes/spd/balls_s4.nff] [--strategies static,master,ring,steal]
+        [--scene priv/scenes/spd/rings_s7.nff] [--strategies static,master,ring,steal]
 
   The parent runs on a node of its own (it hosts no children); the
   children are on `--workers` worker nodes, `--children` on each, with
@@ -47,7 +47,7 @@ defmodule RingTracer.Bench.Network do
     size: 512,
     speeds: "1,1,4,1",
     runs: 3,
-    scene: "priv/scenes/spd/balls_s4.nff",
+    scene: "priv/scenes/spd/rings_s7.nff",
     strategies: "static,master,ring,steal"
   ]
 
@@ -101,10 +101,12 @@ defmodule RingTracer.Bench.Network do
           {rows, same} ->
             :ok = Lab.set_delay(lab, delay)
             rtt = lab |> Lab.rtt_ms() |> Map.values()
+            empty = empty_job_ms(lab, scene, opts)
 
             IO.puts(
               "one-way delay #{fmt(delay)} ms: round trip parent -> each worker, median of 7 pings: " <>
-                Enum.map_join(rtt, ", ", &"#{fmt(&1)} ms")
+                Enum.map_join(rtt, ", ", &"#{fmt(&1)} ms") <>
+                "; an empty job (8x8 pixels, 1 atom per child, ring): #{fmt(empty)} ms"
             )
 
             for strategy <- strategies, reduce: {rows, same} do
@@ -171,6 +173,28 @@ defmodule RingTracer.Bench.Network do
 
     sorted = Enum.sort_by(samples, & &1.ratio)
     Map.put(Enum.at(sorted, div(length(sorted), 2)), :shas, Enum.map(samples, & &1.sha))
+  end
+
+  # The job's fixed cost at this delay: start-up, scene hand-out, the end
+  # of the job, with (almost) no work. The median of three after a warm-up.
+  defp empty_job_ms(lab, scene, opts) do
+    job = [
+      strategy: :ring,
+      nodes: lab.workers,
+      local: false,
+      children_per_node: opts[:children],
+      atoms: 1,
+      width: 8,
+      height: 8
+    ]
+
+    samples =
+      for _ <- 0..3 do
+        {:ok, r} = Lab.call(lab.parent, Remote, :render, [scene, job, 1, false])
+        r.elapsed_us / 1000
+      end
+
+    median(tl(samples))
   end
 
   defp figures(lab, r, before, after_) do
