@@ -13,8 +13,10 @@ defmodule RingTracer.Bench.Network do
   `--speeds` (one slowdown factor per child, in ring order). Each link is
   limited to `--rate` both ways (`tc tbf`) and the relay holds every byte
   for the one-way delay. For each delay it prints the measured round trip
-  (parent to workers, `:net_adm.ping/1`), then per strategy the median
-  (by makespan / ideal) of `--runs` renders after one warm-up:
+  (parent to workers, `:net_adm.ping/1`) and the makespan of an empty job
+  (8x8 pixels, one atom per child: the job's fixed cost), then per
+  strategy the median (by makespan / ideal) of `--runs` renders after one
+  warm-up:
 
     * `makespan/ideal` — the ideal being the total trace work over the
       atoms that can trace at once (one per worker node's dirty scheduler,
