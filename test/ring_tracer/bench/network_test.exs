@@ -5,7 +5,6 @@ defmodule RingTracer.Bench.NetworkTest do
   # this file loads).
   use ExUnit.Case, async: false
 
-  alias RingTracer.Bench.Network
   alias RingTracer.Bench.Network.{Lab, Remote}
   alias RingTracer.TestScenes
 
@@ -90,9 +89,24 @@ defmodule RingTracer.Bench.NetworkTest do
     {listed, 0} = System.cmd("ip", ["netns", "list"])
     for ns <- namespaces, do: refute(listed =~ ns)
   end
+end
+
+defmodule RingTracer.Bench.NetworkPureTest do
+  # The parts that need no namespaces: in every run of the suite.
+  use ExUnit.Case, async: true
+
+  alias RingTracer.Bench.Network
+
+  doctest RingTracer.Bench.Network.Lab
 
   test "the job's options put the children on the workers with their speeds" do
     job = Network.job(workers: 2, children: 2, atoms: 8, size: 64, speeds: "1,1,4,1")
     assert job[:children] == 4 and job[:speeds] == [1, 1, 4, 1]
+
+    assert Network.job(workers: 3, children: 1, atoms: 8, size: 64, speeds: "1,2")[:speeds] == [
+             1,
+             2,
+             1
+           ]
   end
 end
