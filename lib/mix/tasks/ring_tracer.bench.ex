@@ -8,7 +8,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
     {"nodes", RingTracer.Bench.Nodes},
     {"startup", RingTracer.Bench.Startup},
     {"limits", RingTracer.Bench.Limits},
-    {"rays", RingTracer.Bench.Rays}
+    {"rays", RingTracer.Bench.Rays},
+    {"network", RingTracer.Bench.Network}
   ]
 
   @moduledoc """
