@@ -33,7 +33,7 @@ defmodule RingTracer.Result do
       units (see `RingTracer.Kernel`);
     * `:strategy` — the strategy's name; `:layout` — `:strips` or
       `:interleaved` (see `RingTracer.Layout`); `:aim` — whether the ring's
-      children aimed their offers (see `RingTracer.Ring.Aim`);
+      children aimed their offers (see `RingTracer.Strategy.Ring.Aim`);
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels
       were still on their way); the first is kept;
@@ -129,8 +129,7 @@ defmodule RingTracer.Result do
       failures: raw.failures,
       redone: raw.redone,
       nodes: raw.nodes,
-      layout: raw.layout,
-      aim: raw.aim
+      layout: raw.layout
     }
   end
 

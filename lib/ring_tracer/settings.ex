@@ -5,9 +5,6 @@ defmodule RingTracer.Settings do
   the image traced (the camera still frames the whole image, so a region
   holds exactly the whole render's pixels there). The same settings and
   scene give the same bytes for every pixel wherever it is traced.
-
-  `:fail_pixel` is a test hook: the kernel panics when it traces that pixel
-  (to show that a panic is contained). It is `nil` in normal use.
   """
 
   @enforce_keys [:width, :height]
@@ -17,7 +14,6 @@ defmodule RingTracer.Settings do
             cutoff: 1 / 255,
             samples: 1,
             spd: false,
-            fail_pixel: nil,
             region: nil
 
   @type t :: %__MODULE__{
@@ -27,7 +23,6 @@ defmodule RingTracer.Settings do
           cutoff: float(),
           samples: pos_integer(),
           spd: boolean(),
-          fail_pixel: non_neg_integer() | nil,
           region: region() | nil
         }
 
@@ -56,7 +51,6 @@ defmodule RingTracer.Settings do
       cutoff: s.cutoff / 1,
       samples: s.samples,
       spd: s.spd,
-      fail_pixel: s.fail_pixel,
       region: s.region
     }
   end
