@@ -32,6 +32,11 @@ defmodule RingTracer.Job.Parent do
   @spec start_link(Spec.t()) :: GenServer.on_start()
   def start_link(spec), do: GenServer.start_link(__MODULE__, spec)
 
+  # The tag of the messages to the job's caller and progress pid, as
+  # `RingTracer.render/2` documents them. An atom, not the alias: the parent
+  # calls nothing of the public API module (no run-time dependency on it).
+  @reply_tag :"Elixir.RingTracer"
+
   @enforce_keys [:spec, :strategy, :ledger, :missing, :started, :t0]
   defstruct [
     :spec,
@@ -273,7 +278,7 @@ defmodule RingTracer.Job.Parent do
 
       {:error, message, list} ->
         for {_i, pid} <- list, do: Process.exit(pid, :kill)
-        send(state.spec.caller, {RingTracer, state.spec.id, {:error, message}})
+        send(state.spec.caller, {@reply_tag, state.spec.id, {:error, message}})
         {:stop, :normal, state}
     end
   end
@@ -511,7 +516,7 @@ defmodule RingTracer.Job.Parent do
 
   defp progress(%{spec: spec} = state) do
     total = Layout.atom_count(spec.layout)
-    send(spec.progress, {RingTracer, spec.id, {:progress, total - state.missing, total}})
+    send(spec.progress, {@reply_tag, spec.id, {:progress, total - state.missing, total}})
   end
 
   defp stop_children(state),
@@ -642,7 +647,7 @@ defmodule RingTracer.Job.Parent do
       %{job: spec.id, outcome: elem(reply, 0)}
     )
 
-    send(spec.caller, {RingTracer, spec.id, reply})
+    send(spec.caller, {@reply_tag, spec.id, reply})
     {:stop, :normal, state}
   end
 
