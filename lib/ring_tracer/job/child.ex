@@ -97,44 +97,17 @@ defmodule RingTracer.Job.Child do
   @typedoc "Messages sent, by kind: `{count, bytes}` (bytes in the external term format)."
   @type traffic :: %{atom() => {non_neg_integer(), non_neg_integer()}}
 
-  @typedoc "A protocol event for the timeline (an offer sent, passed, consumed...)."
-  @type event :: %{kind: atom(), from: non_neg_integer(), to: term(), at_us: integer()}
+  @typedoc "A process's state that counts the messages it sends (a child's or the parent's)."
+  @type counting :: %{required(:traffic) => traffic(), optional(atom()) => term()}
 
-  @typedoc "One traced atom: who owns it, who traced it, when (job microseconds)."
-  @type atom_record :: %{
-          atom: Layout.atom_id(),
-          owner: non_neg_integer(),
-          child: non_neg_integer(),
-          start_us: integer(),
-          end_us: integer(),
-          trace_us: non_neg_integer()
-        }
+  @typedoc "A protocol event for the timeline (see `RingTracer.Result`)."
+  @type event :: RingTracer.Result.event()
 
-  @typedoc """
-  A child's statistics (see `RingTracer.Result`); a dead child's have
-  `:failed` set, and the result adds `:idle_us`.
-  """
-  @type stats :: %{
-          required(:index) => non_neg_integer(),
-          required(:node) => node() | nil,
-          required(:speed) => number(),
-          required(:own) => non_neg_integer(),
-          required(:given) => non_neg_integer(),
-          required(:received) => non_neg_integer(),
-          required(:handovers) => non_neg_integer(),
-          required(:traced) => non_neg_integer(),
-          required(:offers_sent) => non_neg_integer(),
-          required(:offers_passed) => non_neg_integer(),
-          required(:offers_consumed) => non_neg_integer(),
-          required(:grandchild_restarts) => non_neg_integer(),
-          required(:busy_us) => non_neg_integer(),
-          required(:trace_us) => non_neg_integer(),
-          required(:first_atom_us) => integer() | nil,
-          required(:last_atom_us) => integer() | nil,
-          required(:rays) => map(),
-          optional(:failed) => String.t(),
-          optional(:idle_us) => non_neg_integer()
-        }
+  @typedoc "One traced atom's record (see `RingTracer.Result`)."
+  @type atom_record :: RingTracer.Result.atom_record()
+
+  @typedoc "A child's statistics (see `RingTracer.Result`)."
+  @type stats :: RingTracer.Result.child()
 
   @typedoc "What a child reports to its parent when it stops."
   @type report :: %{
@@ -158,14 +131,14 @@ defmodule RingTracer.Job.Child do
   def start_link(args), do: GenServer.start_link(__MODULE__, args)
 
   @doc "Sends `msg` to `pid`, counting it under `kind` with its external size."
-  @spec send_counted(state, pid(), atom(), term()) :: state when state: %{traffic: traffic()}
+  @spec send_counted(state, pid(), atom(), term()) :: state when state: counting()
   def send_counted(state, pid, kind, msg) do
     send(pid, msg)
     count(state, kind, msg)
   end
 
   @doc false
-  @spec count(state, atom(), term()) :: state when state: %{traffic: traffic()}
+  @spec count(state, atom(), term()) :: state when state: counting()
   def count(state, kind, msg) do
     bytes = :erlang.external_size(msg)
 
@@ -187,7 +160,7 @@ defmodule RingTracer.Job.Child do
   Microseconds since the job's start (`t0`, wall clock, shared by the
   parent and every child, whatever their node).
   """
-  @spec job_time(%{t0: integer()}) :: integer()
+  @spec job_time(%{required(:t0) => integer(), optional(atom()) => term()}) :: integer()
   def job_time(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
   # What the child could give: `{remaining, in_flight}`, where `remaining`

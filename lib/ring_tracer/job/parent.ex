@@ -97,15 +97,11 @@ defmodule RingTracer.Job.Parent do
           reports: %{non_neg_integer() => Child.report()}
         }
 
-  @typedoc "A child that died mid-job: when (microseconds since the parent started), and why."
-  @type failure :: %{child: non_neg_integer(), reason: String.t(), at_us: integer()}
+  @typedoc "A child that died mid-job (see `RingTracer.Result`)."
+  @type failure :: RingTracer.Result.failure()
 
-  @typedoc "Per node: children placed there, atoms traced there, scene bytes shipped to it."
-  @type node_summary :: %{
-          children: non_neg_integer(),
-          traced: non_neg_integer(),
-          scene_bytes: non_neg_integer()
-        }
+  @typedoc "Per node (see `RingTracer.Result`)."
+  @type node_summary :: RingTracer.Result.node_summary()
 
   @typedoc "What the parent replies to the job's caller when the job completes."
   @type reply :: %{
