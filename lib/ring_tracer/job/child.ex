@@ -17,6 +17,11 @@ defmodule RingTracer.Job.Child do
       decides what to do: for the ring, send a help offer to the left;
     * atoms handed over (`{:handover, from, atoms}`) are queued and traced.
 
+  A strategy sees the child through a read-only `RingTracer.Strategy.View`
+  and answers with effects, which the child carries out in one place
+  (`strategy_message/2`, `idle/1`): the strategy decides, the child sends,
+  counts, takes atoms from its queue and records events.
+
   A grandchild that dies is restarted and its atoms retried, at most three
   times per atom; then the child reports the atom as failed to the parent,
   which fails the job.
