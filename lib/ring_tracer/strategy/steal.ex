@@ -55,8 +55,8 @@ defmodule RingTracer.Strategy.Steal do
   defp victims(%{index: index, ring_size: n}) do
     step =
       if n > 2 do
-        :rand.seed(:exsss, {index + 1, 7, 13})
-        coprime(:rand.uniform(n - 1), n)
+        {draw, _} = :rand.uniform_s(n - 1, :rand.seed_s(:exsss, {index + 1, 7, 13}))
+        coprime(draw, n)
       else
         1
       end
