@@ -31,7 +31,8 @@ defmodule RingTracer.Result do
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
       `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
       units (see `RingTracer.Kernel`);
-    * `:strategy` — the strategy's name; `:layout` — `:strips` or
+    * `:strategy` — the strategy's name (its module, for one given as
+      `{module, options}`); `:layout` — `:strips` or
       `:interleaved` (see `RingTracer.Layout`); `:aim` — whether the ring's
       children aimed their offers (see `RingTracer.Strategy.Ring.Aim`);
     * `:duplicates` — atom results that arrived after the atom's first one
