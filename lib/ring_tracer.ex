@@ -39,17 +39,18 @@ defmodule RingTracer do
       POV-Ray's `+SC +EC +SR +ER`); the result is that part, with exactly the
       pixels the whole render has there
     * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
-      (see `RingTracer.Strategy`)
+      (see `RingTracer.Strategies`), or a strategy of your own as `{module,
+      options}` (see `RingTracer.Strategy`)
     * `:layout` — which atoms each child owns at the start: `:strips` (the
       paper's contiguous strips, default) or `:interleaved` (child i owns
       atoms i, i + N, i + 2N, ...; see `RingTracer.Layout`). The image is
       the same; the balance is not
     * `:hold_after` — ring only: hops an offer walks before it may wait at a
-      child about to run out (default 16; see `RingTracer.Ring.HelpOffer`)
+      child about to run out (default 16; see `RingTracer.Strategy.Ring.HelpOffer`)
     * `:aim` — ring only: whether an idle child sends its offer straight to
       the sibling it expects to stay busy longest rather than to its left
       sibling (default: on strips yes, on interleaved strips no; see
-      `RingTracer.Ring.Aim`)
+      `RingTracer.Strategy.Ring.Aim`)
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — other nodes to place children on, round robin with this
@@ -61,6 +62,8 @@ defmodule RingTracer do
       instead of `:children` round robin
     * `:progress` — a pid that gets `{RingTracer, job_id, {:progress, done,
       total}}` as atoms arrive
+    * `:kernel` — what traces the atoms, `{module, options}` (default the
+      native ray tracer, `RingTracer.Kernel.Native`; see `RingTracer.Kernel`)
     * `:timeout` — milliseconds, or `:infinity` (default)
     * `:liveness` — with `:nodes`, milliseconds after which a node that
       does not answer (frozen, hung) is disconnected and its atoms traced
@@ -174,7 +177,6 @@ defmodule RingTracer do
       cutoff: opts[:cutoff] / 1,
       samples: opts[:samples],
       spd: opts[:spd],
-      fail_pixel: opts[:fail_pixel],
       region: region(opts[:region], width, height)
     }
 
@@ -327,14 +329,14 @@ defmodule RingTracer do
     run(
       scene.source,
       settings,
-      {RingTracer.Kernel.Native, []},
+      opts[:kernel] || {RingTracer.Kernel.Native, []},
       :erlang.system_info(:dirty_cpu_schedulers_online),
       opts
     )
   end
 
   defp run(source, settings, kernel, capacity_cap, opts) do
-    {:ok, strategy} = RingTracer.Strategy.module(opts[:strategy])
+    strategy = RingTracer.Strategies.from_options(opts)
     {width, height} = Settings.traced_size(settings)
 
     spec = %Spec{
@@ -345,12 +347,6 @@ defmodule RingTracer do
       caller: self(),
       nodes: opts[:nodes],
       liveness: opts[:liveness],
-      handover_delay: opts[:handover_delay],
-      chaos: opts[:chaos],
-      hold_after: opts[:hold_after],
-      aim:
-        opts[:strategy] == :ring and
-          if(opts[:aim] == nil, do: opts[:layout] == :strips, else: opts[:aim]),
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],
@@ -367,8 +363,14 @@ defmodule RingTracer do
         end
 
         case reply do
-          {:ok, raw} -> {:ok, Result.new(settings, opts[:strategy], capacity_cap, raw)}
-          {:error, message} -> {:error, Error.new(:render_failed, message)}
+          {:ok, raw} ->
+            {_, strategy_opts} = strategy
+            name = if is_atom(opts[:strategy]), do: opts[:strategy], else: elem(strategy, 0)
+            result = Result.new(settings, name, capacity_cap, raw)
+            {:ok, %{result | aim: Keyword.get(strategy_opts, :aim, false)}}
+
+          {:error, message} ->
+            {:error, Error.new(:render_failed, message)}
         end
 
       {:DOWN, ^ref, _, _, reason} ->

@@ -77,14 +77,9 @@ defmodule RingTracerTest do
   test "delayed hand-overs still give the complete, identical image" do
     reference = TestScenes.reference(@scene, 48, 32)
 
-    {:ok, result} =
-      RingTracer.render(TestScenes.path(@scene),
-        children: 5,
-        atoms: 6,
-        width: 48,
-        height: 32,
-        handover_delay: 40
-      )
+    opts = [children: 5, atoms: 6, width: 48, height: 32]
+    strategy = RingTracer.Test.DelayedStrategy.wrap(opts, handover_delay: 40)
+    {:ok, result} = RingTracer.render(TestScenes.path(@scene), [strategy: strategy] ++ opts)
 
     assert result.pixels == reference
     assert Enum.sum(Enum.map(result.children, & &1.traced)) == 30

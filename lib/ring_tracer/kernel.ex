@@ -42,7 +42,7 @@ defmodule RingTracer.Kernel do
   @doc """
   Optional: an estimate of each atom's work, in the `:work` units of
   `trace/4`, as a tuple by atom, for strategies that send help where the
-  work is (`RingTracer.Ring.Aim`). Called once per job, on the parent's
+  work is (`RingTracer.Strategy.Ring.Aim`). Called once per job, on the parent's
   node, while the children start.
   """
   @callback atom_work(Spec.t(), keyword()) :: {:ok, tuple()} | {:error, String.t()}

@@ -19,9 +19,9 @@ defmodule RingTracer.Names do
 
   @doc "The ETS table, on every node, where a job's children look each other up."
   @spec directory_table() :: atom()
-  def directory_table, do: RingTracer.Job.Directory
+  def directory_table, do: :ring_tracer_directory
 
   @doc "The ETS table, on every node, where a child and its grandchild race for the queued atom."
   @spec pipe_table() :: atom()
-  def pipe_table, do: RingTracer.Job.Pipe
+  def pipe_table, do: :ring_tracer_pipe
 end

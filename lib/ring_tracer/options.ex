@@ -19,15 +19,13 @@ defmodule RingTracer.Options do
     region: {:region, nil},
     nodes: {:nodes, []},
     timeout: {:timeout, :infinity},
-    handover_delay: {:non_neg_integer, 0},
-    chaos: {:non_neg_integer, 0},
-    hold_after: {:pos_integer, RingTracer.Ring.HelpOffer.default_hold_after()},
+    hold_after: {:pos_integer, RingTracer.Strategy.Ring.HelpOffer.default_hold_after()},
     aim: {:boolean, nil},
     strategy: {:strategy, :ring},
+    kernel: {:kernel, nil},
     layout: {:layout, :strips},
     speeds: {:speeds, []},
     progress: {:pid, nil},
-    fail_pixel: {:non_neg_integer, nil},
     children_per_node: {:pos_integer, nil},
     local: {:boolean, true},
     allow_dirs: {:paths, []},
@@ -178,11 +176,19 @@ defmodule RingTracer.Options do
 
   defp check(:nodes, _), do: {:error, "a list of node names (atoms)"}
 
+  defp check(:strategy, {m, o}) when is_atom(m) and is_list(o), do: :ok
+
   defp check(:strategy, v) do
-    if v in RingTracer.Strategy.names(),
+    if v in RingTracer.Strategies.names(),
       do: :ok,
-      else: {:error, "one of #{inspect(RingTracer.Strategy.names())}"}
+      else:
+        {:error,
+         "one of #{inspect(RingTracer.Strategies.names())}, or {module, options} " <>
+           "(see RingTracer.Strategy)"}
   end
+
+  defp check(:kernel, {m, o}) when is_atom(m) and is_list(o), do: :ok
+  defp check(:kernel, _), do: {:error, "a kernel as {module, options} (see RingTracer.Kernel)"}
 
   defp check(:layout, v) do
     if v in RingTracer.Layout.orders(),

@@ -31,9 +31,10 @@ defmodule RingTracer.Result do
     * `:rays` — ray counters summed over all atoms: `:eye`, `:eye_hits`,
       `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
       units (see `RingTracer.Kernel`);
-    * `:strategy` — the strategy's name; `:layout` — `:strips` or
+    * `:strategy` — the strategy's name (its module, for one given as
+      `{module, options}`); `:layout` — `:strips` or
       `:interleaved` (see `RingTracer.Layout`); `:aim` — whether the ring's
-      children aimed their offers (see `RingTracer.Ring.Aim`);
+      children aimed their offers (see `RingTracer.Strategy.Ring.Aim`);
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels
       were still on their way); the first is kept;
@@ -73,6 +74,55 @@ defmodule RingTracer.Result do
     warnings_omitted: 0
   ]
 
+  @typedoc "A protocol event for the timeline (an offer sent, passed, consumed...)."
+  @type event :: %{kind: atom(), from: non_neg_integer(), to: term(), at_us: integer()}
+
+  @typedoc "One traced atom: who owns it, who traced it, when (job microseconds)."
+  @type atom_record :: %{
+          atom: RingTracer.Layout.atom_id(),
+          owner: non_neg_integer(),
+          child: non_neg_integer(),
+          start_us: integer(),
+          end_us: integer(),
+          trace_us: non_neg_integer()
+        }
+
+  @typedoc """
+  A child's statistics, as above; a dead child's have `:failed` set, and
+  `:idle_us` is added once the job's makespan is known.
+  """
+  @type child :: %{
+          required(:index) => non_neg_integer(),
+          required(:node) => node() | nil,
+          required(:speed) => number(),
+          required(:own) => non_neg_integer(),
+          required(:given) => non_neg_integer(),
+          required(:received) => non_neg_integer(),
+          required(:handovers) => non_neg_integer(),
+          required(:traced) => non_neg_integer(),
+          required(:offers_sent) => non_neg_integer(),
+          required(:offers_passed) => non_neg_integer(),
+          required(:offers_consumed) => non_neg_integer(),
+          required(:grandchild_restarts) => non_neg_integer(),
+          required(:busy_us) => non_neg_integer(),
+          required(:trace_us) => non_neg_integer(),
+          required(:first_atom_us) => integer() | nil,
+          required(:last_atom_us) => integer() | nil,
+          required(:rays) => map(),
+          optional(:failed) => String.t(),
+          optional(:idle_us) => non_neg_integer()
+        }
+
+  @typedoc "A child that died mid-job: when (microseconds since the parent started), and why."
+  @type failure :: %{child: non_neg_integer(), reason: String.t(), at_us: integer()}
+
+  @typedoc "Per node: children placed there, atoms traced there, scene bytes shipped to it."
+  @type node_summary :: %{
+          children: non_neg_integer(),
+          traced: non_neg_integer(),
+          scene_bytes: non_neg_integer()
+        }
+
   @type t :: %__MODULE__{
           width: pos_integer(),
           height: pos_integer(),
@@ -81,9 +131,9 @@ defmodule RingTracer.Result do
           elapsed_us: non_neg_integer(),
           teardown_us: non_neg_integer(),
           ideal_us: non_neg_integer(),
-          children: [map()],
-          atoms: [map()],
-          events: [map()],
+          children: [child()],
+          atoms: [atom_record()],
+          events: [event()],
           messages: %{atom() => %{count: non_neg_integer(), bytes: non_neg_integer()}},
           rays: map(),
           settings: RingTracer.Settings.t(),
@@ -91,15 +141,15 @@ defmodule RingTracer.Result do
           layout: RingTracer.Layout.order(),
           aim: boolean(),
           duplicates: non_neg_integer(),
-          failures: [map()],
+          failures: [failure()],
           redone: non_neg_integer(),
-          nodes: %{node() => map()},
+          nodes: %{node() => node_summary()},
           warnings: [RingTracer.Scene.Warning.t()],
           warnings_omitted: non_neg_integer()
         }
 
   @doc false
-  @spec new(RingTracer.Settings.t(), atom(), non_neg_integer(), map()) :: t()
+  @spec new(RingTracer.Settings.t(), atom(), number(), RingTracer.Job.Parent.reply()) :: t()
   def new(settings, strategy, capacity_cap, raw) do
     rays = Enum.reduce(raw.children, RingTracer.Rays.zero(), &RingTracer.Rays.add(&2, &1.rays))
 
@@ -126,8 +176,7 @@ defmodule RingTracer.Result do
       failures: raw.failures,
       redone: raw.redone,
       nodes: raw.nodes,
-      layout: raw.layout,
-      aim: raw.aim
+      layout: raw.layout
     }
   end
 

@@ -5,9 +5,6 @@ defmodule RingTracer.Settings do
   the image traced (the camera still frames the whole image, so a region
   holds exactly the whole render's pixels there). The same settings and
   scene give the same bytes for every pixel wherever it is traced.
-
-  `:fail_pixel` is a test hook: the kernel panics when it traces that pixel
-  (to show that a panic is contained). It is `nil` in normal use.
   """
 
   # The kernel's defaults (`Settings::new` in native/kernel/src/render.rs),
@@ -23,7 +20,6 @@ defmodule RingTracer.Settings do
             cutoff: @defaults.cutoff,
             samples: @defaults.samples,
             spd: @defaults.spd,
-            fail_pixel: nil,
             region: nil
 
   @type t :: %__MODULE__{
@@ -33,7 +29,6 @@ defmodule RingTracer.Settings do
           cutoff: float(),
           samples: pos_integer(),
           spd: boolean(),
-          fail_pixel: non_neg_integer() | nil,
           region: region() | nil
         }
 
@@ -89,7 +84,6 @@ defmodule RingTracer.Settings do
       cutoff: s.cutoff / 1,
       samples: s.samples,
       spd: s.spd,
-      fail_pixel: s.fail_pixel,
       region: s.region
     }
   end

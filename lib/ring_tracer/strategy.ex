@@ -1,73 +1,179 @@
 defmodule RingTracer.Strategy do
   @moduledoc """
-  A load-balancing strategy: what a child does when it runs out of atoms,
-  and what it does with strategy messages from its siblings or parent.
+  A load-balancing strategy: a pure policy that decides what a child does
+  when it runs out of atoms, and what it does with strategy messages from its
+  siblings or its parent.
 
   Every strategy works on the same atoms, with the same kernel, and gives
   byte-identical images; they differ in who traces which atom, when, and
-  how many messages that costs.
+  how many messages that costs (`RingTracer.Strategies` lists them).
 
-  | name | module | idea |
-  |---|---|---|
-  | `:static` | `RingTracer.Strategy.Static` | N strips, no rebalancing (the paper's "divisão simples") |
-  | `:master` | `RingTracer.Strategy.Master` | the parent hands out one atom at a time ("divisão complexa") |
-  | `:ring` | `RingTracer.Strategy.Ring` | the paper's ring of help offers (default) |
-  | `:steal` | `RingTracer.Strategy.Steal` | an idle child steals half of a random sibling's atoms |
+  ## The seam
 
-  Child callbacks receive and return the child's state (a map, see
-  `RingTracer.Job.Child`); they use `RingTracer.Job.Child.send_counted/4` so
-  that every message is counted by kind. Parent callbacks are optional.
+  A callback gets a read-only view of its process (`RingTracer.Strategy.View`
+  in a child, `RingTracer.Strategy.ParentView` in the parent) and the
+  strategy's own state, and returns the new state and a list of effects.
+  The process carries the effects out, in order, in one place: it sends and
+  counts the messages, takes atoms out of its queue, records the events.
+  A strategy never sees a process's state and never sends a message itself.
+
+  A strategy is named in a job's spec as `{module, options}`, like a kernel;
+  its options are its own (the ring's `:hold_after` and `:aim`).
+
+  `use RingTracer.Strategy` declares the behaviour and gives every callback a
+  default, so that a strategy defines only what it changes: see
+  [docs/strategies.md](strategies.md) for a walk-through.
   """
 
   alias RingTracer.Layout
+  alias RingTracer.Strategy.{ParentView, View}
 
-  @typedoc "A child's state (see `RingTracer.Job.Child`)."
-  @type child :: map()
-  @typedoc "The parent's state (see `RingTracer.Job.Parent`)."
-  @type parent :: map()
+  @typedoc "A strategy as a job's spec names it."
+  @type t :: {module(), options()}
 
-  @doc "The atoms a child holds at the start."
-  @callback initial_atoms(Layout.t(), index :: non_neg_integer()) :: [Layout.atom_id()]
+  @typedoc "A strategy's own options."
+  @type options :: keyword()
 
-  @doc "Called when the child has nothing queued and nothing in its grandchild's pipe."
-  @callback idle(child()) :: child()
+  @typedoc "A strategy's own state, in a child or in the parent."
+  @type state :: term()
 
-  @doc "A message the child itself does not know; `:unhandled` if the strategy does not either."
-  @callback handle_message(term(), child()) :: {:ok, child()} | :unhandled
+  @typedoc "Who a child's message goes to: a pid, a sibling by index, or the parent."
+  @type to :: pid() | {:sibling, non_neg_integer()} | :parent
 
-  @doc "The parent, once the children are linked."
-  @callback parent_start(parent()) :: parent()
+  @typedoc "The kinds of message a strategy sends, as the job's statistics count them."
+  @type kind :: :offer | :control
+
+  @typedoc "A child's counters that only strategies move."
+  @type stat :: :offers_sent | :offers_passed | :offers_consumed
+
+  @typedoc """
+  What a child's callback asks of its child, carried out in order:
+
+    * `{:send, to, kind, message}` — sends `message`, counted under `kind`;
+    * `{:give, pid, index, n}` — takes up to `n` atoms, farthest from being
+      traced first, and hands them over to sibling `index` at `pid`
+      (possibly none: a refusal); the hand-over carries `handover_news/2`;
+    * `{:queue, atoms}` — queues atoms handed over to the child, which
+      starts on them (and, holding nothing new, is idle again);
+    * `{:left, pid, index}` — the child's left sibling is now `index`;
+    * `:finished` — the child has nothing more to do until the job stops;
+    * `{:event, kind, to}` — records a protocol event for the timeline;
+    * `{:stat, stat}` — adds one to one of the child's counters;
+    * `{:continue, message}` — once the effects before it are carried out,
+      calls `handle_message/3` with `message` and a fresh view (for
+      decisions that depend on what those effects did to the queue).
+  """
+  @type effect ::
+          {:send, to(), kind(), term()}
+          | {:give, pid(), non_neg_integer(), non_neg_integer()}
+          | {:queue, [Layout.atom_id()]}
+          | {:left, pid(), non_neg_integer()}
+          | :finished
+          | {:event, atom(), term()}
+          | {:stat, stat()}
+          | {:continue, term()}
+
+  @typedoc """
+  What a parent's callback asks of the parent, carried out in order:
+
+    * `{:send, index, kind, message}` — sends `message` to child `index`;
+    * `{:hand_out, index, atoms}` — hands atoms to child `index`, recorded in
+      the job's `RingTracer.Job.Ledger`;
+    * `{:helper, fun}` — runs `fun` in a process of the job's, which the
+      parent ends and waits for when the job ends.
+  """
+  @type parent_effect ::
+          {:send, non_neg_integer(), kind(), term()}
+          | {:hand_out, non_neg_integer(), [Layout.atom_id()]}
+          | {:helper, (() -> term())}
+
+  @typedoc "A callback's answer: the strategy's new state and what to do."
+  @type result(effect) :: {state(), [effect]}
+
+  @doc "The atoms a child holds at the start (default: its strip)."
+  @callback initial_atoms(Layout.t(), index :: non_neg_integer(), options()) :: [Layout.atom_id()]
+
+  @doc "A child's strategy state at the start (default: `%{}`)."
+  @callback init(options()) :: state()
+
+  @doc "The child has nothing queued and nothing in its grandchild's pipe."
+  @callback idle(View.t(), state()) :: result(effect())
+
+  @doc """
+  A message the child does not know itself, or one of the child's news:
+  `{:siblings_died, dead}` once the parent has re-linked the ring around
+  dead siblings. Default: atoms handed over are queued, anything else is
+  ignored.
+  """
+  @callback handle_message(term(), View.t(), state()) :: result(effect())
+
+  @doc """
+  What a hand-over the child makes carries besides its atoms (`nil`:
+  nothing), from the view after the atoms left. Default: nothing.
+  """
+  @callback handover_news(View.t(), state()) :: {term(), state()}
+
+  @doc "The parent, once the children are linked; returns the parent's strategy state."
+  @callback parent_start(ParentView.t(), options()) :: result(parent_effect())
 
   @doc "The parent, each time a new atom arrives from child `index`."
-  @callback parent_atom_done(parent(), index :: non_neg_integer()) :: parent()
+  @callback parent_atom_done(ParentView.t(), state(), index :: non_neg_integer()) ::
+              result(parent_effect())
 
   @doc """
   The parent, on a message it does not know itself (for instance the reply
-  of a task the strategy started in `parent_start/1`).
+  of a helper the strategy started in `parent_start/2`).
   """
-  @callback parent_info(parent(), msg :: term()) :: parent()
+  @callback parent_info(term(), ParentView.t(), state()) :: result(parent_effect())
 
-  @optional_callbacks parent_start: 1, parent_atom_done: 2, parent_info: 2
+  defmacro __using__(_opts) do
+    quote do
+      @behaviour RingTracer.Strategy
 
-  @strategies %{
-    static: RingTracer.Strategy.Static,
-    master: RingTracer.Strategy.Master,
-    ring: RingTracer.Strategy.Ring,
-    steal: RingTracer.Strategy.Steal
-  }
+      @impl RingTracer.Strategy
+      def initial_atoms(layout, index, _options), do: RingTracer.Layout.strip(layout, index)
+
+      @impl RingTracer.Strategy
+      def init(_options), do: %{}
+
+      @impl RingTracer.Strategy
+      def handle_message(message, view, state),
+        do: RingTracer.Strategy.default_message(message, view, state)
+
+      @impl RingTracer.Strategy
+      def handover_news(_view, state), do: {nil, state}
+
+      @impl RingTracer.Strategy
+      def parent_start(_view, _options), do: {nil, []}
+
+      @impl RingTracer.Strategy
+      def parent_atom_done(_view, state, _index), do: {state, []}
+
+      @impl RingTracer.Strategy
+      def parent_info(_message, _view, state), do: {state, []}
+
+      defoverridable initial_atoms: 3,
+                     init: 1,
+                     handle_message: 3,
+                     handover_news: 2,
+                     parent_start: 2,
+                     parent_atom_done: 3,
+                     parent_info: 3
+    end
+  end
 
   @doc """
-  The module of a strategy name.
+  What a child does with a message its strategy does not handle: atoms
+  handed over are queued, anything else is ignored.
 
-      iex> RingTracer.Strategy.module(:ring)
-      {:ok, RingTracer.Strategy.Ring}
-      iex> RingTracer.Strategy.module(:lottery)
-      :error
+      iex> RingTracer.Strategy.default_message({:handover, :parent, [3]}, nil, %{})
+      {%{}, [{:queue, [3]}]}
+      iex> RingTracer.Strategy.default_message(:hello, nil, %{})
+      {%{}, []}
   """
-  @spec module(atom()) :: {:ok, module()} | :error
-  def module(name), do: Map.fetch(@strategies, name)
+  @spec default_message(term(), View.t() | nil, state()) :: result(effect())
+  def default_message({:handover, _from, atoms}, _view, state) when is_list(atoms),
+    do: {state, [{:queue, atoms}]}
 
-  @doc "Every strategy name."
-  @spec names() :: [atom()]
-  def names, do: [:static, :master, :ring, :steal]
+  def default_message(_message, _view, state), do: {state, []}
 end

@@ -73,7 +73,7 @@ defmodule RingTracer.FailureTest do
     end
   end
 
-  for strategy <- RingTracer.Strategy.names() do
+  for strategy <- RingTracer.Strategies.names() do
     test "killing a child under #{strategy} still completes", %{reference: reference} do
       kill = fn -> Process.exit(Enum.random(children()), :kill) end
       {:ok, result} = render_killing(7, kill, strategy: unquote(strategy))
@@ -95,7 +95,7 @@ defmodule RingTracer.FailureTest do
                atoms: 4,
                width: 32,
                height: 32,
-               fail_pixel: 100
+               kernel: {RingTracer.Test.FaultyKernel, fail_pixel: 100}
              )
 
     assert message =~ "atom"

@@ -2,7 +2,8 @@ defmodule RingTracer.ProtocolPropertyTest do
   @moduledoc """
   The ring protocol under adversarial schedules: random ring sizes, atoms,
   image sizes, speeds, strategies, layouts (strips or interleaved), aimed
-  offers or not, message delays (which reorder messages), child kills and
+  offers or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
+  and `RingTracer.Test.FaultyKernel`), child kills and
   how soon offers may wait at a child (`:hold_after`), against the real
   parent, children and kernel. Every job ends with the single-process
   image, no process left behind, and, after kills, at most twice the
@@ -47,7 +48,7 @@ defmodule RingTracer.ProtocolPropertyTest do
             [] -> tap(TestScenes.reference(@scene, w, h), &:ets.insert(references, {{w, h}, &1}))
           end
 
-        opts = [
+        job = [
           children: n,
           atoms: k,
           width: w,
@@ -55,13 +56,20 @@ defmodule RingTracer.ProtocolPropertyTest do
           speeds: speeds,
           strategy: strategy,
           layout: layout,
-          chaos: chaos,
           # Small rings: let offers wait after 1-3 hops so that holding is
           # exercised (the default, 16, needs a ring of 17 or more).
           hold_after: hold_after,
-          # nil: the default for the layout (see `RingTracer.Ring.Aim`).
+          # nil: the default for the layout (see `RingTracer.Strategy.Ring.Aim`).
           aim: aim
         ]
+
+        # Delays of up to `chaos` ms, which reorder messages: on what the
+        # strategy has a child send, and on each atom's result.
+        opts =
+          Keyword.merge(job,
+            strategy: RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos),
+            kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
+          )
 
         kill_at = Enum.take_random(1..(n * k), kills)
 

@@ -20,7 +20,7 @@ defmodule RingTracer.SoakTest do
 
   test "200 consecutive jobs leave processes, ETS tables, memory and scenes flat" do
     run = fn i ->
-      strategy = Enum.at(RingTracer.Strategy.names(), rem(i, 4))
+      strategy = Enum.at(RingTracer.Strategies.names(), rem(i, 4))
 
       {:ok, _} =
         RingTracer.render(TestScenes.path("balls_s1.nff"),

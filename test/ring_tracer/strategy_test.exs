@@ -1,6 +1,7 @@
 defmodule RingTracer.StrategyTest do
   use ExUnit.Case, async: false
   doctest RingTracer.Strategy
+  doctest RingTracer.Strategies
 
   alias RingTracer.TestScenes
 
@@ -9,7 +10,7 @@ defmodule RingTracer.StrategyTest do
   test "every strategy gives the byte-identical image, with speeds too" do
     reference = TestScenes.reference(@scene, 40, 30)
 
-    for strategy <- RingTracer.Strategy.names(), speeds <- [[], [1, 3, 1]] do
+    for strategy <- RingTracer.Strategies.names(), speeds <- [[], [1, 3, 1]] do
       {:ok, result} =
         RingTracer.render(TestScenes.path(@scene),
           strategy: strategy,
@@ -30,7 +31,7 @@ defmodule RingTracer.StrategyTest do
   test "the interleaved layout gives the same image; each child starts with atoms i, i + N, ..." do
     reference = TestScenes.reference(@scene, 40, 30)
 
-    for strategy <- RingTracer.Strategy.names() do
+    for strategy <- RingTracer.Strategies.names() do
       {:ok, result} =
         RingTracer.render(TestScenes.path(@scene),
           strategy: strategy,

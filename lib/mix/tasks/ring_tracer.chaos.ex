@@ -126,7 +126,7 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   end
 
   defp convert({:strategies, list}) do
-    known = RingTracer.Strategy.names()
+    known = RingTracer.Strategies.names()
 
     {:strategies,
      Enum.map(names(list), fn name ->

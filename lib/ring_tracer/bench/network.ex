@@ -265,9 +265,9 @@ defmodule RingTracer.Bench.Network do
   end
 
   defp strategy(name) do
-    Enum.find(RingTracer.Strategy.names(), &(Atom.to_string(&1) == name)) ||
+    Enum.find(RingTracer.Strategies.names(), &(Atom.to_string(&1) == name)) ||
       raise ArgumentError,
-            "--strategies: one of #{Enum.join(RingTracer.Strategy.names(), ", ")}, got: #{inspect(name)}"
+            "--strategies: one of #{Enum.join(RingTracer.Strategies.names(), ", ")}, got: #{inspect(name)}"
   end
 
   defp numbers(text) do

@@ -296,7 +296,7 @@ defmodule RingTracer.CLI.Render do
         :progress | @distribution
       ])
 
-    with {:ok, o} <- choice(base, :strategy, RingTracer.Strategy.names()),
+    with {:ok, o} <- choice(base, :strategy, RingTracer.Strategies.names()),
          {:ok, o} <- choice(o, :layout, RingTracer.Layout.orders()),
          {:ok, o} <- speeds(o),
          {:ok, o} <- region(o) do

@@ -17,6 +17,11 @@ defmodule RingTracer.Job.Child do
       decides what to do: for the ring, send a help offer to the left;
     * atoms handed over (`{:handover, from, atoms}`) are queued and traced.
 
+  A strategy sees the child through a read-only `RingTracer.Strategy.View`
+  and answers with effects, which the child carries out in one place
+  (`strategy_message/2`, `idle/1`): the strategy decides, the child sends,
+  counts, takes atoms from its queue and records events.
+
   A grandchild that dies is restarted and its atoms retried, at most three
   times per atom; then the child reports the atom as failed to the parent,
   which fails the job.
@@ -27,11 +32,95 @@ defmodule RingTracer.Job.Child do
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Grandchild, Pipe, Spec}
+  alias RingTracer.Job.{Directory, Grandchild, Pipe, Spec}
   alias RingTracer.Layout
+  alias RingTracer.Strategy.View
 
   @pipe_depth 2
   @max_attempts 3
+
+  @enforce_keys [:spec, :index, :parent, :strategy, :stats]
+  defstruct [
+    :spec,
+    :index,
+    :parent,
+    :strategy,
+    :stats,
+    kernel: nil,
+    left: nil,
+    left_index: nil,
+    ring_size: 0,
+    t0: 0,
+    grandchild: nil,
+    queue: [],
+    in_flight: [],
+    current_since: 0,
+    attempts: %{},
+    done: 0,
+    status: :waiting,
+    dead: [],
+    strategy_state: %{},
+    early: [],
+    traffic: %{},
+    events: [],
+    atoms: []
+  ]
+
+  @typedoc """
+  A child's state: its spec, place in the ring and left sibling, its
+  grandchild and the atoms queued for it (`queue`) or in its pipe
+  (`in_flight`, the one being traced first), tries per atom, its status,
+  its strategy's state, messages that came before the ring (`early`), and
+  what it reports at the end (`traffic`, `events`, `atoms`, `stats`).
+  """
+  @type t :: %__MODULE__{
+          spec: Spec.t(),
+          index: non_neg_integer(),
+          parent: pid(),
+          strategy: module(),
+          stats: stats(),
+          kernel: {module(), term()} | nil,
+          left: pid() | nil,
+          left_index: non_neg_integer() | nil,
+          ring_size: non_neg_integer(),
+          t0: integer(),
+          grandchild: pid() | nil,
+          queue: [Layout.atom_id()],
+          in_flight: [Layout.atom_id()],
+          current_since: integer(),
+          attempts: %{Layout.atom_id() => pos_integer()},
+          done: non_neg_integer(),
+          status: :waiting | :working | :idle | :finished,
+          dead: [non_neg_integer()],
+          strategy_state: RingTracer.Strategy.state(),
+          early: [term()],
+          traffic: traffic(),
+          events: [event()],
+          atoms: [atom_record()]
+        }
+
+  @typedoc "Messages sent, by kind: `{count, bytes}` (bytes in the external term format)."
+  @type traffic :: %{atom() => {non_neg_integer(), non_neg_integer()}}
+
+  @typedoc "A process's state that counts the messages it sends (a child's or the parent's)."
+  @type counting :: %{required(:traffic) => traffic(), optional(atom()) => term()}
+
+  @typedoc "A protocol event for the timeline (see `RingTracer.Result`)."
+  @type event :: RingTracer.Result.event()
+
+  @typedoc "One traced atom's record (see `RingTracer.Result`)."
+  @type atom_record :: RingTracer.Result.atom_record()
+
+  @typedoc "A child's statistics (see `RingTracer.Result`)."
+  @type stats :: RingTracer.Result.child()
+
+  @typedoc "What a child reports to its parent when it stops."
+  @type report :: %{
+          stats: stats(),
+          traffic: traffic(),
+          events: [event()],
+          atoms: [atom_record()]
+        }
 
   @doc false
   @spec start(node(), Spec.t(), non_neg_integer(), pid()) :: DynamicSupervisor.on_start_child()
@@ -46,52 +135,28 @@ defmodule RingTracer.Job.Child do
   @spec start_link({Spec.t(), non_neg_integer(), pid()}) :: GenServer.on_start()
   def start_link(args), do: GenServer.start_link(__MODULE__, args)
 
-  ## Helpers for strategies
-
-  @doc """
-  The pid of sibling `index`, from the job's directory on this node
-  (`RingTracer.Job.Directory`): children do not carry the ring.
-  """
-  @spec sibling(map(), non_neg_integer()) :: pid()
-  def sibling(state, index), do: RingTracer.Job.Directory.sibling(state.spec.id, index)
-
   @doc "Sends `msg` to `pid`, counting it under `kind` with its external size."
-  @spec send_counted(map(), pid(), atom(), term()) :: map()
+  @spec send_counted(state, pid(), atom(), term()) :: state when state: counting()
   def send_counted(state, pid, kind, msg) do
-    deliver(state.spec, pid, msg, 0)
+    send(pid, msg)
     count(state, kind, msg)
   end
 
-  # Sends now, or later: after `extra` ms, plus a random delay of up to the
-  # spec's `:chaos` ms (a test hook that delays and so reorders messages).
-  defp deliver(spec, pid, msg, extra) do
-    case extra + chaos_delay(spec) do
-      0 -> send(pid, msg)
-      ms -> Process.send_after(pid, msg, ms)
-    end
-  end
-
-  defp chaos_delay(%Spec{chaos: 0}), do: 0
-  defp chaos_delay(%Spec{chaos: max}), do: :rand.uniform(max + 1) - 1
-
   @doc false
-  @spec count(map(), atom(), term()) :: map()
+  @spec count(state, atom(), term()) :: state when state: counting()
   def count(state, kind, msg) do
     bytes = :erlang.external_size(msg)
 
-    update_in(
-      state.traffic,
-      &Map.update(&1, kind, {1, bytes}, fn {n, b} -> {n + 1, b + bytes} end)
-    )
+    %{
+      state
+      | traffic: Map.update(state.traffic, kind, {1, bytes}, fn {n, b} -> {n + 1, b + bytes} end)
+    }
   end
 
-  @doc "Adds one to stat `key`."
-  @spec bump(map(), atom()) :: map()
-  def bump(state, key), do: update_in(state.stats[key], &(&1 + 1))
+  defp bump(state, key), do: update_in(state.stats[key], &(&1 + 1))
 
-  @doc "Records a protocol event (offer sent, passed, consumed...) for the timeline."
-  @spec event(map(), atom(), term()) :: map()
-  def event(state, kind, to) do
+  # A protocol event (offer sent, passed, consumed...) for the timeline.
+  defp event(state, kind, to) do
     at = job_time(state)
     %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
   end
@@ -100,17 +165,14 @@ defmodule RingTracer.Job.Child do
   Microseconds since the job's start (`t0`, wall clock, shared by the
   parent and every child, whatever their node).
   """
-  @spec job_time(map()) :: integer()
+  @spec job_time(%{required(:t0) => integer(), optional(atom()) => term()}) :: integer()
   def job_time(%{t0: t0}), do: System.system_time(:microsecond) - t0
 
-  @doc """
-  What the child could give: `{remaining, in_flight}`, where `remaining`
-  counts the queued atoms plus the one waiting in the grandchild's pipe
-  (which `take_last/2` may still take back), and `in_flight` the one being
-  traced.
-  """
-  @spec giveable(map()) :: {non_neg_integer(), non_neg_integer()}
-  def giveable(state) do
+  # What the child could give: `{remaining, in_flight}`, where `remaining`
+  # counts the queued atoms plus the one waiting in the grandchild's pipe
+  # (which `take_last/2` may still take back), and `in_flight` the one being
+  # traced.
+  defp giveable(state) do
     waiting = if waiting(state), do: 1, else: 0
     {length(state.queue) + waiting, length(state.in_flight) - waiting}
   end
@@ -121,14 +183,11 @@ defmodule RingTracer.Job.Child do
 
   defp waiting(_state), do: nil
 
-  @doc """
-  Takes up to `g` atoms to give away, farthest from being traced first: the
-  last queued ones and then, if `g` asks for more, the atom waiting in the
-  grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
-  """
-  @spec take_last(map(), non_neg_integer()) :: {[Layout.atom_id()], map()}
-  def take_last(state, g) do
-    {keep, give} = RingTracer.Ring.HelpOffer.split_queue(state.queue, min(g, length(state.queue)))
+  # Takes up to `g` atoms to give away, farthest from being traced first: the
+  # last queued ones and then, if `g` asks for more, the atom waiting in the
+  # grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
+  defp take_last(state, g) do
+    {keep, give} = Enum.split(state.queue, length(state.queue) - min(g, length(state.queue)))
     state = %{state | queue: keep}
 
     waiting = waiting(state)
@@ -140,23 +199,18 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  @doc """
-  Hands `atoms` over to sibling `to` at `pid` (possibly none: a refusal),
-  then tells the parent, which keeps account of where atoms are
-  (`RingTracer.Job.Ledger`): first the hand-over, so that a child dying
-  between the two leaves the atoms on its own account, to be traced again,
-  never lost.
-  """
-  @spec hand_over(map(), pid(), non_neg_integer(), [Layout.atom_id()], term()) :: map()
-  def hand_over(state, pid, to, atoms, news \\ nil) do
+  # Hands `atoms` over to sibling `to` at `pid` (possibly none: a refusal),
+  # then tells the parent, which keeps account of where atoms are
+  # (`RingTracer.Job.Ledger`): first the hand-over, so that a child dying
+  # between the two leaves the atoms on its own account, to be traced again,
+  # never lost.
+  defp hand_over(state, pid, to, atoms, news) do
     msg =
       if news == nil,
         do: {:handover, state.index, atoms},
         else: {:handover, state.index, atoms, news}
 
-    state = count(state, :handover, msg)
-
-    deliver(state.spec, pid, msg, state.spec.handover_delay)
+    state = send_counted(state, pid, :handover, msg)
 
     state =
       if atoms == [],
@@ -173,7 +227,7 @@ defmodule RingTracer.Job.Child do
   still on their way, and one atom twice in a pipe would meet its own claim
   (`RingTracer.Job.Pipe`) and be skipped.
   """
-  @spec receive_atoms(map(), [Layout.atom_id()]) :: map()
+  @spec receive_atoms(t(), [Layout.atom_id()]) :: t()
   def receive_atoms(state, atoms) do
     atoms = Enum.reject(atoms, &(&1 in state.in_flight or &1 in state.queue))
 
@@ -189,7 +243,7 @@ defmodule RingTracer.Job.Child do
   end
 
   @doc "A child's statistics before its first atom (also what a dead child reports)."
-  @spec new_stats(non_neg_integer(), node() | nil, number(), non_neg_integer()) :: map()
+  @spec new_stats(non_neg_integer(), node() | nil, number(), non_neg_integer()) :: stats()
   def new_stats(index, node, speed, own) do
     %{
       index: index,
@@ -212,6 +266,85 @@ defmodule RingTracer.Job.Child do
     }
   end
 
+  ## The strategy: a view in, effects out, carried out here and nowhere else
+
+  @doc """
+  What the child's strategy sees of it (`RingTracer.Strategy.View`).
+  """
+  @spec view(t()) :: View.t()
+  def view(%__MODULE__{} = state) do
+    {remaining, in_flight} = giveable(state)
+    {_, options} = state.spec.strategy
+
+    %View{
+      job: state.spec.id,
+      options: options,
+      index: state.index,
+      pid: self(),
+      ring_size: state.ring_size,
+      left: state.left,
+      left_index: state.left_index,
+      dead: state.dead,
+      status: view_status(state.status),
+      queued: length(state.queue),
+      remaining: remaining,
+      in_flight: in_flight,
+      done: state.done,
+      rate: rate(state),
+      mean_atom_us: mean_atom_us(state),
+      remaining_us: if(in_flight > 0, do: expected_remaining_us(state)),
+      now: job_time(state)
+    }
+  end
+
+  defp view_status(:waiting), do: :working
+  defp view_status(status), do: status
+
+  @doc """
+  Hands `msg` to the child's strategy and carries out what it answers
+  (`RingTracer.Strategy.handle_message/3`).
+  """
+  @spec strategy_message(t(), term()) :: t()
+  def strategy_message(state, msg),
+    do: run_strategy(state, &state.strategy.handle_message(msg, &1, &2))
+
+  @doc """
+  Tells the child's strategy that the child ran out of atoms, and carries
+  out what it answers (`RingTracer.Strategy.idle/2`).
+  """
+  @spec idle(t()) :: t()
+  def idle(state), do: run_strategy(%{state | status: :idle}, &state.strategy.idle/2)
+
+  defp run_strategy(state, callback) do
+    {strategy_state, effects} = callback.(view(state), state.strategy_state)
+    effects(%{state | strategy_state: strategy_state}, effects)
+  end
+
+  defp effects(state, effects), do: Enum.reduce(effects, state, &effect(&2, &1))
+
+  defp effect(state, {:send, to, kind, msg}),
+    do: send_counted(state, address(state, to), kind, msg)
+
+  defp effect(state, {:give, pid, to, n}) do
+    {atoms, state} = take_last(state, n)
+    {news, strategy_state} = state.strategy.handover_news(view(state), state.strategy_state)
+    hand_over(%{state | strategy_state: strategy_state}, pid, to, atoms, news)
+  end
+
+  defp effect(state, {:queue, atoms}), do: receive_atoms(state, atoms)
+  defp effect(state, {:left, pid, index}), do: %{state | left: pid, left_index: index}
+  defp effect(state, :finished), do: %{state | status: :finished}
+  defp effect(state, {:event, kind, to}), do: event(state, kind, to)
+
+  defp effect(state, {:stat, key}) when key in [:offers_sent, :offers_passed, :offers_consumed],
+    do: bump(state, key)
+
+  defp effect(state, {:continue, msg}), do: strategy_message(state, msg)
+
+  defp address(state, :parent), do: state.parent
+  defp address(state, {:sibling, index}), do: Directory.sibling(state.spec.id, index)
+  defp address(_state, pid) when is_pid(pid), do: pid
+
   ## GenServer
 
   @impl GenServer
@@ -219,30 +352,16 @@ defmodule RingTracer.Job.Child do
     Process.flag(:trap_exit, true)
     Process.monitor(parent)
     {kernel, _} = spec.kernel
-    queue = spec.strategy.initial_atoms(spec.layout, index)
+    {strategy, options} = spec.strategy
+    queue = strategy.initial_atoms(spec.layout, index, options)
 
-    state = %{
+    state = %__MODULE__{
       spec: spec,
       index: index,
       parent: parent,
-      kernel: nil,
-      left: nil,
-      left_index: nil,
-      ring_size: 0,
-      t0: 0,
-      grandchild: nil,
+      strategy: strategy,
+      strategy_state: strategy.init(options),
       queue: queue,
-      in_flight: [],
-      current_since: 0,
-      attempts: %{},
-      done: 0,
-      status: :waiting,
-      dead: [],
-      strategy_state: %{},
-      early: [],
-      traffic: %{},
-      events: [],
-      atoms: [],
       stats: new_stats(index, node(), speed(spec, index), length(queue))
     }
 
@@ -358,62 +477,21 @@ defmodule RingTracer.Job.Child do
     # waiting behind it in its pipe was never tried.
     {started, waiting} = Enum.split_with(state.in_flight, &Pipe.claimed?(gc, &1))
     Pipe.forget(gc)
-    state = %{state | grandchild: nil} |> bump(:grandchild_restarts)
+    state = bump(%{state | grandchild: nil}, :grandchild_restarts)
     message = "grandchild exited: #{inspect(reason)}"
 
     {:noreply, retry(spawn_grandchild(state), started, message, waiting)}
   end
 
   defp handle({:ring_changed, ring}, %{left: left} = state) when left != nil do
-    state = %{
-      state
-      | left: ring.left,
-        left_index: ring.left_index,
-        dead: ring.dead
-    }
-
-    state =
-      case state.status do
-        # Our offer went to a sibling that died: send a fresh one. (One
-        # passed on to it later is lost too, but sending afresh whenever that
-        # may be doubled every idle child's offers after each failure; the
-        # job ends anyway, since the parent hands the dead child's atoms out
-        # again itself.)
-        :offered ->
-          if Map.get(state.strategy_state, :sent_to, hd(ring.dead)) in ring.dead,
-            do: maybe_idle(%{state | status: :working}),
-            else: state
-
-        # The sibling we asked may be gone; the others still trace what they hold.
-        :stealing ->
-          %{state | status: :finished}
-
-        _ ->
-          state
-      end
-
-    {:noreply, state}
+    state = %{state | left: ring.left, left_index: ring.left_index, dead: ring.dead}
+    {:noreply, strategy_message(state, {:siblings_died, ring.dead})}
   end
 
   defp handle(msg, %{left: nil} = state),
     do: {:noreply, %{state | early: [msg | state.early]}}
 
-  # Lost atoms handed out again by the parent, which has heard from every
-  # child it needed to: no more news of idleness until the next failure.
-  defp handle(msg, state), do: strategy(msg, state)
-
-  defp strategy(msg, state) do
-    case state.spec.strategy.handle_message(msg, state) do
-      {:ok, state} ->
-        {:noreply, state}
-
-      :unhandled ->
-        case msg do
-          {:handover, _from, atoms} when is_list(atoms) -> {:noreply, receive_atoms(state, atoms)}
-          _ -> {:noreply, state}
-        end
-    end
-  end
+  defp handle(msg, state), do: {:noreply, strategy_message(state, msg)}
 
   @impl GenServer
   def terminate(_reason, state) do
@@ -475,8 +553,7 @@ defmodule RingTracer.Job.Child do
 
   defp fill_pipe(state), do: state
 
-  defp maybe_idle(%{queue: [], in_flight: [], status: :working} = state),
-    do: state.spec.strategy.idle(state)
+  defp maybe_idle(%{queue: [], in_flight: [], status: :working} = state), do: idle(state)
 
   defp maybe_idle(state), do: state
 

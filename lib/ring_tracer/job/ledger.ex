@@ -32,20 +32,24 @@ defmodule RingTracer.Job.Ledger do
   @typedoc "Per child, the atoms whose count differs from the initial one, by how much."
   @type t :: %__MODULE__{
           layout: Layout.t(),
-          strategy: module(),
+          strategy: RingTracer.Strategy.t(),
           moves: %{non_neg_integer() => %{Layout.atom_id() => integer()}}
         }
 
   @doc """
-  A ledger where each child holds its strategy's initial atoms.
+  A ledger where each child holds its strategy's initial atoms (the
+  strategy as `{module, options}`, or a module with no options).
 
       iex> layout = RingTracer.Layout.new(8, 8, 2, 2)
       iex> ledger = RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring)
       iex> RingTracer.Job.Ledger.held(ledger, 1)
       [2, 3]
   """
-  @spec new(Layout.t(), module()) :: t()
-  def new(layout, strategy), do: %__MODULE__{layout: layout, strategy: strategy}
+  @spec new(Layout.t(), RingTracer.Strategy.t() | module()) :: t()
+  def new(layout, {module, options}) when is_atom(module) and is_list(options),
+    do: %__MODULE__{layout: layout, strategy: {module, options}}
+
+  def new(layout, module) when is_atom(module), do: new(layout, {module, []})
 
   @doc """
   `atoms` moved from child `from` (or `:parent`) to child `to` (or
@@ -82,7 +86,8 @@ defmodule RingTracer.Job.Ledger do
   @doc "The atoms child `index` may hold (traced ones included), in order."
   @spec held(t(), non_neg_integer()) :: [Layout.atom_id()]
   def held(ledger, index) do
-    initial = MapSet.new(ledger.strategy.initial_atoms(ledger.layout, index))
+    {strategy, options} = ledger.strategy
+    initial = MapSet.new(strategy.initial_atoms(ledger.layout, index, options))
     moves = Map.get(ledger.moves, index, %{})
 
     initial

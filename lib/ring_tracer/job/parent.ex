@@ -20,6 +20,7 @@ defmodule RingTracer.Job.Parent do
 
   alias RingTracer.Job.{Child, Directory, Ledger, Spec}
   alias RingTracer.Layout
+  alias RingTracer.Strategy.ParentView
 
   @doc false
   @spec start(Spec.t()) :: DynamicSupervisor.on_start_child()
@@ -31,16 +32,99 @@ defmodule RingTracer.Job.Parent do
   @spec start_link(Spec.t()) :: GenServer.on_start()
   def start_link(spec), do: GenServer.start_link(__MODULE__, spec)
 
-  @doc "Sends `msg` to `pid`, counting it under `kind` (see `RingTracer.Job.Child.send_counted/4`)."
-  @spec send_counted(map(), pid(), atom(), term()) :: map()
-  def send_counted(state, pid, kind, msg), do: Child.send_counted(state, pid, kind, msg)
+  # The tag of the messages to the job's caller and progress pid, as
+  # `RingTracer.render/2` documents them. An atom, not the alias: the parent
+  # calls nothing of the public API module (no run-time dependency on it).
+  @reply_tag :"Elixir.RingTracer"
 
-  @doc """
-  Hands `atoms` to child `index` (a strategy's hand-out, or atoms lost
-  with a dead child), and records it in the job's `RingTracer.Job.Ledger`.
+  @enforce_keys [:spec, :strategy, :ledger, :missing, :started, :t0]
+  defstruct [
+    :spec,
+    :strategy,
+    :ledger,
+    :missing,
+    :started,
+    :t0,
+    completed: nil,
+    children: %{},
+    monitors: %{},
+    results: %{},
+    traced_by: %{},
+    stopping: nil,
+    strategy_state: nil,
+    traffic: %{},
+    duplicates: 0,
+    dead: %{},
+    relinking: false,
+    redone: 0,
+    node_bytes: %{},
+    helpers: []
+  ]
+
+  @typedoc """
+  The parent's state: its spec and strategy module, when it started and
+  completed (monotonic microseconds) and the job's wall-clock start `t0`,
+  the living children and their monitors, the atoms received and who traced
+  them, how many are missing, the ledger of where atoms are, the dead
+  children, and what it reports.
   """
-  @spec hand_out(map(), non_neg_integer(), [Layout.atom_id()]) :: map()
-  def hand_out(state, index, atoms) do
+  @type t :: %__MODULE__{
+          spec: Spec.t(),
+          strategy: module(),
+          ledger: Ledger.t(),
+          missing: non_neg_integer(),
+          started: integer(),
+          t0: integer(),
+          completed: integer() | nil,
+          children: %{non_neg_integer() => pid()},
+          monitors: %{reference() => non_neg_integer()},
+          results: %{Layout.atom_id() => binary()},
+          traced_by: %{Layout.atom_id() => non_neg_integer()},
+          stopping: stopping() | nil,
+          strategy_state: RingTracer.Strategy.state(),
+          traffic: Child.traffic(),
+          duplicates: non_neg_integer(),
+          dead: %{non_neg_integer() => failure()},
+          relinking: boolean(),
+          redone: non_neg_integer(),
+          node_bytes: %{node() => non_neg_integer()},
+          helpers: [{pid(), reference()}]
+        }
+
+  @typedoc "A job that is stopping: its outcome, and the reports of the children so far."
+  @type stopping :: %{
+          outcome: :ok | {:error, String.t()},
+          reports: %{non_neg_integer() => Child.report()}
+        }
+
+  @typedoc "A child that died mid-job (see `RingTracer.Result`)."
+  @type failure :: RingTracer.Result.failure()
+
+  @typedoc "Per node (see `RingTracer.Result`)."
+  @type node_summary :: RingTracer.Result.node_summary()
+
+  @typedoc "What the parent replies to the job's caller when the job completes."
+  @type reply :: %{
+          pixels: binary(),
+          started_at_us: integer(),
+          elapsed_us: non_neg_integer(),
+          teardown_us: non_neg_integer(),
+          children: [Child.stats()],
+          atoms: [Child.atom_record()],
+          events: [Child.event()],
+          traffic: Child.traffic(),
+          duplicates: non_neg_integer(),
+          failures: [failure()],
+          redone: non_neg_integer(),
+          nodes: %{node() => node_summary()},
+          layout: Layout.order()
+        }
+
+  defp send_counted(state, pid, kind, msg), do: Child.send_counted(state, pid, kind, msg)
+
+  # Hands `atoms` to child `index` (a strategy's hand-out, or atoms lost
+  # with a dead child), and records it in the job's `RingTracer.Job.Ledger`.
+  defp hand_out(state, index, atoms) do
     state =
       send_counted(
         state,
@@ -52,42 +136,52 @@ defmodule RingTracer.Job.Parent do
     %{state | ledger: Ledger.moved(state.ledger, :parent, index, atoms)}
   end
 
-  @doc """
-  Runs `fun` in a process of the job's (for a strategy: the ring's work
-  preview), monitored by the parent, which ends it and waits for it when
-  the job ends: no process of a job outlives it. Returns the parent's state.
-  """
-  @spec start_helper(map(), (() -> term())) :: map()
-  def start_helper(state, fun) do
+  # Runs `fun` in a process of the job's (for a strategy: the ring's work
+  # preview), monitored by the parent, which ends it and waits for it when
+  # the job ends: no process of a job outlives it.
+  defp start_helper(state, fun) do
     {pid, ref} = spawn_monitor(fun)
     %{state | helpers: [{pid, ref} | state.helpers]}
   end
 
+  ## The strategy: a view in, effects out, carried out here
+
+  defp view(state) do
+    {_, options} = state.spec.strategy
+
+    %ParentView{
+      spec: state.spec,
+      options: options,
+      pid: self(),
+      children: state.children,
+      traced_by: state.traced_by,
+      now: Child.job_time(state)
+    }
+  end
+
+  defp run_strategy(state, callback) do
+    {strategy_state, effects} = callback.(view(state), state.strategy_state)
+    Enum.reduce(effects, %{state | strategy_state: strategy_state}, &effect(&2, &1))
+  end
+
+  defp effect(state, {:send, index, kind, msg}),
+    do: send_counted(state, Map.fetch!(state.children, index), kind, msg)
+
+  defp effect(state, {:hand_out, index, atoms}), do: hand_out(state, index, atoms)
+  defp effect(state, {:helper, fun}), do: start_helper(state, fun)
+
   @impl GenServer
   def init(%Spec{} = spec) do
     Process.monitor(spec.caller)
-    {:module, _} = Code.ensure_loaded(spec.strategy)
+    {strategy, _} = spec.strategy
 
-    state = %{
+    state = %__MODULE__{
       spec: spec,
+      strategy: strategy,
       started: System.monotonic_time(:microsecond),
-      completed: nil,
       t0: System.system_time(:microsecond),
-      children: %{},
-      monitors: %{},
-      results: %{},
-      traced_by: %{},
       missing: Layout.atom_count(spec.layout),
-      stopping: nil,
-      strategy_state: nil,
-      traffic: %{},
-      duplicates: 0,
-      dead: %{},
-      ledger: Ledger.new(spec.layout, spec.strategy),
-      relinking: false,
-      redone: 0,
-      node_bytes: %{},
-      helpers: []
+      ledger: Ledger.new(spec.layout, spec.strategy)
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -102,7 +196,7 @@ defmodule RingTracer.Job.Parent do
         job: state.spec.id,
         children: state.spec.layout.children,
         atoms: state.missing,
-        strategy: state.spec.strategy
+        strategy: state.strategy
       }
     )
 
@@ -173,16 +267,14 @@ defmodule RingTracer.Job.Parent do
             send_counted(st, pid, :control, {:ring, ring})
           end)
 
-        state =
-          if function_exported?(state.spec.strategy, :parent_start, 1),
-            do: state.spec.strategy.parent_start(state),
-            else: state
+        {_, options} = state.spec.strategy
 
-        {:noreply, state}
+        {:noreply,
+         run_strategy(state, fn view, _ -> state.strategy.parent_start(view, options) end)}
 
       {:error, message, list} ->
         for {_i, pid} <- list, do: Process.exit(pid, :kill)
-        send(state.spec.caller, {RingTracer, state.spec.id, {:error, message}})
+        send(state.spec.caller, {@reply_tag, state.spec.id, {:error, message}})
         {:stop, :normal, state}
     end
   end
@@ -239,11 +331,8 @@ defmodule RingTracer.Job.Parent do
           state.missing == 0 ->
             stop_children(state)
 
-          function_exported?(state.spec.strategy, :parent_atom_done, 2) ->
-            {:noreply, state.spec.strategy.parent_atom_done(state, child)}
-
           true ->
-            {:noreply, state}
+            {:noreply, run_strategy(state, &state.strategy.parent_atom_done(&1, &2, child))}
         end
     end
   end
@@ -281,12 +370,9 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  # Anything else is for the strategy, if it listens (`parent_info/2`).
-  def handle_info(other, %{stopping: nil} = state) do
-    if function_exported?(state.spec.strategy, :parent_info, 2),
-      do: {:noreply, state.spec.strategy.parent_info(state, other)},
-      else: {:noreply, state}
-  end
+  # Anything else is for the strategy (`parent_info/3`).
+  def handle_info(other, %{stopping: nil} = state),
+    do: {:noreply, run_strategy(state, &state.strategy.parent_info(other, &1, &2))}
 
   def handle_info(_other, state), do: {:noreply, state}
 
@@ -426,7 +512,7 @@ defmodule RingTracer.Job.Parent do
 
   defp progress(%{spec: spec} = state) do
     total = Layout.atom_count(spec.layout)
-    send(spec.progress, {RingTracer, spec.id, {:progress, total - state.missing, total}})
+    send(spec.progress, {@reply_tag, spec.id, {:progress, total - state.missing, total}})
   end
 
   defp stop_children(state),
@@ -542,8 +628,7 @@ defmodule RingTracer.Job.Parent do
              failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
              redone: state.redone,
              nodes: node_summary(state, reports),
-             layout: state.spec.layout.order,
-             aim: state.spec.aim
+             layout: state.spec.layout.order
            }}
 
         {:error, message} ->
@@ -558,7 +643,7 @@ defmodule RingTracer.Job.Parent do
       %{job: spec.id, outcome: elem(reply, 0)}
     )
 
-    send(spec.caller, {RingTracer, spec.id, reply})
+    send(spec.caller, {@reply_tag, spec.id, reply})
     {:stop, :normal, state}
   end
 

@@ -49,7 +49,7 @@ defmodule RingTracer.Kernel.Native do
   def atom_work(%{settings: %Settings{width: w, height: h} = settings} = spec, opts) do
     scale = max(1.0, :math.sqrt(w * h / @preview_pixels))
     {pw, ph} = {max(1, round(w / scale)), max(1, round(h / scale))}
-    preview = Settings.to_native(%{settings | width: pw, height: ph, fail_pixel: nil})
+    preview = Settings.to_native(%{settings | width: pw, height: ph})
 
     with {:ok, {scene, _}} <- prepare(spec, opts),
          {:ok, rows} <- Native.row_work(scene.ref, preview) do

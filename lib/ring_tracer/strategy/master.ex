@@ -4,41 +4,35 @@ defmodule RingTracer.Strategy.Master do
   time. Each child has one atom queued ahead (two in its pipe), and each
   atom result it sends doubles as the request for the next one.
   """
-  @behaviour RingTracer.Strategy
+  use RingTracer.Strategy
 
-  alias RingTracer.Job.Parent
   alias RingTracer.Layout
 
   @ahead 2
 
   @impl true
-  def initial_atoms(_layout, _index), do: []
+  def initial_atoms(_layout, _index, _options), do: []
 
+  # Idle, a child waits for the parent's next atom.
   @impl true
-  def idle(child), do: %{child | status: :waiting}
+  def idle(_view, state), do: {state, []}
 
+  # The parent's state: the atoms not handed out yet.
   @impl true
-  def handle_message(_msg, _child), do: :unhandled
-
-  @impl true
-  def parent_start(parent) do
-    queue = Enum.to_list(Layout.atoms(parent.spec.layout))
-    parent = put_in(parent.strategy_state, queue)
-
-    Enum.reduce(1..@ahead, parent, fn _, p ->
-      Enum.reduce(Map.keys(p.children), p, &hand_out(&2, &1))
-    end)
+  def parent_start(view, _options) do
+    queue = Enum.to_list(Layout.atoms(view.spec.layout))
+    rounds = for _ <- 1..@ahead, i <- Map.keys(view.children), do: i
+    {queue, effects} = Enum.reduce(rounds, {queue, []}, &hand_out(&2, &1, view))
+    {queue, Enum.reverse(effects)}
   end
 
   @impl true
-  def parent_atom_done(parent, index), do: hand_out(parent, index)
+  def parent_atom_done(view, queue, index), do: hand_out({queue, []}, index, view)
 
   # A result can arrive from a child that has died since (it was in flight):
   # nothing is handed to the dead; the living keep asking.
-  defp hand_out(%{strategy_state: [atom | rest], children: children} = parent, index)
-       when is_map_key(children, index) do
-    %{Parent.hand_out(parent, index, [atom]) | strategy_state: rest}
-  end
+  defp hand_out({[atom | rest], effects}, index, view) when is_map_key(view.children, index),
+    do: {rest, [{:hand_out, index, [atom]} | effects]}
 
-  defp hand_out(parent, _index), do: parent
+  defp hand_out(acc, _index, _view), do: acc
 end

@@ -7,61 +7,46 @@ defmodule RingTracer.Strategy.Steal do
   The order of victims is random but seeded by the child's index, so a job is
   repeatable.
   """
-  @behaviour RingTracer.Strategy
-
-  alias RingTracer.Job.Child
-  alias RingTracer.Layout
+  use RingTracer.Strategy
 
   @impl true
-  def initial_atoms(layout, index), do: Layout.strip(layout, index)
+  def idle(view, state) do
+    plan = Map.get(state, :victims) || victims(view)
 
-  @impl true
-  def idle(child) do
-    plan = Map.get(child.strategy_state, :victims) || victims(child)
-
-    case next_victim(plan, child) do
+    case next_victim(plan, view) do
       nil ->
-        %{child | status: :finished, strategy_state: %{victims: plan}}
+        {%{victims: plan}, [:finished]}
 
       {victim, plan} ->
-        child
-        |> Child.send_counted(
-          Child.sibling(child, victim),
-          :offer,
-          {:steal, self(), child.index}
-        )
-        |> Child.event(:steal, victim)
-        |> Child.bump(:offers_sent)
-        |> Map.merge(%{status: :stealing, strategy_state: %{victims: plan}})
+        {%{victims: plan},
+         [
+           {:send, {:sibling, victim}, :offer, {:steal, view.pid, view.index}},
+           {:event, :steal, victim},
+           {:stat, :offers_sent}
+         ]}
     end
   end
 
   @impl true
-  def handle_message({:steal, thief, thief_index}, child) do
-    g = div(length(child.queue), 2)
-    {atoms, child} = Child.take_last(child, g)
-
-    child =
-      if g > 0, do: Child.bump(child, :offers_consumed), else: Child.bump(child, :offers_passed)
-
-    {:ok,
-     child
-     |> Child.hand_over(thief, thief_index, atoms)
-     |> Child.event(if(g > 0, do: :give, else: :refuse), thief_index)}
+  def handle_message({:steal, thief, thief_index}, view, state) do
+    g = div(view.queued, 2)
+    {stat, event} = if g > 0, do: {:offers_consumed, :give}, else: {:offers_passed, :refuse}
+    {state, [{:stat, stat}, {:give, thief, thief_index, g}, {:event, event, thief_index}]}
   end
 
-  def handle_message({:handover, _from, []}, child), do: {:ok, idle(child)}
+  def handle_message({:handover, _from, []}, view, state), do: idle(view, state)
 
   # Atoms the parent hands out again after a failure: the child's sweep of
   # victims goes on where it was (restarting it would ask every sibling
   # again, most of them idle by then).
-  def handle_message({:handover, :parent, atoms}, child),
-    do: {:ok, Child.receive_atoms(child, atoms)}
+  def handle_message({:handover, :parent, atoms}, _view, state), do: {state, [{:queue, atoms}]}
+  def handle_message({:handover, _from, atoms}, _view, _state), do: {%{}, [{:queue, atoms}]}
 
-  def handle_message({:handover, _from, atoms}, child),
-    do: {:ok, Child.receive_atoms(%{child | strategy_state: %{}}, atoms)}
+  # The sibling we asked may be gone; the others still trace what they hold.
+  def handle_message({:siblings_died, _dead}, %{status: :idle}, state),
+    do: {state, [:finished]}
 
-  def handle_message(_msg, _child), do: :unhandled
+  def handle_message(_message, _view, state), do: {state, []}
 
   # The order of victims, in constant space whatever the ring's size: the
   # k-th victim is `index + k * step (mod N)` for k = 1..N-1, a permutation
@@ -70,8 +55,8 @@ defmodule RingTracer.Strategy.Steal do
   defp victims(%{index: index, ring_size: n}) do
     step =
       if n > 2 do
-        :rand.seed(:exsss, {index + 1, 7, 13})
-        coprime(:rand.uniform(n - 1), n)
+        {draw, _} = :rand.uniform_s(n - 1, :rand.seed_s(:exsss, {index + 1, 7, 13}))
+        coprime(draw, n)
       else
         1
       end
@@ -82,11 +67,11 @@ defmodule RingTracer.Strategy.Steal do
   defp coprime(s, n), do: if(Integer.gcd(s, n) == 1, do: s, else: coprime(rem(s, n - 1) + 1, n))
 
   # The next victim not known dead, or nil when every sibling has been asked.
-  defp next_victim(%{k: k, n: n}, _child) when k >= n, do: nil
+  defp next_victim(%{k: k, n: n}, _view) when k >= n, do: nil
 
-  defp next_victim(%{k: k, step: step, n: n} = plan, child) do
-    victim = rem(child.index + k * step, n)
+  defp next_victim(%{k: k, step: step, n: n} = plan, view) do
+    victim = rem(view.index + k * step, n)
     plan = %{plan | k: k + 1}
-    if victim in child.dead, do: next_victim(plan, child), else: {victim, plan}
+    if victim in view.dead, do: next_victim(plan, view), else: {victim, plan}
   end
 end

@@ -33,8 +33,6 @@ pub struct Settings {
     /// SPD corner mode (SPD testing procedure): rays through the (W+1)x(H+1) pixel corners, the
     /// four corners of a pixel averaged; forces depth 5, no cut-off and one sample.
     pub spd: bool,
-    /// test hook: tracing this pixel panics; None in normal use
-    pub fail_pixel: Option<u64>,
     /// Only this part of the `width` x `height` image is traced (the camera still frames the whole
     /// image); span indices then count the region's pixels, row-major. `None`: the whole image.
     pub region: Option<Region>,
@@ -75,7 +73,6 @@ impl Settings {
             cutoff: 1.0 / 255.0,
             samples: 1,
             spd: false,
-            fail_pixel: None,
             region: None,
         }
     }
@@ -182,7 +179,6 @@ impl Settings {
     ///     cutoff: 0.0,
     ///     samples: 1,
     ///     spd: false,
-    ///     fail_pixel: None,
     ///     region: None,
     /// };
     /// assert_eq!(s.span_end(5, 3).unwrap(), 8);
@@ -249,11 +245,6 @@ pub fn trace_span_into(
     let end = settings.span_end(start, count)?;
     if let Some(r) = settings.region {
         return trace_region_into(scene, settings, r, start, end, out);
-    }
-    if let Some(p) = settings.fail_pixel {
-        if (start..end).contains(&p) {
-            panic!("test hook: tracing pixel {p} (Settings::fail_pixel)");
-        }
     }
     let mut stats = RayStats::default();
     if count == 0 {

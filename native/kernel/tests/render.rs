@@ -360,38 +360,6 @@ fn obj_scene_and_format() {
     .is_err());
 }
 
-#[test]
-fn fail_pixel_hook_panics_only_on_its_pixel() {
-    let scene = nff(GOLDEN);
-    let s = Settings::for_scene(&scene);
-    assert_eq!(s.fail_pixel, None);
-    // no hook: every span traces
-    assert!(std::panic::catch_unwind(|| trace_span(&scene, &s, 0, 48)).is_ok());
-    let hooked = Settings {
-        fail_pixel: Some(17),
-        ..s.clone()
-    };
-    // a span containing the pixel panics (a real panic, not an Err)
-    let r = std::panic::catch_unwind(|| trace_span(&scene, &hooked, 10, 10));
-    let payload = r.expect_err("span containing pixel 17 panics");
-    let msg = payload
-        .downcast_ref::<String>()
-        .cloned()
-        .unwrap_or_default();
-    assert!(msg.contains("17"), "{msg}");
-    assert!(std::panic::catch_unwind(|| trace_span(&scene, &hooked, 17, 1)).is_err());
-    // spans around it do not
-    let before = std::panic::catch_unwind(|| trace_span(&scene, &hooked, 0, 17));
-    assert!(before.expect("no panic").is_ok());
-    let after = std::panic::catch_unwind(|| trace_span(&scene, &hooked, 18, 30));
-    assert!(after.expect("no panic").is_ok());
-    // and the pixels are the same as without the hook
-    assert_eq!(
-        trace_span(&scene, &hooked, 0, 17).unwrap().0,
-        trace_span(&scene, &s, 0, 17).unwrap().0
-    );
-}
-
 /// A region traces exactly the whole render's pixels there, in every mode (pixel centres, jittered
 /// samples, SPD corners), whatever spans it is cut into.
 #[test]

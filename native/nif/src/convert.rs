@@ -12,8 +12,6 @@ pub struct SettingsTerm {
     pub cutoff: f64,
     pub samples: u32,
     pub spd: bool,
-    /// Test hook: tracing this pixel panics (rustler turns it into an Erlang exception).
-    pub fail_pixel: Option<u64>,
     /// Only this part of the image, `{x0, y0, width, height}`, or nil.
     pub region: Option<(u32, u32, u32, u32)>,
 }
@@ -28,7 +26,6 @@ impl SettingsTerm {
             cutoff: self.cutoff as f32,
             samples: self.samples,
             spd: self.spd,
-            fail_pixel: self.fail_pixel,
             region: self.region.map(|(x0, y0, width, height)| Region {
                 x0,
                 y0,

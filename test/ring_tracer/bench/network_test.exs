@@ -41,7 +41,7 @@ defmodule RingTracer.Bench.NetworkTest do
       # The delay is in the path: a round trip takes two one-way delays.
       for {_w, ms} <- Lab.rtt_ms(lab, 3), do: assert(ms >= 2 * @delay_ms)
 
-      for strategy <- RingTracer.Strategy.names() do
+      for strategy <- RingTracer.Strategies.names() do
         before = Lab.counters(lab)
 
         opts = [

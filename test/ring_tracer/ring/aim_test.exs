@@ -1,9 +1,9 @@
-defmodule RingTracer.Ring.AimTest do
+defmodule RingTracer.Strategy.Ring.AimTest do
   use ExUnit.Case, async: true
-  doctest RingTracer.Ring.Aim
+  doctest RingTracer.Strategy.Ring.Aim
 
   alias RingTracer.Layout
-  alias RingTracer.Ring.Aim
+  alias RingTracer.Strategy.Ring.Aim
 
   test "learn keeps the newest report per sibling and at most eight, latest-ending first" do
     old = for i <- 0..9, do: {i, 1_000 * i, 10, 2}

@@ -1,8 +1,8 @@
-defmodule RingTracer.Ring.HelpOfferTest do
+defmodule RingTracer.Strategy.Ring.HelpOfferTest do
   use ExUnit.Case, async: true
-  doctest RingTracer.Ring.HelpOffer
+  doctest RingTracer.Strategy.Ring.HelpOffer
 
-  alias RingTracer.Ring.HelpOffer
+  alias RingTracer.Strategy.Ring.HelpOffer
 
   defp offer(origin, rate, seq \\ 1),
     do: %HelpOffer{origin: origin, pid: self(), rate: rate, seq: seq}

@@ -1,8 +1,8 @@
-defmodule RingTracer.Ring.ShareTest do
+defmodule RingTracer.Strategy.Ring.ShareTest do
   use ExUnit.Case, async: true
-  doctest RingTracer.Ring.Share
+  doctest RingTracer.Strategy.Ring.Share
 
-  alias RingTracer.Ring.Share
+  alias RingTracer.Strategy.Ring.Share
 
   test "equal speeds, no third helper: what is left is split in half" do
     assert Share.give(20, 0, 1.0, 1.0) == 10

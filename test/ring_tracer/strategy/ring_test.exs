@@ -1,11 +1,12 @@
 defmodule RingTracer.Strategy.RingTest do
   # The ring strategy's decisions, one message at a time, on a child state
-  # built by hand: this test process plays every sibling, the parent and the
-  # grandchild, and reads what the child sends in its mailbox.
+  # built by hand and carried out by the child's own effects: this test
+  # process plays every sibling, the parent and the grandchild, and reads
+  # what the child sends in its mailbox.
   use ExUnit.Case, async: true
 
   alias RingTracer.Job.{Child, Directory, Spec}
-  alias RingTracer.Ring.HelpOffer
+  alias RingTracer.Strategy.Ring.HelpOffer
   alias RingTracer.Strategy.Ring
 
   defp child(fields) do
@@ -16,16 +17,19 @@ defmodule RingTracer.Strategy.RingTest do
       source: nil,
       settings: nil,
       layout: nil,
-      caller: me
+      caller: me,
+      strategy: {Ring, Keyword.get(fields, :options, [])}
     }
 
     # The ring, published where a child looks its siblings up, for as long
     # as this test's process lives.
     {siblings, fields} = Keyword.pop(fields, :siblings, {me, me, me, me})
+    fields = Keyword.delete(fields, :options)
     :ok = Directory.publish(node(), spec.id, me, siblings, 5_000)
 
-    base = %{
+    base = %Child{
       spec: spec,
+      strategy: Ring,
       index: 1,
       parent: me,
       left: me,
@@ -46,7 +50,7 @@ defmodule RingTracer.Strategy.RingTest do
       stats: stats(traced: 4, busy_us: 40_000, work: 40_000)
     }
 
-    Map.merge(base, Map.new(fields))
+    struct!(base, fields)
   end
 
   defp stats(fields) do
@@ -59,13 +63,10 @@ defmodule RingTracer.Strategy.RingTest do
   defp offer(origin, seq \\ 1, via \\ nil),
     do: %HelpOffer{origin: origin, pid: self(), rate: 1.0, seq: seq, via: via}
 
-  defp handle(child, msg) do
-    {:ok, child} = Ring.handle_message(msg, child)
-    child
-  end
+  defp handle(child, msg), do: Child.strategy_message(child, msg)
 
   test "an idle child parks an offer, and gives it a share once its own offer brings atoms" do
-    idle = child(status: :offered, strategy_state: %{seq: 1, current: 1})
+    idle = child(status: :idle, strategy_state: %{seq: 1, current: 1})
     parked = handle(idle, {:help_offer, offer(2)})
 
     assert [%HelpOffer{origin: 2}] = parked.strategy_state.parked
@@ -86,7 +87,7 @@ defmodule RingTracer.Strategy.RingTest do
 
     idle =
       child(
-        status: :offered,
+        status: :idle,
         strategy_state: %{seq: 1, current: 1},
         siblings: {giver, me, me, me}
       )
@@ -99,7 +100,7 @@ defmodule RingTracer.Strategy.RingTest do
   end
 
   test "when its own offer comes back, a child is finished and sends parked offers home" do
-    idle = child(status: :offered, strategy_state: %{seq: 1, current: 1})
+    idle = child(status: :idle, strategy_state: %{seq: 1, current: 1})
     child = idle |> handle({:help_offer, offer(2)}) |> handle({:help_offer, offer(3)})
 
     finished = handle(child, {:help_offer, offer(1)})
@@ -115,9 +116,9 @@ defmodule RingTracer.Strategy.RingTest do
     c0 = child(index: 0, left_index: 1, status: :working, stats: Child.new_stats(0, node(), 1, 4))
     c1 = child(index: 1, left_index: 0, status: :working)
 
-    c0 = Ring.idle(c0)
+    c0 = Child.idle(c0)
     assert_received {:help_offer, %HelpOffer{origin: 0, wrapped: true} = from0}
-    c1 = Ring.idle(c1)
+    c1 = Child.idle(c1)
     assert_received {:help_offer, %HelpOffer{origin: 1, wrapped: false} = from1}
 
     # Child 1 passes child 0's offer (it went past the end of the ring)...
@@ -148,7 +149,7 @@ defmodule RingTracer.Strategy.RingTest do
     assert [%HelpOffer{origin: 2, held: true}] = held.strategy_state.held
 
     # Out of atoms: its own offer and the held one go left in one message.
-    out = Ring.idle(%{held | in_flight: []})
+    out = Child.idle(%{held | in_flight: []})
     assert_received {:help_offers, [%HelpOffer{origin: 1}, %HelpOffer{origin: 2, hops: 17}]}
     refute_received {:help_offer, _}
     assert {1, _bytes} = out.traffic.offer
@@ -234,7 +235,7 @@ defmodule RingTracer.Strategy.RingTest do
 
     # Our own offer tells the same, and so do the offers held with it.
     held = put_in(passed.strategy_state[:held], [%{offer(3) | heard: []}])
-    Ring.idle(%{held | in_flight: []})
+    Child.idle(%{held | in_flight: []})
 
     assert_received {:help_offers,
                      [
@@ -245,7 +246,7 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "a dead sibling's rate is no longer told" do
     c = child(dead: [3], strategy_state: %{heard: [{5.0, 3, 7}, {2.0, 0, 2}]})
-    Ring.idle(c)
+    Child.idle(c)
     assert_received {:help_offer, %HelpOffer{origin: 1, heard: [{2.0, 0, 2}, {1.0, 1, 4}]}}
   end
 
@@ -279,8 +280,11 @@ defmodule RingTracer.Strategy.RingTest do
   describe "aiming" do
     # A child that aims (`aim: true`), with job time starting now.
     defp aiming(fields) do
-      c = child(Keyword.put_new(fields, :t0, System.system_time(:microsecond)))
-      put_in(c.spec.aim, true)
+      child(
+        fields
+        |> Keyword.put_new(:t0, System.system_time(:microsecond))
+        |> Keyword.put(:options, aim: true)
+      )
     end
 
     # A sibling that tells the test what reached it.
@@ -296,24 +300,24 @@ defmodule RingTracer.Strategy.RingTest do
       loads = [{3, 1_000_000, 0, 8}, {2, 500_000, 0, 8}]
       c = aiming(siblings: {self(), self(), self(), three}, strategy_state: %{loads: loads})
 
-      offered = Ring.idle(c)
+      offered = Child.idle(c)
       assert_receive {:three, {:help_offer, %HelpOffer{origin: 1, aimed: 3} = o}}
       # It carries what we know: sibling 3 first, and our own load among them.
       assert [{3, 1_000_000, 0, 8} | _] = o.loads
       assert Enum.any?(o.loads, &(elem(&1, 0) == 1))
-      assert offered.status == :offered
+      assert offered.status == :idle
       refute_received {:help_offer, _}
     end
 
     test "with nobody expected to have atoms queued, the offer goes to the left sibling" do
       # Sibling 3 ends late, but has started its last queued atom since it said so.
       loads = [{3, 1_000_000, -900_000, 1}]
-      Ring.idle(aiming(strategy_state: %{loads: loads}))
+      Child.idle(aiming(strategy_state: %{loads: loads}))
       assert_received {:help_offer, %HelpOffer{origin: 1, aimed: nil}}
     end
 
     test "without aiming, offers go left and carry no loads" do
-      Ring.idle(child(strategy_state: %{loads: [{3, 1_000_000, 0, 8}]}))
+      Child.idle(child(strategy_state: %{loads: [{3, 1_000_000, 0, 8}]}))
       assert_received {:help_offer, %HelpOffer{origin: 1, aimed: nil, loads: []}}
     end
 
@@ -344,12 +348,12 @@ defmodule RingTracer.Strategy.RingTest do
     end
 
     test "an aimed offer that comes home is followed by one that walks the ring" do
-      home = aiming(status: :offered, strategy_state: %{seq: 1, current: 1})
+      home = aiming(status: :idle, strategy_state: %{seq: 1, current: 1})
       back = %{offer(1) | aimed: 3, loads: [{3, 100, 50, 0}]}
       walking = handle(home, {:help_offer, back})
 
       assert_received {:help_offer, %HelpOffer{origin: 1, seq: 2, aimed: nil}}
-      assert walking.status == :offered
+      assert walking.status == :idle
       # Sibling 3 has nothing to give, and we know it now.
       assert {3, 100, 50, 0} in walking.strategy_state.loads
     end

@@ -1,4 +1,4 @@
-defmodule RingTracer.Ring.Share do
+defmodule RingTracer.Strategy.Ring.Share do
   @moduledoc """
   The help-offer share rule: how many atoms a child gives to a sibling that
   offered help.
@@ -21,7 +21,7 @@ defmodule RingTracer.Ring.Share do
     * the offerer, idle;
     * in a ring of three or more, one more helper (`helper_rate`): the
       fastest other sibling it has heard of (offers carry what they heard,
-      see `RingTracer.Ring.HelpOffer`).
+      see `RingTracer.Strategy.Ring.HelpOffer`).
 
   Atoms go one at a time to whoever would complete one more soonest
   (`(n + 1) / rate`; the giver first on ties, then the offerer), which is
@@ -42,17 +42,17 @@ defmodule RingTracer.Ring.Share do
   (its offerer, which finished its own work, is faster); an offerer with no
   rate counts as fast as the giver. Atoms in flight are never given.
 
-      iex> RingTracer.Ring.Share.give(20, 0, 1.0, 1.0)
+      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0)
       10
-      iex> RingTracer.Ring.Share.give(6, 2, 1.0, 1.0)
+      iex> RingTracer.Strategy.Ring.Share.give(6, 2, 1.0, 1.0)
       4
-      iex> RingTracer.Ring.Share.give(20, 0, 1.0, 1.0, 1.0)
+      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0, 1.0)
       7
-      iex> RingTracer.Ring.Share.give(20, 0, 2.0, 1.0, 1.0)
+      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 2.0, 1.0, 1.0)
       15
-      iex> RingTracer.Ring.Share.give(3, 1, 0.2, 1.0, 4.0)
+      iex> RingTracer.Strategy.Ring.Share.give(3, 1, 0.2, 1.0, 4.0)
       0
-      iex> RingTracer.Ring.Share.give(5, 1, 1.0, nil)
+      iex> RingTracer.Strategy.Ring.Share.give(5, 1, 1.0, nil)
       5
   """
 

@@ -1,4 +1,4 @@
-defmodule RingTracer.Ring.Aim do
+defmodule RingTracer.Strategy.Ring.Aim do
   @loads_max 3
   @known_max 8
   @board_to 2
@@ -44,7 +44,7 @@ defmodule RingTracer.Ring.Aim do
   carry it on. (Sending it to every child cost more messages in misses than
   it saved, measured on `8, speeds 1..8`.)
 
-      iex> alias RingTracer.Ring.Aim
+      iex> alias RingTracer.Strategy.Ring.Aim
       iex> known = Aim.learn([{1, 900, 100, 3}], [{1, 500, 200, 1}, {2, 800, 150, 4}])
       [{2, 800, 150, 4}, {1, 500, 200, 1}]
       iex> view = %{index: 0, left_index: 3, dead: [], now: 300, min_us: 100}
@@ -80,9 +80,9 @@ defmodule RingTracer.Ring.Aim do
   What an offer or a hand-over carries of `known`: its #{@loads_max}
   latest-ending loads, and `first` (a child's own) ahead of them.
 
-      iex> RingTracer.Ring.Aim.news([{4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}, {7, 60, 0, 2}])
+      iex> RingTracer.Strategy.Ring.Aim.news([{4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}, {7, 60, 0, 2}])
       [{4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}]
-      iex> RingTracer.Ring.Aim.news([{4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}], {1, 10, 5, 0})
+      iex> RingTracer.Strategy.Ring.Aim.news([{4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}], {1, 10, 5, 0})
       [{1, 10, 5, 0}, {4, 90, 0, 2}, {5, 80, 0, 2}, {6, 70, 0, 2}]
   """
   @spec news([load()], load() | nil) :: [load()]
@@ -103,9 +103,9 @@ defmodule RingTracer.Ring.Aim do
 
       iex> view = %{index: 0, left_index: 3, dead: [], now: 1_000, min_us: 100}
       iex> known = [{1, 5_000, 0, 1}, {2, 3_000, 900, 2}]
-      iex> RingTracer.Ring.Aim.target(known, view)
+      iex> RingTracer.Strategy.Ring.Aim.target(known, view)
       2
-      iex> RingTracer.Ring.Aim.target(known, %{view | dead: [2]})
+      iex> RingTracer.Strategy.Ring.Aim.target(known, %{view | dead: [2]})
       nil
   """
   @spec target([load()], map()) :: non_neg_integer() | nil
@@ -129,11 +129,11 @@ defmodule RingTracer.Ring.Aim do
   `end_us`; since `at_us` it has started one atom per (end_us - at_us) /
   (queued + 1).
 
-      iex> RingTracer.Ring.Aim.queued?({1, 4_000, 0, 3}, 1_000)
+      iex> RingTracer.Strategy.Ring.Aim.queued?({1, 4_000, 0, 3}, 1_000)
       true
-      iex> RingTracer.Ring.Aim.queued?({1, 4_000, 0, 3}, 3_000)
+      iex> RingTracer.Strategy.Ring.Aim.queued?({1, 4_000, 0, 3}, 3_000)
       false
-      iex> RingTracer.Ring.Aim.queued?({1, 4_000, 0, 0}, 0)
+      iex> RingTracer.Strategy.Ring.Aim.queued?({1, 4_000, 0, 0}, 0)
       false
   """
   @spec queued?(load(), integer()) :: boolean()
@@ -152,7 +152,7 @@ defmodule RingTracer.Ring.Aim do
 
       iex> layout = RingTracer.Layout.new(4, 2, 2, 2)
       iex> traced_by = %{0 => 0, 2 => 1}
-      iex> RingTracer.Ring.Aim.board(layout, {10, 10, 40, 80}, traced_by, 100)
+      iex> RingTracer.Strategy.Ring.Aim.board(layout, {10, 10, 40, 80}, traced_by, 100)
       {[{1, 300, 100, 1}, {0, 200, 100, 1}], [1, 0]}
   """
   @spec board(Layout.t(), tuple(), %{Layout.atom_id() => non_neg_integer()}, integer()) ::

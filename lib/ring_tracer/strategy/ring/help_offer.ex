@@ -1,10 +1,10 @@
-defmodule RingTracer.Ring.HelpOffer do
+defmodule RingTracer.Strategy.Ring.HelpOffer do
   @moduledoc """
   The help offer (the ring's token) and what a child does when one reaches it.
 
   A child that has traced every atom it holds sends an offer to its left
   sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
-  per busy microsecond, see `RingTracer.Ring.Share`; `nil` until it has
+  per busy microsecond, see `RingTracer.Strategy.Ring.Share`; `nil` until it has
   traced work), its mean wall time per atom (`atom_us`, `nil` before its
   first atom), the fastest siblings heard of along its way (`heard`, see
   "Gossip") and a sequence number (`seq`) so that a child can tell its
@@ -17,7 +17,7 @@ defmodule RingTracer.Ring.HelpOffer do
   `aimed` is the sibling an offer was sent straight to, if not its child's
   left one, `home_left` that child's left sibling (`{pid, index}`) for the
   walk a miss turns it into, and `loads` the siblings' loads it carries
-  (all three `RingTracer.Ring.Aim`).
+  (all three `RingTracer.Strategy.Ring.Aim`).
 
   `decide/2` is the whole rule, pure:
 
@@ -118,7 +118,7 @@ defmodule RingTracer.Ring.HelpOffer do
   visits each of them.
   """
 
-  alias RingTracer.Ring.Share
+  alias RingTracer.Strategy.Ring.Share
 
   @enforce_keys [:origin, :pid, :seq]
   defstruct [
@@ -156,7 +156,7 @@ defmodule RingTracer.Ring.HelpOffer do
           wrapped: boolean(),
           aimed: non_neg_integer() | nil,
           home_left: {pid(), non_neg_integer()} | nil,
-          loads: [RingTracer.Ring.Aim.load()],
+          loads: [RingTracer.Strategy.Ring.Aim.load()],
           hops: non_neg_integer(),
           held: boolean()
         }
@@ -190,25 +190,25 @@ defmodule RingTracer.Ring.HelpOffer do
   @doc """
   What the child described by `view` does with `offer`.
 
-      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), rate: 2.0, seq: 3}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 1, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 3}, offer)
+      iex> offer = %RingTracer.Strategy.Ring.HelpOffer{origin: 1, pid: self(), rate: 2.0, seq: 3}
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 1, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 3}, offer)
       :returned
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil}, offer)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil}, offer)
       {:give, 4}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil, heard: [{9.0, 5, 12}]}, offer)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 6, in_flight: 2, rate: 2.0, offer_seq: nil, heard: [{9.0, 5, 12}]}, offer)
       {:give, 1}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil}, offer)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil}, offer)
       :pass
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, offer)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, offer)
       :park
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, %{offer | wrapped: true})
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 0, rate: 2.0, offer_seq: 5}, %{offer | wrapped: true})
       :pass
       iex> far = %{offer | hops: 16, atom_us: 4_000}
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 1_500}, far)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 1_500}, far)
       :hold
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 9_000}, far)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, remaining_us: 9_000}, far)
       :pass
-      iex> RingTracer.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, ring_size: 16}, far)
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, ring_size: 16}, far)
       :home
   """
   @spec decide(view(), t()) :: decision()
@@ -250,7 +250,7 @@ defmodule RingTracer.Ring.HelpOffer do
   entry per sibling (its newest report: the highest `done`), the #{@heard_max}
   fastest, fastest first. Reports without a rate are ignored.
 
-      iex> RingTracer.Ring.HelpOffer.learn([{3.0, 1, 9}, {1.0, 2, 4}], [{2.0, 4, 3}, {5.0, 2, 6}, {4.0, 1, 2}])
+      iex> RingTracer.Strategy.Ring.HelpOffer.learn([{3.0, 1, 9}, {1.0, 2, 4}], [{2.0, 4, 3}, {5.0, 2, 6}, {4.0, 1, 2}])
       [{5.0, 2, 6}, {3.0, 1, 9}, {2.0, 4, 3}]
   """
   @spec learn(heard(), [{Share.rate(), non_neg_integer(), non_neg_integer()}]) :: heard()
@@ -280,10 +280,10 @@ defmodule RingTracer.Ring.HelpOffer do
   marked `wrapped` if the hop goes past the end of the ring (to a higher
   index).
 
-      iex> offer = %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), seq: 3}
-      iex> RingTracer.Ring.HelpOffer.hop(offer, 1, 0)
-      %RingTracer.Ring.HelpOffer{origin: 1, pid: self(), seq: 3, hops: 1, wrapped: false}
-      iex> RingTracer.Ring.HelpOffer.hop(offer, 0, 3).wrapped
+      iex> offer = %RingTracer.Strategy.Ring.HelpOffer{origin: 1, pid: self(), seq: 3}
+      iex> RingTracer.Strategy.Ring.HelpOffer.hop(offer, 1, 0)
+      %RingTracer.Strategy.Ring.HelpOffer{origin: 1, pid: self(), seq: 3, hops: 1, wrapped: false}
+      iex> RingTracer.Strategy.Ring.HelpOffer.hop(offer, 0, 3).wrapped
       true
   """
   @spec hop(t(), non_neg_integer(), non_neg_integer()) :: t()
@@ -294,7 +294,7 @@ defmodule RingTracer.Ring.HelpOffer do
   Splits the queued atoms into the ones kept and the `g` given away (the last
   ones of the queue, farthest from being traced).
 
-      iex> RingTracer.Ring.HelpOffer.split_queue([1, 2, 3, 4, 5], 2)
+      iex> RingTracer.Strategy.Ring.HelpOffer.split_queue([1, 2, 3, 4, 5], 2)
       {[1, 2, 3], [4, 5]}
   """
   @spec split_queue([non_neg_integer()], non_neg_integer()) ::

@@ -1,0 +1,64 @@
+defmodule RingTracer.Strategy.View do
+  @moduledoc """
+  What a child's strategy sees of its child: read-only, built by the child
+  for each callback.
+
+    * `:job` — the job's id; `:options` — the strategy's options;
+    * `:index`, `:pid` — the child's place in the ring and its pid;
+      `:ring_size` — children at the start; `:left`, `:left_index` — its
+      left sibling now; `:dead` — siblings known to be dead;
+    * `:status` — `:working` (atoms queued or in its pipe), `:idle` (its
+      strategy was told it ran out, and has not made it finish) or
+      `:finished`;
+    * `:queued` — atoms queued, not yet in the grandchild's pipe;
+      `:remaining`, `:in_flight` — what it could give: the queued atoms plus
+      the one waiting in its pipe, and the one being traced;
+    * `:done` — atoms traced; `:rate` — its speed, kernel work per busy
+      microsecond (`nil` before it has traced work); `:mean_atom_us` — wall
+      time per atom (`nil` before its first); `:remaining_us` — how long the
+      atom being traced should still take (`nil` when none or unknown);
+    * `:now` — job microseconds (wall clock since the job's start, the
+      same for every process of the job).
+  """
+
+  @enforce_keys [:job, :index, :pid, :ring_size, :status]
+  defstruct [
+    :job,
+    :index,
+    :pid,
+    :ring_size,
+    :left,
+    :left_index,
+    :status,
+    :rate,
+    :mean_atom_us,
+    :remaining_us,
+    options: [],
+    dead: [],
+    queued: 0,
+    remaining: 0,
+    in_flight: 0,
+    done: 0,
+    now: 0
+  ]
+
+  @type t :: %__MODULE__{
+          job: reference(),
+          options: keyword(),
+          index: non_neg_integer(),
+          pid: pid(),
+          ring_size: non_neg_integer(),
+          left: pid() | nil,
+          left_index: non_neg_integer() | nil,
+          dead: [non_neg_integer()],
+          status: :working | :idle | :finished,
+          queued: non_neg_integer(),
+          remaining: non_neg_integer(),
+          in_flight: non_neg_integer(),
+          done: non_neg_integer(),
+          rate: float() | nil,
+          mean_atom_us: non_neg_integer() | nil,
+          remaining_us: non_neg_integer() | nil,
+          now: integer()
+        }
+end

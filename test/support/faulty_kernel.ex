@@ -1,0 +1,40 @@
+defmodule RingTracer.Test.FaultyKernel do
+  @moduledoc """
+  A test-only kernel: the native one, except that an atom holding pixel
+  `:fail_pixel` fails as a kernel panic does (`RingTracer.Kernel.Native`
+  turns a panic into `{:error, "kernel raised: ..."}`), every time it is
+  traced; and, with `:jitter`, each atom's result waits up to that many
+  milliseconds more, drawn at random, before it goes to its child.
+  """
+  @behaviour RingTracer.Kernel
+
+  alias RingTracer.Kernel.Native
+
+  @impl true
+  def prepare(spec, opts) do
+    with {:ok, context} <- Native.prepare(spec, []), do: {:ok, {context, opts}}
+  end
+
+  @impl true
+  def prepare_node(spec, _opts, node), do: Native.prepare_node(spec, [], node)
+
+  @impl true
+  def atom_work(spec, _opts), do: Native.atom_work(spec, [])
+
+  @impl true
+  def trace({context, opts}, first, count, atom) do
+    pixel = opts[:fail_pixel]
+
+    result =
+      if is_integer(pixel) and pixel >= first and pixel < first + count,
+        do: {:error, "kernel raised: test fault at pixel #{pixel}"},
+        else: Native.trace(context, first, count, atom)
+
+    case Keyword.get(opts, :jitter, 0) do
+      0 -> :ok
+      max -> Process.sleep(:rand.uniform(max + 1) - 1)
+    end
+
+    result
+  end
+end
