@@ -67,6 +67,10 @@ defmodule RingTracer do
       elsewhere (default 10_000; see `RingTracer.Cluster.Liveness`)
     * `:allow_dirs` — folders besides the scene's own that the scene may read
       referenced files from (default none; see `RingTracer.Scene.load/2`)
+    * `:preview` — a live page of the job in a browser (`RingTracer.Preview`):
+      `true` (a free port on 127.0.0.1), a port, `[port: p, listen: address]`,
+      each printing the page's address on stderr and stopping the page when
+      the job ends, or a preview started with `RingTracer.Preview.start/1`
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
   for a missing or invalid scene, a bad option, or a job that failed.
@@ -79,7 +83,7 @@ defmodule RingTracer do
   line, are returned in the result's `:warnings` (and `:warnings_omitted`
   past the first 100), as they are in `RingTracer.Scene.load/2`'s scene, so
   a caller can show them before rendering or after. This function prints
-  and logs nothing; `mix ring_tracer.render` prints them to stderr before
+  and logs nothing (but the address of a preview it starts); `mix ring_tracer.render` prints them to stderr before
   the render starts.
   """
   @spec render(Path.t() | Scene.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
@@ -359,7 +363,13 @@ defmodule RingTracer do
 
     {:ok, parent} = Parent.start(spec)
     ref = Process.monitor(parent)
+    preview = RingTracer.Preview.for_job(opts[:preview], parent)
+    result = await(spec, settings, capacity_cap, ref, opts)
+    RingTracer.Preview.after_job(preview)
+    result
+  end
 
+  defp await(spec, settings, capacity_cap, ref, opts) do
     receive do
       {RingTracer, id, reply} when id == spec.id ->
         receive do

@@ -93,6 +93,7 @@ defmodule RingTracer.Job.Child do
   @spec event(map(), atom(), term()) :: map()
   def event(state, kind, to) do
     at = job_time(state)
+    RingTracer.Telemetry.child_event(state.spec.id, kind, state.index, to, at)
     %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
   end
 
