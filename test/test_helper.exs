@@ -1,3 +1,3 @@
 # `mix test` runs the quick tests; `bin/ringtracer test` (and CI) includes
 # the slow and multi-node ones too.
-ExUnit.start(exclude: [:slow, :distributed])
+ExUnit.start(exclude: [:slow, :distributed, :browser])
