@@ -21,7 +21,7 @@ defmodule RingTracer.MixProject do
       dialyzer_ignore: [],
       # :inets (the preview's HTTP server) is started by RingTracer.Preview, like
       # :ssl by TLS, only when used.
-      xref: [exclude: [:ssl, :inets, :httpd, :httpd_util, :httpd_response]],
+      xref: [exclude: [:ssl, :inets, :httpd, :httpd_util, :httpd_response, :httpc]],
       aliases: aliases()
     ]
   end

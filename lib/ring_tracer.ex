@@ -361,9 +361,10 @@ defmodule RingTracer do
       progress: opts[:progress]
     }
 
+    preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])
     {:ok, parent} = Parent.start(spec)
     ref = Process.monitor(parent)
-    preview = RingTracer.Preview.for_job(opts[:preview], parent)
+    RingTracer.Preview.watch_job(preview, parent)
     result = await(spec, settings, capacity_cap, ref, opts)
     RingTracer.Preview.after_job(preview)
     result

@@ -148,18 +148,21 @@ defmodule RingTracer.Preview do
     do: GenServer.call(pid, {:watch, parent, progress})
 
   @doc false
-  # What `render/2`'s `:preview` option does once the job's parent runs:
-  # `{preview, owned?}`, or nil.
-  @spec for_job(term(), pid()) :: {t(), boolean()} | nil
-  def for_job(nil, _parent), do: nil
-  def for_job(false, _parent), do: nil
+  # What `render/2`'s `:preview` option does before the job's parent starts
+  # (`job`: its id; `nodes`: its other nodes): `{preview, owned?}`, or nil.
+  # Then `watch/2` once the parent runs.
+  @spec for_job(term(), reference(), [node()]) :: {t(), boolean()} | nil
+  def for_job(nil, _job, _nodes), do: nil
+  def for_job(false, _job, _nodes), do: nil
 
-  def for_job(%__MODULE__{} = preview, parent) do
-    _ = watch(preview, parent)
-    {preview, false}
+  def for_job(%__MODULE__{} = preview, job, nodes) do
+    case GenServer.call(preview.pid, {:expect, job, nodes}) do
+      :ok -> {preview, false}
+      {:error, _} -> nil
+    end
   end
 
-  def for_job(option, parent) do
+  def for_job(option, job, nodes) do
     opts =
       case option do
         true -> []
@@ -170,13 +173,22 @@ defmodule RingTracer.Preview do
     case start(opts) do
       {:ok, preview} ->
         IO.puts(:stderr, "preview: #{preview.url}")
-        _ = watch(preview, parent)
+        :ok = GenServer.call(preview.pid, {:expect, job, nodes})
         {preview, true}
 
       {:error, error} ->
         IO.puts(:stderr, "preview: #{error.message}")
         nil
     end
+  end
+
+  @doc false
+  @spec watch_job({t(), boolean()} | nil, pid()) :: :ok
+  def watch_job(nil, _parent), do: :ok
+
+  def watch_job({preview, _}, parent) do
+    _ = watch(preview, parent)
+    :ok
   end
 
   @doc false

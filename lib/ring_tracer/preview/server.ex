@@ -55,6 +55,8 @@ defmodule RingTracer.Preview.Server do
           handlers: [],
           waiters: MapSet.new(),
           viewers: %{},
+          expect: nil,
+          pending: [],
           drain: nil
         }
 
@@ -68,55 +70,63 @@ defmodule RingTracer.Preview.Server do
   @impl GenServer
   def handle_call(:address, _from, state), do: {:reply, {state.addr, state.port}, state}
 
+  def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,
+    do: {:reply, {:error, :already_watching}, state}
+
+  # Before the job's parent starts (render/2's :preview): the handlers are
+  # in place from the job's first event.
+  def handle_call({:expect, id, nodes}, _from, state),
+    do: {:reply, :ok, %{attach_all(state, id, nodes) | expect: id}}
+
   def handle_call({:watch, _parent, _progress}, _from, %{parent: p} = state) when p != nil,
     do: {:reply, {:error, :already_watching}, state}
 
   def handle_call({:watch, parent, progress}, _from, state) do
-    me = self()
-
-    local = [
-      {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
-      {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
-      {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, me},
-      {[:ring_tracer, :child, :event], &RingTracer.Preview.Relay.child_event/4, {me, nil}}
-    ]
-
-    handlers = Enum.map(local, fn spec -> attach(node(), spec) end)
+    state = if state.expect, do: state, else: attach_all(state, nil, [])
 
     case describe(parent, progress) do
-      {:ok, info} ->
+      {:ok, info} when state.expect in [nil, info.id] ->
         Process.monitor(parent)
+        # Opened on a running job: now its other nodes are known.
+        state =
+          if state.expect, do: state, else: attach_all(state, info.id, info.nodes -- [node()])
 
-        remote =
-          for n <- Enum.uniq(info.nodes), n != node() do
-            attach(
-              n,
-              {[:ring_tracer, :child, :event], &RingTracer.Preview.Relay.child_event/4,
-               {me, info.id}}
-            )
-          end
+        state = update(%{state | parent: parent, expect: info.id}, &Log.job(&1, info))
+        pending = Enum.reverse(state.pending)
+        state = Enum.reduce(pending, %{state | pending: []}, &apply_event(&2, &1))
+        {:reply, :ok, state}
 
-        state = %{state | parent: parent, handlers: handlers ++ remote}
-        {:reply, :ok, update(state, &Log.job(&1, info))}
+      {:ok, _other} ->
+        {:reply, {:error, :other_job}, state}
 
       other ->
-        detach(handlers)
+        state = if state.expect, do: state, else: detach_all(state)
         {:reply, other, state}
     end
   end
 
   @impl GenServer
-  def handle_info({:atom, job, a, child, pixels, rays, us, at}, %{log: %{job: job}} = state),
-    do: {:noreply, update(state, &Log.atom(&1, a, child, pixels, rays, us, at))}
+  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
+      when kind == :atom,
+      do: {:noreply, %{state | pending: [msg | state.pending]}}
 
-  def handle_info({:moved, job, from, to, n, at}, %{log: %{job: job}} = state),
-    do: {:noreply, update(state, &Log.move(&1, from, to, n, at))}
+  def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
+      when kind in [:moved, :child_event],
+      do: {:noreply, %{state | pending: [msg | state.pending]}}
 
-  def handle_info({:child_event, job, kind, from, to, at}, %{log: %{job: job}} = state),
-    do: {:noreply, update(state, &Log.event(&1, kind, from, to, at))}
+  def handle_info({:job_stop, job, _} = msg, %{log: %{job: nil}, expect: job} = state),
+    do: {:noreply, %{state | pending: [msg | state.pending]}}
 
-  def handle_info({:job_stop, job, reply}, %{log: %{job: job}} = state),
-    do: {:noreply, update(state, &Log.final(&1, reply))}
+  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
+      when kind == :atom,
+      do: {:noreply, apply_event(state, msg)}
+
+  def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: job}} = state)
+      when kind in [:moved, :child_event],
+      do: {:noreply, apply_event(state, msg)}
+
+  def handle_info({:job_stop, job, _} = msg, %{log: %{job: job}} = state),
+    do: {:noreply, apply_event(state, msg)}
 
   def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state),
     do: {:noreply, update(state, &Log.gone(&1, reason))}
@@ -179,6 +189,51 @@ defmodule RingTracer.Preview.Server do
           do: port
 
     port
+  end
+
+  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),
+    do: update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
+
+  defp apply_event(state, {:moved, _job, from, to, n, at}),
+    do: update(state, &Log.move(&1, from, to, n, at))
+
+  defp apply_event(state, {:child_event, _job, kind, from, to, at}),
+    do: update(state, &Log.event(&1, kind, from, to, at))
+
+  defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
+
+  # The parent's events (this node), and children's on `nodes` (filtered
+  # there by job, when known).
+  defp attach_all(state, job, nodes) do
+    me = self()
+
+    parent =
+      if state.handlers == [] do
+        [
+          {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
+          {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
+          {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, me}
+        ]
+        |> Enum.map(&attach(node(), &1))
+      else
+        []
+      end
+
+    children =
+      for n <- Enum.uniq([node() | nodes]),
+          not Enum.any?(state.handlers, &match?({^n, {_, _, [:ring_tracer, :child, :event]}}, &1)) do
+        attach(
+          n,
+          {[:ring_tracer, :child, :event], &RingTracer.Preview.Relay.child_event/4, {me, job}}
+        )
+      end
+
+    %{state | handlers: state.handlers ++ Enum.reject(parent ++ children, &is_nil/1)}
+  end
+
+  defp detach_all(state) do
+    detach(state.handlers)
+    %{state | handlers: []}
   end
 
   defp update(state, fun) do

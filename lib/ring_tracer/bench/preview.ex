@@ -1,0 +1,135 @@
+defmodule RingTracer.Bench.Preview do
+  @moduledoc """
+  What watching costs: a render's makespan with a live preview and one
+  browser-like viewer reading its event stream (`viewer/2`, an SSE client
+  on `:httpc`), against the same render without a preview; runs alternate,
+  and the row gives the medians and their ratio (the target is at most
+  1.03).
+
+      bin/ringtracer mix run -e 'RingTracer.Bench.Preview.run()'
+
+  Options: `:scene` (default `priv/scenes/balls_s1.nff`), `:width`,
+  `:height` (320 x 240), `:children` (schedulers online), `:atoms` (16 per
+  child), `:runs` (7 of each).
+  """
+
+  @doc "Runs the benchmark, prints its row and returns the figures."
+  @spec run(keyword()) :: map()
+  def run(opts \\ []) do
+    {:ok, _} = Application.ensure_all_started(:ring_tracer)
+    {:ok, _} = Application.ensure_all_started(:inets)
+    scene = Keyword.get(opts, :scene, "priv/scenes/balls_s1.nff")
+    runs = Keyword.get(opts, :runs, 7)
+
+    render_opts = [
+      width: Keyword.get(opts, :width, 320),
+      height: Keyword.get(opts, :height, 240),
+      children: Keyword.get(opts, :children, System.schedulers_online()),
+      atoms: Keyword.get(opts, :atoms, 16)
+    ]
+
+    # One of each first, not counted: caches, the kernel, inets warm.
+    _ = plain(scene, render_opts)
+    _ = watched(scene, render_opts)
+
+    {without, with} =
+      Enum.reduce(1..runs, {[], []}, fn _, {a, b} ->
+        {[plain(scene, render_opts) | a], [watched(scene, render_opts) | b]}
+      end)
+
+    row = %{
+      runs: runs,
+      without_ms: median(without) / 1000,
+      with_ms: median(with) / 1000,
+      ratio: median(with) / median(without)
+    }
+
+    IO.puts(
+      "preview: #{Keyword.get(render_opts, :width)}x#{Keyword.get(render_opts, :height)}, " <>
+        "#{render_opts[:children]} children x #{render_opts[:atoms]} atoms, #{runs} runs each: " <>
+        "makespan median #{Float.round(row.without_ms, 1)} ms without, " <>
+        "#{Float.round(row.with_ms, 1)} ms with a preview and one viewer " <>
+        "(#{Float.round(row.ratio, 3)}x)"
+    )
+
+    row
+  end
+
+  defp plain(scene, opts) do
+    {:ok, r} = RingTracer.render(scene, opts)
+    r.elapsed_us
+  end
+
+  defp watched(scene, opts) do
+    {:ok, preview} = RingTracer.Preview.start()
+    me = self()
+    viewer = spawn_link(fn -> send(me, {:viewed, self(), viewer(preview.url <> "events")}) end)
+    {:ok, r} = RingTracer.render(scene, Keyword.put(opts, :preview, preview))
+
+    receive do
+      {:viewed, ^viewer, {:ok, frames}} when frames > 0 -> :ok
+    after
+      30_000 -> raise "the viewer did not see the job's end"
+    end
+
+    RingTracer.Preview.stop(preview)
+    r.elapsed_us
+  end
+
+  @doc """
+  Reads the Server-Sent Events stream at `url` (a preview's `/events`) until
+  its `end` frame, as a browser would; returns `{:ok, frames_seen}` or
+  `{:error, reason}`. `timeout` bounds the wait for each piece.
+  """
+  @spec viewer(String.t(), timeout()) :: {:ok, non_neg_integer()} | {:error, term()}
+  def viewer(url, timeout \\ 30_000) do
+    {:ok, ref} =
+      :httpc.request(:get, {String.to_charlist(url), []}, [], sync: false, stream: :self)
+
+    read(ref, "", 0, timeout)
+  end
+
+  defp read(ref, buffer, frames, timeout) do
+    receive do
+      {:http, {^ref, :stream_start, _headers}} ->
+        read(ref, buffer, frames, timeout)
+
+      {:http, {^ref, :stream, data}} ->
+        {complete, rest} = split(buffer <> data)
+        frames = frames + length(complete)
+
+        if Enum.any?(complete, &String.contains?(&1, "event: end\n")) do
+          :httpc.cancel_request(ref)
+          {:ok, frames}
+        else
+          read(ref, rest, frames, timeout)
+        end
+
+      {:http, {^ref, :stream_end, _}} ->
+        {:error, :ended_early}
+
+      {:http, {^ref, {:error, reason}}} ->
+        {:error, reason}
+    after
+      timeout ->
+        :httpc.cancel_request(ref)
+        {:error, :timeout}
+    end
+  end
+
+  # SSE frames end with a blank line; comments (": keep-alive") are not frames.
+  defp split(text) do
+    parts = String.split(text, "\n\n")
+    {complete, [rest]} = Enum.split(parts, -1)
+    {Enum.reject(complete, &String.starts_with?(&1, ":")), rest}
+  end
+
+  defp median(list) do
+    sorted = Enum.sort(list)
+    n = length(sorted)
+
+    if rem(n, 2) == 1,
+      do: Enum.at(sorted, div(n, 2)),
+      else: (Enum.at(sorted, div(n, 2) - 1) + Enum.at(sorted, div(n, 2))) / 2
+  end
+end
