@@ -65,6 +65,7 @@ defmodule RingTracer.Preview.HTTP do
   end
 
   defp stream(m, server, table) do
+    Process.flag(:priority, :low)
     ref = Process.monitor(server)
     send(server, {:viewer, self()})
 

@@ -108,14 +108,26 @@ defmodule RingTracer.Preview.Log do
     if MapSet.member?(log.atoms, a) do
       log
     else
-      data = %{
-        a: a,
-        c: child,
-        at: if(at, do: at - log.t0, else: nil),
-        tus: trace_us,
-        rays: rays,
-        px: Base.encode64(RingTracer.Image.srgb8(pixels))
-      }
+      # Built by hand: the pixels are base64 already, so no JSON encoder
+      # needs to scan the longest part of the frame.
+      at = if at, do: Integer.to_string(at - log.t0), else: "null"
+
+      data =
+        IO.iodata_to_binary([
+          ~s({"a":),
+          Integer.to_string(a),
+          ~s(,"c":),
+          Integer.to_string(child),
+          ~s(,"at":),
+          at,
+          ~s(,"tus":),
+          Integer.to_string(trace_us),
+          ~s(,"rays":),
+          Integer.to_string(rays),
+          ~s(,"px":"),
+          Base.encode64(RingTracer.Image.srgb8(pixels)),
+          ~s("})
+        ])
 
       append(%{log | atoms: MapSet.put(log.atoms, a)}, "atom", data)
     end
@@ -200,8 +212,8 @@ defmodule RingTracer.Preview.Log do
   defp append(log, name, data) do
     seq = log.seq + 1
 
-    frame =
-      IO.iodata_to_binary(["event: ", name, "\ndata: ", :jiffy.encode(data, [:use_nil]), "\n\n"])
+    json = if is_binary(data), do: data, else: :jiffy.encode(data, [:use_nil])
+    frame = IO.iodata_to_binary(["event: ", name, "\ndata: ", json, "\n\n"])
 
     %{log | seq: seq, frames: [{seq, frame} | log.frames]}
   end

@@ -25,6 +25,9 @@ defmodule RingTracer.Preview.Server do
   def init(opts) do
     Process.flag(:trap_exit, true)
     Process.flag(:message_queue_data, :off_heap)
+    # The job's processes come first on a scheduler: the preview runs when
+    # they wait.
+    Process.flag(:priority, :low)
     table = :ets.new(__MODULE__, [:ordered_set, :protected, read_concurrency: true])
     addr = Keyword.get(opts, :listen, {127, 0, 0, 1})
 

@@ -200,7 +200,9 @@ defmodule RingTracer.Preview.HTTPTest do
       err =
         capture_io(:stderr, fn ->
           capture_io(fn ->
-            argv = [@scene, "-o", out, "-w", "16", "--children", "2", "--progress", "none"] ++ args
+            argv =
+              [@scene, "-o", out, "-w", "16", "--children", "2", "--progress", "none"] ++ args
+
             assert :ok = RingTracer.CLI.Render.execute(argv)
           end)
         end)
