@@ -214,6 +214,7 @@ defmodule RingTracer.Options do
           {:port, p} -> is_integer(p) and p in 0..65_535
           {:listen, a} -> match?({:ok, _}, RingTracer.Preview.address(a))
           {:max_viewers, m} -> is_integer(m) and m > 0
+          {:cpu_share, c} -> is_number(c) and c > 0 and c <= 1
           _ -> false
         end)
 
@@ -223,7 +224,8 @@ defmodule RingTracer.Options do
   defp check(:preview, _),
     do:
       {:error,
-       "true, a port (0 for a free one), [port: p, listen: address, max_viewers: n] " <>
+       "true, a port (0 for a free one), [port: p, listen: address, max_viewers: n, " <>
+         "cpu_share: 0.01] " <>
          "or a RingTracer.Preview"}
 
   defp check(:pid, v) when is_pid(v), do: :ok

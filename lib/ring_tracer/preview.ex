@@ -51,7 +51,9 @@ defmodule RingTracer.Preview do
 
   Options: `:port` (default 0: a free one), `:listen` (an address, as a
   tuple or a string, default `{127, 0, 0, 1}`), `:max_viewers` (browsers at
-  once, default 32).
+  once, default 32), `:cpu_share` (the most of one core the preview spends
+  on atoms while the job runs, default 0.01: on a render too light for
+  that, the page lags and catches up when the job ends).
   """
   @spec start(keyword()) :: {:ok, t()} | {:error, RingTracer.Error.t()}
   def start(opts \\ []) do

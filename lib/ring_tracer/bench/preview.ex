@@ -9,8 +9,9 @@ defmodule RingTracer.Bench.Preview do
       bin/ringtracer mix run -e 'RingTracer.Bench.Preview.run()'
 
   Options: `:scene` (default `priv/scenes/balls_s1.nff`), `:width`,
-  `:height` (320 x 240), `:children` (schedulers online), `:atoms` (16 per
-  child), `:runs` (7 of each).
+  `:height` (512 x 512, the scene's own), `:children` (schedulers online), `:atoms` (16 per
+  child), `:runs` (9 of each), and `:samples`, `:depth`, `:speeds`,
+  `:strategy` as for `RingTracer.render/2`.
   """
 
   @doc "Runs the benchmark, prints its row and returns the figures."
@@ -19,14 +20,15 @@ defmodule RingTracer.Bench.Preview do
     {:ok, _} = Application.ensure_all_started(:ring_tracer)
     {:ok, _} = Application.ensure_all_started(:inets)
     scene = Keyword.get(opts, :scene, "priv/scenes/balls_s1.nff")
-    runs = Keyword.get(opts, :runs, 7)
+    runs = Keyword.get(opts, :runs, 9)
 
-    render_opts = [
-      width: Keyword.get(opts, :width, 320),
-      height: Keyword.get(opts, :height, 240),
-      children: Keyword.get(opts, :children, System.schedulers_online()),
-      atoms: Keyword.get(opts, :atoms, 16)
-    ]
+    render_opts =
+      [
+        width: Keyword.get(opts, :width, 512),
+        height: Keyword.get(opts, :height, 512),
+        children: Keyword.get(opts, :children, System.schedulers_online()),
+        atoms: Keyword.get(opts, :atoms, 16)
+      ] ++ Keyword.take(opts, [:samples, :depth, :speeds, :strategy])
 
     # One of each first, not counted: caches, the kernel, inets warm.
     _ = plain(scene, render_opts)

@@ -19,7 +19,12 @@ defmodule RingTracer.Preview.Relay do
     do: send(server, {:moved, md.job, md.from, md.to, m.atoms, System.system_time(:microsecond)})
 
   @doc false
-  def job_stop(_event, _m, md, server), do: send(server, {:job_stop, md.job, md.reply})
+  # Also raises the flag that ends the preview's pacing at once (its
+  # message may queue behind atoms).
+  def job_stop(_event, _m, md, {server, ended}) do
+    :atomics.put(ended, 1, 1)
+    send(server, {:job_stop, md.job, md.reply})
+  end
 
   # On a child's node: only that job's events cross the network.
   @doc false

@@ -59,6 +59,8 @@ defmodule RingTracer.Preview.Server do
           waiters: MapSet.new(),
           viewers: %{},
           expect: nil,
+          ended: :atomics.new(1, []),
+          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
           pending: [],
           drain: nil
         }
@@ -194,8 +196,11 @@ defmodule RingTracer.Preview.Server do
     port
   end
 
-  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),
-    do: update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
+  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}) do
+    t = System.monotonic_time(:microsecond)
+    state = update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
+    pace(state, System.monotonic_time(:microsecond) - t)
+  end
 
   defp apply_event(state, {:moved, _job, from, to, n, at}),
     do: update(state, &Log.move(&1, from, to, n, at))
@@ -204,6 +209,27 @@ defmodule RingTracer.Preview.Server do
     do: update(state, &Log.event(&1, kind, from, to, at))
 
   defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
+
+  # While the job runs, the preview spends at most `cpu_share` of one core
+  # on atoms (their pixels to sRGB and base64, and so what viewers send):
+  # after each atom it waits in proportion, in slices, until the job ends.
+  # On a render too light for that, the page lags and catches up at the end.
+  defp pace(state, work_us) do
+    wait_ms = work_us * (1 - state.cpu_share) / state.cpu_share / 1000
+    wait(state.ended, round(wait_ms))
+    state
+  end
+
+  defp wait(_ended, ms) when ms <= 0, do: :ok
+
+  defp wait(ended, ms) do
+    if :atomics.get(ended, 1) == 0 do
+      Process.sleep(min(ms, 20))
+      wait(ended, ms - 20)
+    else
+      :ok
+    end
+  end
 
   # The parent's events (this node), and children's on `nodes` (filtered
   # there by job, when known).
@@ -215,7 +241,7 @@ defmodule RingTracer.Preview.Server do
         [
           {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
           {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
-          {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, me}
+          {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, {me, state.ended}}
         ]
         |> Enum.map(&attach(node(), &1))
       else
