@@ -86,6 +86,10 @@ defmodule RingTracer.Preview do
     end
   end
 
+  @doc "How many browsers are reading the job's stream now."
+  @spec viewers(t()) :: non_neg_integer()
+  def viewers(%__MODULE__{pid: pid}), do: GenServer.call(pid, :viewers)
+
   @doc "The page's address."
   @spec url(t()) :: String.t()
   def url(%__MODULE__{url: url}), do: url

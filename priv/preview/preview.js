@@ -136,7 +136,7 @@
 
   function drawLanes() {
     const n = job.children, W = Math.max(200, $('lanes').clientWidth - 222), H = Math.ceil(n * laneH);
-    if (lanes.width !== W || lanes.height !== H) { lanes.width = W; lanes.height = H; lanes.style.height = H + 'px'; }
+    if (lanes.width !== W || lanes.height !== H) { lanes.width = W; lanes.height = H; lanes.style.width = W + 'px'; lanes.style.height = H + 'px'; }
     lctx.clearRect(0, 0, W, H);
     const bars = s.final ? s.final.atoms.map((r) => ({ c: r.child, a: r.atom, start: r.start_us, end: r.end_us })) : s.bars;
     const marks = s.final ? s.final.events.map((e) => ({ kind: e.kind, from: e.from, to: e.to, at: e.at_us })) : s.marks;

@@ -66,6 +66,8 @@ defmodule RingTracer.Bench.Preview do
     {:ok, preview} = RingTracer.Preview.start()
     me = self()
     viewer = spawn_link(fn -> send(me, {:viewed, self(), viewer(preview.url <> "events")}) end)
+    # The browser is there when the job starts (its connecting is not the job's).
+    connected(preview, 500)
     {:ok, r} = RingTracer.render(scene, Keyword.put(opts, :preview, preview))
 
     receive do
@@ -124,6 +126,15 @@ defmodule RingTracer.Bench.Preview do
     parts = String.split(text, "\n\n")
     {complete, [rest]} = Enum.split(parts, -1)
     {Enum.reject(complete, &String.starts_with?(&1, ":")), rest}
+  end
+
+  defp connected(_preview, 0), do: raise("the viewer did not connect")
+
+  defp connected(preview, tries) do
+    if RingTracer.Preview.viewers(preview) == 0 do
+      Process.sleep(2)
+      connected(preview, tries - 1)
+    end
   end
 
   defp median(list) do

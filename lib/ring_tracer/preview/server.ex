@@ -74,6 +74,7 @@ defmodule RingTracer.Preview.Server do
 
   @impl GenServer
   def handle_call(:address, _from, state), do: {:reply, {state.addr, state.port}, state}
+  def handle_call(:viewers, _from, state), do: {:reply, map_size(state.viewers), state}
 
   def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,
     do: {:reply, {:error, :already_watching}, state}

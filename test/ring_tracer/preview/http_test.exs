@@ -74,7 +74,7 @@ defmodule RingTracer.Preview.HTTPTest do
     url = p.url <> "events"
     for i <- 1..2, do: spawn_link(fn -> send(me, {:viewer, i, Viewer.viewer(url)}) end)
     # The viewers are connected before the job starts.
-    assert RingTracer.Test.Wait.eventually(fn -> map_size(:sys.get_state(p.pid).viewers) == 2 end)
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 2 end)
 
     {:ok, result} =
       RingTracer.render(@scene, width: 24, height: 16, children: 3, atoms: 4, preview: p)
