@@ -40,7 +40,7 @@
       div.style.lineHeight = laneH + 'px';
       div.style.borderLeftColor = d.palette[i];
       div.style.fontSize = laneH >= 10 ? '11px' : '0';
-      div.textContent = 'child ' + i + ' · ' + d.nodes[i] + (d.speeds[i] !== 1 ? ' · ×' + d.speeds[i] + ' slower' : '');
+      div.textContent = 'child ' + i + ' · ' + d.nodes[i] + (d.speeds[i] !== 1 ? ' · ×' + d.speeds[i] : '');
       div.title = div.textContent;
       labels.appendChild(div);
     }

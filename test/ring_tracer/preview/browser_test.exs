@@ -46,17 +46,16 @@ defmodule RingTracer.Preview.BrowserTest do
 
   defp run(chromium, dir) do
     {:ok, preview} = RingTracer.Preview.start()
-    me = self()
-
-    :ok =
-      RingTracer.Telemetry.attach(
-        :browser_test,
-        [:ring_tracer, :atom, :stop],
-        fn _, _, md, _ -> send(me, {:done, md.done, md.total}) end,
-        nil
-      )
 
     try do
+      # One browser, on the page before the job starts, until its end.
+      cdp = CDP.start(chromium, preview.url, Path.join(dir, "profile"))
+
+      assert RingTracer.Test.Wait.eventually(
+               fn -> RingTracer.Preview.viewers(preview) == 1 end,
+               3000
+             )
+
       job =
         Task.async(fn ->
           RingTracer.render("priv/scenes/balls_s1.nff",
@@ -64,18 +63,22 @@ defmodule RingTracer.Preview.BrowserTest do
             height: 240,
             children: @children,
             atoms: 8,
-            speeds: [100, 200, 100],
+            speeds: [600, 800, 600],
             preview: preview
           )
         end)
 
-      # One browser from the start of the job to its end.
-      cdp = CDP.start(chromium, preview.url, Path.join(dir, "profile"))
-
-      # Part-way: some atoms on the canvas, not all.
+      # Part-way: a third of the atoms or more on the canvas, not all.
       total = @children * 8
-      wait_for_done(div(total, 3))
-      cdp = CDP.await(cdp, "document.body.dataset.state === 'running'")
+
+      cdp =
+        CDP.await(
+          cdp,
+          "document.body.dataset.state === 'running' && " <>
+            "+document.getElementById('atoms').textContent.split(' / ')[0] >= #{div(total, 3)}",
+          180_000
+        )
+
       {partway, cdp} = CDP.screenshot(cdp)
       {shown, cdp} = CDP.eval(cdp, "document.getElementById('atoms').textContent")
       [done_then, ^total] = shown |> String.split(" / ") |> Enum.map(&String.to_integer/1)
@@ -83,6 +86,8 @@ defmodule RingTracer.Preview.BrowserTest do
 
       {:ok, result} = Task.await(job, 200_000)
       cdp = CDP.await(cdp, "document.body.dataset.state === 'done'")
+      # The final screenshot with the atom outlines on (they do not touch the image's canvas).
+      {_, cdp} = CDP.eval(cdp, "document.getElementById('outlines').click()")
       {final, cdp} = CDP.screenshot(cdp)
       {data_url, cdp} = CDP.eval(cdp, "document.getElementById('result').textContent")
 
@@ -113,19 +118,9 @@ defmodule RingTracer.Preview.BrowserTest do
       for {label, i} <- Enum.with_index(lanes),
           do: assert(label =~ "child #{i} · #{node()}")
     after
-      RingTracer.Telemetry.detach(:browser_test)
       RingTracer.Preview.stop(preview)
     end
   end
 
   defp rgb(rgba), do: for(<<r, g, b, _a <- rgba>>, into: <<>>, do: <<r, g, b>>)
-
-  defp wait_for_done(n) do
-    receive do
-      {:done, done, _total} when done >= n -> :ok
-      {:done, _, _} -> wait_for_done(n)
-    after
-      60_000 -> flunk("the render did not reach #{n} atoms")
-    end
-  end
 end
