@@ -47,7 +47,8 @@ defmodule RingTracer.Preview do
   @type t :: %__MODULE__{pid: pid(), url: String.t(), port: :inet.port_number()}
 
   @doc """
-  Starts a preview server, not yet watching a job.
+  Starts a preview server, not yet watching a job (it watches one job, the
+  first it is given).
 
   Options: `:port` (default 0: a free one), `:listen` (an address, as a
   tuple or a string, default `{127, 0, 0, 1}`), `:max_viewers` (browsers at
@@ -178,6 +179,8 @@ defmodule RingTracer.Preview do
 
     case start(opts) do
       {:ok, preview} ->
+        # Gone with the render, however it ends (a :timeout kills it).
+        send(preview.pid, {:owner, self()})
         IO.puts(:stderr, "preview: #{preview.url}")
         :ok = GenServer.call(preview.pid, {:expect, job, nodes})
         {preview, true}

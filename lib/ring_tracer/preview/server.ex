@@ -146,6 +146,14 @@ defmodule RingTracer.Preview.Server do
     end
   end
 
+  def handle_info({:owner, pid}, state) do
+    Process.monitor(pid)
+    {:noreply, Map.put(state, :owner, pid)}
+  end
+
+  def handle_info({:DOWN, _, :process, pid, _}, %{owner: pid} = state),
+    do: {:stop, :normal, state}
+
   def handle_info({:viewer, pid}, state),
     do: {:noreply, %{state | viewers: Map.put(state.viewers, pid, Process.monitor(pid))}}
 

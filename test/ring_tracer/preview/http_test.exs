@@ -216,6 +216,31 @@ defmodule RingTracer.Preview.HTTPTest do
     assert message =~ "--preview takes an integer from 0 to 65535"
   end
 
+  test "a preview render/2 started goes with it when the render times out" do
+    err =
+      capture_io(:stderr, fn ->
+        assert {:error, %RingTracer.Error{reason: :timeout}} =
+                 RingTracer.render("priv/scenes/balls_s1.nff",
+                   width: 96,
+                   height: 72,
+                   children: 2,
+                   atoms: 8,
+                   speeds: [1000, 1000],
+                   timeout: 200,
+                   preview: true
+                 )
+      end)
+
+    [_, port] = Regex.run(~r{preview: http://127\.0\.0\.1:(\d+)/}, err)
+
+    assert RingTracer.Test.Wait.eventually(fn ->
+             match?(
+               {:error, _},
+               :gen_tcp.connect({127, 0, 0, 1}, String.to_integer(port), [], 500)
+             )
+           end)
+  end
+
   test "the :preview option is checked" do
     for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1]] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =
