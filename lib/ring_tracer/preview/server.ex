@@ -11,7 +11,10 @@ defmodule RingTracer.Preview.Server do
   each child's node) and from the parent's description of the job
   (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
   before the preview opened. A handler only sends this process a message:
-  the job never waits for the preview, nor for any viewer.
+  the job never waits for the preview, nor for any viewer. While the job
+  runs, the server spends at most `:cpu_share` of one core on atoms (0.01
+  by default: after an atom's work it waits 99 times as long, until the job
+  ends), and it and the viewers run at low process priority.
   """
   use GenServer
 
