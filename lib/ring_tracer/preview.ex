@@ -212,21 +212,21 @@ defmodule RingTracer.Preview do
       {:ok, {0, 0, 0, 0}}
       iex> {:error, %RingTracer.Error{}} = RingTracer.Preview.address("nowhere")
   """
-  @spec address(:inet.ip_address() | String.t()) ::
+  @spec address(term()) ::
           {:ok, :inet.ip_address()} | {:error, RingTracer.Error.t()}
   def address(addr) when is_tuple(addr) and tuple_size(addr) in [4, 8], do: {:ok, addr}
 
   def address(text) when is_binary(text) do
     case :inet.parse_address(String.to_charlist(text)) do
       {:ok, addr} -> {:ok, addr}
-      {:error, _} -> address({:bad, text})
+      {:error, _} -> not_an_address(text)
     end
   end
 
-  def address({:bad, text}),
-    do: {:error, RingTracer.Error.new(:invalid_option, "not an IP address: #{text}")}
+  def address(other), do: not_an_address(inspect(other))
 
-  def address(other), do: address({:bad, inspect(other)})
+  defp not_an_address(text),
+    do: {:error, RingTracer.Error.new(:invalid_option, "not an IP address: #{text}")}
 
   defp host(addr) when tuple_size(addr) == 8, do: "[#{:inet.ntoa(addr)}]"
   defp host(addr), do: to_string(:inet.ntoa(addr))
