@@ -43,7 +43,10 @@ defmodule RingTracer.Bench.Preview do
       runs: runs,
       without_ms: median(without) / 1000,
       with_ms: median(with) / 1000,
-      ratio: median(with) / median(without)
+      ratio: median(with) / median(without),
+      # Each watched run against the plain run just before it: the pair
+      # shares the machine's load of the moment (it is shared here).
+      pair_ratio: median(Enum.zip_with(with, without, &(&1 / &2)))
     }
 
     IO.puts(
@@ -51,7 +54,7 @@ defmodule RingTracer.Bench.Preview do
         "#{render_opts[:children]} children x #{render_opts[:atoms]} atoms, #{runs} runs each: " <>
         "makespan median #{Float.round(row.without_ms, 1)} ms without, " <>
         "#{Float.round(row.with_ms, 1)} ms with a preview and one viewer " <>
-        "(#{Float.round(row.ratio, 3)}x)"
+        "(#{Float.round(row.ratio, 3)}x; median of the pairs' ratios #{Float.round(row.pair_ratio, 3)}x)"
     )
 
     row
