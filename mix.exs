@@ -19,7 +19,9 @@ defmodule RingTracer.MixProject do
       elixirc_paths: elixirc_paths(Mix.env()),
       test_coverage: [summary: [threshold: 0]],
       dialyzer_ignore: [],
-      xref: [exclude: [:ssl]],
+      # :inets (the preview's HTTP server) is started by RingTracer.Preview, like
+      # :ssl by TLS, only when used.
+      xref: [exclude: [:ssl, :inets, :httpd, :httpd_util, :httpd_response, :httpc]],
       aliases: aliases()
     ]
   end

@@ -70,6 +70,10 @@ defmodule RingTracer do
       elsewhere (default 10_000; see `RingTracer.Cluster.Liveness`)
     * `:allow_dirs` — folders besides the scene's own that the scene may read
       referenced files from (default none; see `RingTracer.Scene.load/2`)
+    * `:preview` — a live page of the job in a browser (`RingTracer.Preview`):
+      `true` (a free port on 127.0.0.1), a port, `[port: p, listen: address]`,
+      each printing the page's address on stderr and stopping the page when
+      the job ends, or a preview started with `RingTracer.Preview.start/1`
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
   for a missing or invalid scene, a bad option, or a job that failed.
@@ -82,7 +86,7 @@ defmodule RingTracer do
   line, are returned in the result's `:warnings` (and `:warnings_omitted`
   past the first 100), as they are in `RingTracer.Scene.load/2`'s scene, so
   a caller can show them before rendering or after. This function prints
-  and logs nothing; `mix ring_tracer.render` prints them to stderr before
+  and logs nothing (but the address of a preview it starts); `mix ring_tracer.render` prints them to stderr before
   the render starts.
   """
   @spec render(Path.t() | Scene.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
@@ -353,9 +357,16 @@ defmodule RingTracer do
       progress: opts[:progress]
     }
 
+    preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])
     {:ok, parent} = Parent.start(spec)
     ref = Process.monitor(parent)
+    RingTracer.Preview.watch_job(preview, parent)
+    result = await(spec, settings, capacity_cap, ref, opts)
+    RingTracer.Preview.after_job(preview)
+    result
+  end
 
+  defp await(spec, settings, capacity_cap, ref, opts) do
     receive do
       {RingTracer, id, reply} when id == spec.id ->
         receive do
@@ -364,8 +375,8 @@ defmodule RingTracer do
 
         case reply do
           {:ok, raw} ->
-            {_, strategy_opts} = strategy
-            name = if is_atom(opts[:strategy]), do: opts[:strategy], else: elem(strategy, 0)
+            {module, strategy_opts} = spec.strategy
+            name = if is_atom(opts[:strategy]), do: opts[:strategy], else: module
             result = Result.new(settings, name, capacity_cap, raw)
             {:ok, %{result | aim: Keyword.get(strategy_opts, :aim, false)}}
 

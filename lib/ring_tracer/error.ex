@@ -18,6 +18,7 @@ defmodule RingTracer.Error do
   | `:node_unavailable` | a node given in `:nodes` cannot host children (the message says why) |
   | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |
   | `:distribution` | this node could not become distributed (name in use, epmd, TLS set-up) |
+  | `:preview` | a preview could not start (port in use) or its job is not running |
   """
   defexception [:reason, :message]
 

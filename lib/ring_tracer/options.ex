@@ -29,7 +29,8 @@ defmodule RingTracer.Options do
     children_per_node: {:pos_integer, nil},
     local: {:boolean, true},
     allow_dirs: {:paths, []},
-    liveness: {:pos_integer, RingTracer.Cluster.Liveness.default_timeout()}
+    liveness: {:pos_integer, RingTracer.Cluster.Liveness.default_timeout()},
+    preview: {:preview, nil}
   ]
 
   # Documented maxima, checked before any work. Each has been run at full
@@ -209,6 +210,30 @@ defmodule RingTracer.Options do
   end
 
   defp check(:paths, _), do: {:error, "a list of folder paths (strings)"}
+  defp check(:preview, v) when is_boolean(v) or is_struct(v, RingTracer.Preview), do: :ok
+  defp check(:preview, v) when is_integer(v) and v in 0..65_535, do: :ok
+
+  defp check(:preview, v) when is_list(v) do
+    ok? =
+      Keyword.keyword?(v) and
+        Enum.all?(v, fn
+          {:port, p} -> is_integer(p) and p in 0..65_535
+          {:listen, a} -> match?({:ok, _}, RingTracer.Preview.address(a))
+          {:max_viewers, m} -> is_integer(m) and m > 0
+          {:cpu_share, c} -> is_number(c) and c > 0 and c <= 1
+          _ -> false
+        end)
+
+    if ok?, do: :ok, else: check(:preview, :bad)
+  end
+
+  defp check(:preview, _),
+    do:
+      {:error,
+       "true, a port (0 for a free one), [port: p, listen: address, max_viewers: n, " <>
+         "cpu_share: 0.01] " <>
+         "or a RingTracer.Preview"}
+
   defp check(:pid, v) when is_pid(v), do: :ok
   defp check(:pid, _), do: {:error, "a pid"}
 

@@ -74,6 +74,18 @@ defmodule RingTracer.Telemetry do
     :ok
   end
 
+  @doc false
+  # A child's protocol event (`RingTracer.Job.Child.event/3`).
+  @spec child_event(reference(), atom(), non_neg_integer(), term(), integer()) :: :ok
+  def child_event(job, kind, from, to, at),
+    do:
+      execute([:ring_tracer, :child, :event], %{at_us: at}, %{
+        job: job,
+        kind: kind,
+        from: from,
+        to: to
+      })
+
   @impl GenServer
   def init([]) do
     :ets.new(@table, [:named_table, :bag, :protected, read_concurrency: true])

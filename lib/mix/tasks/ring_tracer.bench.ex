@@ -9,7 +9,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
     {"startup", RingTracer.Bench.Startup},
     {"limits", RingTracer.Bench.Limits},
     {"rays", RingTracer.Bench.Rays},
-    {"network", RingTracer.Bench.Network}
+    {"network", RingTracer.Bench.Network},
+    {"preview", RingTracer.Bench.Preview}
   ]
 
   @moduledoc """

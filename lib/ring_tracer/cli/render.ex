@@ -36,7 +36,8 @@ defmodule RingTracer.CLI.Render do
     allow_dir: :keep,
     quiet: :boolean,
     progress: :string,
-    region: :string
+    region: :string,
+    preview: :integer
   ]
   @switches @render_switches ++ RingTracer.CLI.Worker.switches()
   @aliases [o: :out, q: :quiet, w: :width]
@@ -49,7 +50,8 @@ defmodule RingTracer.CLI.Render do
     height: 1..16_384,
     depth: 1..64,
     samples: 1..16,
-    children_per_node: 1..@max.children
+    children_per_node: 1..@max.children,
+    preview: 0..65_535
   ]
   @accepted Map.merge(
               Map.new(@ranges, fn {k, a..b//1} -> {k, "an integer from #{a} to #{b}"} end),
@@ -115,6 +117,8 @@ defmodule RingTracer.CLI.Render do
           --ownership FILE    the image tinted by the child that traced each atom, .png
       -q, --quiet             print nothing but errors
           --progress MODE     bar (a terminal's default), log (a line every 5 s), none
+          --preview [PORT]    a live page of the render at the address printed (a free
+                              port on 127.0.0.1 unless given; --listen ADDR widens it)
 
     Cluster (start workers with `ringtracer worker`):
           --nodes a@host,...  also place children on these nodes, round robin
@@ -162,7 +166,7 @@ defmodule RingTracer.CLI.Render do
   """
   @spec execute([String.t()], boolean()) :: :ok | {:error, pos_integer(), String.t()}
   def execute(argv, signals? \\ false) do
-    case Args.parse(argv, @switches, @accepted, @aliases) do
+    case Args.parse(preview_port(argv), @switches, @accepted, @aliases) do
       :help ->
         IO.write(help())
         :ok
@@ -184,6 +188,18 @@ defmodule RingTracer.CLI.Render do
         usage("one scene at a time, got: #{Enum.join(extra, " ")}")
     end
   end
+
+  # `--preview` takes an optional port: alone, it means a free one (0).
+  defp preview_port(["--preview", next | rest]) do
+    case Integer.parse(next) do
+      {_, ""} -> ["--preview", next | preview_port(rest)]
+      _ -> ["--preview=0" | preview_port([next | rest])]
+    end
+  end
+
+  defp preview_port(["--preview"]), do: ["--preview=0"]
+  defp preview_port([arg | rest]), do: [arg | preview_port(rest)]
+  defp preview_port([]), do: []
 
   defp usage(message), do: {:error, 2, message}
   defp failed(message), do: {:error, 1, message}
@@ -293,14 +309,22 @@ defmodule RingTracer.CLI.Render do
         :ownership,
         :allow_dir,
         :quiet,
-        :progress | @distribution
+        :progress,
+        :preview | @distribution
       ])
 
     with {:ok, o} <- choice(base, :strategy, RingTracer.Strategies.names()),
          {:ok, o} <- choice(o, :layout, RingTracer.Layout.orders()),
          {:ok, o} <- speeds(o),
          {:ok, o} <- region(o) do
-      {:ok, nodes(o)}
+      {:ok, o |> nodes() |> preview(opts)}
+    end
+  end
+
+  defp preview(render_opts, opts) do
+    case opts[:preview] do
+      nil -> render_opts
+      port -> Keyword.put(render_opts, :preview, [port: port] ++ Keyword.take(opts, [:listen]))
     end
   end
 

@@ -158,6 +158,7 @@ defmodule RingTracer.Job.Child do
   # A protocol event (offer sent, passed, consumed...) for the timeline.
   defp event(state, kind, to) do
     at = job_time(state)
+    RingTracer.Telemetry.child_event(state.spec.id, kind, state.index, to, at)
     %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
   end
 

@@ -133,7 +133,16 @@ defmodule RingTracer.Job.Parent do
         {:handover, :parent, atoms}
       )
 
+    moved(state, :parent, index, atoms)
     %{state | ledger: Ledger.moved(state.ledger, :parent, index, atoms)}
+  end
+
+  defp moved(state, from, to, atoms) do
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :atoms, :moved],
+      %{atoms: length(atoms)},
+      %{job: state.spec.id, from: from, to: to}
+    )
   end
 
   # Runs `fun` in a process of the job's (for a strategy: the ring's work
@@ -169,6 +178,16 @@ defmodule RingTracer.Job.Parent do
 
   defp effect(state, {:hand_out, index, atoms}), do: hand_out(state, index, atoms)
   defp effect(state, {:helper, fun}), do: start_helper(state, fun)
+
+  @doc """
+  What a preview (`RingTracer.Preview`) needs of a running job: its id,
+  start time, layout, strategy, the node and speed of each child, and the
+  atoms traced so far (`results`: atom => pixels; `traced_by`: atom =>
+  child). With `progress` given, only a job that reports its progress to
+  that pid answers (`{:error, :other_job}` otherwise).
+  """
+  @spec describe(pid(), pid() | nil) :: {:ok, map()} | {:error, :other_job}
+  def describe(parent, progress \\ nil), do: GenServer.call(parent, {:describe, progress})
 
   @impl GenServer
   def init(%Spec{} = spec) do
@@ -298,6 +317,29 @@ defmodule RingTracer.Job.Parent do
   end
 
   @impl GenServer
+  def handle_call({:describe, progress}, _from, state) do
+    if progress == nil or progress == state.spec.progress do
+      n = state.spec.layout.children
+      speeds = List.to_tuple(state.spec.speeds)
+
+      {:reply,
+       {:ok,
+        %{
+          id: state.spec.id,
+          t0: state.t0,
+          layout: state.spec.layout,
+          strategy: state.spec.strategy,
+          nodes: placement(state.spec.nodes, n),
+          speeds: for(i <- 0..(n - 1), do: speed(speeds, i)),
+          results: state.results,
+          traced_by: state.traced_by
+        }}, state}
+    else
+      {:reply, {:error, :other_job}, state}
+    end
+  end
+
+  @impl GenServer
   def handle_info({:atom_done, _child, atom, _pixels, _rays, _us}, state)
       when is_map_key(state.results, atom) do
     # A second copy (an atom handed out again after a failure whose first
@@ -325,7 +367,7 @@ defmodule RingTracer.Job.Parent do
         }
 
         progress(state)
-        atom_event(state, child, atom, rays, us)
+        atom_event(state, child, atom, pixels, rays, us)
 
         cond do
           state.missing == 0 ->
@@ -366,6 +408,7 @@ defmodule RingTracer.Job.Parent do
       state = %{state | ledger: Ledger.moved(state.ledger, from, :nobody, atoms)}
       {:noreply, reassign(state, atoms)}
     else
+      moved(state, from, to, atoms)
       {:noreply, %{state | ledger: Ledger.moved(state.ledger, from, to, atoms)}}
     end
   end
@@ -498,13 +541,20 @@ defmodule RingTracer.Job.Parent do
     |> Enum.reject(&(elem(&1, 1) == []))
   end
 
-  defp atom_event(state, child, atom, rays, us) do
+  defp atom_event(state, child, atom, pixels, rays, us) do
     total = Layout.atom_count(state.spec.layout)
 
     RingTracer.Telemetry.execute(
       [:ring_tracer, :atom, :stop],
       %{rays: RingTracer.Rays.total(rays), trace_us: us},
-      %{job: state.spec.id, atom: atom, child: child, done: total - state.missing, total: total}
+      %{
+        job: state.spec.id,
+        atom: atom,
+        child: child,
+        done: total - state.missing,
+        total: total,
+        pixels: pixels
+      }
     )
   end
 
@@ -640,7 +690,7 @@ defmodule RingTracer.Job.Parent do
     RingTracer.Telemetry.execute(
       [:ring_tracer, :job, :stop],
       %{duration: System.convert_time_unit(now - state.started, :microsecond, :native)},
-      %{job: spec.id, outcome: elem(reply, 0)}
+      %{job: spec.id, outcome: elem(reply, 0), reply: reply}
     )
 
     send(spec.caller, {@reply_tag, spec.id, reply})

@@ -1,0 +1,153 @@
+defmodule RingTracer.Preview.HTTP do
+  @moduledoc """
+  The only module of a preview's `:httpd` server (so no directory listing,
+  no file serving by path, no CGI): it answers `GET` for the page's three
+  files, by fixed name from `priv/preview`, and `GET /events`, the job's
+  Server-Sent Events stream. Anything else is 404 (an unknown path) or 405
+  (a method other than GET).
+
+  `/events` streams the log of `RingTracer.Preview.Server` from its first
+  frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
+  up to 256 KB, at most one every #{40} ms, until the job's end frame. The
+  handler reads the log itself: a slow viewer lags without holding any
+  buffer, and a stalled one blocks only its own connection's process.
+  """
+
+  require Record
+
+  Record.defrecordp(:mod, Record.extract(:mod, from_lib: "inets/include/httpd.hrl"))
+
+  @files %{
+    "/" => {"index.html", ~c"text/html; charset=utf-8"},
+    "/index.html" => {"index.html", ~c"text/html; charset=utf-8"},
+    "/preview.js" => {"preview.js", ~c"text/javascript; charset=utf-8"},
+    "/preview.css" => {"preview.css", ~c"text/css; charset=utf-8"}
+  }
+  @chunk_bytes 256 * 1024
+  @interval_ms 40
+  @keep_alive_ms 10_000
+  @csp ~c"default-src 'self'; img-src 'self' data:; connect-src 'self'; frame-ancestors 'none'"
+
+  @doc "The folder of the page's files."
+  @spec root() :: String.t()
+  def root, do: Application.app_dir(:ring_tracer, "priv/preview")
+
+  @doc false
+  def unquote(:do)(m) do
+    path = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
+
+    cond do
+      mod(m, :method) != ~c"GET" ->
+        {:proceed, [{:response, {405, ~c"only GET"}}]}
+
+      path == "/events" ->
+        {server, table} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+        stream(m, server, table)
+
+      Map.has_key?(@files, path) ->
+        {name, type} = Map.fetch!(@files, path)
+        body = File.read!(Path.join(root(), name))
+
+        head = [
+          code: 200,
+          content_type: type,
+          content_length: Integer.to_charlist(byte_size(body)),
+          cache_control: ~c"no-store",
+          "x-content-type-options": ~c"nosniff",
+          "content-security-policy": @csp
+        ]
+
+        {:proceed, [{:response, {:response, head, body}}]}
+
+      true ->
+        {:proceed, [{:response, {404, ~c"not found"}}]}
+    end
+  end
+
+  defp stream(m, server, table) do
+    Process.flag(:priority, :low)
+    ref = Process.monitor(server)
+    send(server, {:viewer, self()})
+
+    headers =
+      [content_type: ~c"text/event-stream", cache_control: ~c"no-store"] ++
+        if mod(m, :http_version) == ~c"HTTP/1.1", do: [transfer_encoding: ~c"chunked"], else: []
+
+    :httpd_response.send_header(m, 200, headers)
+
+    if loop(m, server, table, ref, last_event_id(m)) == :ok,
+      do: :httpd_response.send_final_chunk(m, false)
+
+    send(server, {:viewer_done, self()})
+    Process.demonitor(ref, [:flush])
+    {:proceed, [{:response, {:already_sent, 200, 0}}]}
+  end
+
+  defp last_event_id(m) do
+    with {_, v} <- List.keyfind(mod(m, :parsed_header), ~c"last-event-id", 0),
+         {n, ""} <- Integer.parse(to_string(v)) do
+      n
+    else
+      _ -> 0
+    end
+  end
+
+  defp loop(m, server, table, ref, cursor) do
+    case read(table, cursor, [], 0) do
+      :gone ->
+        :closed
+
+      {[], _, _} ->
+        send(server, {:wait, self(), cursor})
+
+        receive do
+          :preview_more ->
+            loop(m, server, table, ref, cursor)
+
+          {:DOWN, ^ref, _, _, _} ->
+            :ok
+        after
+          @keep_alive_ms ->
+            with :ok <- deliver(m, ": keep-alive\n\n"), do: loop(m, server, table, ref, cursor)
+        end
+
+      {chunk, last, ended?} ->
+        with :ok <- deliver(m, chunk) do
+          if ended? do
+            :ok
+          else
+            Process.sleep(@interval_ms)
+            loop(m, server, table, ref, last)
+          end
+        end
+    end
+  end
+
+  # Frames after `cursor`, up to about @chunk_bytes: `{iodata, last, ended?}`.
+  defp read(table, cursor, acc, bytes) do
+    case :ets.next(table, cursor) do
+      :"$end_of_table" ->
+        {Enum.reverse(acc), cursor, false}
+
+      seq ->
+        [{^seq, frame, last?}] = :ets.lookup(table, seq)
+        acc = [["id: ", Integer.to_string(seq), "\n", frame] | acc]
+        bytes = bytes + byte_size(frame)
+
+        if last? or bytes >= @chunk_bytes,
+          do: {Enum.reverse(acc), seq, last?},
+          else: read(table, seq, acc, bytes)
+    end
+  rescue
+    ArgumentError -> :gone
+  end
+
+  defp deliver(m, data) do
+    case :httpd_response.send_chunk(m, IO.iodata_to_binary(data), false) do
+      :ok -> :ok
+      _ -> :closed
+    end
+  catch
+    _, _ -> :closed
+  end
+end

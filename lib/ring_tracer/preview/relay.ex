@@ -1,0 +1,35 @@
+defmodule RingTracer.Preview.Relay do
+  @moduledoc false
+  # `RingTracer.Telemetry` handlers of a preview (functions of a module, so
+  # that one can be attached on another node, where children run): each
+  # sends one message to the preview's server and returns. The server
+  # filters by job.
+
+  @doc false
+  def atom(_event, m, md, server),
+    do:
+      send(
+        server,
+        {:atom, md.job, md.atom, md.child, md.pixels, m.rays, m.trace_us,
+         System.system_time(:microsecond)}
+      )
+
+  @doc false
+  def moved(_event, m, md, server),
+    do: send(server, {:moved, md.job, md.from, md.to, m.atoms, System.system_time(:microsecond)})
+
+  @doc false
+  # Also raises the flag that ends the preview's pacing at once (its
+  # message may queue behind atoms).
+  def job_stop(_event, _m, md, {server, ended}) do
+    :atomics.put(ended, 1, 1)
+    send(server, {:job_stop, md.job, md.reply})
+  end
+
+  # On a child's node: only that job's events cross the network.
+  @doc false
+  def child_event(_event, m, md, {server, job}) do
+    if job == nil or md.job == job,
+      do: send(server, {:child_event, md.job, md.kind, md.from, md.to, m.at_us})
+  end
+end

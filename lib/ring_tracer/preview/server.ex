@@ -1,0 +1,330 @@
+defmodule RingTracer.Preview.Server do
+  @moduledoc """
+  The process behind one preview (`RingTracer.Preview`): it owns the HTTP
+  server (OTP's `:httpd`, started stand-alone for this preview, with
+  `RingTracer.Preview.HTTP` as its only module) and the job's event log
+  (`RingTracer.Preview.Log`), kept in a protected ETS table that viewers
+  read from, frame by frame.
+
+  It learns about its job from `RingTracer.Telemetry` handlers (atoms and
+  hand-overs from the parent, which runs on this node; help offers from
+  each child's node) and from the parent's description of the job
+  (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
+  before the preview opened. A handler only sends this process a message:
+  the job never waits for the preview, nor for any viewer. While the job
+  runs, the server spends at most `:cpu_share` of one core on atoms (0.01
+  by default: after an atom's work it waits 99 times as long, until the job
+  ends), and it and the viewers run at low process priority.
+  """
+  use GenServer
+
+  alias RingTracer.Preview.Log
+
+  @doc false
+  @spec start(keyword()) :: GenServer.on_start()
+  def start(opts), do: GenServer.start(__MODULE__, opts)
+
+  @impl GenServer
+  def init(opts) do
+    Process.flag(:trap_exit, true)
+    Process.flag(:message_queue_data, :off_heap)
+    # The job's processes come first on a scheduler: the preview runs when
+    # they wait.
+    Process.flag(:priority, :low)
+    table = :ets.new(__MODULE__, [:ordered_set, :protected, read_concurrency: true])
+    addr = Keyword.get(opts, :listen, {127, 0, 0, 1})
+
+    config = [
+      port: Keyword.get(opts, :port, 0),
+      server_name: ~c"ringtracer-preview",
+      server_root: String.to_charlist(RingTracer.Preview.HTTP.root()),
+      document_root: String.to_charlist(RingTracer.Preview.HTTP.root()),
+      bind_address: addr,
+      ipfamily: if(tuple_size(addr) == 8, do: :inet6, else: :inet),
+      modules: [RingTracer.Preview.HTTP],
+      max_clients: Keyword.get(opts, :max_viewers, 32),
+      keep_alive_timeout: 60,
+      ring_tracer_preview: {self(), table}
+    ]
+
+    case :inets.start(:httpd, config, :stand_alone) do
+      {:ok, httpd} ->
+        port = port(httpd)
+
+        state = %{
+          table: table,
+          httpd: httpd,
+          port: port,
+          addr: addr,
+          log: Log.new(Keyword.take(opts, [:max_events])),
+          parent: nil,
+          handlers: [],
+          waiters: MapSet.new(),
+          viewers: %{},
+          expect: nil,
+          ended: :atomics.new(1, []),
+          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
+          pending: [],
+          drain: nil
+        }
+
+        {:ok, state}
+
+      {:error, reason} ->
+        {:stop, {:httpd, reason}}
+    end
+  end
+
+  @impl GenServer
+  def handle_call(:address, _from, state), do: {:reply, {state.addr, state.port}, state}
+  def handle_call(:viewers, _from, state), do: {:reply, map_size(state.viewers), state}
+
+  def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,
+    do: {:reply, {:error, :already_watching}, state}
+
+  # Before the job's parent starts (render/2's :preview): the handlers are
+  # in place from the job's first event.
+  def handle_call({:expect, id, nodes}, _from, state),
+    do: {:reply, :ok, %{attach_all(state, id, nodes) | expect: id}}
+
+  def handle_call({:watch, _parent, _progress}, _from, %{parent: p} = state) when p != nil,
+    do: {:reply, {:error, :already_watching}, state}
+
+  def handle_call({:watch, parent, progress}, _from, state) do
+    state = if state.expect, do: state, else: attach_all(state, nil, [])
+
+    case describe(parent, progress) do
+      {:ok, info} when state.expect in [nil, info.id] ->
+        Process.monitor(parent)
+        # Opened on a running job: now its other nodes are known.
+        state =
+          if state.expect, do: state, else: attach_all(state, info.id, info.nodes -- [node()])
+
+        state = update(%{state | parent: parent, expect: info.id}, &Log.job(&1, info))
+        pending = Enum.reverse(state.pending)
+        state = Enum.reduce(pending, %{state | pending: []}, &apply_event(&2, &1))
+        {:reply, :ok, state}
+
+      {:ok, _other} ->
+        {:reply, {:error, :other_job}, state}
+
+      other ->
+        state = if state.expect, do: state, else: detach_all(state)
+        {:reply, other, state}
+    end
+  end
+
+  @impl GenServer
+  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
+      when kind == :atom,
+      do: {:noreply, %{state | pending: [msg | state.pending]}}
+
+  def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
+      when kind in [:moved, :child_event],
+      do: {:noreply, %{state | pending: [msg | state.pending]}}
+
+  def handle_info({:job_stop, job, _} = msg, %{log: %{job: nil}, expect: job} = state),
+    do: {:noreply, %{state | pending: [msg | state.pending]}}
+
+  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
+      when kind == :atom,
+      do: {:noreply, apply_event(state, msg)}
+
+  def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: job}} = state)
+      when kind in [:moved, :child_event],
+      do: {:noreply, apply_event(state, msg)}
+
+  def handle_info({:job_stop, job, _} = msg, %{log: %{job: job}} = state),
+    do: {:noreply, apply_event(state, msg)}
+
+  def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state),
+    do: {:noreply, update(state, &Log.gone(&1, reason))}
+
+  def handle_info({:wait, pid, cursor}, state) do
+    if state.log.seq > cursor do
+      send(pid, :preview_more)
+      {:noreply, state}
+    else
+      {:noreply, %{state | waiters: MapSet.put(state.waiters, pid)}}
+    end
+  end
+
+  def handle_info({:owner, pid}, state) do
+    Process.monitor(pid)
+    {:noreply, Map.put(state, :owner, pid)}
+  end
+
+  def handle_info({:DOWN, _, :process, pid, _}, %{owner: pid} = state),
+    do: {:stop, :normal, state}
+
+  def handle_info({:viewer, pid}, state),
+    do: {:noreply, %{state | viewers: Map.put(state.viewers, pid, Process.monitor(pid))}}
+
+  def handle_info({:viewer_done, pid}, state) do
+    {ref, viewers} = Map.pop(state.viewers, pid)
+    if ref, do: Process.demonitor(ref, [:flush])
+    {:noreply, drained(%{state | viewers: viewers})}
+  end
+
+  def handle_info({:DOWN, _, :process, pid, _}, state) when is_map_key(state.viewers, pid),
+    do: {:noreply, drained(%{state | viewers: Map.delete(state.viewers, pid)})}
+
+  def handle_info({:drain, from, ref, ms}, state) do
+    timer = Process.send_after(self(), {:drain_timeout, ref}, ms)
+    {:noreply, drained(%{state | drain: {from, ref, timer}})}
+  end
+
+  def handle_info({:drain_timeout, ref}, %{drain: {from, ref, _}} = state) do
+    send(from, {:drained, ref})
+    {:noreply, %{state | drain: nil}}
+  end
+
+  def handle_info(_other, state), do: {:noreply, state}
+
+  # A stop waits for the viewers still reading the log.
+  defp drained(%{drain: {from, ref, timer}, viewers: v} = state) when map_size(v) == 0 do
+    Process.cancel_timer(timer)
+    send(from, {:drained, ref})
+    %{state | drain: nil}
+  end
+
+  defp drained(state), do: state
+
+  @impl GenServer
+  def terminate(_reason, state) do
+    detach(state.handlers)
+    :inets.stop(:stand_alone, state.httpd)
+    :ok
+  end
+
+  # httpd.info/2 knows only servers started under the :inets application;
+  # this one is ours (stand-alone, linked), and its instance supervisor is
+  # named by address and port.
+  defp port(httpd) do
+    [port] =
+      for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
+          do: port
+
+    port
+  end
+
+  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}) do
+    t = System.monotonic_time(:microsecond)
+    state = update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
+    pace(state, System.monotonic_time(:microsecond) - t)
+  end
+
+  defp apply_event(state, {:moved, _job, from, to, n, at}),
+    do: update(state, &Log.move(&1, from, to, n, at))
+
+  defp apply_event(state, {:child_event, _job, kind, from, to, at}),
+    do: update(state, &Log.event(&1, kind, from, to, at))
+
+  defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
+
+  # While the job runs, the preview spends at most `cpu_share` of one core
+  # on atoms (their pixels to sRGB and base64, and so what viewers send):
+  # after each atom it waits in proportion, in slices, until the job ends.
+  # On a render too light for that, the page lags and catches up at the end.
+  defp pace(state, work_us) do
+    wait_ms = work_us * (1 - state.cpu_share) / state.cpu_share / 1000
+    wait(state.ended, round(wait_ms))
+    state
+  end
+
+  defp wait(_ended, ms) when ms <= 0, do: :ok
+
+  defp wait(ended, ms) do
+    if :atomics.get(ended, 1) == 0 do
+      Process.sleep(min(ms, 20))
+      wait(ended, ms - 20)
+    else
+      :ok
+    end
+  end
+
+  # The parent's events (this node), and children's on `nodes` (filtered
+  # there by job, when known).
+  defp attach_all(state, job, nodes) do
+    me = self()
+
+    parent =
+      if state.handlers == [] do
+        [
+          {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
+          {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
+          {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, {me, state.ended}}
+        ]
+        |> Enum.map(&attach(node(), &1))
+      else
+        []
+      end
+
+    children =
+      for n <- Enum.uniq([node() | nodes]),
+          not Enum.any?(state.handlers, &match?({^n, {_, _, [:ring_tracer, :child, :event]}}, &1)) do
+        attach(
+          n,
+          {[:ring_tracer, :child, :event], &RingTracer.Preview.Relay.child_event/4, {me, job}}
+        )
+      end
+
+    %{state | handlers: state.handlers ++ Enum.reject(parent ++ children, &is_nil/1)}
+  end
+
+  defp detach_all(state) do
+    detach(state.handlers)
+    %{state | handlers: []}
+  end
+
+  defp update(state, fun) do
+    {frames, log} = Log.take(fun.(state.log))
+
+    case frames do
+      [] ->
+        %{state | log: log}
+
+      _ ->
+        :ets.insert(
+          state.table,
+          for({seq, f} <- frames, do: {seq, f, seq == log.seq and log.done})
+        )
+
+        Enum.each(state.waiters, &send(&1, :preview_more))
+        %{state | log: log, waiters: MapSet.new()}
+    end
+  end
+
+  defp describe(parent, progress) do
+    RingTracer.Job.Parent.describe(parent, progress)
+  catch
+    :exit, reason -> {:error, {:job_not_running, reason}}
+  end
+
+  defp attach(node, {event, fun, config}) do
+    id = {RingTracer.Preview, self(), event}
+
+    result =
+      if node == node(),
+        do: RingTracer.Telemetry.attach(id, event, fun, config),
+        else: :erpc.call(node, RingTracer.Telemetry, :attach, [id, event, fun, config], 5_000)
+
+    if result == :ok, do: {node, id}, else: nil
+  catch
+    _, _ -> nil
+  end
+
+  defp detach(handlers) do
+    for {node, id} <- Enum.reject(handlers, &is_nil/1) do
+      try do
+        if node == node(),
+          do: RingTracer.Telemetry.detach(id),
+          else: :erpc.call(node, RingTracer.Telemetry, :detach, [id], 2_000)
+      catch
+        _, _ -> :ok
+      end
+    end
+
+    :ok
+  end
+end

@@ -1,0 +1,252 @@
+defmodule RingTracer.Preview.HTTPTest do
+  use ExUnit.Case, async: false
+  doctest RingTracer.Preview
+
+  import ExUnit.CaptureIO
+
+  alias RingTracer.Bench.Preview, as: Viewer
+  alias RingTracer.Preview
+
+  @scene "priv/scenes/tetra_s1.nff"
+
+  setup do
+    {:ok, preview} = Preview.start()
+    on_exit(fn -> Preview.stop(preview, 0) end)
+    {:ok, preview: preview}
+  end
+
+  defp get(url, method \\ :get) do
+    {:ok, {{_, code, _}, headers, body}} =
+      :httpc.request(method, {String.to_charlist(url), []}, [autoredirect: false], [])
+
+    {code, Map.new(headers, fn {k, v} -> {to_string(k), to_string(v)} end), to_string(body)}
+  end
+
+  # Every frame of a finished job's stream, as {id, event, data}.
+  defp frames(url, headers \\ []) do
+    {:ok, {{_, 200, _}, _, body}} =
+      :httpc.request(:get, {String.to_charlist(url <> "events"), headers}, [], [])
+
+    body
+    |> to_string()
+    |> String.split("\n\n", trim: true)
+    |> Enum.map(fn frame ->
+      [_, id, name, data] = Regex.run(~r/\Aid: (\d+)\nevent: (\w+)\ndata: (.*)\z/s, frame)
+      {String.to_integer(id), name, :jiffy.decode(data, [:return_maps, :use_nil])}
+    end)
+  end
+
+  test "serves the page's files and nothing else, on loopback", %{preview: p} do
+    assert p.url =~ ~r{\Ahttp://127\.0\.0\.1:\d+/\z}
+
+    assert {200, h, body} = get(p.url)
+    assert h["content-type"] =~ "text/html"
+    assert body =~ ~s(<script src="preview.js">)
+    assert h["content-security-policy"] =~ "default-src 'self'"
+    assert {200, %{"content-type" => "text/javascript" <> _}, _} = get(p.url <> "preview.js")
+    assert {200, %{"content-type" => "text/css" <> _}, _} = get(p.url <> "preview.css")
+
+    for path <- ["index.htm", "../mix.exs", "%2e%2e/mix.exs", "priv/preview/", "preview", "x.js"],
+        do: assert({404, _, _} = get(p.url <> path), path)
+
+    assert {405, _, _} = get(p.url, :delete)
+    assert {405, _, _} = get(p.url <> "events", :head)
+
+    # Nothing answers on this machine's other addresses.
+    {:ok, ifs} = :inet.getifaddrs()
+
+    for {_, opts} <- ifs,
+        addr <- Keyword.get_values(opts, :addr),
+        tuple_size(addr) == 4 and addr != {127, 0, 0, 1} do
+      assert {:error, _} = :gen_tcp.connect(addr, p.port, [], 1_000)
+    end
+  end
+
+  test "--listen widens: the page answers on the address given" do
+    {:ok, p} = Preview.start(listen: "0.0.0.0")
+    assert p.url =~ "http://0.0.0.0:"
+    assert {200, _, _} = get("http://127.0.0.1:#{p.port}/")
+    Preview.stop(p, 0)
+  end
+
+  test "two viewers during the job and one after it all get the whole job", %{preview: p} do
+    me = self()
+    url = p.url <> "events"
+    for i <- 1..2, do: spawn_link(fn -> send(me, {:viewer, i, Viewer.viewer(url)}) end)
+    # The viewers are connected before the job starts.
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 2 end)
+
+    {:ok, result} =
+      RingTracer.render(@scene, width: 24, height: 16, children: 3, atoms: 4, preview: p)
+
+    assert_receive {:viewer, 1, {:ok, n}}, 10_000
+    assert_receive {:viewer, 2, {:ok, ^n}}, 10_000
+
+    late = frames(p.url)
+    assert length(late) == n
+    assert Enum.map(late, &elem(&1, 0)) == Enum.to_list(1..n)
+    names = Enum.map(late, &elem(&1, 1))
+    assert hd(names) == "job" and Enum.take(names, -2) == ["final", "end"]
+
+    atoms = for {_, "atom", a} <- late, do: a
+    assert Enum.sort(Enum.map(atoms, & &1["a"])) == Enum.to_list(0..11)
+
+    pixels =
+      atoms
+      |> Enum.sort_by(& &1["a"])
+      |> Enum.map_join(&Base.decode64!(&1["px"]))
+
+    assert pixels == RingTracer.Image.srgb8(result.pixels)
+
+    for {_, "atom", a} <- late,
+        do: assert(a["c"] == Enum.find(result.atoms, &(&1.atom == a["a"])).child)
+
+    [{_, "final", final}] = for {_, "final", _} = f <- late, do: f
+    assert final["ok"]
+    assert Enum.map(final["children"], & &1["traced"]) == Enum.map(result.children, & &1.traced)
+
+    # A browser reconnecting with Last-Event-ID gets only what it missed.
+    resumed = frames(p.url, [{~c"last-event-id", ~c"#{n - 2}"}])
+    assert Enum.map(resumed, &elem(&1, 1)) == ["final", "end"]
+  end
+
+  test "protocol events and hand-overs of a slowed ring reach the page", %{preview: p} do
+    {:ok, result} =
+      RingTracer.render(@scene,
+        width: 32,
+        height: 24,
+        children: 3,
+        atoms: 6,
+        speeds: [1, 40, 1],
+        preview: p
+      )
+
+    late = frames(p.url)
+    evs = for {_, "ev", e} <- late, do: e
+    moves = for {_, "move", m} <- late, do: m
+    assert length(evs) == length(result.events)
+
+    assert Enum.sort(Enum.map(evs, & &1["kind"])) ==
+             Enum.sort(Enum.map(result.events, &"#{&1.kind}"))
+
+    assert Enum.sum(Enum.map(moves, & &1["n"])) ==
+             Enum.sum(Enum.map(result.children, & &1.received))
+  end
+
+  test "a stalled viewer does not hold up the job", %{preview: p} do
+    # A client that asks for the stream and never reads it.
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, p.port, [:binary, active: false, recbuf: 1024])
+    :ok = :gen_tcp.send(sock, "GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+
+    {:ok, result} =
+      RingTracer.render(@scene, width: 160, height: 120, children: 2, atoms: 64, preview: p)
+
+    assert length(result.atoms) == 128
+    # The log is complete for others; the server holds nothing per viewer.
+    assert length(frames(p.url)) >= 128 + 3
+    {:message_queue_len, q} = Process.info(p.pid, :message_queue_len)
+    assert q < 10
+    :gen_tcp.close(sock)
+  end
+
+  test "open/2 previews a job already running, from the atoms traced so far" do
+    {:ok, job} =
+      RingTracer.render_async(@scene,
+        width: 32,
+        height: 24,
+        children: 2,
+        atoms: 8,
+        speeds: [60, 60]
+      )
+
+    id = job.id
+    assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= 2, 20_000
+    {:ok, p} = Preview.open(job)
+    assert_receive {RingTracer, ^id, {:ok, result}}, 60_000
+
+    late = frames(p.url)
+    atoms = for {_, "atom", a} <- late, do: a
+    assert Enum.sort(Enum.map(atoms, & &1["a"])) == Enum.to_list(0..15)
+    # Those traced before it opened carry no arrival time.
+    assert Enum.any?(atoms, &(&1["at"] == nil))
+    assert length(result.atoms) == 16
+    Preview.stop(p, 0)
+
+    assert {:error, %RingTracer.Error{reason: :preview}} = Preview.open(job)
+  end
+
+  test "render/2 with preview: true prints the address and stops the page at the end" do
+    err =
+      capture_io(:stderr, fn ->
+        assert {:ok, _} =
+                 RingTracer.render(@scene,
+                   width: 8,
+                   height: 8,
+                   children: 2,
+                   atoms: 2,
+                   preview: true
+                 )
+      end)
+
+    assert [_, port] = Regex.run(~r{preview: http://127\.0\.0\.1:(\d+)/}, err)
+    assert {:error, _} = :gen_tcp.connect({127, 0, 0, 1}, String.to_integer(port), [], 1_000)
+  end
+
+  @tag :tmp_dir
+  test "ringtracer render --preview [PORT] serves the page while it renders", %{tmp_dir: dir} do
+    out = Path.join(dir, "p.png")
+
+    for args <- [["--preview"], ["--preview", "0"], ["--preview", "--quiet"]] do
+      err =
+        capture_io(:stderr, fn ->
+          capture_io(fn ->
+            argv =
+              [@scene, "-o", out, "-w", "16", "--children", "2", "--progress", "none"] ++ args
+
+            assert :ok = RingTracer.CLI.Render.execute(argv)
+          end)
+        end)
+
+      assert err =~ ~r{preview: http://127\.0\.0\.1:\d+/}, inspect(args)
+    end
+
+    assert {:error, 2, message} =
+             RingTracer.CLI.Render.execute([@scene, "-o", out, "--preview", "70000"])
+
+    assert message =~ "--preview takes an integer from 0 to 65535"
+  end
+
+  test "a preview render/2 started goes with it when the render times out" do
+    err =
+      capture_io(:stderr, fn ->
+        assert {:error, %RingTracer.Error{reason: :timeout}} =
+                 RingTracer.render("priv/scenes/balls_s1.nff",
+                   width: 96,
+                   height: 72,
+                   children: 2,
+                   atoms: 8,
+                   speeds: [1000, 1000],
+                   timeout: 200,
+                   preview: true
+                 )
+      end)
+
+    [_, port] = Regex.run(~r{preview: http://127\.0\.0\.1:(\d+)/}, err)
+
+    assert RingTracer.Test.Wait.eventually(fn ->
+             match?(
+               {:error, _},
+               :gen_tcp.connect({127, 0, 0, 1}, String.to_integer(port), [], 500)
+             )
+           end)
+  end
+
+  test "the :preview option is checked" do
+    for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1]] do
+      assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =
+               RingTracer.render(@scene, preview: bad)
+
+      assert m =~ ":preview"
+    end
+  end
+end
