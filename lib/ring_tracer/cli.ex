@@ -131,7 +131,7 @@ defmodule RingTracer.CLI do
 
     with {:ok, _} <- Application.ensure_all_started(:ring_tracer),
          :ok <- warm_up(),
-         {:ok, pid} <- RingTracer.CLI.Server.start_link(path) do
+         {:ok, pid} <- RingTracer.CLI.Server.start_link(path, &run/2) do
       IO.puts("ringtracer serve: rendering for this user's commands on #{path} (Ctrl-C stops)")
       if signals?, do: RingTracer.CLI.Signals.forward_to(self())
 

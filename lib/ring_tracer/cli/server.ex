@@ -28,9 +28,16 @@ defmodule RingTracer.CLI.Server do
   @type t :: %__MODULE__{socket: :gen_tcp.socket(), path: Path.t(), acceptor: pid()}
   defstruct [:socket, :path, :acceptor]
 
-  @doc "Listens on the Unix socket `path` (its folder is made, mode 0700, if missing)."
-  @spec start_link(Path.t()) :: GenServer.on_start()
-  def start_link(path), do: GenServer.start_link(__MODULE__, path)
+  @typedoc "What runs a command: its arguments, whether signals reach it; its exit status."
+  @type runner :: ([String.t()], boolean() -> non_neg_integer())
+
+  @doc """
+  Listens on the Unix socket `path` (its folder is made, mode 0700, if
+  missing) and runs each client's command with `runner`
+  (`&RingTracer.CLI.run/2`).
+  """
+  @spec start_link(Path.t(), runner()) :: GenServer.on_start()
+  def start_link(path, runner), do: GenServer.start_link(__MODULE__, {path, runner})
 
   @doc "Stops the server and removes its socket."
   @spec stop(pid()) :: :ok
@@ -79,7 +86,7 @@ defmodule RingTracer.CLI.Server do
   end
 
   @impl GenServer
-  def init(path) do
+  def init({path, runner}) do
     Process.flag(:trap_exit, true)
 
     with :ok <- check_dir(Path.dirname(path)),
@@ -87,7 +94,7 @@ defmodule RingTracer.CLI.Server do
          {:ok, socket} <- listen(path),
          :ok <- File.chmod(path, 0o600) do
       server = self()
-      acceptor = spawn_link(fn -> accept(socket, server) end)
+      acceptor = spawn_link(fn -> accept(socket, server, runner) end)
       {:ok, %__MODULE__{socket: socket, path: path, acceptor: acceptor}}
     else
       {:error, message} when is_binary(message) -> {:stop, message}
@@ -127,20 +134,20 @@ defmodule RingTracer.CLI.Server do
     ])
   end
 
-  defp accept(socket, server) do
+  defp accept(socket, server, runner) do
     case :gen_tcp.accept(socket) do
       {:ok, client} ->
-        {:ok, pid} = Session.start(client)
+        {:ok, pid} = Session.start(client, runner)
         :ok = :gen_tcp.controlling_process(client, pid)
         send(pid, :go)
-        accept(socket, server)
+        accept(socket, server, runner)
 
       {:error, :closed} ->
         :ok
 
       {:error, reason} ->
         Logger.warning("ringtracer serve: accept failed: #{inspect(reason)}")
-        accept(socket, server)
+        accept(socket, server, runner)
     end
   end
 

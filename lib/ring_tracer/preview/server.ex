@@ -302,7 +302,7 @@ defmodule RingTracer.Preview.Server do
   end
 
   defp attach(node, {event, fun, config}) do
-    id = {RingTracer.Preview, self(), event}
+    id = {__MODULE__, self(), event}
 
     result =
       if node == node(),

@@ -51,7 +51,7 @@ defmodule RingTracer.Preview.DistributedTest do
     handlers =
       :erpc.call(n, :ets, :match_object, [
         RingTracer.Telemetry,
-        {:_, {RingTracer.Preview, :_, :_}, :_, :_}
+        {:_, {RingTracer.Preview.Server, :_, :_}, :_, :_}
       ])
 
     assert handlers == []

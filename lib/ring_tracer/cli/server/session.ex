@@ -22,20 +22,21 @@ defmodule RingTracer.CLI.Server.Session do
           cwd: Path.t() | nil,
           args: [String.t()],
           tty?: boolean(),
-          command: {pid(), reference()} | nil
+          command: {pid(), reference()} | nil,
+          runner: RingTracer.CLI.Server.runner()
         }
-  defstruct [:socket, :cwd, args: [], tty?: false, command: nil]
+  defstruct [:socket, :cwd, :runner, args: [], tty?: false, command: nil]
 
   # How long a command may take to stop once its client has gone.
   @stop_ms 2_000
 
-  @doc "A session for the accepted `socket`; it starts reading on `:go`."
-  @spec start(:gen_tcp.socket()) :: {:ok, pid()}
-  def start(socket) do
+  @doc "A session for the accepted `socket`, running its command with `runner`; it starts reading on `:go`."
+  @spec start(:gen_tcp.socket(), RingTracer.CLI.Server.runner()) :: {:ok, pid()}
+  def start(socket, runner) do
     pid =
       spawn(fn ->
         receive do
-          :go -> loop(%__MODULE__{socket: socket})
+          :go -> loop(%__MODULE__{socket: socket, runner: runner})
         end
       end)
 
@@ -110,14 +111,14 @@ defmodule RingTracer.CLI.Server.Session do
       out = Device.start(state.socket, "O", state.tty?, me)
       err = Device.start(state.socket, "E", state.tty?, me)
       console = %Console{err: err, cwd: state.cwd, tty?: state.tty?}
-      args = state.args
+      {args, runner} = {state.args, state.runner}
 
       {pid, ref} =
         spawn_monitor(fn ->
           Process.group_leader(self(), out)
           Console.put(console)
           ref = receive do: ({:ref, ref} -> ref)
-          send(me, {:status, ref, RingTracer.CLI.run(args, false)})
+          send(me, {:status, ref, runner.(args, false)})
         end)
 
       send(pid, {:ref, ref})
