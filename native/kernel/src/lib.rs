@@ -30,6 +30,7 @@
 //!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes;
 //!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
 //!   by instances (transform, inverse, material) under a top-level BVH.
+//! - [`raysets`]: the fixed ray sets of the ray-casting benchmarks.
 //! - [`camera`], [`ray`], [`material`], [`light`]: the Whitted model's ingredients;
 //!   [`integrator`]: the [`Integrator`] trait and [`Whitted`] (shading rules documented there).
 //! - [`render`]: [`Settings`], [`trace_span`], [`render_image`] (SPD corner mode, stratified
@@ -57,6 +58,7 @@ pub mod nff;
 pub mod obj;
 pub mod polygon;
 pub mod ray;
+pub mod raysets;
 pub mod render;
 pub mod scene;
 pub mod stats;

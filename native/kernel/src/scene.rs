@@ -186,6 +186,20 @@ impl Scene {
         self.source_count
     }
 
+    /// The scene's own triangles as corner triples (`v0, v0 + e1, v0 + e2`), in BVH order; other
+    /// shapes and the triangles of instanced meshes are left out. For handing the same mesh to
+    /// another kernel in comparisons (see [`crate::raysets`]).
+    pub fn triangles(&self) -> Vec<[Vec3A; 3]> {
+        self.geom
+            .shapes
+            .iter()
+            .filter_map(|s| match *s {
+                Shape::Triangle { v0, e1, e2 } => Some([v0, v0 + e1, v0 + e2]),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Number of the scene's own internal primitives (triangles after polygon triangulation,
     /// spheres, cones, planes; the triangles of shared meshes are not among them);
     /// [`Hit::prim`] indexes these when [`Hit::instance`] is [`Hit::NO_INSTANCE`].
@@ -391,6 +405,35 @@ impl Scene {
             return false;
         };
         hit_triangle(tri[0], tri[1], tri[2], &inst.object_ray(ray), 0.0, tmax).is_some()
+    }
+
+    /// Closest hits of a packet of rays (such as a 4 x 4 pixel tile of primary rays):
+    /// `out[i]` gets what [`Scene::intersect_with`] returns for `rays[i]`, bit for bit, for
+    /// `i < min(rays.len(), out.len())`.
+    pub fn intersect_packet(
+        &self,
+        rays: &[Ray],
+        tmax: f32,
+        scratch: &mut Scratch,
+        out: &mut [Option<Hit>],
+    ) {
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.intersect_with(r, tmax, scratch);
+        }
+    }
+
+    /// Any-hit queries of a packet of rays (such as the shadow rays of a tile): `out[i]` gets
+    /// what [`Scene::occluded_with`] returns for `rays[i]`.
+    pub fn occluded_packet(
+        &self,
+        rays: &[Ray],
+        tmax: f32,
+        scratch: &mut Scratch,
+        out: &mut [bool],
+    ) {
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded_with(r, tmax, scratch);
+        }
     }
 
     /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
