@@ -479,6 +479,18 @@ impl Bvh {
     }
 }
 
+impl Bvh {
+    /// Every leaf as (first primitive, count).
+    pub fn leaves(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.nodes.iter().flat_map(|n| {
+            (0..4).filter_map(move |i| {
+                let c = n.count[i];
+                (c != 0 && c != EMPTY).then_some((n.child[i] as usize, c as usize))
+            })
+        })
+    }
+}
+
 impl Node4 {
     fn empty() -> Node4 {
         Node4 {

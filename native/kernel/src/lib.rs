@@ -63,6 +63,7 @@ pub mod render;
 pub mod scene;
 pub mod stats;
 pub mod toml_scene;
+mod tri4;
 pub mod warning;
 
 pub use bvh::Scratch;

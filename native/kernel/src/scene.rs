@@ -12,6 +12,7 @@ use crate::limits;
 use crate::material::Material;
 use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
+use crate::tri4::{RayLanes, TriBlocks};
 use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Vec3A};
@@ -110,6 +111,8 @@ pub struct Scene {
     pub(crate) patch_normals: Vec<[Vec3A; 3]>,
     pub(crate) planes: Vec<Plane>,
     pub(crate) bvh: Bvh,
+    /// The triangles of `bvh`'s all-triangle leaves, four to a SIMD block.
+    pub(crate) tri_blocks: TriBlocks,
     /// Shared meshes, each stored once.
     pub(crate) meshes: Vec<Mesh>,
     /// References to them, in the order of `instance_bvh`'s leaves.
@@ -268,10 +271,21 @@ impl Scene {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         let mut mailbox = Mailbox::default();
+        let blocks = &self.tri_blocks;
+        let lanes = RayLanes::new(ray);
         let mut best = self
             .bvh
             .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
                 let mut tm = tmax;
+                if let Some(leaf) = blocks.leaf(first, count) {
+                    for (k, b) in leaf.iter().enumerate() {
+                        if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
+                            tm = t;
+                            prim = (first + 4 * k + i) as u32;
+                        }
+                    }
+                    return tm;
+                }
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
                         if mailbox.seen(s) {
@@ -475,9 +489,20 @@ impl Scene {
         }
         let mut found = NO_CACHE;
         let mut mailbox = Mailbox::default();
+        let blocks = &self.tri_blocks;
+        let lanes = RayLanes::new(ray);
         let r = self
             .bvh
             .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
+                if let Some(leaf) = blocks.leaf(first, count) {
+                    for (k, b) in leaf.iter().enumerate() {
+                        if let Some(i) = b.any(&lanes, 0.0, tmax) {
+                            found = (Hit::NO_INSTANCE, (first + 4 * k + i) as u32);
+                            return -1.0;
+                        }
+                    }
+                    return tmax;
+                }
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
                         if mailbox.seen(s) {
@@ -1005,6 +1030,7 @@ impl SceneBuilder {
         let (bvh, shapes, info, bounds) = ordered_bvh(&self.geom, &self.info, &self.poly_bounds);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
+        let tri_blocks = TriBlocks::build(&bvh, &self.geom.shapes);
         let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
         let instances: Vec<Instance> = order
             .iter()
@@ -1040,6 +1066,7 @@ impl SceneBuilder {
             patch_normals: self.patch_normals,
             planes: self.planes,
             bvh,
+            tri_blocks,
             meshes: self.meshes,
             instances,
             instance_bvh,
