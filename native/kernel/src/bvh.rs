@@ -41,7 +41,7 @@ pub(crate) mod probe {
     thread_local! {
         pub static NODES: Cell<u64> = const { Cell::new(0) };
         pub static TCOST: Cell<f32> = const { Cell::new(super::TRAVERSAL_COST) };
-        pub static LEAF_MIN: Cell<usize> = const { Cell::new(2) };
+        pub static LEAF_MIN: Cell<usize> = const { Cell::new(0) };
     }
 }
 
@@ -53,13 +53,17 @@ fn traversal_cost() -> f32 {
 fn traversal_cost() -> f32 {
     TRAVERSAL_COST
 }
+/// The tuning report's leaf size when it sets one (0: the builder's choice).
 #[cfg(test)]
-fn leaf_min() -> usize {
-    probe::LEAF_MIN.with(|c| c.get())
+fn leaf_min(chosen: usize) -> usize {
+    match probe::LEAF_MIN.with(|c| c.get()) {
+        0 => chosen,
+        lm => lm,
+    }
 }
 #[cfg(not(test))]
-fn leaf_min() -> usize {
-    2
+fn leaf_min(chosen: usize) -> usize {
+    chosen
 }
 
 /// A flattened node: `a = (min, first)`, `b = (max, count)` with the integers stored as f32 bits.
@@ -94,8 +98,14 @@ struct Bin {
     count: u32,
 }
 
+/// Leaves at most this big are never split: for primitives tested one at a time.
+pub(crate) const LEAF_MIN: usize = 2;
+/// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
+/// one test.
+pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
+
 /// Binary binned-SAH build; returns the nodes and the primitive order.
-fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
+fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
     let n = boxes.len();
     let mut order: Vec<u32> = (0..n as u32).collect();
     if n == 0 {
@@ -118,7 +128,7 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
         let make_leaf = |nodes: &mut Vec<Node>| {
             nodes[ni] = Node::new(bounds, start as u32, count as u32);
         };
-        if count <= leaf_min() || depth >= MAX_DEPTH {
+        if count <= leaf_min(leaf_min_chosen) || depth >= MAX_DEPTH {
             make_leaf(&mut nodes);
             continue;
         }
@@ -355,7 +365,12 @@ impl Bvh {
     /// Builds over primitive boxes; returns the hierarchy and the primitive order (new position ->
     /// old index).
     pub fn build(boxes: &[Aabb]) -> (Bvh, Vec<u32>) {
-        let (bin, order) = build_binary(boxes);
+        Bvh::build_with(boxes, LEAF_MIN)
+    }
+
+    /// [`Bvh::build`] never splitting leaves of up to `leaf_min` primitives.
+    pub fn build_with(boxes: &[Aabb], leaf_min: usize) -> (Bvh, Vec<u32>) {
+        let (bin, order) = build_binary(boxes, leaf_min);
         let mut nodes = Vec::with_capacity(bin.len() / 4 + 1);
         if !bin.is_empty() {
             let bounds = |n: &Node| Aabb {
@@ -618,7 +633,7 @@ mod tests {
     #[test]
     fn build_covers_all_primitives_once() {
         let boxes = grid();
-        let (bin, order) = build_binary(&boxes);
+        let (bin, order) = build_binary(&boxes, LEAF_MIN);
         assert!(bin.len() < 2 * boxes.len());
         assert_eq!(std::mem::size_of::<Node>(), 32);
         let mut seen = vec![0u32; boxes.len()];
@@ -643,7 +658,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<Node8>(), 256);
         // identical boxes still give bounded leaves
         let same = vec![boxes[0]; 100];
-        let (bin, _) = build_binary(&same);
+        let (bin, _) = build_binary(&same, LEAF_MIN);
         assert!(bin.iter().all(|n| n.count() as usize <= MAX_LEAF));
     }
 

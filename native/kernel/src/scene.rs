@@ -716,11 +716,13 @@ pub(crate) struct SceneBuilder {
 }
 
 /// A BVH over a geometry's shapes, with the shapes and their data put in its order, and the
-/// bounds of it all.
+/// bounds of it all. `blocks`: the leaves' triangles will be met four at a time
+/// ([`TriBlocks`]), so an all-triangle geometry gets leaves of up to four.
 fn ordered_bvh(
     geom: &Geometry,
     info: &[PrimInfo],
     poly_bounds: &[Aabb],
+    blocks: bool,
 ) -> (Bvh, Vec<Shape>, Vec<PrimInfo>, Aabb) {
     // BVH references: (shape index, box); oblique cones get several tight boxes
     let mut boxes: Vec<Aabb> = Vec::with_capacity(geom.shapes.len());
@@ -733,7 +735,18 @@ fn ordered_bvh(
             owner.push(i as u32);
         }
     }
-    let (bvh, order) = Bvh::build(&boxes);
+    // triangles are met four at a time: leaves of up to four are as cheap as one
+    let all_triangles = blocks
+        && geom
+            .shapes
+            .iter()
+            .all(|s| matches!(s, Shape::Triangle { .. }));
+    let leaf_min = if all_triangles {
+        crate::bvh::LEAF_MIN_TRIANGLES
+    } else {
+        crate::bvh::LEAF_MIN
+    };
+    let (bvh, order) = Bvh::build_with(&boxes, leaf_min);
     let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
     // the boxes go before the ordered arrays are made: a parse's peak memory
     drop(boxes);
@@ -799,7 +812,7 @@ impl SceneBuilder {
         self.warnings.absorb(std::mem::take(&mut mesh.warnings));
         let base = self.materials.len() as u32;
         self.materials.extend(mesh.materials.iter().copied());
-        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds);
+        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds, false);
         let mut tris: Vec<Tri> = Vec::with_capacity(shapes.len());
         let mut infos = Vec::with_capacity(shapes.len());
         for (s, i) in shapes.iter().zip(&info) {
@@ -1027,7 +1040,8 @@ impl SceneBuilder {
         self.geom.shapes.shrink_to_fit();
         self.info.shrink_to_fit();
         self.patch_normals.shrink_to_fit();
-        let (bvh, shapes, info, bounds) = ordered_bvh(&self.geom, &self.info, &self.poly_bounds);
+        let (bvh, shapes, info, bounds) =
+            ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
         let tri_blocks = TriBlocks::build(&bvh, &self.geom.shapes);
