@@ -8,6 +8,8 @@ fn main() {
     println!("cargo::rerun-if-changed=c/embree_side.c");
     println!("cargo::rerun-if-env-changed=EMBREE_INCLUDE");
     let include = std::env::var("EMBREE_INCLUDE").unwrap_or_else(|_| "/usr/include".into());
+    // installing libembree-dev later rebuilds the bench with Embree (a missing path reruns this)
+    println!("cargo::rerun-if-changed={include}/embree3/rtcore.h");
     if !Path::new(&include).join("embree3/rtcore.h").exists() {
         println!(
             "cargo::warning=Embree 3 headers not found ({include}/embree3/rtcore.h): \
