@@ -1,45 +1,46 @@
 defmodule RingTracer.Bench.Rays do
   @help """
-  Closest-hit rays per second, in the kernel alone.
+  Rays per second in the kernel alone, next to Intel Embree's.
 
-      mix ring_tracer.bench rays MESH.obj [MORE.obj ...]
+      mix ring_tracer.bench rays [--rounds 3] [--size 1024] [MESH.obj ...]
 
-  Casts closest-hit rays only: 1024 x 1024 primary rays through a 45-degree
-  pinhole looking at the mesh's bounding-box centre from centre + (0.3, 0.3,
-  1.1) x its diagonal, and 1,048,576 incoherent rays (fixed seed); prints
-  the BVH build time, Mrays/s with 1 and 2 threads, and hit counts. It is
-  the kernel's own cargo example (`native/kernel/examples/bench.rs`), with
-  no BEAM in the loop.
+  For each mesh (default: the SPD teapot tessellation in
+  `../shared/scenes/meshes/`, when it is there): the same triangles and the
+  same rays (`size` x `size` primary rays in 4 x 4 tiles, and as many
+  incoherent ones, closest hit and any hit) through our kernel and through
+  Embree 3 (`rtcIntersect1`, `rtcIntersect16`, `rtcOccluded1/16`), one
+  thread and two, alternating in each round; prints Mrays/s ranges and the
+  ratios of the best rounds. Embree is timed by the project's own C harness
+  (`native/embree_bench`), built when Debian's `libembree-dev` is installed;
+  without it the table says so and times ours only. No BEAM in the loop.
+  `cargo run --release -p ring_tracer_kernel --example big_mesh -- OUT.obj`
+  writes a 600k-triangle mesh.
   """
   @moduledoc @help
   @behaviour RingTracer.Bench
+
+  @teapot "../shared/scenes/meshes/spd_teapot_s12_tess.obj"
 
   @impl RingTracer.Bench
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "rays MESH.obj [MORE.obj ...]"
+  def usage, do: "rays [--rounds 3] [--size 1024] [MESH.obj ...]"
 
   @impl RingTracer.Bench
-  def run([]), do: Mix.raise("usage: mix ring_tracer.bench #{usage()}")
-
-  def run(meshes) do
+  def run(argv) do
+    {opts, meshes, _} = OptionParser.parse(argv, strict: [rounds: :integer, size: :integer])
+    meshes = if meshes == [] and File.exists?(@teapot), do: [@teapot], else: meshes
+    if meshes == [], do: Mix.raise("usage: mix ring_tracer.bench #{usage()}")
     cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
+    flags = for {k, v} <- opts, do: ["--#{k}", Integer.to_string(v)]
 
-    args = [
-      "run",
-      "--release",
-      "-q",
-      "-p",
-      "ring_tracer_kernel",
-      "--example",
-      "bench",
-      "--",
-      "--raycast"
-    ]
+    args =
+      ~w(run --release -q -p ring_tracer_embree_bench --) ++
+        List.flatten(flags) ++ Enum.map(meshes, &Path.expand/1)
 
     {_, status} =
-      System.cmd(cargo, args ++ Enum.map(meshes, &Path.expand/1),
+      System.cmd(cargo, args,
         cd: "native",
         into: IO.stream(:stdio, :line),
         stderr_to_stdout: true

@@ -8,10 +8,10 @@
 //! BVH build time, then 1024x1024 primary rays from a 45-degree pinhole looking at the bounding
 //! box centre from `centre + (0.3, 0.3, 1.1) * diagonal` (+y up), and 1,048,576 incoherent rays
 //! (origins uniform in the central half of the box, directions uniform on the sphere, fixed
-//! seed), each with 1 and 2 threads.
+//! seed), each with 1 and 2 threads ([`ring_tracer_kernel::raysets`]). Next to Embree:
+//! `cargo run --release -p ring_tracer_embree_bench -- mesh.obj`.
 
-use ring_tracer_kernel::glam::Vec3A;
-use ring_tracer_kernel::{obj, render_image, Camera, Ray, Scene, Scratch, Settings};
+use ring_tracer_kernel::{raysets, render_image, Ray, Scene, Scratch, Settings};
 use std::path::Path;
 use std::time::Instant;
 
@@ -82,18 +82,6 @@ fn main() {
     }
 }
 
-/// xorshift64* — fixed-seed generator for the incoherent rays.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f32 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        (v >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 fn cast(scene: &Scene, rays: &[Ray], threads: usize) -> (f64, u64) {
     let t = Instant::now();
     let chunk = rays.len().div_ceil(threads * 64).max(1);
@@ -143,26 +131,8 @@ fn raycast(path: &str) {
         scene.primitive_count(),
         build
     );
-    let cam: Camera = obj::default_camera(b);
-    let n = 1024u32;
-    let span = Camera::centre_span(n, n);
-    let mut primary = Vec::with_capacity((n * n) as usize);
-    for y in 0..n {
-        for x in 0..n {
-            primary.push(cam.ray(x as f32 + 0.5, y as f32 + 0.5, n, n, span));
-        }
-    }
-    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
-    let c = b.centre();
-    let half = (b.max - b.min) * 0.5;
-    let mut incoherent = Vec::with_capacity(1 << 20);
-    while incoherent.len() < 1 << 20 {
-        let o = c + (Vec3A::new(rng.next(), rng.next(), rng.next()) - Vec3A::splat(0.5)) * half;
-        let z = 2.0 * rng.next() - 1.0;
-        let phi = std::f32::consts::TAU * rng.next();
-        let r = (1.0 - z * z).max(0.0).sqrt();
-        incoherent.push(Ray::new(o, Vec3A::new(r * phi.cos(), r * phi.sin(), z)));
-    }
+    let primary = raysets::primary(b, 1024);
+    let incoherent = raysets::incoherent(b, primary.len());
     for (name, rays) in [("primary", &primary), ("incoherent", &incoherent)] {
         for threads in [1, 2] {
             let mut best = f64::INFINITY;

@@ -1,8 +1,8 @@
-//! Bounding volume hierarchy: binned SAH build, 4-wide flattened nodes, ordered traversal.
+//! Bounding volume hierarchy: binned SAH build, 8-wide flattened nodes, ordered traversal.
 //!
 //! Build: a binary tree with binned SAH (16 bins on each axis, iterative, depth-capped) in
 //! 32-byte nodes (box + first/count packed in the w lanes, children adjacent). It is then
-//! collapsed into 4-wide nodes (`Node4`: the four child boxes in SoA layout, 128 bytes, i.e.
+//! collapsed into 8-wide nodes (`Node8`: the eight child boxes in SoA layout, 256 bytes, i.e.
 //! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
 //! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
 //! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
@@ -10,8 +10,11 @@
 //! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
 //! stack ([`Scratch`] holds both).
 //!
-//! Traversal tests the four child boxes at once with SSE (`Vec4`), using per-ray precomputed
-//! reciprocal direction and near/far plane selection (no min/max per axis). For closest-hit
+//! Traversal tests the eight child boxes at once, with AVX where the CPU has it (detected at
+//! run time; the whole traversal loop is then compiled for AVX) and otherwise with two SSE
+//! vectors (`Vec4`; glam's scalar code off x86), the same operations on the same values either
+//! way, so the same hits on every machine. Per ray, the reciprocal direction and the near/far
+//! plane rows are chosen once (no min/max per axis, no branch per node). For closest-hit
 //! queries the children that are hit are handled nearest first: leaves are intersected
 //! immediately, the nearest inner child is descended into, the others are stacked with their
 //! entry distance and skipped later if a closer hit was found. Shadow rays use the unordered
@@ -38,7 +41,7 @@ pub(crate) mod probe {
     thread_local! {
         pub static NODES: Cell<u64> = const { Cell::new(0) };
         pub static TCOST: Cell<f32> = const { Cell::new(super::TRAVERSAL_COST) };
-        pub static LEAF_MIN: Cell<usize> = const { Cell::new(2) };
+        pub static LEAF_MIN: Cell<usize> = const { Cell::new(0) };
     }
 }
 
@@ -50,13 +53,17 @@ fn traversal_cost() -> f32 {
 fn traversal_cost() -> f32 {
     TRAVERSAL_COST
 }
+/// The tuning report's leaf size when it sets one (0: the builder's choice).
 #[cfg(test)]
-fn leaf_min() -> usize {
-    probe::LEAF_MIN.with(|c| c.get())
+fn leaf_min(chosen: usize) -> usize {
+    match probe::LEAF_MIN.with(|c| c.get()) {
+        0 => chosen,
+        lm => lm,
+    }
 }
 #[cfg(not(test))]
-fn leaf_min() -> usize {
-    2
+fn leaf_min(chosen: usize) -> usize {
+    chosen
 }
 
 /// A flattened node: `a = (min, first)`, `b = (max, count)` with the integers stored as f32 bits.
@@ -91,8 +98,14 @@ struct Bin {
     count: u32,
 }
 
+/// Leaves at most this big are never split: for primitives tested one at a time.
+pub(crate) const LEAF_MIN: usize = 2;
+/// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
+/// one test.
+pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
+
 /// Binary binned-SAH build; returns the nodes and the primitive order.
-fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
+fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
     let n = boxes.len();
     let mut order: Vec<u32> = (0..n as u32).collect();
     if n == 0 {
@@ -115,7 +128,7 @@ fn build_binary(boxes: &[Aabb]) -> (Vec<Node>, Vec<u32>) {
         let make_leaf = |nodes: &mut Vec<Node>| {
             nodes[ni] = Node::new(bounds, start as u32, count as u32);
         };
-        if count <= leaf_min() || depth >= MAX_DEPTH {
+        if count <= leaf_min(leaf_min_chosen) || depth >= MAX_DEPTH {
             make_leaf(&mut nodes);
             continue;
         }
@@ -234,27 +247,33 @@ impl Scratch {
     }
 }
 
-/// Marks an unused child slot of a [`Node4`].
+/// Children per node.
+pub(crate) const WIDTH: usize = 8;
+
+/// Marks an unused child slot of a [`Node8`].
 const EMPTY: u32 = u32::MAX;
 
-/// A 4-wide node: the boxes of up to four children in SoA layout, tested together with SIMD.
+/// An 8-wide node: the boxes of up to eight children in SoA layout, tested together with SIMD
+/// (one AVX vector per plane where the CPU has AVX, else two SSE vectors; same results).
+/// `bounds[a]` holds the children's minima on axis `a`, `bounds[3 + a]` their maxima.
 /// `count[i] == 0`: child `i` is the node `child[i]`; `count[i] == EMPTY`: unused slot (its box
 /// is empty, so it is never hit); otherwise a leaf of `count[i]` primitives from `child[i]`.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
-pub(crate) struct Node4 {
-    lo: [Vec4; 3],
-    hi: [Vec4; 3],
-    child: [u32; 4],
-    count: [u32; 4],
+pub(crate) struct Node8 {
+    bounds: [[f32; WIDTH]; 6],
+    child: [u32; WIDTH],
+    count: [u32; WIDTH],
 }
 
-/// Per-ray constants for the 4-wide box test.
+/// Per-ray constants for the 8-wide box test: which plane row is near and which far on each
+/// axis (chosen once per ray by the direction's signs, so the node test has no branches), the
+/// reciprocal direction and origin times it.
 struct RayPre {
-    /// Per axis: (near-plane selector is `hi`?).
-    neg: [bool; 3],
-    inv: [Vec4; 3],
-    oinv: [Vec4; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+    inv: [f32; 3],
+    oinv: [f32; 3],
 }
 
 impl RayPre {
@@ -262,67 +281,115 @@ impl RayPre {
     fn new(ray: &Ray) -> RayPre {
         let o = ray.origin;
         let i = ray.inv_dir;
+        let neg = [i.x < 0.0, i.y < 0.0, i.z < 0.0];
         RayPre {
-            neg: [i.x < 0.0, i.y < 0.0, i.z < 0.0],
-            inv: [Vec4::splat(i.x), Vec4::splat(i.y), Vec4::splat(i.z)],
-            oinv: [
-                Vec4::splat(o.x * i.x),
-                Vec4::splat(o.y * i.y),
-                Vec4::splat(o.z * i.z),
-            ],
+            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
+            inv: [i.x, i.y, i.z],
+            oinv: [o.x * i.x, o.y * i.y, o.z * i.z],
         }
     }
 }
 
-impl Node4 {
-    /// Entry distances of the four children and the mask of those entered before `tmax`.
-    #[inline(always)]
-    fn hit(&self, r: &RayPre, tmax: f32) -> (Vec4, u32) {
+/// The box test with SSE (two halves of four; glam's scalar code off x86): entry distances of
+/// the eight children and the mask of those entered before `tmax`.
+#[inline(always)]
+fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
+    let mut out = [0.0f32; WIDTH];
+    let mut mask = 0u32;
+    for h in 0..2 {
         let mut tn = Vec4::ZERO;
         let mut tf = Vec4::splat(tmax);
         for a in 0..3 {
-            let (n, f) = if r.neg[a] {
-                (self.hi[a], self.lo[a])
-            } else {
-                (self.lo[a], self.hi[a])
-            };
-            tn = tn.max(n * r.inv[a] - r.oinv[a]);
-            tf = tf.min(f * r.inv[a] - r.oinv[a]);
+            let (inv, oinv) = (Vec4::splat(r.inv[a]), Vec4::splat(r.oinv[a]));
+            let n = Vec4::from_slice(&node.bounds[r.near[a] & 7][4 * h..]);
+            let f = Vec4::from_slice(&node.bounds[r.far[a] & 7][4 * h..]);
+            tn = tn.max(n * inv - oinv);
+            tf = tf.min(f * inv - oinv);
         }
-        (tn, tn.cmple(tf).bitmask())
+        tn.write_to_slice(&mut out[4 * h..]);
+        mask |= tn.cmple(tf).bitmask() << (4 * h);
+    }
+    (out, mask)
+}
+
+/// [`hit_sse`] with one AVX vector per plane: the same operations on the same values, so the
+/// same distances and mask.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
+    use std::arch::x86_64::*;
+    let mut tn = _mm256_setzero_ps();
+    let mut tf = _mm256_set1_ps(tmax);
+    for a in 0..3 {
+        let inv = _mm256_set1_ps(r.inv[a]);
+        let oinv = _mm256_set1_ps(r.oinv[a]);
+        let n = &node.bounds[r.near[a] & 7];
+        let f = &node.bounds[r.far[a] & 7];
+        // SAFETY: `n` and `f` are arrays of 8 f32, exactly the 32 bytes an unaligned load reads.
+        let (n, f) = unsafe { (_mm256_loadu_ps(n.as_ptr()), _mm256_loadu_ps(f.as_ptr())) };
+        tn = _mm256_max_ps(tn, _mm256_sub_ps(_mm256_mul_ps(n, inv), oinv));
+        tf = _mm256_min_ps(tf, _mm256_sub_ps(_mm256_mul_ps(f, inv), oinv));
+    }
+    let mut out = [0.0f32; WIDTH];
+    // SAFETY: `out` is 8 f32, the 32 bytes an unaligned store writes.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), tn) };
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+    (out, mask)
+}
+
+/// Whether the AVX node test can run here (checked once by std, then a cached flag).
+#[inline(always)]
+fn has_avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
-/// The hierarchy: a binary SAH tree collapsed into 4-wide nodes.
+/// The hierarchy: a binary SAH tree collapsed into 8-wide nodes.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bvh {
-    pub nodes: Vec<Node4>,
+    pub nodes: Vec<Node8>,
 }
 
 impl Bvh {
     /// Builds over primitive boxes; returns the hierarchy and the primitive order (new position ->
     /// old index).
     pub fn build(boxes: &[Aabb]) -> (Bvh, Vec<u32>) {
-        let (bin, order) = build_binary(boxes);
-        let mut nodes = Vec::with_capacity(bin.len() / 2 + 1);
-        if let Some(root) = bin.first() {
+        Bvh::build_with(boxes, LEAF_MIN)
+    }
+
+    /// [`Bvh::build`] never splitting leaves of up to `leaf_min` primitives.
+    pub fn build_with(boxes: &[Aabb], leaf_min: usize) -> (Bvh, Vec<u32>) {
+        let (bin, order) = build_binary(boxes, leaf_min);
+        let mut nodes = Vec::with_capacity(bin.len() / 4 + 1);
+        if !bin.is_empty() {
             let bounds = |n: &Node| Aabb {
                 min: Vec3A::from_vec4(n.a),
                 max: Vec3A::from_vec4(n.b),
             };
-            // (binary node, Node4 slot to fill)
-            nodes.push(Node4::empty());
+            // (binary node, Node8 slot to fill)
+            nodes.push(Node8::empty());
             let mut work = vec![(0usize, 0usize)];
-            let _ = root;
+            let mut kids: Vec<usize> = Vec::with_capacity(WIDTH);
             while let Some((bi, slot)) = work.pop() {
-                // gather up to four children by opening the largest interior child
-                let mut kids: Vec<usize> = Vec::with_capacity(4);
+                // gather up to eight children by opening the largest interior child
+                kids.clear();
                 if bin[bi].count() > 0 {
                     kids.push(bi);
                 } else {
                     let f = bin[bi].first() as usize;
                     kids.extend([f, f + 1]);
-                    while kids.len() < 4 {
+                    while kids.len() < WIDTH {
                         let best = kids
                             .iter()
                             .enumerate()
@@ -339,26 +406,26 @@ impl Bvh {
                         kids.extend([f, f + 1]);
                     }
                 }
-                let mut n4 = Node4::empty();
+                let mut n8 = Node8::empty();
                 for (i, &k) in kids.iter().enumerate() {
                     let Some(n) = bin.get(k) else { continue };
                     let b = bounds(n);
                     for a in 0..3 {
-                        n4.lo[a][i] = b.min[a];
-                        n4.hi[a][i] = b.max[a];
+                        n8.bounds[a][i] = b.min[a];
+                        n8.bounds[3 + a][i] = b.max[a];
                     }
                     if n.count() > 0 {
-                        n4.child[i] = n.first();
-                        n4.count[i] = n.count();
+                        n8.child[i] = n.first();
+                        n8.count[i] = n.count();
                     } else {
                         let ni = nodes.len();
-                        nodes.push(Node4::empty());
-                        n4.child[i] = ni as u32;
-                        n4.count[i] = 0;
+                        nodes.push(Node8::empty());
+                        n8.child[i] = ni as u32;
+                        n8.count[i] = 0;
                         work.push((k, ni));
                     }
                 }
-                nodes[slot] = n4;
+                nodes[slot] = n8;
             }
         }
         (Bvh { nodes }, order)
@@ -380,9 +447,45 @@ impl Bvh {
     }
 
     /// [`Bvh::traverse`] with the stack and the work counter given apart, so that a leaf visit
-    /// can traverse another hierarchy (a mesh instance's) with a second stack.
+    /// can traverse another hierarchy (a mesh instance's) with a second stack. Runs the AVX
+    /// node test where the CPU has it (the whole loop compiled for AVX), else SSE.
     #[inline(always)]
     pub fn traverse_in<const ORDERED: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx() {
+            // SAFETY: the CPU has AVX (checked just above).
+            return unsafe { self.traverse_avx::<ORDERED>(ray, tmax, stack, work, visit) };
+        }
+        self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit)
+    }
+
+    /// [`Bvh::traverse_loop`] compiled with AVX.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    unsafe fn traverse_avx<const ORDERED: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
+        self.traverse_loop::<ORDERED, true>(ray, tmax, stack, work, visit)
+    }
+
+    /// The traversal; `AVX` only where the CPU has it (see [`Bvh::traverse_in`]).
+    #[inline(always)]
+    fn traverse_loop<const ORDERED: bool, const AVX: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -401,12 +504,19 @@ impl Bvh {
                 #[cfg(test)]
                 probe::NODES.with(|c| c.set(c.get() + 1));
                 *work += 1;
-                let (tn, mut mask) = node.hit(&pre, tmax);
-                let tn = tn.to_array();
+                #[cfg(target_arch = "x86_64")]
+                let (tn, mut mask) = if AVX {
+                    // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+                    unsafe { hit_avx(node, &pre, tmax) }
+                } else {
+                    hit_sse(node, &pre, tmax)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (tn, mut mask) = hit_sse(node, &pre, tmax);
                 if mask & mask.wrapping_sub(1) == 0 {
                     // zero or one child hit: the common case, no sorting or stacking
                     if mask != 0 {
-                        let i = mask.trailing_zeros() as usize & 3;
+                        let i = mask.trailing_zeros() as usize & 7;
                         let count = node.count[i];
                         if count == 0 {
                             cur = node.child[i];
@@ -422,23 +532,23 @@ impl Bvh {
                     }
                 } else {
                     // several children: leaves at once, inner nodes nearest first
-                    let mut it = [0.0f32; 4];
-                    let mut ic = [0u32; 4];
+                    let mut it = [0.0f32; WIDTH];
+                    let mut ic = [0u32; WIDTH];
                     let mut ni = 0usize;
                     while mask != 0 {
-                        let i = mask.trailing_zeros() as usize & 3;
+                        let i = mask.trailing_zeros() as usize & 7;
                         mask &= mask - 1;
                         let count = node.count[i];
                         if count == 0 {
                             // insertion keeps (it, ic) sorted far to near
                             let mut j = ni;
-                            while ORDERED && j > 0 && it[(j - 1) & 3] < tn[i] {
-                                it[j & 3] = it[(j - 1) & 3];
-                                ic[j & 3] = ic[(j - 1) & 3];
+                            while ORDERED && j > 0 && it[(j - 1) & 7] < tn[i] {
+                                it[j & 7] = it[(j - 1) & 7];
+                                ic[j & 7] = ic[(j - 1) & 7];
                                 j -= 1;
                             }
-                            it[j & 3] = tn[i];
-                            ic[j & 3] = node.child[i];
+                            it[j & 7] = tn[i];
+                            ic[j & 7] = node.child[i];
                             ni += 1;
                         } else if count != EMPTY && tn[i] <= tmax {
                             *work += count as u64;
@@ -449,16 +559,16 @@ impl Bvh {
                         }
                     }
                     if ni > 0 {
-                        if stack.len() < sp + 4 {
+                        if stack.len() < sp + WIDTH {
                             stack.resize(sp + 64, (0, 0, 0.0));
                         }
                         for j in 0..ni - 1 {
                             if let Some(slot) = stack.get_mut(sp) {
-                                *slot = (ic[j & 3], 0, it[j & 3]);
+                                *slot = (ic[j & 7], 0, it[j & 7]);
                                 sp += 1;
                             }
                         }
-                        cur = ic[(ni - 1) & 3];
+                        cur = ic[(ni - 1) & 7];
                         continue;
                     }
                 }
@@ -477,15 +587,25 @@ impl Bvh {
             }
         }
     }
+
+    /// Every leaf as (first primitive, count).
+    pub fn leaves(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.nodes.iter().flat_map(|n| {
+            (0..WIDTH).filter_map(move |i| {
+                let c = n.count[i];
+                (c != 0 && c != EMPTY).then_some((n.child[i] as usize, c as usize))
+            })
+        })
+    }
 }
 
-impl Node4 {
-    fn empty() -> Node4 {
-        Node4 {
-            lo: [Vec4::INFINITY; 3],
-            hi: [Vec4::NEG_INFINITY; 3],
-            child: [0; 4],
-            count: [EMPTY; 4],
+impl Node8 {
+    fn empty() -> Node8 {
+        let (inf, ninf) = ([f32::INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH]);
+        Node8 {
+            bounds: [inf, inf, inf, ninf, ninf, ninf],
+            child: [0; WIDTH],
+            count: [EMPTY; WIDTH],
         }
     }
 }
@@ -513,7 +633,7 @@ mod tests {
     #[test]
     fn build_covers_all_primitives_once() {
         let boxes = grid();
-        let (bin, order) = build_binary(&boxes);
+        let (bin, order) = build_binary(&boxes, LEAF_MIN);
         assert!(bin.len() < 2 * boxes.len());
         assert_eq!(std::mem::size_of::<Node>(), 32);
         let mut seen = vec![0u32; boxes.len()];
@@ -526,7 +646,7 @@ mod tests {
         let (bvh, order) = Bvh::build(&boxes);
         let mut seen = vec![0u32; boxes.len()];
         for n in &bvh.nodes {
-            for i in 0..4 {
+            for i in 0..WIDTH {
                 if n.count[i] != EMPTY && n.count[i] > 0 {
                     for k in n.child[i]..n.child[i] + n.count[i] {
                         seen[order[k as usize] as usize] += 1;
@@ -535,11 +655,49 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
-        assert_eq!(std::mem::size_of::<Node4>(), 128);
+        assert_eq!(std::mem::size_of::<Node8>(), 256);
         // identical boxes still give bounded leaves
         let same = vec![boxes[0]; 100];
-        let (bin, _) = build_binary(&same);
+        let (bin, _) = build_binary(&same, LEAF_MIN);
         assert!(bin.iter().all(|n| n.count() as usize <= MAX_LEAF));
+    }
+
+    #[test]
+    fn avx_and_sse_node_tests_agree_bit_for_bit() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut f = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
+        };
+        let mut hits = 0;
+        for round in 0..5000 {
+            let mut node = Node8::empty();
+            for i in 0..WIDTH - round % 3 {
+                for a in 0..3 {
+                    let (x, y) = (f(), f());
+                    node.bounds[a][i] = x.min(y);
+                    node.bounds[3 + a][i] = x.max(y);
+                }
+            }
+            let mut d = Vec3A::new(f(), f(), f());
+            if round % 5 == 0 {
+                d.y = 0.0; // an axis-parallel ray: the tiny safe reciprocal
+            }
+            let ray = Ray::new(Vec3A::new(f(), f(), f()) * 0.25, d);
+            let pre = RayPre::new(&ray);
+            let tmax = if round % 2 == 0 { 3.0 } else { f32::INFINITY };
+            let (t, m) = hit_sse(&node, &pre, tmax);
+            hits += m.count_ones();
+            if has_avx() {
+                // SAFETY: the CPU has AVX (checked on the line above).
+                let (ta, ma) = unsafe { hit_avx(&node, &pre, tmax) };
+                assert_eq!(m, ma);
+                assert_eq!(t.map(f32::to_bits), ta.map(f32::to_bits));
+            }
+        }
+        assert!(hits > 5000, "{hits}");
     }
 
     #[test]

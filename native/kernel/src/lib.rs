@@ -27,9 +27,10 @@
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
 //!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
 //!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
-//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 4-wide SIMD nodes;
+//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 8-wide SIMD nodes (AVX or SSE);
 //!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
 //!   by instances (transform, inverse, material) under a top-level BVH.
+//! - [`raysets`]: the fixed ray sets of the ray-casting benchmarks.
 //! - [`camera`], [`ray`], [`material`], [`light`]: the Whitted model's ingredients;
 //!   [`integrator`]: the [`Integrator`] trait and [`Whitted`] (shading rules documented there).
 //! - [`render`]: [`Settings`], [`trace_span`], [`render_image`] (SPD corner mode, stratified
@@ -57,10 +58,12 @@ pub mod nff;
 pub mod obj;
 pub mod polygon;
 pub mod ray;
+pub mod raysets;
 pub mod render;
 pub mod scene;
 pub mod stats;
 pub mod toml_scene;
+mod tri4;
 pub mod warning;
 
 pub use bvh::Scratch;

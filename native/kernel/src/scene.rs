@@ -12,6 +12,7 @@ use crate::limits;
 use crate::material::Material;
 use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
+use crate::tri4::{RayLanes, TriBlocks};
 use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Vec3A};
@@ -110,6 +111,8 @@ pub struct Scene {
     pub(crate) patch_normals: Vec<[Vec3A; 3]>,
     pub(crate) planes: Vec<Plane>,
     pub(crate) bvh: Bvh,
+    /// The triangles of `bvh`'s all-triangle leaves, four to a SIMD block.
+    pub(crate) tri_blocks: TriBlocks,
     /// Shared meshes, each stored once.
     pub(crate) meshes: Vec<Mesh>,
     /// References to them, in the order of `instance_bvh`'s leaves.
@@ -186,6 +189,20 @@ impl Scene {
         self.source_count
     }
 
+    /// The scene's own triangles as corner triples (`v0, v0 + e1, v0 + e2`), in BVH order; other
+    /// shapes and the triangles of instanced meshes are left out. For handing the same mesh to
+    /// another kernel in comparisons (see [`crate::raysets`]).
+    pub fn triangles(&self) -> Vec<[Vec3A; 3]> {
+        self.geom
+            .shapes
+            .iter()
+            .filter_map(|s| match *s {
+                Shape::Triangle { v0, e1, e2 } => Some([v0, v0 + e1, v0 + e2]),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// Number of the scene's own internal primitives (triangles after polygon triangulation,
     /// spheres, cones, planes; the triangles of shared meshes are not among them);
     /// [`Hit::prim`] indexes these when [`Hit::instance`] is [`Hit::NO_INSTANCE`].
@@ -254,10 +271,21 @@ impl Scene {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         let mut mailbox = Mailbox::default();
+        let blocks = &self.tri_blocks;
+        let lanes = RayLanes::new(ray);
         let mut best = self
             .bvh
             .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
                 let mut tm = tmax;
+                if let Some(leaf) = blocks.leaf(first, count) {
+                    for (k, b) in leaf.iter().enumerate() {
+                        if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
+                            tm = t;
+                            prim = (first + 4 * k + i) as u32;
+                        }
+                    }
+                    return tm;
+                }
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
                         if mailbox.seen(s) {
@@ -393,6 +421,35 @@ impl Scene {
         hit_triangle(tri[0], tri[1], tri[2], &inst.object_ray(ray), 0.0, tmax).is_some()
     }
 
+    /// Closest hits of a packet of rays (such as a 4 x 4 pixel tile of primary rays):
+    /// `out[i]` gets what [`Scene::intersect_with`] returns for `rays[i]`, bit for bit, for
+    /// `i < min(rays.len(), out.len())`.
+    pub fn intersect_packet(
+        &self,
+        rays: &[Ray],
+        tmax: f32,
+        scratch: &mut Scratch,
+        out: &mut [Option<Hit>],
+    ) {
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.intersect_with(r, tmax, scratch);
+        }
+    }
+
+    /// Any-hit queries of a packet of rays (such as the shadow rays of a tile): `out[i]` gets
+    /// what [`Scene::occluded_with`] returns for `rays[i]`.
+    pub fn occluded_packet(
+        &self,
+        rays: &[Ray],
+        tmax: f32,
+        scratch: &mut Scratch,
+        out: &mut [bool],
+    ) {
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded_with(r, tmax, scratch);
+        }
+    }
+
     /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
     pub fn occluded(&self, ray: &Ray, tmax: f32) -> bool {
         self.occluded_with(ray, tmax, &mut Scratch::new())
@@ -432,9 +489,20 @@ impl Scene {
         }
         let mut found = NO_CACHE;
         let mut mailbox = Mailbox::default();
+        let blocks = &self.tri_blocks;
+        let lanes = RayLanes::new(ray);
         let r = self
             .bvh
             .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
+                if let Some(leaf) = blocks.leaf(first, count) {
+                    for (k, b) in leaf.iter().enumerate() {
+                        if let Some(i) = b.any(&lanes, 0.0, tmax) {
+                            found = (Hit::NO_INSTANCE, (first + 4 * k + i) as u32);
+                            return -1.0;
+                        }
+                    }
+                    return tmax;
+                }
                 if let Some(range) = shapes.get(first..first + count) {
                     for (k, s) in range.iter().enumerate() {
                         if mailbox.seen(s) {
@@ -648,11 +716,13 @@ pub(crate) struct SceneBuilder {
 }
 
 /// A BVH over a geometry's shapes, with the shapes and their data put in its order, and the
-/// bounds of it all.
+/// bounds of it all. `blocks`: the leaves' triangles will be met four at a time
+/// ([`TriBlocks`]), so an all-triangle geometry gets leaves of up to four.
 fn ordered_bvh(
     geom: &Geometry,
     info: &[PrimInfo],
     poly_bounds: &[Aabb],
+    blocks: bool,
 ) -> (Bvh, Vec<Shape>, Vec<PrimInfo>, Aabb) {
     // BVH references: (shape index, box); oblique cones get several tight boxes
     let mut boxes: Vec<Aabb> = Vec::with_capacity(geom.shapes.len());
@@ -665,7 +735,18 @@ fn ordered_bvh(
             owner.push(i as u32);
         }
     }
-    let (bvh, order) = Bvh::build(&boxes);
+    // triangles are met four at a time: leaves of up to four are as cheap as one
+    let all_triangles = blocks
+        && geom
+            .shapes
+            .iter()
+            .all(|s| matches!(s, Shape::Triangle { .. }));
+    let leaf_min = if all_triangles {
+        crate::bvh::LEAF_MIN_TRIANGLES
+    } else {
+        crate::bvh::LEAF_MIN
+    };
+    let (bvh, order) = Bvh::build_with(&boxes, leaf_min);
     let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
     // the boxes go before the ordered arrays are made: a parse's peak memory
     drop(boxes);
@@ -731,7 +812,7 @@ impl SceneBuilder {
         self.warnings.absorb(std::mem::take(&mut mesh.warnings));
         let base = self.materials.len() as u32;
         self.materials.extend(mesh.materials.iter().copied());
-        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds);
+        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds, false);
         let mut tris: Vec<Tri> = Vec::with_capacity(shapes.len());
         let mut infos = Vec::with_capacity(shapes.len());
         for (s, i) in shapes.iter().zip(&info) {
@@ -959,9 +1040,11 @@ impl SceneBuilder {
         self.geom.shapes.shrink_to_fit();
         self.info.shrink_to_fit();
         self.patch_normals.shrink_to_fit();
-        let (bvh, shapes, info, bounds) = ordered_bvh(&self.geom, &self.info, &self.poly_bounds);
+        let (bvh, shapes, info, bounds) =
+            ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
+        let tri_blocks = TriBlocks::build(&bvh, &self.geom.shapes);
         let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
         let instances: Vec<Instance> = order
             .iter()
@@ -997,6 +1080,7 @@ impl SceneBuilder {
             patch_normals: self.patch_normals,
             planes: self.planes,
             bvh,
+            tri_blocks,
             meshes: self.meshes,
             instances,
             instance_bvh,

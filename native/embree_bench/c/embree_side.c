@@ -1,0 +1,152 @@
+/* RingTracer's side-by-side harness for Intel Embree 3 (Debian libembree-dev).
+ *
+ * A triangle mesh is handed over once (eb_new) and Embree builds its BVH; then the caller
+ * times batches of rays through eb_intersect1 (one rtcIntersect1 per ray), eb_intersect16
+ * (rtcIntersect16 on consecutive groups of 16 rays; the caller orders coherent rays in tiles)
+ * and the shadow forms eb_occluded1 / eb_occluded16. Rays are 6 floats each (origin, unit
+ * direction), tnear 0, tfar infinity. Each call returns the number of rays that hit. */
+#include <embree3/rtcore.h>
+#include <stdint.h>
+#include <stddef.h>
+#include <string.h>
+
+struct eb_scene {
+  RTCDevice device;
+  RTCScene scene;
+};
+
+static struct eb_scene the_scenes[8];
+
+const char *eb_version(void) { return RTC_VERSION_STRING; }
+
+/* Returns a handle >= 0, or -1 when Embree refuses the device or the scene. */
+int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris) {
+  int h = -1;
+  for (int i = 0; i < 8; i++)
+    if (the_scenes[i].device == NULL) { h = i; break; }
+  if (h < 0) return -1;
+  /* one build thread: the machine is shared and the figures are per tracing thread */
+  RTCDevice device = rtcNewDevice("threads=1");
+  if (device == NULL) return -1;
+  RTCScene scene = rtcNewScene(device);
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  float *v = (float *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                              RTC_FORMAT_FLOAT3, 3 * sizeof(float), nverts);
+  unsigned *t = (unsigned *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                    RTC_FORMAT_UINT3, 3 * sizeof(unsigned), ntris);
+  if (v == NULL || t == NULL) {
+    rtcReleaseGeometry(geom);
+    rtcReleaseScene(scene);
+    rtcReleaseDevice(device);
+    return -1;
+  }
+  memcpy(v, verts, nverts * 3 * sizeof(float));
+  memcpy(t, idx, ntris * 3 * sizeof(unsigned));
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+  rtcCommitScene(scene);
+  if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
+    rtcReleaseScene(scene);
+    rtcReleaseDevice(device);
+    return -1;
+  }
+  the_scenes[h].device = device;
+  the_scenes[h].scene = scene;
+  return h;
+}
+
+void eb_free(int h) {
+  if (h < 0 || h >= 8 || the_scenes[h].device == NULL) return;
+  rtcReleaseScene(the_scenes[h].scene);
+  rtcReleaseDevice(the_scenes[h].device);
+  the_scenes[h].device = NULL;
+  the_scenes[h].scene = NULL;
+}
+
+static void init_ray(struct RTCRay *r, const float *p) {
+  r->org_x = p[0]; r->org_y = p[1]; r->org_z = p[2]; r->tnear = 0.0f;
+  r->dir_x = p[3]; r->dir_y = p[4]; r->dir_z = p[5]; r->time = 0.0f;
+  r->tfar = __builtin_inff(); r->mask = 0xFFFFFFFFu; r->id = 0; r->flags = 0;
+}
+
+uint64_t eb_intersect1(int h, const float *rays, size_t n) {
+  RTCScene scene = the_scenes[h].scene;
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  uint64_t hits = 0;
+  for (size_t i = 0; i < n; i++) {
+    struct RTCRayHit rh;
+    init_ray(&rh.ray, rays + 6 * i);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scene, &ctx, &rh);
+    hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+  }
+  return hits;
+}
+
+uint64_t eb_occluded1(int h, const float *rays, size_t n) {
+  RTCScene scene = the_scenes[h].scene;
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  uint64_t hits = 0;
+  for (size_t i = 0; i < n; i++) {
+    struct RTCRay r;
+    init_ray(&r, rays + 6 * i);
+    rtcOccluded1(scene, &ctx, &r);
+    hits += r.tfar < 0.0f;
+  }
+  return hits;
+}
+
+static int fill16(struct RTCRay16 *r, int valid[16], const float *rays, size_t i, size_t n) {
+  int live = 0;
+  for (int k = 0; k < 16; k++) {
+    size_t j = i + (size_t)k;
+    const float *p = rays + 6 * (j < n ? j : i);
+    valid[k] = j < n ? -1 : 0;
+    live += j < n;
+    r->org_x[k] = p[0]; r->org_y[k] = p[1]; r->org_z[k] = p[2]; r->tnear[k] = 0.0f;
+    r->dir_x[k] = p[3]; r->dir_y[k] = p[4]; r->dir_z[k] = p[5]; r->time[k] = 0.0f;
+    r->tfar[k] = __builtin_inff(); r->mask[k] = 0xFFFFFFFFu; r->id[k] = 0; r->flags[k] = 0;
+  }
+  return live;
+}
+
+/* coherent != 0 sets RTC_INTERSECT_CONTEXT_FLAG_COHERENT (for tiles of primary rays) */
+uint64_t eb_intersect16(int h, const float *rays, size_t n, int coherent) {
+  RTCScene scene = the_scenes[h].scene;
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  uint64_t hits = 0;
+  struct RTCRayHit16 rh;
+  int valid[16];
+  for (size_t i = 0; i < n; i += 16) {
+    int live = fill16(&rh.ray, valid, rays, i, n);
+    for (int k = 0; k < 16; k++) {
+      rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
+    }
+    rtcIntersect16(valid, scene, &ctx, &rh);
+    for (int k = 0; k < live; k++) hits += rh.hit.geomID[k] != RTC_INVALID_GEOMETRY_ID;
+  }
+  return hits;
+}
+
+uint64_t eb_occluded16(int h, const float *rays, size_t n, int coherent) {
+  RTCScene scene = the_scenes[h].scene;
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  uint64_t hits = 0;
+  struct RTCRay16 r;
+  int valid[16];
+  for (size_t i = 0; i < n; i += 16) {
+    int live = fill16(&r, valid, rays, i, n);
+    rtcOccluded16(valid, scene, &ctx, &r);
+    for (int k = 0; k < live; k++) hits += r.tfar[k] < 0.0f;
+  }
+  return hits;
+}

@@ -1,0 +1,171 @@
+//! The project's C harness over Embree 3 (`c/embree_side.c`), present when the build found
+//! Debian's `libembree-dev` (`cfg(embree)`).
+
+use ring_tracer_kernel::glam::Vec3A;
+
+#[cfg(embree)]
+mod ffi {
+    use std::os::raw::{c_char, c_int};
+    extern "C" {
+        pub fn eb_version() -> *const c_char;
+        pub fn eb_new(verts: *const f32, nverts: usize, idx: *const u32, ntris: usize) -> c_int;
+        pub fn eb_free(h: c_int);
+        pub fn eb_intersect1(h: c_int, rays: *const f32, n: usize) -> u64;
+        pub fn eb_occluded1(h: c_int, rays: *const f32, n: usize) -> u64;
+        pub fn eb_intersect16(h: c_int, rays: *const f32, n: usize, coherent: c_int) -> u64;
+        pub fn eb_occluded16(h: c_int, rays: *const f32, n: usize, coherent: c_int) -> u64;
+    }
+}
+
+/// An Embree scene over one triangle mesh (built once, traced from any number of threads).
+pub struct Embree {
+    #[cfg(embree)]
+    handle: std::os::raw::c_int,
+}
+
+/// How a batch of rays is handed to Embree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Call {
+    /// `rtcIntersect1` per ray.
+    Intersect1,
+    /// `rtcIntersect16` per 16 consecutive rays (coherent flag for tiles of primary rays).
+    Intersect16 {
+        /// Sets `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`.
+        coherent: bool,
+    },
+    /// `rtcOccluded1` per ray.
+    Occluded1,
+    /// `rtcOccluded16` per 16 consecutive rays.
+    Occluded16 {
+        /// Sets `RTC_INTERSECT_CONTEXT_FLAG_COHERENT`.
+        coherent: bool,
+    },
+}
+
+/// Rays as the harness takes them: origin and direction, 6 floats each.
+pub fn flat(rays: &[ring_tracer_kernel::Ray]) -> Vec<f32> {
+    rays.iter()
+        .flat_map(|r| {
+            let (o, d) = (r.origin, r.dir);
+            [o.x, o.y, o.z, d.x, d.y, d.z]
+        })
+        .collect()
+}
+
+impl Embree {
+    /// Embree's version, or why it is not there.
+    pub fn version() -> Result<String, String> {
+        #[cfg(embree)]
+        {
+            // SAFETY: eb_version returns a pointer to a static NUL-terminated string literal.
+            let v = unsafe { std::ffi::CStr::from_ptr(ffi::eb_version()) };
+            Ok(v.to_string_lossy().into_owned())
+        }
+        #[cfg(not(embree))]
+        {
+            Err(
+                "Embree 3 was not found when this bench was built (Debian: apt-get install \
+                 libembree-dev, then rebuild)"
+                    .into(),
+            )
+        }
+    }
+
+    /// Builds Embree's BVH over the triangles (each given by its three corners).
+    pub fn new(tris: &[[Vec3A; 3]]) -> Result<Embree, String> {
+        #[cfg(embree)]
+        {
+            let verts: Vec<f32> = tris
+                .iter()
+                .flat_map(|t| t.iter().flat_map(|v| [v.x, v.y, v.z]))
+                .collect();
+            let idx: Vec<u32> = (0..(3 * tris.len()) as u32).collect();
+            // SAFETY: `verts` holds 3 floats per vertex for 3 * tris.len() vertices and `idx`
+            // 3 indices per triangle, all below the vertex count; eb_new copies both before
+            // returning and keeps no pointer to them.
+            let handle =
+                unsafe { ffi::eb_new(verts.as_ptr(), idx.len(), idx.as_ptr(), tris.len()) };
+            if handle < 0 {
+                return Err("Embree refused the device or the scene".into());
+            }
+            Ok(Embree { handle })
+        }
+        #[cfg(not(embree))]
+        {
+            let _ = tris;
+            Err(Embree::version().unwrap_err())
+        }
+    }
+
+    /// Traces `rays` (6 floats each, see [`flat`]); returns how many hit.
+    pub fn trace(&self, call: Call, rays: &[f32]) -> u64 {
+        #[cfg(embree)]
+        {
+            let n = rays.len() / 6;
+            let p = rays.as_ptr();
+            let h = self.handle;
+            // SAFETY: `p` points to `n` complete rays of 6 floats that stay borrowed for the
+            // call; `h` is a live handle (freed only in Drop); the harness only reads the rays,
+            // and Embree's scenes may be traced from several threads at once.
+            unsafe {
+                match call {
+                    Call::Intersect1 => ffi::eb_intersect1(h, p, n),
+                    Call::Occluded1 => ffi::eb_occluded1(h, p, n),
+                    Call::Intersect16 { coherent } => ffi::eb_intersect16(h, p, n, coherent as _),
+                    Call::Occluded16 { coherent } => ffi::eb_occluded16(h, p, n, coherent as _),
+                }
+            }
+        }
+        #[cfg(not(embree))]
+        {
+            let _ = (call, rays);
+            0
+        }
+    }
+}
+
+impl Drop for Embree {
+    fn drop(&mut self) {
+        #[cfg(embree)]
+        // SAFETY: the handle came from eb_new and is freed once, here.
+        unsafe {
+            ffi::eb_free(self.handle)
+        };
+    }
+}
+
+#[cfg(all(test, embree))]
+mod tests {
+    use super::*;
+    use ring_tracer_kernel::Ray;
+
+    #[test]
+    fn embree_counts_hits_like_the_geometry_says() {
+        // a unit square in z = 0 as two triangles; rays down -z over a 4 x 4 grid, half inside
+        let q = [
+            Vec3A::new(0.0, 0.0, 0.0),
+            Vec3A::new(1.0, 0.0, 0.0),
+            Vec3A::new(1.0, 1.0, 0.0),
+            Vec3A::new(0.0, 1.0, 0.0),
+        ];
+        let e = Embree::new(&[[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).expect("embree");
+        assert!(!Embree::version().unwrap().is_empty());
+        let rays: Vec<Ray> = (0..17)
+            .map(|i| {
+                let x = (i % 4) as f32 * 0.5 + 0.1;
+                let y = (i / 4 % 4) as f32 * 0.5 + 0.1;
+                Ray::new(Vec3A::new(x, y, 1.0), -Vec3A::Z)
+            })
+            .collect();
+        // x, y in {0.1, 0.6, 1.1, 1.6}: 4 of each 16 are inside; the 17th ray is (0.1, 0.1)
+        let f = flat(&rays);
+        for call in [
+            Call::Intersect1,
+            Call::Occluded1,
+            Call::Intersect16 { coherent: true },
+            Call::Occluded16 { coherent: false },
+        ] {
+            assert_eq!(e.trace(call, &f), 5, "{call:?}");
+        }
+    }
+}

@@ -1,0 +1,254 @@
+//! Ray casting, RingTracer's kernel next to Intel Embree 3, same rays, same run.
+//!
+//! `cargo run --release -p ring_tracer_embree_bench -- [--rounds R] [--size N] MESH.obj...`
+//!
+//! For each mesh: both BVHs are built once, then R rounds (default 3) each time every
+//! measurement below, ours and Embree's alternating, and the table gives each one's range
+//! over the rounds (Mrays/s, the machine may be busy: compare columns of one run only).
+//! Rays ([`ring_tracer_kernel::raysets`]): N x N primary rays (default 1024) of the default
+//! OBJ view, and as many incoherent rays (random origins in the central half of the box,
+//! directions on the sphere), closest hit; the incoherent ones also as any-hit shadow queries.
+//! Columns: single rays on 1 thread (`Scene::intersect_with` / `occluded_with` against
+//! `rtcIntersect1` / `rtcOccluded1`), packets of 16 on 1 thread (ours: `Scene::intersect_packet`
+//! on 4 x 4 pixel tiles; Embree: `rtcIntersect16`, on the same tiles with the coherent flag
+//! for primary rays), and single rays on 2 threads. Hit counts must agree (they are printed
+//! when they differ by more than a few rays on triangle edges).
+//!
+//! Without Embree's headers at build time the bench says so and times ours only.
+
+mod embree;
+
+use embree::{flat, Call, Embree};
+use ring_tracer_kernel::{raysets, Ray, Scene, Scratch};
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+/// Runs `f` over `items` split in small chunks handed out to `threads` threads; returns
+/// (seconds, sum of f's results).
+fn timed<T: Sync>(
+    threads: usize,
+    items: &[T],
+    chunk: usize,
+    f: impl Fn(&[T]) -> u64 + Sync,
+) -> (f64, u64) {
+    let next = AtomicUsize::new(0);
+    let t = Instant::now();
+    let total = std::thread::scope(|s| {
+        let hs: Vec<_> = (0..threads)
+            .map(|_| {
+                s.spawn(|| {
+                    let mut sum = 0;
+                    loop {
+                        let c = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(part) = items.chunks(chunk).nth(c) else {
+                            break;
+                        };
+                        sum += f(part);
+                    }
+                    sum
+                })
+            })
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap_or(0)).sum()
+    });
+    (t.elapsed().as_secs_f64(), total)
+}
+
+/// One measured quantity: its rate in each round and its hit count.
+#[derive(Default)]
+struct Figure {
+    rates: Vec<f64>,
+    hits: u64,
+}
+
+impl Figure {
+    fn add(&mut self, rays: usize, (secs, hits): (f64, u64)) {
+        self.rates.push(rays as f64 / secs / 1e6);
+        self.hits = hits;
+    }
+    fn range(&self) -> String {
+        if self.rates.is_empty() {
+            return "-".into();
+        }
+        let lo = self.rates.iter().cloned().fold(f64::INFINITY, f64::min);
+        let hi = self.rates.iter().cloned().fold(0.0, f64::max);
+        format!("{lo:.1}-{hi:.1}")
+    }
+    fn best(&self) -> f64 {
+        self.rates.iter().cloned().fold(0.0, f64::max)
+    }
+}
+
+const CHUNK: usize = 4096;
+
+/// A table row: label, our rays, Embree's (flat), coherent, any-hit.
+type Row<'a> = (&'static str, &'a [Ray], &'a [f32], bool, bool);
+
+fn bench(path: &str, rounds: usize, size: u32) {
+    let t0 = Instant::now();
+    let scene = match Scene::load(Path::new(path)) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("{e}");
+            return;
+        }
+    };
+    let ours_build = t0.elapsed().as_secs_f64();
+    let tris = scene.triangles();
+    let t1 = Instant::now();
+    let embree = Embree::new(&tris);
+    let embree_build = t1.elapsed().as_secs_f64();
+    let name = Path::new(path)
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    println!();
+    match &embree {
+        Ok(_) => println!(
+            "{name}: {} triangles; load + BVH {ours_build:.2} s (ours), BVH {embree_build:.2} s (Embree {}, 1 build thread)",
+            tris.len(),
+            Embree::version().unwrap_or_default()
+        ),
+        Err(e) => println!(
+            "{name}: {} triangles; load + BVH {ours_build:.2} s. Embree: {e}",
+            tris.len()
+        ),
+    }
+    let b = scene.bounds();
+    let primary = raysets::primary(b, size);
+    let tiled: Vec<Ray> = raysets::tile_order(size)
+        .iter()
+        .map(|&i| primary[i as usize])
+        .collect();
+    let incoherent = raysets::incoherent(b, primary.len());
+    let n = primary.len();
+    let flat_tiled = flat(&tiled);
+    let flat_inc = flat(&incoherent);
+
+    let rows: [Row; 3] = [
+        ("primary (coherent)", &tiled, &flat_tiled, true, false),
+        ("incoherent", &incoherent, &flat_inc, false, false),
+        ("incoherent, any hit", &incoherent, &flat_inc, false, true),
+    ];
+    // per row: ours 1, Embree 1, ours 16, Embree 16, ours 2 threads, Embree 2 threads
+    let mut figs: Vec<[Figure; 6]> = rows.iter().map(|_| Default::default()).collect();
+    for _ in 0..rounds {
+        for (k, &(_, rays, fr, coherent, any)) in rows.iter().enumerate() {
+            let ours_single = |part: &[Ray]| {
+                let mut s = Scratch::new();
+                part.iter()
+                    .filter(|r| {
+                        if any {
+                            scene.occluded_with(r, f32::INFINITY, &mut s)
+                        } else {
+                            scene.intersect_with(r, f32::INFINITY, &mut s).is_some()
+                        }
+                    })
+                    .count() as u64
+            };
+            let ours_packet = |part: &[Ray]| {
+                let mut s = Scratch::new();
+                let mut hits = 0u64;
+                for p in part.chunks(16) {
+                    if any {
+                        let mut out = [false; 16];
+                        scene.occluded_packet(p, f32::INFINITY, &mut s, &mut out);
+                        hits += out.iter().filter(|&&h| h).count() as u64;
+                    } else {
+                        let mut out = [None; 16];
+                        scene.intersect_packet(p, f32::INFINITY, &mut s, &mut out);
+                        hits += out.iter().filter(|h| h.is_some()).count() as u64;
+                    }
+                }
+                hits
+            };
+            let (one, sixteen) = if any {
+                (Call::Occluded1, Call::Occluded16 { coherent })
+            } else {
+                (Call::Intersect1, Call::Intersect16 { coherent })
+            };
+            let f = &mut figs[k];
+            f[0].add(n, timed(1, rays, CHUNK, ours_single));
+            if let Ok(e) = &embree {
+                f[1].add(n, timed(1, fr, 6 * CHUNK, |p| e.trace(one, p)));
+            }
+            f[2].add(n, timed(1, rays, CHUNK, ours_packet));
+            if let Ok(e) = &embree {
+                f[3].add(n, timed(1, fr, 6 * CHUNK, |p| e.trace(sixteen, p)));
+            }
+            f[4].add(n, timed(2, rays, CHUNK, ours_single));
+            if let Ok(e) = &embree {
+                f[5].add(n, timed(2, fr, 6 * CHUNK, |p| e.trace(one, p)));
+            }
+        }
+    }
+    println!(
+        "{} x {size} rays of each kind, {rounds} rounds alternating; Mrays/s (min-max); ours / Embree of the best rounds",
+        size
+    );
+    println!(
+        "| rays | ours, single | Embree rtcIntersect1 | ours / E1 | ours, packets of 16 | Embree rtcIntersect16 | ours / E16 | ours, 2 threads | scaling | Embree 1, 2 threads |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for (k, row) in rows.iter().enumerate() {
+        let f = &figs[k];
+        let ratio = |a: &Figure, b: &Figure| {
+            if b.rates.is_empty() {
+                "-".to_string()
+            } else {
+                format!("{:.2}", a.best() / b.best())
+            }
+        };
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
+            row.0,
+            f[0].range(),
+            f[1].range(),
+            ratio(&f[0], &f[1]),
+            f[2].range(),
+            f[3].range(),
+            ratio(&f[2], &f[3]),
+            f[4].range(),
+            f[4].best() / f[0].best(),
+            f[5].range(),
+        );
+        let hits: Vec<u64> = f
+            .iter()
+            .filter(|x| !x.rates.is_empty())
+            .map(|x| x.hits)
+            .collect();
+        let (lo, hi) = (
+            hits.iter().min().copied().unwrap_or(0),
+            hits.iter().max().copied().unwrap_or(0),
+        );
+        if hi - lo > (n as u64) / 10_000 + 2 {
+            println!("  (hit counts differ: {hits:?})");
+        }
+    }
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mut rounds = 3;
+    let mut size = 1024;
+    let mut meshes = Vec::new();
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
+            "--size" => size = args.next().and_then(|v| v.parse().ok()).unwrap_or(size),
+            _ => meshes.push(a),
+        }
+    }
+    if meshes.is_empty() {
+        eprintln!("usage: embree_bench [--rounds R] [--size N] MESH.obj...");
+        std::process::exit(2);
+    }
+    match Embree::version() {
+        Ok(v) => println!("Embree {v} (the project's harness, native/embree_bench/c)"),
+        Err(e) => println!("{e}"),
+    }
+    for m in &meshes {
+        bench(m, rounds.max(1), size.max(4));
+    }
+}
