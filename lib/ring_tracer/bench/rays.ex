@@ -2,10 +2,10 @@ defmodule RingTracer.Bench.Rays do
   @help """
   Rays per second in the kernel alone, next to Intel Embree's.
 
-      mix ring_tracer.bench rays [--rounds 3] [--size 1024] [MESH.obj ...]
+      mix ring_tracer.bench rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024]
 
-  For each mesh (default: the SPD teapot tessellation in
-  `../shared/scenes/meshes/`, when it is there): the same triangles and the
+  For each mesh (the SPD teapot tessellation is
+  `../shared/scenes/meshes/spd_teapot_s12_tess.obj`): the same triangles and the
   same rays (`size` x `size` primary rays in 4 x 4 tiles, and as many
   incoherent ones, closest hit and any hit) through our kernel and through
   Embree 3 (`rtcIntersect1`, `rtcIntersect16`, `rtcOccluded1/16`), one
@@ -19,18 +19,15 @@ defmodule RingTracer.Bench.Rays do
   @moduledoc @help
   @behaviour RingTracer.Bench
 
-  @teapot "../shared/scenes/meshes/spd_teapot_s12_tess.obj"
-
   @impl RingTracer.Bench
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "rays [--rounds 3] [--size 1024] [MESH.obj ...]"
+  def usage, do: "rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024]"
 
   @impl RingTracer.Bench
   def run(argv) do
     {opts, meshes, _} = OptionParser.parse(argv, strict: [rounds: :integer, size: :integer])
-    meshes = if meshes == [] and File.exists?(@teapot), do: [@teapot], else: meshes
     if meshes == [], do: Mix.raise("usage: mix ring_tracer.bench #{usage()}")
     cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
     flags = for {k, v} <- opts, do: ["--#{k}", Integer.to_string(v)]

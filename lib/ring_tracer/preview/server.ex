@@ -193,8 +193,17 @@ defmodule RingTracer.Preview.Server do
   @impl GenServer
   def terminate(_reason, state) do
     detach(state.handlers)
+    # A stand-alone httpd is stopped by an exit signal, which returns at
+    # once: wait until it (and with it its listening socket) is gone, so a
+    # stopped preview no longer accepts connections.
+    ref = Process.monitor(state.httpd)
     :inets.stop(:stand_alone, state.httpd)
-    :ok
+
+    receive do
+      {:DOWN, ^ref, _, _, _} -> :ok
+    after
+      5_000 -> :ok
+    end
   end
 
   # httpd.info/2 knows only servers started under the :inets application;

@@ -150,13 +150,15 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "open/2 previews a job already running, from the atoms traced so far" do
+    # Slow enough (about a second) to be still running when the preview
+    # opens, even on a loaded machine.
     {:ok, job} =
       RingTracer.render_async(@scene,
-        width: 32,
-        height: 24,
+        width: 160,
+        height: 120,
         children: 2,
         atoms: 8,
-        speeds: [60, 60]
+        speeds: [100, 100]
       )
 
     id = job.id
