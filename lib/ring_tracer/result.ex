@@ -197,10 +197,10 @@ defmodule RingTracer.Result do
     round(work / capacity)
   end
 
-  @doc "Messages and bytes per atom, over all kinds."
+  @doc "Messages and bytes per atom of the layout (pieces of one atom count once), over all kinds."
   @spec per_atom(t()) :: %{messages: float(), bytes: float()}
   def per_atom(%__MODULE__{messages: messages, atoms: atoms}) do
-    n = max(length(atoms), 1)
+    n = atoms |> Enum.uniq_by(&RingTracer.Layout.base(&1.atom)) |> length() |> max(1)
 
     {count, bytes} =
       Enum.reduce(messages, {0, 0}, fn {_, m}, {c, b} -> {c + m.count, b + m.bytes} end)

@@ -53,6 +53,9 @@ defmodule RingTracer.Strategy do
     * `{:give, pid, index, n}` — takes up to `n` atoms, farthest from being
       traced first, and hands them over to sibling `index` at `pid`
       (possibly none: a refusal); the hand-over carries `handover_news/2`;
+    * `{:give, pid, index, n, {k, d}}` — the same, and with the `n` atoms
+      the last `k` of `d` parts of the next one (`RingTracer.Layout.split/3`:
+      its first parts stay with the child);
     * `{:queue, atoms}` — queues atoms handed over to the child, which
       starts on them (and, holding nothing new, is idle again);
     * `{:left, pid, index}` — the child's left sibling is now `index`;
@@ -66,6 +69,7 @@ defmodule RingTracer.Strategy do
   @type effect ::
           {:send, to(), kind(), term()}
           | {:give, pid(), non_neg_integer(), non_neg_integer()}
+          | {:give, pid(), non_neg_integer(), non_neg_integer(), part() | nil}
           | {:queue, [Layout.atom_id()]}
           | {:left, pid(), non_neg_integer()}
           | :finished
@@ -86,6 +90,9 @@ defmodule RingTracer.Strategy do
           {:send, non_neg_integer(), kind(), term()}
           | {:hand_out, non_neg_integer(), [Layout.atom_id()]}
           | {:helper, (() -> term())}
+
+  @typedoc "`{k, d}`: `k` of `d` equal parts of an atom or piece, `0 < k < d`."
+  @type part :: {pos_integer(), pos_integer()}
 
   @typedoc "A callback's answer: the strategy's new state and what to do."
   @type result(effect) :: {state(), [effect]}
@@ -112,6 +119,14 @@ defmodule RingTracer.Strategy do
   nothing), from the view after the atoms left. Default: nothing.
   """
   @callback handover_news(View.t(), state()) :: {term(), state()}
+
+  @doc """
+  The child is about to send the next queued atom (or piece) to its
+  grandchild: `{k, d}` has the grandchild trace only its first `k` of `d`
+  parts, the rest staying first in the queue (where it can be given away or
+  cut again); `nil`, the whole of it. Default: `nil`.
+  """
+  @callback pipe_piece(View.t(), state()) :: part() | nil
 
   @doc "The parent, once the children are linked; returns the parent's strategy state."
   @callback parent_start(ParentView.t(), options()) :: result(parent_effect())
@@ -144,6 +159,9 @@ defmodule RingTracer.Strategy do
       def handover_news(_view, state), do: {nil, state}
 
       @impl RingTracer.Strategy
+      def pipe_piece(_view, _state), do: nil
+
+      @impl RingTracer.Strategy
       def parent_start(_view, _options), do: {nil, []}
 
       @impl RingTracer.Strategy
@@ -156,6 +174,7 @@ defmodule RingTracer.Strategy do
                      init: 1,
                      handle_message: 3,
                      handover_news: 2,
+                     pipe_piece: 2,
                      parent_start: 2,
                      parent_atom_done: 3,
                      parent_info: 3

@@ -44,6 +44,9 @@ defmodule RingTracer.Test.DelayedStrategy do
   def handover_news(view, state), do: inner(view).handover_news(inner_view(view), state)
 
   @impl true
+  def pipe_piece(view, state), do: inner(view).pipe_piece(inner_view(view), state)
+
+  @impl true
   def parent_start(view, options) do
     {module, inner} = options[:inner]
     module.parent_start(inner_view(view), inner)
@@ -72,10 +75,12 @@ defmodule RingTracer.Test.DelayedStrategy do
     end
   end
 
-  defp delay({:give, pid, index, n}, view) do
+  defp delay({:give, pid, index, n}, view), do: delay({:give, pid, index, n, nil}, view)
+
+  defp delay({:give, pid, index, n, part}, view) do
     case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
-      0 -> {:give, pid, index, n}
-      ms -> {:give, relay(pid, ms), index, n}
+      0 -> {:give, pid, index, n, part}
+      ms -> {:give, relay(pid, ms), index, n, part}
     end
   end
 

@@ -183,6 +183,34 @@ defmodule RingTracer.Job.Child do
 
   defp waiting(_state), do: nil
 
+  # Takes up to `g` whole atoms and then, with `part` `{k, n}`, the last `k`
+  # of `n` parts of the next one (`RingTracer.Layout.split/3`; its head stays
+  # queued): see `take_last/2`.
+  defp take_last(state, g, nil), do: take_last(state, g)
+
+  defp take_last(state, g, {k, n}) do
+    {whole, state} = take_last(state, g)
+
+    cond do
+      length(whole) < g ->
+        {whole, state}
+
+      state.queue != [] ->
+        {head, tail} = Layout.split(List.last(state.queue), n - k, n)
+        {[tail | whole], %{state | queue: List.replace_at(state.queue, -1, head)}}
+
+      true ->
+        case take_last(state, 1) do
+          {[atom], state} ->
+            {head, tail} = Layout.split(atom, n - k, n)
+            {[tail | whole], fill_pipe(%{state | queue: [head]})}
+
+          {[], state} ->
+            {whole, state}
+        end
+    end
+  end
+
   # Takes up to `g` atoms to give away, farthest from being traced first: the
   # last queued ones and then, if `g` asks for more, the atom waiting in the
   # grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
@@ -287,6 +315,8 @@ defmodule RingTracer.Job.Child do
       dead: state.dead,
       status: view_status(state.status),
       queued: length(state.queue),
+      next_share: share(List.first(state.queue)),
+      last_share: share(List.last(state.queue) || waiting(state)),
       remaining: remaining,
       in_flight: in_flight,
       done: state.done,
@@ -295,6 +325,13 @@ defmodule RingTracer.Job.Child do
       remaining_us: if(in_flight > 0, do: expected_remaining_us(state)),
       now: job_time(state)
     }
+  end
+
+  defp share(nil), do: nil
+
+  defp share(atom) do
+    {k, n} = Layout.fraction(atom)
+    k / n
   end
 
   defp view_status(:waiting), do: :working
@@ -325,8 +362,10 @@ defmodule RingTracer.Job.Child do
   defp effect(state, {:send, to, kind, msg}),
     do: send_counted(state, address(state, to), kind, msg)
 
-  defp effect(state, {:give, pid, to, n}) do
-    {atoms, state} = take_last(state, n)
+  defp effect(state, {:give, pid, to, n}), do: effect(state, {:give, pid, to, n, nil})
+
+  defp effect(state, {:give, pid, to, n, part}) do
+    {atoms, state} = take_last(state, n, part)
     {news, strategy_state} = state.strategy.handover_news(view(state), state.strategy_state)
     hand_over(%{state | strategy_state: strategy_state}, pid, to, atoms, news)
   end
@@ -544,8 +583,20 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  defp fill_pipe(%{queue: [atom | rest], in_flight: in_flight} = state)
+  defp fill_pipe(%{queue: [next | queued], in_flight: in_flight} = state)
        when length(in_flight) < @pipe_depth do
+    # The strategy may have the grandchild trace only the first part of the
+    # next atom, the rest staying queued (`RingTracer.Strategy.pipe_piece/2`).
+    {atom, rest} =
+      case state.strategy.pipe_piece(view(state), state.strategy_state) do
+        {k, n} when k < n ->
+          {head, tail} = Layout.split(next, k, n)
+          {head, [tail | queued]}
+
+        _ ->
+          {next, queued}
+      end
+
     send(state.grandchild, {:trace, atom})
     state = if in_flight == [], do: %{state | current_since: now()}, else: state
     fill_pipe(%{state | queue: rest, in_flight: in_flight ++ [atom]})

@@ -21,7 +21,13 @@ defmodule RingTracer.Strategy.Ring do
       `RingTracer.Strategy.Ring.HelpOffer`);
     * `:aim` — whether an idle child sends its offer straight to the sibling
       it expects to stay busy longest (default false; see
-      `RingTracer.Strategy.Ring.Aim`).
+      `RingTracer.Strategy.Ring.Aim`);
+    * `:split` — adaptive atoms (default true): near the end of a child's
+      atoms, a hand-over gives part of an atom as well as whole ones
+      (`RingTracer.Strategy.Ring.Share.part/6`), and a child slower than the
+      fastest it has heard of traces its last atoms in pieces
+      (`RingTracer.Strategy.Ring.Share.pipe_part/4`); `false` keeps atoms
+      whole, as the paper does.
 
   ## State
 
@@ -33,7 +39,7 @@ defmodule RingTracer.Strategy.Ring do
   """
   use RingTracer.Strategy
 
-  alias RingTracer.Strategy.Ring.{Aim, HelpOffer}
+  alias RingTracer.Strategy.Ring.{Aim, HelpOffer, Share}
   alias RingTracer.Strategy.View
 
   # Offers in a list leave one at a time (each may give atoms, and the next
@@ -245,7 +251,8 @@ defmodule RingTracer.Strategy.Ring do
       ring_size: view.ring_size - length(view.dead),
       offer_seq: if(view.status == :idle, do: state[:current]),
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
-      hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after())
+      hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after()),
+      split: split?(view)
     }
 
     case HelpOffer.decide(decision_view, offer) do
@@ -268,6 +275,14 @@ defmodule RingTracer.Strategy.Ring do
         {state,
          [
            {:give, offer.pid, offer.origin, g},
+           {:event, :give, offer.origin},
+           {:stat, :offers_consumed}
+         ]}
+
+      {:give, g, part} ->
+        {state,
+         [
+           {:give, offer.pid, offer.origin, g, part},
            {:event, :give, offer.origin},
            {:stat, :offers_consumed}
          ]}
@@ -405,4 +420,16 @@ defmodule RingTracer.Strategy.Ring do
   end
 
   defp aim?(view), do: Keyword.get(view.options, :aim, false)
+
+  defp split?(view), do: Keyword.get(view.options, :split, true)
+
+  # Adaptive atoms at the pipe: a child slower than the fastest it has heard
+  # of traces its last atoms in pieces (`Share.pipe_part/4`).
+  @impl true
+  def pipe_piece(view, state) do
+    if split?(view) do
+      fastest = state |> Map.get(:heard, []) |> Enum.map(&elem(&1, 0)) |> Enum.max(fn -> nil end)
+      Share.pipe_part(view.queued, view.rate, fastest, view.next_share)
+    end
+  end
 end
