@@ -54,6 +54,32 @@ defmodule RingTracer.Job.Coverage do
   @spec complete?(t(), non_neg_integer()) :: boolean()
   def complete?(coverage, a), do: covered?(coverage, a)
 
+  @doc """
+  Whether `ids` (atoms and pieces) tile every atom of `layout` exactly once:
+  together they cover each atom, and their shares add up to one atom.
+
+      iex> layout = RingTracer.Layout.new(4, 1, 1, 2)
+      iex> RingTracer.Job.Coverage.tiles?(layout, [0, {1, 0, 1, 2}, {1, 1, 2, 2}])
+      true
+      iex> RingTracer.Job.Coverage.tiles?(layout, [0, {1, 0, 1, 2}, {1, 1, 3, 4}, 1])
+      false
+      iex> RingTracer.Job.Coverage.tiles?(layout, [0])
+      false
+  """
+  @spec tiles?(Layout.t(), [Layout.atom_id()]) :: boolean()
+  def tiles?(layout, ids) do
+    coverage = Enum.reduce(ids, new(), &elem(add(&2, &1), 1))
+
+    shares =
+      Enum.group_by(ids, &Layout.base/1, &Layout.fraction/1)
+      |> Map.new(fn {a, fs} ->
+        {a, Enum.reduce(fs, {0, 1}, fn {k, d}, {n, m} -> q(n * d + k * m, m * d) end)}
+      end)
+
+    map_size(shares) == Layout.atom_count(layout) and
+      Enum.all?(Layout.atoms(layout), &(complete?(coverage, &1) and shares[&1] == {1, 1}))
+  end
+
   defp interval(a) do
     case a do
       {_, lo, hi, d} -> {q(lo, d), q(hi, d)}
