@@ -120,14 +120,6 @@ defmodule RingTracer.Strategy do
   """
   @callback handover_news(View.t(), state()) :: {term(), state()}
 
-  @doc """
-  The child is about to send the next queued atom (or piece) to its
-  grandchild: `{k, d}` has the grandchild trace only its first `k` of `d`
-  parts, the rest staying first in the queue (where it can be given away or
-  cut again); `nil`, the whole of it. Default: `nil`.
-  """
-  @callback pipe_piece(View.t(), state()) :: part() | nil
-
   @doc "The parent, once the children are linked; returns the parent's strategy state."
   @callback parent_start(ParentView.t(), options()) :: result(parent_effect())
 
@@ -159,9 +151,6 @@ defmodule RingTracer.Strategy do
       def handover_news(_view, state), do: {nil, state}
 
       @impl RingTracer.Strategy
-      def pipe_piece(_view, _state), do: nil
-
-      @impl RingTracer.Strategy
       def parent_start(_view, _options), do: {nil, []}
 
       @impl RingTracer.Strategy
@@ -174,7 +163,6 @@ defmodule RingTracer.Strategy do
                      init: 1,
                      handle_message: 3,
                      handover_news: 2,
-                     pipe_piece: 2,
                      parent_start: 2,
                      parent_atom_done: 3,
                      parent_info: 3

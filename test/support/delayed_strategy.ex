@@ -44,9 +44,6 @@ defmodule RingTracer.Test.DelayedStrategy do
   def handover_news(view, state), do: inner(view).handover_news(inner_view(view), state)
 
   @impl true
-  def pipe_piece(view, state), do: inner(view).pipe_piece(inner_view(view), state)
-
-  @impl true
   def parent_start(view, options) do
     {module, inner} = options[:inner]
     module.parent_start(inner_view(view), inner)

@@ -315,7 +315,6 @@ defmodule RingTracer.Job.Child do
       dead: state.dead,
       status: view_status(state.status),
       queued: length(state.queue),
-      next_share: share(List.first(state.queue)),
       last_share: share(List.last(state.queue) || waiting(state)),
       remaining: remaining,
       in_flight: in_flight,
@@ -583,20 +582,8 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  defp fill_pipe(%{queue: [next | queued], in_flight: in_flight} = state)
+  defp fill_pipe(%{queue: [atom | rest], in_flight: in_flight} = state)
        when length(in_flight) < @pipe_depth do
-    # The strategy may have the grandchild trace only the first part of the
-    # next atom, the rest staying queued (`RingTracer.Strategy.pipe_piece/2`).
-    {atom, rest} =
-      case state.strategy.pipe_piece(view(state), state.strategy_state) do
-        {k, n} when k < n ->
-          {head, tail} = Layout.split(next, k, n)
-          {head, [tail | queued]}
-
-        _ ->
-          {next, queued}
-      end
-
     send(state.grandchild, {:trace, atom})
     state = if in_flight == [], do: %{state | current_since: now()}, else: state
     fill_pipe(%{state | queue: rest, in_flight: in_flight ++ [atom]})

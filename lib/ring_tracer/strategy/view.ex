@@ -13,9 +13,9 @@ defmodule RingTracer.Strategy.View do
     * `:queued` — atoms queued, not yet in the grandchild's pipe;
       `:remaining`, `:in_flight` — what it could give: the queued atoms plus
       the one waiting in its pipe, and the one being traced;
-      `:next_share`, `:last_share` — the share of its atom (1.0: a whole
-      atom, less for a piece, see `RingTracer.Layout`) of the next atom to
-      be traced and of the farthest one it could give (`nil`: none);
+      `:last_share` — the share of its atom (1.0: a whole atom, less for a
+      piece, see `RingTracer.Layout`) of the farthest atom it could give
+      (`nil`: none);
     * `:done` — atoms traced; `:rate` — its speed, kernel work per busy
       microsecond (`nil` before it has traced work); `:mean_atom_us` — wall
       time per atom (`nil` before its first); `:remaining_us` — how long the
@@ -36,7 +36,6 @@ defmodule RingTracer.Strategy.View do
     :rate,
     :mean_atom_us,
     :remaining_us,
-    :next_share,
     :last_share,
     options: [],
     dead: [],
@@ -59,7 +58,6 @@ defmodule RingTracer.Strategy.View do
           status: :working | :idle | :finished,
           queued: non_neg_integer(),
           remaining: non_neg_integer(),
-          next_share: float() | nil,
           last_share: float() | nil,
           in_flight: non_neg_integer(),
           done: non_neg_integer(),

@@ -22,12 +22,10 @@ defmodule RingTracer.Strategy.Ring do
     * `:aim` — whether an idle child sends its offer straight to the sibling
       it expects to stay busy longest (default false; see
       `RingTracer.Strategy.Ring.Aim`);
-    * `:split` — adaptive atoms (default true): near the end of a child's
-      atoms, a hand-over gives part of an atom as well as whole ones
-      (`RingTracer.Strategy.Ring.Share.part/6`), and a child slower than the
-      fastest it has heard of traces its last atoms in pieces
-      (`RingTracer.Strategy.Ring.Share.pipe_part/4`); `false` keeps atoms
-      whole, as the paper does.
+    * `:split` — adaptive atoms (default true): a hand-over can give part
+      of an atom, near the end of the giver's atoms or to an offerer too
+      slow for a whole one (`RingTracer.Strategy.Ring.Share.part/7`);
+      `false` keeps atoms whole, as the paper does.
 
   ## State
 
@@ -39,7 +37,7 @@ defmodule RingTracer.Strategy.Ring do
   """
   use RingTracer.Strategy
 
-  alias RingTracer.Strategy.Ring.{Aim, HelpOffer, Share}
+  alias RingTracer.Strategy.Ring.{Aim, HelpOffer}
   alias RingTracer.Strategy.View
 
   # Offers in a list leave one at a time (each may give atoms, and the next
@@ -252,7 +250,8 @@ defmodule RingTracer.Strategy.Ring do
       offer_seq: if(view.status == :idle, do: state[:current]),
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
       hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after()),
-      split: split?(view)
+      split: split?(view),
+      last_share: view.last_share
     }
 
     case HelpOffer.decide(decision_view, offer) do
@@ -422,14 +421,4 @@ defmodule RingTracer.Strategy.Ring do
   defp aim?(view), do: Keyword.get(view.options, :aim, false)
 
   defp split?(view), do: Keyword.get(view.options, :split, true)
-
-  # Adaptive atoms at the pipe: a child slower than the fastest it has heard
-  # of traces its last atoms in pieces (`Share.pipe_part/4`).
-  @impl true
-  def pipe_piece(view, state) do
-    if split?(view) do
-      fastest = state |> Map.get(:heard, []) |> Enum.map(&elem(&1, 0)) |> Enum.max(fn -> nil end)
-      Share.pipe_part(view.queued, view.rate, fastest, view.next_share)
-    end
-  end
 end

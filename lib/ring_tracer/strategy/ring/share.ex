@@ -145,63 +145,54 @@ defmodule RingTracer.Strategy.Ring.Share do
   (`{k, 8}`, `nil`: none), from the same rates. The atoms are shared as if
   they could be cut anywhere (the offerer's part of the `remaining` and
   `in_flight` atoms in proportion to its speed, with the helper's if it is
-  faster than the giver) and the whole atoms given are taken off. Only near
-  the end of the giver's atoms (one or two left after the hand-over): before,
-  the atoms themselves are small enough.
+  faster than the giver) and the whole atoms given are taken off. With whole
+  atoms given, only near the end of the giver's atoms (one or two left after
+  the hand-over: before, the atoms themselves are small enough); with none
+  (the offerer is too slow for a whole atom), whenever its part is worth an
+  eighth of an atom: a slow child then stays busy to the end of the job
+  instead of idling with its capacity lost. `share` is the share of its atom of
+  the one to cut (a piece: less than 1.0); neither part is smaller than an
+  eighth of an atom.
 
-      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 8.0, 1.0, nil, 1)
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 8.0, 1.0, nil, 1, 1.0)
       {7, 8}
-      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1)
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 1.0)
       {4, 8}
-      iex> RingTracer.Strategy.Ring.Share.part(20, 1, 1.0, 1.0, nil, 10)
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.25)
+      {4, 8}
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.2)
       nil
+      iex> RingTracer.Strategy.Ring.Share.part(20, 1, 1.0, 1.0, nil, 10, 1.0)
+      nil
+      iex> RingTracer.Strategy.Ring.Share.part(5, 1, 0.125, 1.0, 1.0, 0, 1.0)
+      {2, 8}
   """
-  @spec part(non_neg_integer(), non_neg_integer(), rate(), rate(), rate(), non_neg_integer()) ::
-          {pos_integer(), 8} | nil
-  def part(remaining, in_flight, offerer_rate, self_rate, helper_rate, g)
-      when (remaining - g) in 1..2 do
+  @spec part(
+          non_neg_integer(),
+          non_neg_integer(),
+          rate(),
+          rate(),
+          rate(),
+          non_neg_integer(),
+          float() | nil
+        ) :: {pos_integer(), 8} | nil
+  def part(remaining, in_flight, offerer_rate, self_rate, helper_rate, g, share)
+      when remaining > g and (g == 0 or remaining - g <= 2) and is_float(share) and
+             share >= 0.25 do
     if positive?(offerer_rate) and positive?(self_rate) do
       vh = if positive?(helper_rate), do: helper_rate, else: 0.0
       total = remaining + in_flight
       mine = if offerer_rate > self_rate, do: offerer_rate + vh, else: offerer_rate
-      k = min(floor((total * mine / (offerer_rate + self_rate + vh) - g) * 8), 7)
-      if k >= 1, do: {k, 8}
+      k = floor((total * mine / (offerer_rate + self_rate + vh) - g) * 8)
+      # Neither part below an eighth of an atom.
+      least = ceil(1 / share - 1.0e-9)
+      k = min(k, 8 - least)
+      if k >= least, do: {k, 8}
     end
   end
 
-  def part(_remaining, _in_flight, _offerer_rate, _self_rate, _helper_rate, _g), do: nil
-
-  @doc """
-  Adaptive atoms, at the grandchild's pipe: the part of the next atom a
-  child should trace now (`{k, d}`, `nil`: all of it). A child slower than
-  the fastest sibling it has heard of (`rate` over `fastest` below
-  0.75), with at most two atoms left (`remaining`, the next one
-  included), traces pieces of about twice its relative speed in atoms
-  (eighths, at least one), so that its last piece ends about as late as two
-  of the fastest child's atoms would: a big atom started late on a slow
-  child no longer sets the makespan. The rest of the atom stays queued,
-  where an idle sibling can take it. `share` is the next atom's share of its
-  atom (a piece: less than 1.0).
-
-      iex> RingTracer.Strategy.Ring.Share.pipe_part(2, 1.0, 8.0, 1.0)
-      {2, 8}
-      iex> RingTracer.Strategy.Ring.Share.pipe_part(2, 1.0, 8.0, 0.5)
-      {4, 8}
-      iex> RingTracer.Strategy.Ring.Share.pipe_part(2, 7.0, 8.0, 1.0)
-      nil
-      iex> RingTracer.Strategy.Ring.Share.pipe_part(5, 1.0, 8.0, 1.0)
-      nil
-  """
-  @spec pipe_part(non_neg_integer(), rate(), rate(), float() | nil) :: {pos_integer(), 8} | nil
-  def pipe_part(remaining, rate, fastest, share)
-      when remaining in 1..2 and is_float(share) and share > 0 do
-    if positive?(rate) and positive?(fastest) and rate < 0.75 * fastest do
-      k = max(floor(8 * 2 * rate / fastest / share), 1)
-      if k < 8, do: {k, 8}
-    end
-  end
-
-  def pipe_part(_remaining, _rate, _fastest, _share), do: nil
+  def part(_remaining, _in_flight, _offerer_rate, _self_rate, _helper_rate, _g, _share),
+    do: nil
 
   defp positive?(rate), do: is_number(rate) and rate > 0
 end
