@@ -170,6 +170,16 @@ defmodule RingTracer.Layout do
   def base(a) when is_integer(a), do: a
 
   @doc """
+  An atom or piece as people read it.
+
+      iex> {RingTracer.Layout.name(5), RingTracer.Layout.name({5, 1, 3, 4})}
+      {"5", "5 (parts 1-2 of 4)"}
+  """
+  @spec name(atom_id()) :: String.t()
+  def name({a, lo, hi, d}), do: "#{a} (parts #{lo}-#{hi - 1} of #{d})"
+  def name(a) when is_integer(a), do: Integer.to_string(a)
+
+  @doc """
   The share of its atom a piece covers, `{numerator, denominator}` (an atom:
   `{1, 1}`).
 

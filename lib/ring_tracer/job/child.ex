@@ -197,13 +197,14 @@ defmodule RingTracer.Job.Child do
 
       state.queue != [] ->
         {head, tail} = Layout.split(List.last(state.queue), n - k, n)
-        {[tail | whole], %{state | queue: List.replace_at(state.queue, -1, head)}}
+        state = bump(%{state | queue: List.replace_at(state.queue, -1, head)}, :splits)
+        {[tail | whole], state}
 
       true ->
         case take_last(state, 1) do
           {[atom], state} ->
             {head, tail} = Layout.split(atom, n - k, n)
-            {[tail | whole], fill_pipe(%{state | queue: [head]})}
+            {[tail | whole], fill_pipe(bump(%{state | queue: [head]}, :splits))}
 
           {[], state} ->
             {whole, state}
@@ -280,6 +281,7 @@ defmodule RingTracer.Job.Child do
       own: own,
       given: 0,
       received: 0,
+      splits: 0,
       handovers: 0,
       traced: 0,
       offers_sent: 0,
