@@ -43,9 +43,11 @@ defmodule RingTracer.Strategy.Ring.HelpOfferTest do
 
     # Without adaptive atoms the same offer walks on.
     assert HelpOffer.decide(view(1, 1, 1, 1.0, nil), offer(2, 0.4)) == :pass
-    # An eighth-speed offerer and five atoms queued: a quarter of one.
+    # An eighth-speed offerer, five atoms queued and one in flight, nobody
+    # else to help: five eighths of one (it ends them as the giver ends the
+    # rest).
     assert HelpOffer.decide(split.(view(1, 5, 1, 1.0, nil), 1.0), offer(2, 0.125)) ==
-             {:give, 0, {2, 8}}
+             {:give, 0, {5, 8}}
 
     # A piece already an eighth of an atom is not cut again.
     assert HelpOffer.decide(split.(view(1, 1, 1, 1.0, nil), 0.125), offer(2, 0.4)) == :pass
