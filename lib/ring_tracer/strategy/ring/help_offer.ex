@@ -186,10 +186,20 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
           optional(:heard) => heard(),
           optional(:ring_size) => non_neg_integer(),
           optional(:remaining_us) => non_neg_integer() | nil,
-          optional(:hold_after) => pos_integer()
+          optional(:hold_after) => pos_integer(),
+          optional(:split) => boolean(),
+          optional(:last_share) => float() | nil
         }
 
-  @type decision :: :returned | :drop | :park | :hold | :home | :pass | {:give, pos_integer()}
+  @type decision ::
+          :returned
+          | :drop
+          | :park
+          | :hold
+          | :home
+          | :pass
+          | {:give, pos_integer()}
+          | {:give, non_neg_integer(), {pos_integer(), 8}}
 
   @doc """
   What the child described by `view` does with `offer`.
