@@ -49,8 +49,8 @@ defmodule RingTracer.Strategy.Ring.HelpOfferTest do
     assert HelpOffer.decide(split.(view(1, 5, 1, 1.0, nil), 1.0), offer(2, 0.125)) ==
              {:give, 0, {5, 8}}
 
-    # A piece already an eighth of an atom is not cut again.
-    assert HelpOffer.decide(split.(view(1, 1, 1, 1.0, nil), 0.125), offer(2, 0.4)) == :pass
+    # A piece of a quarter of an atom is not cut again.
+    assert HelpOffer.decide(split.(view(1, 1, 1, 1.0, nil), 0.25), offer(2, 0.4)) == :pass
     # Far from the end, whole atoms only.
     assert HelpOffer.decide(split.(view(1, 12, 2, 4.0, nil), 1.0), offer(2, 12.0)) == {:give, 11}
   end

@@ -59,6 +59,9 @@ defmodule RingTracer.Strategy.Ring.Share do
   @typedoc "Kernel work units per microsecond; `nil` until a child has traced work."
   @type rate :: float() | nil
 
+  # The smallest piece adaptive atoms cut, in atoms.
+  @least_part 0.25
+
   # Queues up to this long are planned atom by atom.
   @one_by_one 64
 
@@ -148,19 +151,20 @@ defmodule RingTracer.Strategy.Ring.Share do
   faster than the giver) and the whole atoms given are taken off. With whole
   atoms given, only near the end of the giver's atoms (one or two left after
   the hand-over: before, the atoms themselves are small enough); with none
-  (the offerer is too slow for a whole atom), whenever its part is worth an
-  eighth of an atom: a slow child then stays busy to the end of the job
+  (the offerer is too slow for a whole atom), whenever its part is worth a
+  quarter of an atom: a slow child then stays busy to the end of the job
   instead of idling with its capacity lost. `share` is the share of its atom of
-  the one to cut (a piece: less than 1.0); neither part is smaller than an
-  eighth of an atom.
+  the one to cut (a piece: less than 1.0); neither part is smaller than a
+  quarter of an atom (smaller pieces cost more messages than they save
+  time).
 
       iex> RingTracer.Strategy.Ring.Share.part(2, 1, 8.0, 1.0, nil, 1, 1.0)
-      {7, 8}
+      {6, 8}
       iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 1.0)
       {4, 8}
-      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.25)
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.5)
       {4, 8}
-      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.2)
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.4)
       nil
       iex> RingTracer.Strategy.Ring.Share.part(20, 1, 1.0, 1.0, nil, 10, 1.0)
       nil
@@ -178,14 +182,14 @@ defmodule RingTracer.Strategy.Ring.Share do
         ) :: {pos_integer(), 8} | nil
   def part(remaining, in_flight, offerer_rate, self_rate, helper_rate, g, share)
       when remaining > g and (g == 0 or remaining - g <= 2) and is_float(share) and
-             share >= 0.25 do
+             share >= 2 * @least_part do
     if positive?(offerer_rate) and positive?(self_rate) do
       vh = if positive?(helper_rate), do: helper_rate, else: 0.0
       total = remaining + in_flight
       mine = if offerer_rate > self_rate, do: offerer_rate + vh, else: offerer_rate
       k = floor((total * mine / (offerer_rate + self_rate + vh) - g) * 8)
-      # Neither part below an eighth of an atom.
-      least = ceil(1 / share - 1.0e-9)
+      # Neither part below a quarter of an atom (in eighths of this one).
+      least = ceil(8 * @least_part / share - 1.0e-9)
       k = min(k, 8 - least)
       if k >= least, do: {k, 8}
     end
