@@ -51,6 +51,10 @@ defmodule RingTracer do
       the sibling it expects to stay busy longest rather than to its left
       sibling (default: on strips yes, on interleaved strips no; see
       `RingTracer.Strategy.Ring.Aim`)
+    * `:split` — ring only: adaptive atoms, cut into pieces near the end of
+      a job (default false: they do not yet pay for their messages on this
+      machine; see `RingTracer.Strategy.Ring`). The image is the
+      same
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — other nodes to place children on, round robin with this
@@ -308,7 +312,7 @@ defmodule RingTracer do
   ## Options
 
   Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
-  `:aim`, `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
+  `:aim`, `:split`, `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
   microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
 
       iex> {:ok, result} = RingTracer.simulate(children: 16, atoms: 4, costs: 1000)

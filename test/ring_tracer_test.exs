@@ -28,7 +28,12 @@ defmodule RingTracerTest do
           )
 
         assert result.pixels == reference
-        assert Enum.sum(Enum.map(result.children, & &1.traced)) == unquote(n * k)
+        # Each atom once, whole or in pieces (adaptive atoms) that tile it.
+        assert Enum.sum(Enum.map(result.children, & &1.traced)) == length(result.atoms)
+        layout = RingTracer.Layout.new(40, 30, unquote(n), unquote(k))
+        assert RingTracer.Job.Coverage.tiles?(layout, Enum.map(result.atoms, & &1.atom))
+        splits = Enum.sum(Enum.map(result.children, & &1.splits))
+        assert length(result.atoms) == unquote(n * k) + splits
       end
     end
 
@@ -56,7 +61,11 @@ defmodule RingTracerTest do
 
     stats = result.children
     assert length(stats) == 4
-    assert Enum.sum(Enum.map(stats, & &1.traced)) == 32
+    # Every cut (adaptive atoms) makes one piece more.
+    splits = Enum.sum(Enum.map(stats, & &1.splits))
+    assert Enum.sum(Enum.map(stats, & &1.traced)) == 32 + splits
+    ids = Enum.map(result.atoms, & &1.atom)
+    assert RingTracer.Job.Coverage.tiles?(RingTracer.Layout.new(64, 48, 4, 8), ids)
     assert Enum.sum(Enum.map(stats, & &1.given)) == Enum.sum(Enum.map(stats, & &1.received))
 
     # Every consumed offer is exactly one hand-over.
@@ -66,7 +75,7 @@ defmodule RingTracerTest do
     # Every child sent at least one offer, and its last one came back.
     assert Enum.all?(stats, &(&1.offers_sent >= 1))
 
-    for c <- stats, do: assert(c.traced == c.own - c.given + c.received)
+    for c <- stats, do: assert(c.traced == c.own - c.given + c.received + c.splits)
     assert result.rays.eye == 64 * 48
     # Work units: one per ray, plus the boxes and primitives the rays were tested against.
     assert result.rays.work > result.rays.eye + result.rays.shadow
@@ -82,7 +91,10 @@ defmodule RingTracerTest do
     {:ok, result} = RingTracer.render(TestScenes.path(@scene), [strategy: strategy] ++ opts)
 
     assert result.pixels == reference
-    assert Enum.sum(Enum.map(result.children, & &1.traced)) == 30
+    splits = Enum.sum(Enum.map(result.children, & &1.splits))
+    assert Enum.sum(Enum.map(result.children, & &1.traced)) == 30 + splits
+    ids = Enum.map(result.atoms, & &1.atom)
+    assert RingTracer.Job.Coverage.tiles?(RingTracer.Layout.new(48, 32, 5, 6), ids)
   end
 
   test "no process of a job is left after it ends" do

@@ -36,7 +36,7 @@ defmodule RingTracer.Kernel do
   speed in work per microsecond: counting atoms would mix up speed with
   atom cost.
   """
-  @callback trace(context(), non_neg_integer(), non_neg_integer(), non_neg_integer()) ::
+  @callback trace(context(), non_neg_integer(), non_neg_integer(), RingTracer.Layout.atom_id()) ::
               {:ok, binary(), map(), non_neg_integer()} | {:error, String.t()}
 
   @doc """

@@ -19,6 +19,26 @@ defmodule RingTracer.Layout do
 
   The atoms themselves, and so the image, are the same either way.
 
+  ## Pieces
+
+  An atom can be split at run time (`split/3`): a piece `{a, lo, hi, d}` is
+  parts `lo` up to (not including) `hi` of atom `a` cut into `d` parts, part
+  `j` starting at pixel `first + div(j * count, d)` of the atom's span. A
+  whole atom is its plain index (`{a, 0, 1, 1}` is written `a`). Cutting a
+  piece again refines the same grid, so pieces of one atom always tile it,
+  and a pixel's value does not depend on the span it is traced in
+  (`RingTracer.Kernel`): an image of pieces is the image of atoms, byte for
+  byte.
+
+      iex> layout = RingTracer.Layout.new(10, 1, 1, 1)
+      iex> {head, tail} = RingTracer.Layout.split(0, 3, 4)
+      iex> {head, tail}
+      {{0, 0, 3, 4}, {0, 3, 4, 4}}
+      iex> {RingTracer.Layout.span(layout, head), RingTracer.Layout.span(layout, tail)}
+      {{0, 7}, {7, 3}}
+      iex> RingTracer.Layout.split(tail, 1, 2)
+      {{0, 6, 7, 8}, {0, 7, 8, 8}}
+
       iex> layout = RingTracer.Layout.new(10, 1, 2, 2)
       iex> Enum.map(RingTracer.Layout.atoms(layout), &RingTracer.Layout.span(layout, &1))
       [{0, 2}, {2, 3}, {5, 2}, {7, 3}]
@@ -47,8 +67,12 @@ defmodule RingTracer.Layout do
           atoms_per_child: pos_integer(),
           order: order()
         }
-  @typedoc "An atom's index, `0..n*k-1`."
-  @type atom_id :: non_neg_integer()
+  @typedoc "An atom's index, `0..n*k-1`, or a piece of one (see \"Pieces\")."
+  @type atom_id :: non_neg_integer() | piece()
+
+  @typedoc "Parts `lo..hi-1` of atom `a` cut into `d` parts (see \"Pieces\")."
+  @type piece ::
+          {non_neg_integer(), non_neg_integer(), pos_integer(), pos_integer()}
 
   @doc """
   A layout for a `width` x `height` image, `children` strips of
@@ -92,6 +116,7 @@ defmodule RingTracer.Layout do
 
   @doc "The child whose strip holds atom `a` (its original owner)."
   @spec owner(t(), atom_id()) :: non_neg_integer()
+  def owner(layout, {a, _, _, _}), do: owner(layout, a)
   def owner(%__MODULE__{atoms_per_child: k, order: :strips}, a), do: div(a, k)
   def owner(%__MODULE__{children: n, order: :interleaved}, a), do: rem(a, n)
 
@@ -120,12 +145,68 @@ defmodule RingTracer.Layout do
     |> List.to_tuple()
   end
 
-  @doc "`{first_pixel, pixel_count}` of atom `a`."
+  @doc "`{first_pixel, pixel_count}` of atom (or piece) `a`."
   @spec span(t(), atom_id()) :: {non_neg_integer(), non_neg_integer()}
+  def span(layout, {a, lo, hi, d}) do
+    {first, count} = span(layout, a)
+    {first + div(lo * count, d), div(hi * count, d) - div(lo * count, d)}
+  end
+
   def span(layout, a) do
     m = atom_count(layout)
     p = pixels(layout)
     first = div(a * p, m)
     {first, div((a + 1) * p, m) - first}
+  end
+
+  @doc """
+  The atom a piece belongs to (an atom is its own).
+
+      iex> {RingTracer.Layout.base(5), RingTracer.Layout.base({5, 1, 2, 4})}
+      {5, 5}
+  """
+  @spec base(atom_id()) :: non_neg_integer()
+  def base({a, _, _, _}), do: a
+  def base(a) when is_integer(a), do: a
+
+  @doc """
+  An atom or piece as people read it.
+
+      iex> {RingTracer.Layout.name(5), RingTracer.Layout.name({5, 1, 3, 4})}
+      {"5", "5 (parts 1-2 of 4)"}
+  """
+  @spec name(atom_id()) :: String.t()
+  def name({a, lo, hi, d}), do: "#{a} (parts #{lo}-#{hi - 1} of #{d})"
+  def name(a) when is_integer(a), do: Integer.to_string(a)
+
+  @doc """
+  The share of its atom a piece covers, `{numerator, denominator}` (an atom:
+  `{1, 1}`).
+
+      iex> RingTracer.Layout.fraction({5, 1, 3, 4})
+      {2, 4}
+  """
+  @spec fraction(atom_id()) :: {pos_integer(), pos_integer()}
+  def fraction({_, lo, hi, d}), do: {hi - lo, d}
+  def fraction(a) when is_integer(a), do: {1, 1}
+
+  @doc """
+  Atom or piece `a` cut in two: its first `k` of `n` equal parts, and the
+  rest (`0 < k < n`). The pieces are written with the smallest grid (a
+  piece that is a whole atom is its index).
+  """
+  @spec split(atom_id(), pos_integer(), pos_integer()) :: {atom_id(), atom_id()}
+  def split(a, k, n) when is_integer(a), do: split({a, 0, 1, 1}, k, n)
+
+  def split({a, lo, hi, d}, k, n) when is_integer(k) and is_integer(n) and k > 0 and k < n do
+    cut = lo * n + k * (hi - lo)
+    {piece(a, lo * n, cut, d * n), piece(a, cut, hi * n, d * n)}
+  end
+
+  defp piece(a, 0, d, d), do: a
+
+  defp piece(a, lo, hi, d) do
+    g = Integer.gcd(Integer.gcd(lo, hi), d)
+    {a, div(lo, g), div(hi, g), div(d, g)}
   end
 end

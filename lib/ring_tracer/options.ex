@@ -21,6 +21,7 @@ defmodule RingTracer.Options do
     timeout: {:timeout, :infinity},
     hold_after: {:pos_integer, RingTracer.Strategy.Ring.HelpOffer.default_hold_after()},
     aim: {:boolean, nil},
+    split: {:boolean, false},
     strategy: {:strategy, :ring},
     kernel: {:kernel, nil},
     layout: {:layout, :strips},

@@ -12,8 +12,10 @@ defmodule RingTracer.Result do
     * `:ideal_us` — total trace work divided by total capacity (see
       `ideal_us/3`);
     * `:children` — one map per child, in ring order: `:index`, `:node`,
-      `:speed`, atoms `:own`, `:given`, `:received`, `:handovers` (hand-over
-      messages received), `:traced`, offers `:offers_sent`, `:offers_passed`
+      `:speed`, atoms `:own`, `:given`, `:received`, `:splits` (atoms it cut
+      in two to give part of one: adaptive atoms, one item more each, so
+      `traced == own - given + received + splits`), `:handovers` (hand-over
+      messages received), `:traced` (atoms and pieces), offers `:offers_sent`, `:offers_passed`
       (offer messages: offers passed on together count once),
       `:offers_consumed` (for `:steal`, requests sent, refused and granted),
       `:grandchild_restarts`, `:busy_us` (wall time its grandchild spent on
@@ -98,6 +100,7 @@ defmodule RingTracer.Result do
           required(:own) => non_neg_integer(),
           required(:given) => non_neg_integer(),
           required(:received) => non_neg_integer(),
+          required(:splits) => non_neg_integer(),
           required(:handovers) => non_neg_integer(),
           required(:traced) => non_neg_integer(),
           required(:offers_sent) => non_neg_integer(),
@@ -197,10 +200,10 @@ defmodule RingTracer.Result do
     round(work / capacity)
   end
 
-  @doc "Messages and bytes per atom, over all kinds."
+  @doc "Messages and bytes per atom of the layout (pieces of one atom count once), over all kinds."
   @spec per_atom(t()) :: %{messages: float(), bytes: float()}
   def per_atom(%__MODULE__{messages: messages, atoms: atoms}) do
-    n = max(length(atoms), 1)
+    n = atoms |> Enum.uniq_by(&RingTracer.Layout.base(&1.atom)) |> length() |> max(1)
 
     {count, bytes} =
       Enum.reduce(messages, {0, 0}, fn {_, m}, {c, b} -> {c + m.count, b + m.bytes} end)

@@ -35,11 +35,11 @@ defmodule RingTracer.Strategies do
 
   @doc """
   The strategy of `render/2`'s validated options, as a job's spec names it:
-  `{module, options}` (as given, if given so), the ring's options taken from `:hold_after` and
-  `:aim` (by default, a ring aims on strips, see `RingTracer.Strategy.Ring.Aim`).
+  `{module, options}` (as given, if given so), the ring's options taken from `:hold_after`,
+  `:split` (adaptive atoms, default false) and `:aim` (by default, a ring aims on strips, see `RingTracer.Strategy.Ring.Aim`).
 
       iex> RingTracer.Strategies.from_options(strategy: :ring, layout: :strips, aim: nil, hold_after: 16)
-      {RingTracer.Strategy.Ring, [hold_after: 16, aim: true]}
+      {RingTracer.Strategy.Ring, [hold_after: 16, aim: true, split: false]}
       iex> RingTracer.Strategies.from_options(strategy: :steal, layout: :strips, aim: nil, hold_after: 16)
       {RingTracer.Strategy.Steal, []}
   """
@@ -51,7 +51,9 @@ defmodule RingTracer.Strategies do
 
       :ring ->
         aim = if opts[:aim] == nil, do: opts[:layout] == :strips, else: opts[:aim]
-        {RingTracer.Strategy.Ring, [hold_after: opts[:hold_after], aim: aim]}
+
+        {RingTracer.Strategy.Ring,
+         [hold_after: opts[:hold_after], aim: aim, split: Keyword.get(opts, :split, false)]}
 
       name ->
         {:ok, module} = module(name)

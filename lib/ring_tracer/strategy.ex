@@ -53,6 +53,9 @@ defmodule RingTracer.Strategy do
     * `{:give, pid, index, n}` — takes up to `n` atoms, farthest from being
       traced first, and hands them over to sibling `index` at `pid`
       (possibly none: a refusal); the hand-over carries `handover_news/2`;
+    * `{:give, pid, index, n, {k, d}}` — the same, and with the `n` atoms
+      the last `k` of `d` parts of the next one (`RingTracer.Layout.split/3`:
+      its first parts stay with the child);
     * `{:queue, atoms}` — queues atoms handed over to the child, which
       starts on them (and, holding nothing new, is idle again);
     * `{:left, pid, index}` — the child's left sibling is now `index`;
@@ -66,6 +69,7 @@ defmodule RingTracer.Strategy do
   @type effect ::
           {:send, to(), kind(), term()}
           | {:give, pid(), non_neg_integer(), non_neg_integer()}
+          | {:give, pid(), non_neg_integer(), non_neg_integer(), part() | nil}
           | {:queue, [Layout.atom_id()]}
           | {:left, pid(), non_neg_integer()}
           | :finished
@@ -86,6 +90,9 @@ defmodule RingTracer.Strategy do
           {:send, non_neg_integer(), kind(), term()}
           | {:hand_out, non_neg_integer(), [Layout.atom_id()]}
           | {:helper, (() -> term())}
+
+  @typedoc "`{k, d}`: `k` of `d` equal parts of an atom or piece, `0 < k < d`."
+  @type part :: {pos_integer(), pos_integer()}
 
   @typedoc "A callback's answer: the strategy's new state and what to do."
   @type result(effect) :: {state(), [effect]}

@@ -7,7 +7,7 @@
   const ictx = img.getContext('2d'), octx = overlay.getContext('2d'), lctx = lanes.getContext('2d');
   let job = null, pixels = null, k = 1, laneH = 18, dirty = false, ended = false;
   const s = {
-    done: 0, rays: 0, now: 0, tracer: [], bars: [], marks: [], prevEnd: [], fed: [],
+    done: 0, rays: 0, now: 0, tracer: [], seen: {}, bars: [], marks: [], prevEnd: [], fed: [],
     traced: [], given: [], received: [], own: [],
     msgs: { result: 0, offer: 0, pass: 0, give: 0, back: 0, handover: 0, steal: 0, refuse: 0, returned: 0 },
     final: null
@@ -71,17 +71,28 @@
     return { x0: first % w, y0: Math.floor(first / w), x1: last % w, y1: Math.floor(last / w), first: first, count: count };
   }
 
+  // A piece of an atom (adaptive atoms) covers parts p[0] to p[1] of p[2].
+  function pieceSpan(d) {
+    const sp = span(d.a);
+    if (!d.p) return sp;
+    const [lo, hi, n] = d.p, first = sp.first + Math.floor(lo * sp.count / n);
+    const count = Math.floor(hi * sp.count / n) - Math.floor(lo * sp.count / n), w = job.width, last = first + count - 1;
+    return { x0: first % w, y0: Math.floor(first / w), x1: last % w, y1: Math.floor(last / w), first: first, count: count };
+  }
+
   function onAtom(d) {
-    if (!job || s.tracer[d.a] !== undefined) return;
+    const key = d.p ? d.a + ':' + d.p.join(':') : String(d.a);
+    if (!job || s.seen[key]) return;
+    s.seen[key] = true;
     s.tracer[d.a] = d.c;
-    const raw = atob(d.px), p = pixels.data, sp = span(d.a);
+    const raw = atob(d.px), p = pixels.data, sp = pieceSpan(d);
     for (let i = 0; i < sp.count; i++) {
       const o = (sp.first + i) * 4, q = i * 3;
       p[o] = raw.charCodeAt(q); p[o + 1] = raw.charCodeAt(q + 1); p[o + 2] = raw.charCodeAt(q + 2); p[o + 3] = 255;
     }
     ictx.putImageData(pixels, 0, 0, 0, sp.y0, job.width, sp.y1 - sp.y0 + 1);
     if ($('outlines').checked) outline(d.a);
-    s.done++; s.rays += d.rays; s.traced[d.c]++; s.msgs.result++;
+    s.done += d.p ? (d.p[1] - d.p[0]) / d.p[2] : 1; s.rays += d.rays; s.traced[d.c]++; s.msgs.result++;
     if (d.at !== null) {
       s.now = Math.max(s.now, d.at);
       // Live, an atom's bar runs from the child's previous atom (its
@@ -170,7 +181,7 @@
 
   function drawCounters() {
     const t = s.final ? s.final.elapsed_us : s.now;
-    $('atoms').textContent = s.done + ' / ' + job.total;
+    $('atoms').textContent = Math.round(s.done * 100) / 100 + ' / ' + job.total;
     $('rate').textContent = t > 0 ? fmt(s.rays / (t / 1e6)) : '–';
     $('elapsed').textContent = ms(t);
     $('eta').textContent = s.final ? 'done' : s.done > 0 ? ms(((job.total - s.done) * t) / s.done) : '–';
@@ -222,7 +233,7 @@
     ended = true;
     es.close();
     drawLanes(); drawCounters();
-    if (job && s.done === job.total) {
+    if (job && Math.abs(s.done - job.total) < 1e-6) {
       $('result').textContent = img.toDataURL('image/png');
       document.body.dataset.state = 'done';
       status('done: ' + s.done + ' atoms');

@@ -40,6 +40,9 @@ defmodule RingTracer.OptionsTest do
     assert {:ok, _} = Options.validate(children: max_n, atoms: div(max_atoms, max_n))
     # Reduced here; the maxima were run at full size (see RingTracer.Options).
     {:ok, result} = RingTracer.simulate(children: 2048, atoms: 2, costs: 100)
-    assert length(result.atoms) == 4096
+    # One record per atom, or per piece of one (adaptive atoms).
+    ids = Enum.map(result.atoms, & &1.atom)
+    assert ids == Enum.uniq(ids)
+    assert RingTracer.Job.Coverage.tiles?(RingTracer.Layout.new(4096, 1, 2048, 2), ids)
   end
 end

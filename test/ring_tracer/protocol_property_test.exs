@@ -2,12 +2,13 @@ defmodule RingTracer.ProtocolPropertyTest do
   @moduledoc """
   The ring protocol under adversarial schedules: random ring sizes, atoms,
   image sizes, speeds, strategies, layouts (strips or interleaved), aimed
-  offers or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
+  offers or not, adaptive atoms (pieces) or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
   and `RingTracer.Test.FaultyKernel`), child kills and
   how soon offers may wait at a child (`:hold_after`), against the real
   parent, children and kernel. Every job ends with the single-process
-  image, no process left behind, and, after kills, at most twice the
-  messages of the same job without them (no storms).
+  image, every pixel traced once in the records the parent kept (whole
+  atoms or pieces tiling them), no process left behind, and, after kills,
+  at most twice the messages of the same job without them (no storms).
 
   CI runs 1,000 cases (200 missed a hang that 2,000 found); `PROPER_NUMTESTS=5000 mix test
   test/ring_tracer/protocol_property_test.exs --include slow` runs more.
@@ -28,7 +29,7 @@ defmodule RingTracer.ProtocolPropertyTest do
     {integer(1, 7), integer(1, 6), integer(1, 20), integer(1, 14), list(integer(1, 3)),
      oneof([:ring, :static, :master, :steal]), integer(0, 4), integer(0, 2),
      integer(0, 1_000_000), integer(1, 3), oneof([:strips, :interleaved]),
-     oneof([nil, true, false])}
+     oneof([nil, true, false]), boolean()}
   end
 
   test "property: every schedule ends with the single-process image and no process left" do
@@ -37,7 +38,8 @@ defmodule RingTracer.ProtocolPropertyTest do
 
     RingTracer.PropErCase.check(
       gen(),
-      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout, aim} = case_ ->
+      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout, aim, split} =
+           case_ ->
         if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
         :rand.seed(:exsss, {seed, n, k})
         kills = min(kills, n - 1)
@@ -60,7 +62,9 @@ defmodule RingTracer.ProtocolPropertyTest do
           # exercised (the default, 16, needs a ring of 17 or more).
           hold_after: hold_after,
           # nil: the default for the layout (see `RingTracer.Strategy.Ring.Aim`).
-          aim: aim
+          aim: aim,
+          # Adaptive atoms: pieces near the end of the job (ring only).
+          split: split
         ]
 
         # Delays of up to `chaos` ms, which reorder messages: on what the
@@ -86,14 +90,17 @@ defmodule RingTracer.ProtocolPropertyTest do
         ok =
           case result do
             {:ok, r} ->
-              # One record per atom (the copy the parent kept), all of them
-              # unless a killed child took its records with it.
+              # One record per atom or piece (the copy the parent kept),
+              # tiling every atom exactly, unless a killed child took its
+              # records with it.
               ids = Enum.map(r.atoms, & &1.atom)
-              total = RingTracer.Layout.atom_count(RingTracer.Layout.new(w, h, n, k))
+              layout = RingTracer.Layout.new(w, h, n, k)
               lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
 
               r.pixels == reference and length(r.failures) <= length(kill_at) and
-                ids == Enum.uniq(ids) and (lost_records or length(ids) == total) and
+                ids == Enum.uniq(ids) and
+                (lost_records or RingTracer.Job.Coverage.tiles?(layout, ids)) and
+                (split or not Enum.any?(ids, &is_tuple/1)) and
                 no_storm?(r, clean, strategy, n)
 
             _ ->

@@ -10,21 +10,32 @@ defmodule RingTracer.StrategyTest do
   test "every strategy gives the byte-identical image, with speeds too" do
     reference = TestScenes.reference(@scene, 40, 30)
 
-    for strategy <- RingTracer.Strategies.names(), speeds <- [[], [1, 3, 1]] do
+    for strategy <- RingTracer.Strategies.names(),
+        speeds <- [[], [1, 3, 1]],
+        split <- [false, true] do
       {:ok, result} =
         RingTracer.render(TestScenes.path(@scene),
           strategy: strategy,
           speeds: speeds,
+          split: split,
           children: 3,
           atoms: 6,
           width: 40,
           height: 30
         )
 
-      assert result.pixels == reference, "#{strategy} #{inspect(speeds)}"
-      assert length(result.atoms) == 18
-      assert Enum.sort(Enum.map(result.atoms, & &1.atom)) == Enum.to_list(0..17)
-      assert result.messages.result.count == 18
+      assert result.pixels == reference, "#{strategy} #{inspect(speeds)} split: #{split}"
+
+      if split do
+        # Adaptive atoms (the ring's): one record and one result message
+        # per atom or piece, the pieces tiling the image once.
+        assert tiles?(3, 6, result)
+        assert result.messages.result.count == length(result.atoms)
+      else
+        assert length(result.atoms) == 18
+        assert Enum.sort(Enum.map(result.atoms, & &1.atom)) == Enum.to_list(0..17)
+        assert result.messages.result.count == 18
+      end
     end
   end
 
@@ -45,7 +56,8 @@ defmodule RingTracer.StrategyTest do
 
       assert result.pixels == reference, "#{strategy}"
       assert result.layout == :interleaved
-      assert Enum.all?(result.atoms, &(&1.owner == rem(&1.atom, 3)))
+      # Pieces of an atom (adaptive atoms) have its owner.
+      assert Enum.all?(result.atoms, &(&1.owner == rem(RingTracer.Layout.base(&1.atom), 3)))
       # The master owns every atom itself and hands them out in image order.
       own = if strategy == :master, do: 0, else: 6
       assert Enum.all?(result.children, &(&1.own == own)), "#{strategy}"
@@ -199,14 +211,22 @@ defmodule RingTracer.StrategyTest do
     # (about 12,000 offer messages here); with parking and holding,
     # 1,900-2,300.
     {:ok, result} = RingTracer.simulate(children: 256, atoms: 8, costs: 5000, speeds: [1, 2, 3])
-    assert length(result.atoms) == 2048
+    assert tiles?(256, 8, result)
     assert result.messages.offer.count < div(256 * 256, 16)
   end
 
   @tag :slow
   test "a 1024-child simulated ring finishes with every atom once" do
     {:ok, result} = RingTracer.simulate(children: 1024, atoms: 4, costs: 2000, speeds: [1, 2, 3])
-    assert length(result.atoms) == 4096
-    assert Enum.sort(Enum.map(result.atoms, & &1.atom)) == Enum.to_list(0..4095)
+    assert tiles?(1024, 4, result)
+  end
+
+  # One record per atom, or per piece of one (adaptive atoms), tiling the
+  # image exactly once.
+  defp tiles?(n, k, result) do
+    ids = Enum.map(result.atoms, & &1.atom)
+
+    ids == Enum.uniq(ids) and
+      RingTracer.Job.Coverage.tiles?(RingTracer.Layout.new(n * k, 1, n, k), ids)
   end
 end

@@ -72,10 +72,12 @@ defmodule RingTracer.Test.DelayedStrategy do
     end
   end
 
-  defp delay({:give, pid, index, n}, view) do
+  defp delay({:give, pid, index, n}, view), do: delay({:give, pid, index, n, nil}, view)
+
+  defp delay({:give, pid, index, n, part}, view) do
     case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
-      0 -> {:give, pid, index, n}
-      ms -> {:give, relay(pid, ms), index, n}
+      0 -> {:give, pid, index, n, part}
+      ms -> {:give, relay(pid, ms), index, n, part}
     end
   end
 

@@ -16,7 +16,9 @@ defmodule RingTracer.Bench.Balance do
   ...; see `RingTracer.Layout`), which shows how much of the ring's loss
   comes with the paper's contiguous strips, and every scenario runs it
   once more on strips with every offer sent to the left sibling as in the
-  paper (`ring/left`, `aim: false`; see `RingTracer.Strategy.Ring.Aim`). For each real
+  paper (`ring/left`, `aim: false`; see `RingTracer.Strategy.Ring.Aim`), and with
+  atoms cut in pieces near the end (`ring/split`, `split: true`: adaptive atoms, see
+  `RingTracer.Strategy.Ring`). For each real
   scenario a `floor` row runs the same atoms and speeds with no protocol at
   all (`floor/5`: N grandchildren fed from one shared counter): the
   distance from it to 1.0 is this machine's cost of dirty NIF calls, not
@@ -76,6 +78,7 @@ defmodule RingTracer.Bench.Balance do
     runs_of =
       Enum.map(RingTracer.Strategies.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
         [
+          {"ring/split", [strategy: :ring, split: true]},
           {"ring/left", [strategy: :ring, aim: false]},
           {"ring/interleaved", [strategy: :ring, layout: :interleaved]}
         ]
@@ -114,7 +117,10 @@ defmodule RingTracer.Bench.Balance do
 
     sim_runs =
       Enum.map(RingTracer.Strategies.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
-        [{"ring/left", [strategy: :ring, aim: false]}]
+        [
+          {"ring/split", [strategy: :ring, split: true]},
+          {"ring/left", [strategy: :ring, aim: false]}
+        ]
 
     sim_rows =
       for n <- sims, {name, how} <- sim_runs do

@@ -26,6 +26,7 @@ defmodule RingTracer.CLI.Render do
     strategy: :string,
     layout: :string,
     aim: :boolean,
+    split: :boolean,
     speeds: :string,
     stats: :string,
     timeline: :string,
@@ -109,6 +110,7 @@ defmodule RingTracer.CLI.Render do
           --strategy S        ring (default), static, master or steal
           --layout L          strips (default) or interleaved
           --aim, --no-aim     ring: offers straight to the busiest sibling (default on strips)
+          --split, --no-split ring: adaptive atoms, cut in pieces near the end (default off)
           --speeds 1,1,4      slowdown factor of each child, cyclic (1-1000)
 
     Reports:

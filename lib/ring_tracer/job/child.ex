@@ -184,6 +184,35 @@ defmodule RingTracer.Job.Child do
 
   defp waiting(_state), do: nil
 
+  # Takes up to `g` whole atoms and then, with `part` `{k, n}`, the last `k`
+  # of `n` parts of the next one (`RingTracer.Layout.split/3`; its head stays
+  # queued): see `take_last/2`.
+  defp take_last(state, g, nil), do: take_last(state, g)
+
+  defp take_last(state, g, {k, n}) do
+    {whole, state} = take_last(state, g)
+
+    cond do
+      length(whole) < g ->
+        {whole, state}
+
+      state.queue != [] ->
+        {head, tail} = Layout.split(List.last(state.queue), n - k, n)
+        state = bump(%{state | queue: List.replace_at(state.queue, -1, head)}, :splits)
+        {[tail | whole], state}
+
+      true ->
+        case take_last(state, 1) do
+          {[atom], state} ->
+            {head, tail} = Layout.split(atom, n - k, n)
+            {[tail | whole], fill_pipe(bump(%{state | queue: [head]}, :splits))}
+
+          {[], state} ->
+            {whole, state}
+        end
+    end
+  end
+
   # Takes up to `g` atoms to give away, farthest from being traced first: the
   # last queued ones and then, if `g` asks for more, the atom waiting in the
   # grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
@@ -253,6 +282,7 @@ defmodule RingTracer.Job.Child do
       own: own,
       given: 0,
       received: 0,
+      splits: 0,
       handovers: 0,
       traced: 0,
       offers_sent: 0,
@@ -288,6 +318,7 @@ defmodule RingTracer.Job.Child do
       dead: state.dead,
       status: view_status(state.status),
       queued: length(state.queue),
+      last_share: share(List.last(state.queue) || waiting(state)),
       remaining: remaining,
       in_flight: in_flight,
       done: state.done,
@@ -296,6 +327,13 @@ defmodule RingTracer.Job.Child do
       remaining_us: if(in_flight > 0, do: expected_remaining_us(state)),
       now: job_time(state)
     }
+  end
+
+  defp share(nil), do: nil
+
+  defp share(atom) do
+    {k, n} = Layout.fraction(atom)
+    k / n
   end
 
   defp view_status(:waiting), do: :working
@@ -326,8 +364,10 @@ defmodule RingTracer.Job.Child do
   defp effect(state, {:send, to, kind, msg}),
     do: send_counted(state, address(state, to), kind, msg)
 
-  defp effect(state, {:give, pid, to, n}) do
-    {atoms, state} = take_last(state, n)
+  defp effect(state, {:give, pid, to, n}), do: effect(state, {:give, pid, to, n, nil})
+
+  defp effect(state, {:give, pid, to, n, part}) do
+    {atoms, state} = take_last(state, n, part)
     {news, strategy_state} = state.strategy.handover_news(view(state), state.strategy_state)
     hand_over(%{state | strategy_state: strategy_state}, pid, to, atoms, news)
   end

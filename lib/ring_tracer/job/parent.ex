@@ -3,10 +3,11 @@ defmodule RingTracer.Job.Parent do
   The parent of one render job: it starts the children, links them in a
   ring, receives every atom's pixels, and ends the job.
 
-  The job is complete when the parent holds every atom exactly once; that,
-  not the ring's tokens, is the termination test, because atoms handed over
-  between children may still be in flight when an offer returns. An atom
-  that arrives twice is counted once. On completion the parent sends each
+  The job is complete when the parent holds every atom, whole or in pieces
+  (`RingTracer.Job.Coverage`); that, not the ring's tokens, is the
+  termination test, because atoms handed over between children may still be
+  in flight when an offer returns. An atom (or a piece) that brings nothing
+  new is counted as a duplicate. On completion the parent sends each
   child the stop message, waits until every child has stopped and reported
   its statistics (a child kills its grandchild first), sends the result to
   the caller and stops: no process of the job outlives it.
@@ -18,7 +19,7 @@ defmodule RingTracer.Job.Parent do
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Child, Directory, Ledger, Spec}
+  alias RingTracer.Job.{Child, Coverage, Directory, Ledger, Spec}
   alias RingTracer.Layout
   alias RingTracer.Strategy.ParentView
 
@@ -49,6 +50,7 @@ defmodule RingTracer.Job.Parent do
     children: %{},
     monitors: %{},
     results: %{},
+    coverage: %{},
     traced_by: %{},
     stopping: nil,
     strategy_state: nil,
@@ -79,6 +81,7 @@ defmodule RingTracer.Job.Parent do
           children: %{non_neg_integer() => pid()},
           monitors: %{reference() => non_neg_integer()},
           results: %{Layout.atom_id() => binary()},
+          coverage: Coverage.t(),
           traced_by: %{Layout.atom_id() => non_neg_integer()},
           stopping: stopping() | nil,
           strategy_state: RingTracer.Strategy.state(),
@@ -340,47 +343,24 @@ defmodule RingTracer.Job.Parent do
   end
 
   @impl GenServer
-  def handle_info({:atom_done, _child, atom, _pixels, _rays, _us}, state)
-      when is_map_key(state.results, atom) do
-    # A second copy (an atom handed out again after a failure whose first
-    # pixels were still on their way): counted, also while the job stops, so
-    # that every result message sent is either kept or counted here.
-    {:noreply, %{state | duplicates: state.duplicates + 1}}
-  end
+  def handle_info({:atom_done, child, atom, pixels, rays, us}, state) do
+    case Coverage.add(state.coverage, atom) do
+      # A second copy (an atom handed out again after a failure whose first
+      # pixels were still on their way): counted, also while the job stops,
+      # so that every result message sent is either kept or counted here.
+      {:duplicate, _} ->
+        {:noreply, %{state | duplicates: state.duplicates + 1}}
 
-  def handle_info({:atom_done, child, atom, pixels, rays, us}, %{stopping: nil} = state) do
-    {_first, count} = Layout.span(state.spec.layout, atom)
+      {:new, coverage} when state.stopping == nil ->
+        atom_done(state, coverage, child, atom, pixels, rays, us)
 
-    cond do
-      byte_size(pixels) != count * 12 ->
-        fail(
-          state,
-          "atom #{atom} came back with #{byte_size(pixels)} bytes, expected #{count * 12}"
-        )
-
-      true ->
-        state = %{
-          state
-          | results: Map.put(state.results, atom, pixels),
-            traced_by: Map.put(state.traced_by, atom, child),
-            missing: state.missing - 1
-        }
-
-        progress(state)
-        atom_event(state, child, atom, pixels, rays, us)
-
-        cond do
-          state.missing == 0 ->
-            stop_children(state)
-
-          true ->
-            {:noreply, run_strategy(state, &state.strategy.parent_atom_done(&1, &2, child))}
-        end
+      {:new, _} ->
+        {:noreply, state}
     end
   end
 
   def handle_info({:atom_failed, child, atom, message}, %{stopping: nil} = state) do
-    fail(state, "atom #{atom} failed on child #{child}: #{message}")
+    fail(state, "atom #{inspect(atom)} failed on child #{child}: #{message}")
   end
 
   def handle_info({:child_failed, child, message}, %{stopping: nil} = state) do
@@ -418,6 +398,42 @@ defmodule RingTracer.Job.Parent do
     do: {:noreply, run_strategy(state, &state.strategy.parent_info(other, &1, &2))}
 
   def handle_info(_other, state), do: {:noreply, state}
+
+  defp atom_done(state, coverage, child, atom, pixels, rays, us) do
+    {_first, count} = Layout.span(state.spec.layout, atom)
+    base = Layout.base(atom)
+
+    cond do
+      byte_size(pixels) != count * 12 ->
+        fail(
+          state,
+          "atom #{inspect(atom)} came back with #{byte_size(pixels)} bytes, expected #{count * 12}"
+        )
+
+      true ->
+        # An atom counts once all of it has arrived (pieces tile it).
+        done = if Coverage.complete?(coverage, base), do: 1, else: 0
+
+        state = %{
+          state
+          | results: Map.put(state.results, atom, pixels),
+            coverage: coverage,
+            traced_by: Map.put(state.traced_by, atom, child),
+            missing: state.missing - done
+        }
+
+        if done == 1, do: progress(state)
+        atom_event(state, child, atom, pixels, rays, us)
+
+        cond do
+          state.missing == 0 ->
+            stop_children(state)
+
+          true ->
+            {:noreply, run_strategy(state, &state.strategy.parent_atom_done(&1, &2, child))}
+        end
+    end
+  end
 
   defp down(state, ref, reason) do
     case Map.pop(state.monitors, ref) do
@@ -487,7 +503,7 @@ defmodule RingTracer.Job.Parent do
   # Atoms lost with a child, less those traced since, to the live children
   # in shares that follow their speeds.
   defp reassign(state, atoms) do
-    case Enum.reject(atoms, &Map.has_key?(state.results, &1)) do
+    case Enum.reject(atoms, &Coverage.covered?(state.coverage, &1)) do
       [] ->
         state
 
@@ -614,13 +630,49 @@ defmodule RingTracer.Job.Parent do
     %{stats: stats, traffic: %{}, events: [], atoms: []}
   end
 
-  # One record per atom: the copy whose pixels the parent kept.
-  defp kept_atoms(reports, traced_by) do
+  # One record per atom or piece: the copy whose pixels the parent kept.
+  defp kept_atoms(reports, traced_by, layout) do
     reports
     |> Enum.flat_map(& &1.atoms)
     |> Enum.filter(&(Map.get(traced_by, &1.atom) == &1.child))
     |> Enum.uniq_by(& &1.atom)
-    |> Enum.sort_by(& &1.atom)
+    |> Enum.sort_by(&{Layout.base(&1.atom), Layout.span(layout, &1.atom)})
+  end
+
+  @doc """
+  The image from the pixels received, by atom or piece (`results`): each
+  atom's pieces in pixel order, the pixels two pieces share (after a
+  failure) taken once.
+
+      iex> layout = RingTracer.Layout.new(4, 1, 1, 1)
+      iex> {h, t} = RingTracer.Layout.split(0, 1, 2)
+      iex> px = fn n -> :binary.copy(<<n::96>>, 1) end
+      iex> results = %{t => px.(3) <> px.(4), h => px.(1) <> px.(2), {0, 1, 3, 4} => px.(2) <> px.(3)}
+      iex> RingTracer.Job.Parent.assemble(layout, results) == px.(1) <> px.(2) <> px.(3) <> px.(4)
+      true
+  """
+  @spec assemble(Layout.t(), %{Layout.atom_id() => binary()}) :: binary()
+  def assemble(layout, results) do
+    by_atom = Enum.group_by(results, fn {a, _} -> Layout.base(a) end)
+
+    layout
+    |> Layout.atoms()
+    |> Enum.map(fn a ->
+      {first, _} = Layout.span(layout, a)
+
+      by_atom
+      |> Map.fetch!(a)
+      |> Enum.map(fn {piece, pixels} -> {Layout.span(layout, piece), pixels} end)
+      |> Enum.sort()
+      |> Enum.reduce({first, []}, fn {{f, c}, pixels}, {cursor, acc} ->
+        if f + c > cursor,
+          do: {f + c, [binary_part(pixels, (cursor - f) * 12, (f + c - cursor) * 12) | acc]},
+          else: {cursor, acc}
+      end)
+      |> elem(1)
+      |> Enum.reverse()
+    end)
+    |> IO.iodata_to_binary()
   end
 
   defp finish(state) do
@@ -653,11 +705,7 @@ defmodule RingTracer.Job.Parent do
     reply =
       case outcome do
         :ok ->
-          pixels =
-            spec.layout
-            |> Layout.atoms()
-            |> Enum.map(&Map.fetch!(state.results, &1))
-            |> IO.iodata_to_binary()
+          pixels = assemble(spec.layout, state.results)
 
           traffic =
             Enum.reduce(reports, state.traffic, fn r, acc ->
@@ -671,7 +719,7 @@ defmodule RingTracer.Job.Parent do
              elapsed_us: elapsed,
              teardown_us: now - state.completed,
              children: Enum.map(reports, & &1.stats),
-             atoms: kept_atoms(reports, state.traced_by),
+             atoms: kept_atoms(reports, state.traced_by, spec.layout),
              events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
              traffic: traffic,
              duplicates: state.duplicates,

@@ -47,7 +47,9 @@ defmodule RingTracer.Kernel.Simulated do
 
   @impl RingTracer.Kernel
   def trace(costs, _first, count, atom) do
-    us = cost(costs, atom)
+    # A piece of an atom (`RingTracer.Layout`) costs its share of the atom.
+    {k, n} = RingTracer.Layout.fraction(atom)
+    us = div(cost(costs, RingTracer.Layout.base(atom)) * k, n)
     t0 = System.monotonic_time(:microsecond)
     Process.sleep(div(us + 500, 1000))
     elapsed = System.monotonic_time(:microsecond) - t0

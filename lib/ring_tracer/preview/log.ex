@@ -115,7 +115,8 @@ defmodule RingTracer.Preview.Log do
       data =
         IO.iodata_to_binary([
           ~s({"a":),
-          Integer.to_string(a),
+          Integer.to_string(Layout.base(a)),
+          piece_field(a),
           ~s(,"c":),
           Integer.to_string(child),
           ~s(,"at":),
@@ -225,4 +226,8 @@ defmodule RingTracer.Preview.Log do
     do: String.replace_prefix(inspect(module), "RingTracer.Strategy.", "")
 
   defp strategy_name(other), do: inspect(other)
+
+  # A piece of an atom (adaptive atoms): its parts `lo` to `hi` of `d`.
+  defp piece_field({_a, lo, hi, d}), do: ~s(,"p":[#{lo},#{hi},#{d}])
+  defp piece_field(_atom), do: []
 end

@@ -19,13 +19,17 @@ defmodule RingTracer.Report.Ownership do
   def pixels(%Result{children: children, atoms: atoms, pixels: pixels} = result)
       when is_list(atoms) and atoms != [] and is_list(children) and children != [] do
     n = length(children)
-    k = max(div(length(atoms), n), 1)
+    k = max(div(atoms |> Enum.uniq_by(&Layout.base(&1.atom)) |> length(), n), 1)
     layout = Layout.new(result.width, result.height, n, k)
     tracer = Map.new(atoms, &{&1.atom, &1.child})
     colours = children |> Enum.with_index() |> Map.new(fn {_, i} -> {i, Palette.linear(i)} end)
+    # Atoms traced in pieces: each piece tinted for its tracer.
+    pieces = atoms |> Enum.map(& &1.atom) |> Enum.group_by(&Layout.base/1)
 
     layout
     |> Layout.atoms()
+    |> Enum.flat_map(&Map.get(pieces, &1, [&1]))
+    |> Enum.sort_by(&Layout.span(layout, &1))
     |> Enum.map(fn a ->
       {first, count} = Layout.span(layout, a)
       chunk = binary_part(pixels, first * 12, count * 12)

@@ -256,7 +256,7 @@ defmodule RingTracer.Report.Timeline do
         else: ""
 
     tip =
-      "atom #{atom.atom}: owner child #{atom.owner}, traced by child #{atom.child}, " <>
+      "atom #{RingTracer.Layout.name(atom.atom)}: owner child #{atom.owner}, traced by child #{atom.child}, " <>
         "#{ms(atom.start_us)}-#{ms(atom.end_us)} ms (trace #{ms(atom.trace_us || 0)} ms)"
 
     [

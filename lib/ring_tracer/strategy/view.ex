@@ -13,6 +13,9 @@ defmodule RingTracer.Strategy.View do
     * `:queued` — atoms queued, not yet in the grandchild's pipe;
       `:remaining`, `:in_flight` — what it could give: the queued atoms plus
       the one waiting in its pipe, and the one being traced;
+      `:last_share` — the share of its atom (1.0: a whole atom, less for a
+      piece, see `RingTracer.Layout`) of the farthest atom it could give
+      (`nil`: none);
     * `:done` — atoms traced; `:rate` — its speed, kernel work per busy
       microsecond (`nil` before it has traced work); `:mean_atom_us` — wall
       time per atom (`nil` before its first); `:remaining_us` — how long the
@@ -33,6 +36,7 @@ defmodule RingTracer.Strategy.View do
     :rate,
     :mean_atom_us,
     :remaining_us,
+    :last_share,
     options: [],
     dead: [],
     queued: 0,
@@ -54,6 +58,7 @@ defmodule RingTracer.Strategy.View do
           status: :working | :idle | :finished,
           queued: non_neg_integer(),
           remaining: non_neg_integer(),
+          last_share: float() | nil,
           in_flight: non_neg_integer(),
           done: non_neg_integer(),
           rate: float() | nil,

@@ -34,6 +34,27 @@ defmodule RingTracer.Strategy.Ring.HelpOfferTest do
     assert HelpOffer.decide(view(1, 12, 2, 4.0, nil), offer(2, 12.0)) == {:give, 11}
   end
 
+  test "adaptive atoms: part of an atom near the end, or for an offerer too slow for a whole one" do
+    split = fn v, share -> Map.merge(v, %{split: true, last_share: share}) end
+    # An offerer at 0.4 of the giver's speed, one atom queued behind the one
+    # in flight: a whole atom would end later on it, half of one does not.
+    assert HelpOffer.decide(split.(view(1, 1, 1, 1.0, nil), 1.0), offer(2, 0.4)) ==
+             {:give, 0, {4, 8}}
+
+    # Without adaptive atoms the same offer walks on.
+    assert HelpOffer.decide(view(1, 1, 1, 1.0, nil), offer(2, 0.4)) == :pass
+    # An eighth-speed offerer, five atoms queued and one in flight, nobody
+    # else to help: five eighths of one (it ends them as the giver ends the
+    # rest).
+    assert HelpOffer.decide(split.(view(1, 5, 1, 1.0, nil), 1.0), offer(2, 0.125)) ==
+             {:give, 0, {5, 8}}
+
+    # A piece of a quarter of an atom is not cut again.
+    assert HelpOffer.decide(split.(view(1, 1, 1, 1.0, nil), 0.25), offer(2, 0.4)) == :pass
+    # Far from the end, whole atoms only.
+    assert HelpOffer.decide(split.(view(1, 12, 2, 4.0, nil), 1.0), offer(2, 12.0)) == {:give, 11}
+  end
+
   test "the third helper is the fastest sibling heard of other than the two" do
     slow = offer(2, 1.0)
     base = view(1, 12, 1, 2.0, nil)

@@ -160,12 +160,16 @@ defmodule RingTracer.Strategy.Ring.Aim do
   def board(layout, work, traced_by, now) do
     done =
       Enum.reduce(traced_by, %{}, fn {a, i}, acc ->
-        Map.update(acc, i, elem(work, a), &(&1 + elem(work, a)))
+        {k, n} = Layout.fraction(a)
+        w = elem(work, Layout.base(a)) * k / n
+        Map.update(acc, i, w, &(&1 + w))
       end)
+
+    traced = MapSet.new(Map.keys(traced_by), &Layout.base/1)
 
     loads =
       for i <- 0..(layout.children - 1), rate = Map.get(done, i, 0) / max(now, 1), rate > 0 do
-        left = Enum.reject(Layout.strip(layout, i), &is_map_key(traced_by, &1))
+        left = Enum.reject(Layout.strip(layout, i), &MapSet.member?(traced, &1))
         left_work = Enum.reduce(left, 0, &(elem(work, &1) + &2))
         {i, now + round(left_work / rate), now, length(left)}
       end

@@ -26,6 +26,10 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
     * an old offer of its own (superseded) -> `:drop`;
     * the share rule gives at least one atom -> `{:give, g}`: the token is
       consumed, and the child sends its last `g` queued atoms to the offerer;
+      with adaptive atoms (`split: true` in the view), `{:give, g, {k, 8}}`:
+      `k` eighths of the next one too, near the end of the giver's atoms or
+      (`g` 0) to an offerer too slow for a whole atom
+      (`RingTracer.Strategy.Ring.Share.part/7`);
     * the child is idle itself, its own offer still out, and the offer has
       not wrapped -> `:park`;
     * the child is tracing its last atom, which should end within half of
@@ -182,10 +186,20 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
           optional(:heard) => heard(),
           optional(:ring_size) => non_neg_integer(),
           optional(:remaining_us) => non_neg_integer() | nil,
-          optional(:hold_after) => pos_integer()
+          optional(:hold_after) => pos_integer(),
+          optional(:split) => boolean(),
+          optional(:last_share) => float() | nil
         }
 
-  @type decision :: :returned | :drop | :park | :hold | :home | :pass | {:give, pos_integer()}
+  @type decision ::
+          :returned
+          | :drop
+          | :park
+          | :hold
+          | :home
+          | :pass
+          | {:give, pos_integer()}
+          | {:give, non_neg_integer(), {pos_integer(), 8}}
 
   @doc """
   What the child described by `view` does with `offer`.
@@ -217,12 +231,38 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
   end
 
   def decide(view, %__MODULE__{rate: rate, wrapped: wrapped} = offer) do
-    case Share.give(view.remaining, view.in_flight, rate, view.rate, helper_rate(view, offer)) do
-      0 when view.offer_seq != nil and not wrapped -> :park
-      0 -> if holds?(view, offer), do: :hold, else: walk_on(view, offer)
-      g -> {:give, g}
+    helper = helper_rate(view, offer)
+
+    case Share.give(view.remaining, view.in_flight, rate, view.rate, helper) do
+      0 ->
+        case part(view, offer, helper, 0) do
+          nil when view.offer_seq != nil and not wrapped -> :park
+          nil -> if holds?(view, offer), do: :hold, else: walk_on(view, offer)
+          part -> {:give, 0, part}
+        end
+
+      g ->
+        case part(view, offer, helper, g) do
+          nil -> {:give, g}
+          part -> {:give, g, part}
+        end
     end
   end
+
+  # Adaptive atoms (`Share.part/7`): part of one more atom, or none.
+  defp part(%{split: true} = view, offer, helper, g) do
+    Share.part(
+      view.remaining,
+      view.in_flight,
+      offer.rate,
+      view.rate,
+      helper,
+      g,
+      view[:last_share]
+    )
+  end
+
+  defp part(_view, _offer, _helper, _g), do: nil
 
   # An offer that has walked as many hops as the ring has live children
   # without reaching its origin goes home (see "Strays").

@@ -21,7 +21,11 @@ defmodule RingTracer.Strategy.Ring do
       `RingTracer.Strategy.Ring.HelpOffer`);
     * `:aim` — whether an idle child sends its offer straight to the sibling
       it expects to stay busy longest (default false; see
-      `RingTracer.Strategy.Ring.Aim`).
+      `RingTracer.Strategy.Ring.Aim`);
+    * `:split` — adaptive atoms (default true): a hand-over can give part
+      of an atom, near the end of the giver's atoms or to an offerer too
+      slow for a whole one (`RingTracer.Strategy.Ring.Share.part/7`);
+      `false` keeps atoms whole, as the paper does.
 
   ## State
 
@@ -245,7 +249,9 @@ defmodule RingTracer.Strategy.Ring do
       ring_size: view.ring_size - length(view.dead),
       offer_seq: if(view.status == :idle, do: state[:current]),
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
-      hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after())
+      hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after()),
+      split: split?(view),
+      last_share: view.last_share
     }
 
     case HelpOffer.decide(decision_view, offer) do
@@ -268,6 +274,14 @@ defmodule RingTracer.Strategy.Ring do
         {state,
          [
            {:give, offer.pid, offer.origin, g},
+           {:event, :give, offer.origin},
+           {:stat, :offers_consumed}
+         ]}
+
+      {:give, g, part} ->
+        {state,
+         [
+           {:give, offer.pid, offer.origin, g, part},
            {:event, :give, offer.origin},
            {:stat, :offers_consumed}
          ]}
@@ -405,4 +419,6 @@ defmodule RingTracer.Strategy.Ring do
   end
 
   defp aim?(view), do: Keyword.get(view.options, :aim, false)
+
+  defp split?(view), do: Keyword.get(view.options, :split, true)
 end

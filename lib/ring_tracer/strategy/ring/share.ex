@@ -59,6 +59,9 @@ defmodule RingTracer.Strategy.Ring.Share do
   @typedoc "Kernel work units per microsecond; `nil` until a child has traced work."
   @type rate :: float() | nil
 
+  # The smallest piece adaptive atoms cut, in atoms.
+  @least_part 0.25
+
   # Queues up to this long are planned atom by atom.
   @one_by_one 64
 
@@ -138,6 +141,62 @@ defmodule RingTracer.Strategy.Ring.Share do
 
     one_by_one(left - 1, next, vg, vo, vh)
   end
+
+  @doc """
+  Adaptive atoms, at a hand-over: after the `g` whole atoms `give/5` gave,
+  the share of the next one the offerer should take as well, in eighths
+  (`{k, 8}`, `nil`: none), from the same rates. The atoms are shared as if
+  they could be cut anywhere (the offerer's part of the `remaining` and
+  `in_flight` atoms in proportion to its speed, with the helper's if it is
+  faster than the giver) and the whole atoms given are taken off. With whole
+  atoms given, only near the end of the giver's atoms (one or two left after
+  the hand-over: before, the atoms themselves are small enough); with none
+  (the offerer is too slow for a whole atom), whenever its part is worth a
+  quarter of an atom: a slow child then stays busy to the end of the job
+  instead of idling with its capacity lost. `share` is the share of its atom of
+  the one to cut (a piece: less than 1.0); neither part is smaller than a
+  quarter of an atom (smaller pieces cost more messages than they save
+  time).
+
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 8.0, 1.0, nil, 1, 1.0)
+      {6, 8}
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 1.0)
+      {4, 8}
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.5)
+      {4, 8}
+      iex> RingTracer.Strategy.Ring.Share.part(2, 1, 1.0, 1.0, nil, 1, 0.4)
+      nil
+      iex> RingTracer.Strategy.Ring.Share.part(20, 1, 1.0, 1.0, nil, 10, 1.0)
+      nil
+      iex> RingTracer.Strategy.Ring.Share.part(5, 1, 0.125, 1.0, 1.0, 0, 1.0)
+      {2, 8}
+  """
+  @spec part(
+          non_neg_integer(),
+          non_neg_integer(),
+          rate(),
+          rate(),
+          rate(),
+          non_neg_integer(),
+          float() | nil
+        ) :: {pos_integer(), 8} | nil
+  def part(remaining, in_flight, offerer_rate, self_rate, helper_rate, g, share)
+      when remaining > g and (g == 0 or remaining - g <= 2) and is_float(share) and
+             share >= 2 * @least_part do
+    if positive?(offerer_rate) and positive?(self_rate) do
+      vh = if positive?(helper_rate), do: helper_rate, else: 0.0
+      total = remaining + in_flight
+      mine = if offerer_rate > self_rate, do: offerer_rate + vh, else: offerer_rate
+      k = floor((total * mine / (offerer_rate + self_rate + vh) - g) * 8)
+      # Neither part below a quarter of an atom (in eighths of this one).
+      least = ceil(8 * @least_part / share - 1.0e-9)
+      k = min(k, 8 - least)
+      if k >= least, do: {k, 8}
+    end
+  end
+
+  def part(_remaining, _in_flight, _offerer_rate, _self_rate, _helper_rate, _g, _share),
+    do: nil
 
   defp positive?(rate), do: is_number(rate) and rate > 0
 end
