@@ -3,6 +3,8 @@ defmodule RingTracer.CLITest do
   # through a symlink on the PATH, interrupted with real signals.
   use ExUnit.Case, async: false
 
+  import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
+
   @moduletag :distributed
   @moduletag timeout: 180_000
   @launcher Path.expand("bin/ringtracer")
@@ -41,31 +43,6 @@ defmodule RingTracer.CLITest do
 
     {:os_pid, pid} = Port.info(port, :os_pid)
     {port, pid}
-  end
-
-  defp collect(port, out \\ "") do
-    receive do
-      {^port, {:data, data}} -> collect(port, out <> data)
-      {^port, {:exit_status, status}} -> {status, out}
-    after
-      120_000 -> flunk("the command did not end; output: #{out}")
-    end
-  end
-
-  defp until(port, text, out \\ "") do
-    if String.contains?(out, text) do
-      out
-    else
-      receive do
-        {^port, {:data, data}} ->
-          until(port, text, out <> data)
-
-        {^port, {:exit_status, status}} ->
-          flunk("exited #{status} before #{inspect(text)}: #{out}")
-      after
-        120_000 -> flunk("no #{inspect(text)}; output: #{out}")
-      end
-    end
   end
 
   defp run(ctx, args) do

@@ -3,6 +3,8 @@ defmodule RingTracer.CLI.ServerTest do
   # processes, from another folder, interrupted with real signals.
   use ExUnit.Case, async: false
 
+  import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
+
   alias RingTracer.CLI.Server
 
   @moduletag :distributed
@@ -75,31 +77,6 @@ defmodule RingTracer.CLI.ServerTest do
       {^port, {:exit_status, _}} -> :ok
     after
       10_000 -> System.cmd("kill", ["-KILL", "#{pid}"])
-    end
-  end
-
-  defp collect(port, out \\ "") do
-    receive do
-      {^port, {:data, data}} -> collect(port, out <> data)
-      {^port, {:exit_status, status}} -> {status, out}
-    after
-      120_000 -> flunk("the command did not end; output: #{out}")
-    end
-  end
-
-  defp until(port, text, out \\ "") do
-    if String.contains?(out, text) do
-      out
-    else
-      receive do
-        {^port, {:data, data}} ->
-          until(port, text, out <> data)
-
-        {^port, {:exit_status, status}} ->
-          flunk("exited #{status} before #{inspect(text)}: #{out}")
-      after
-        120_000 -> flunk("no #{inspect(text)}; output: #{out}")
-      end
     end
   end
 
