@@ -403,7 +403,8 @@ defmodule RingTracer.Job.Child do
       strategy: strategy,
       strategy_state: strategy.init(options),
       queue: queue,
-      stats: new_stats(index, node(), speed(spec, index), length(queue))
+      stats:
+        new_stats(index, node(), Spec.speed(List.to_tuple(spec.speeds), index), length(queue))
     }
 
     {:ok, state, {:continue, {:prepare, kernel}}}
@@ -637,7 +638,4 @@ defmodule RingTracer.Job.Child do
       mean -> max(mean - (now() - state.current_since), 0)
     end
   end
-
-  defp speed(%Spec{speeds: []}, _index), do: 1
-  defp speed(%Spec{speeds: speeds}, index), do: Enum.at(speeds, rem(index, length(speeds)))
 end

@@ -252,7 +252,7 @@ defmodule RingTracer.Job.Parent do
           placement
           |> Enum.with_index()
           |> Enum.reduce_while({:ok, []}, fn {node, i}, {:ok, acc} ->
-            case Child.start(node, %{child_spec | speeds: [speed(speeds, i)]}, i, self()) do
+            case Child.start(node, %{child_spec | speeds: [Spec.speed(speeds, i)]}, i, self()) do
               {:ok, pid} ->
                 {:cont, {:ok, [{i, pid} | acc]}}
 
@@ -333,7 +333,7 @@ defmodule RingTracer.Job.Parent do
           layout: state.spec.layout,
           strategy: state.spec.strategy,
           nodes: placement(state.spec.nodes, n),
-          speeds: for(i <- 0..(n - 1), do: speed(speeds, i)),
+          speeds: for(i <- 0..(n - 1), do: Spec.speed(speeds, i)),
           results: state.results,
           traced_by: state.traced_by
         }}, state}
@@ -600,9 +600,6 @@ defmodule RingTracer.Job.Parent do
     for {_i, pid} <- state.children, do: Process.exit(pid, :kill)
     {:stop, :normal, state}
   end
-
-  defp speed({}, _index), do: 1
-  defp speed(speeds, index), do: elem(speeds, rem(index, tuple_size(speeds)))
 
   # `nodes` is one node per child (`RingTracer.Options` places them), or []
   # when every child runs on this node.

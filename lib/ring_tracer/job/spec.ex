@@ -36,4 +36,17 @@ defmodule RingTracer.Job.Spec do
           progress: pid() | nil,
           liveness: pos_integer()
         }
+
+  @doc """
+  Child `index`'s slowdown from the job's speeds, as a tuple (they repeat
+  over the ring; none means 1).
+
+      iex> RingTracer.Job.Spec.speed({1, 4}, 3)
+      4
+      iex> RingTracer.Job.Spec.speed({}, 3)
+      1
+  """
+  @spec speed(tuple(), non_neg_integer()) :: number()
+  def speed({}, _index), do: 1
+  def speed(speeds, index), do: elem(speeds, rem(index, tuple_size(speeds)))
 end

@@ -1,0 +1,4 @@
+defmodule RingTracer.Job.SpecTest do
+  use ExUnit.Case, async: true
+  doctest RingTracer.Job.Spec
+end
