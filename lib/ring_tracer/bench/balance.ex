@@ -2,7 +2,7 @@ defmodule RingTracer.Bench.Balance do
   @help """
   Strategy x scenario: makespan / ideal and messages per atom.
 
-      mix ring_tracer.bench balance [--size 1024] [--atoms 16] [--runs 3] [--quick]
+      mix ring_tracer.bench balance [--size 1024] [--atoms 16] [--runs 3] [--quick] [--why]
 
   Renders the same atoms with every strategy (`static`, `master`, `ring`,
   `steal`) on real scenes (4 equal children; 4 with one 4x slower; 8 with
@@ -27,6 +27,10 @@ defmodule RingTracer.Bench.Balance do
   percent of the makespan even for the `floor`. Under the table it checks
   the targets of `RingTracer.Bench.Targets` against it, each "ok" or
   "MISSED".
+
+  `--why` prints a second table: where each row's makespan goes at the end
+  of the job (`tail/1`), for the floor too (`floor/5` keeps its feeders'
+  last atoms).
   """
   @moduledoc @help
   @behaviour RingTracer.Bench
@@ -42,13 +46,19 @@ defmodule RingTracer.Bench.Balance do
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "balance [--size 1024] [--atoms 16] [--runs 3] [--quick]"
+  def usage, do: "balance [--size 1024] [--atoms 16] [--runs 3] [--quick] [--why]"
 
   @impl RingTracer.Bench
   def run(argv) do
     {opts, _, _} =
       OptionParser.parse(argv,
-        strict: [size: :integer, atoms: :integer, quick: :boolean, runs: :integer]
+        strict: [
+          size: :integer,
+          atoms: :integer,
+          quick: :boolean,
+          runs: :integer,
+          why: :boolean
+        ]
       )
 
     Mix.Task.run("app.start")
@@ -110,7 +120,8 @@ defmodule RingTracer.Bench.Balance do
               ratio: f.elapsed_us / f.ideal_us,
               idle_pct: nil,
               msgs: 0.0,
-              bytes: nil
+              bytes: nil,
+              tail: f.tail
             }
           ]
       end)
@@ -148,6 +159,81 @@ defmodule RingTracer.Bench.Balance do
     )
 
     info(Targets.report(Enum.map(real, &elem(&1, 0)), rows ++ sim_rows))
+
+    if opts[:why] do
+      info("\nwhere the makespan goes at the end of the job (`tail/1`; times in ms):")
+
+      print_table(
+        ~w(scenario strategy makespan_ms first_idle_ms tail_ms last_ms last_speed gives_late offer_ms),
+        Enum.map(rows ++ sim_rows, &tail_cells/1)
+      )
+    end
+  end
+
+  @doc """
+  Where a job's makespan goes at its end, from its result (or the floor's):
+
+    * `:first_idle_us` — from the first child to trace its last atom to the
+      end: how long capacity lay unused at all;
+    * `:tail_us` — from the median child's last atom to the end: how long
+      half the children had nothing left;
+    * `:last_us` and `:last_speed` — how long the atom or piece that ended
+      last took (its slowdown included) and its child's speed factor: a big
+      atom started late on a slow child sets the makespan;
+    * `:gives_late` — hand-overs (`:give` events) in the last tenth of the
+      makespan, and `:offer_us`, the median time from an offer to the
+      hand-over it brought (nil without hand-overs).
+
+      iex> RingTracer.Bench.Balance.tail(%{elapsed_us: 100,
+      ...>   atoms: [%{child: 0, start_us: 0, end_us: 60}, %{child: 1, start_us: 10, end_us: 99}],
+      ...>   children: [%{index: 0, speed: 1, last_atom_us: 60}, %{index: 1, speed: 4, last_atom_us: 99}],
+      ...>   events: [%{kind: :offer, from: 0, to: 1, at_us: 60}, %{kind: :give, from: 1, to: 0, at_us: 95}]})
+      %{first_idle_us: 40, tail_us: 1, last_us: 89, last_speed: 4, gives_late: 1, offer_us: 35}
+  """
+  @spec tail(%{
+          elapsed_us: non_neg_integer(),
+          atoms: [map()],
+          children: [map()],
+          events: [map()]
+        }) :: map()
+  def tail(%{elapsed_us: elapsed, atoms: atoms, children: children, events: events}) do
+    ends = children |> Enum.map(& &1.last_atom_us) |> Enum.reject(&is_nil/1) |> Enum.sort()
+    last = Enum.max_by(atoms, & &1.end_us, fn -> nil end)
+    speed = last && Enum.find_value(children, &(&1.index == last.child && &1.speed))
+
+    %{
+      first_idle_us: if(ends == [], do: 0, else: elapsed - hd(ends)),
+      tail_us: if(ends == [], do: 0, else: elapsed - Enum.at(ends, div(length(ends), 2))),
+      last_us: last && last.end_us - last.start_us,
+      last_speed: speed,
+      gives_late: Enum.count(events, &(&1.kind == :give and &1.at_us > elapsed * 0.9)),
+      offer_us: offer_us(events)
+    }
+  end
+
+  # For each hand-over, the time since its receiver's latest offer.
+  defp offer_us(events) do
+    {waits, _} =
+      Enum.reduce(events, {[], %{}}, fn
+        %{kind: :offer, from: from, at_us: t}, {waits, sent} ->
+          {waits, Map.put(sent, from, t)}
+
+        %{kind: :give, to: to, at_us: t}, {waits, sent} when is_map_key(sent, to) ->
+          {[t - sent[to] | waits], Map.delete(sent, to)}
+
+        _, acc ->
+          acc
+      end)
+
+    if waits != [], do: waits |> Enum.sort() |> Enum.at(div(length(waits), 2))
+  end
+
+  defp tail_cells(%{tail: t} = r) do
+    ms = &(&1 && fmt(&1 / 1000))
+
+    [r.scenario, r.strategy, fmt(r.makespan_us / 1000)] ++
+      [ms.(t.first_idle_us), ms.(t.tail_us), ms.(t.last_us)] ++
+      [t.last_speed && to_string(t.last_speed), to_string(t.gives_late), ms.(t.offer_us)]
   end
 
   @doc """
@@ -157,10 +243,10 @@ defmodule RingTracer.Bench.Balance do
   one shared counter as soon as it sends back the last. No strategy, no
   parent: what remains between its makespan and the ideal time is the cost
   of the kernel calls themselves. Returns the makespan and the ideal time,
-  as `RingTracer.Result` has them.
+  as `RingTracer.Result` has them, and the `tail/1` of its feeders.
   """
   @spec floor(RingTracer.Scene.t(), pos_integer(), pos_integer(), pos_integer(), [number()]) ::
-          {:ok, %{elapsed_us: non_neg_integer(), ideal_us: non_neg_integer()}}
+          {:ok, %{elapsed_us: non_neg_integer(), ideal_us: non_neg_integer(), tail: map()}}
   def floor(scene, size, n, k, speeds) do
     settings = %Settings{width: size, height: size}
     kernel = {RingTracer.Kernel.Native, {scene, Settings.to_native(settings)}}
@@ -169,38 +255,62 @@ defmodule RingTracer.Bench.Balance do
     next = :atomics.new(1, [])
     speeds = if speeds == [], do: List.duplicate(1, n), else: speeds
 
-    {elapsed, traces} =
+    t0 = System.monotonic_time(:microsecond)
+
+    {elapsed, per_feeder} =
       :timer.tc(fn ->
         speeds
         |> Enum.map(fn speed ->
-          Task.async(fn -> feeder(kernel, layout, speed, next, total) end)
+          Task.async(fn -> feeder(kernel, layout, speed, next, total, t0) end)
         end)
-        |> Enum.flat_map(&Task.await(&1, :infinity))
+        |> Enum.map(&Task.await(&1, :infinity))
       end)
 
+    traces = Enum.concat(per_feeder)
     cap = :erlang.system_info(:dirty_cpu_schedulers_online)
-    {:ok, %{elapsed_us: elapsed, ideal_us: Result.ideal_us(traces, speeds, cap)}}
+
+    children =
+      per_feeder
+      |> Enum.zip(speeds)
+      |> Enum.with_index(fn {traces, speed}, i ->
+        %{
+          index: i,
+          speed: speed,
+          last_atom_us: Enum.max(Enum.map(traces, & &1.end_us), fn -> nil end)
+        }
+      end)
+
+    atoms =
+      per_feeder
+      |> Enum.with_index()
+      |> Enum.flat_map(fn {traces, i} -> Enum.map(traces, &Map.put(&1, :child, i)) end)
+
+    tail = tail(%{elapsed_us: elapsed, atoms: atoms, children: children, events: []})
+    {:ok, %{elapsed_us: elapsed, ideal_us: Result.ideal_us(traces, speeds, cap), tail: tail}}
   end
 
-  defp feeder(kernel, layout, speed, next, total) do
+  defp feeder(kernel, layout, speed, next, total, t0) do
     gc = Grandchild.start_link(kernel, layout, speed)
-    traces = feed(gc, next, total, [])
+    traces = feed(gc, next, total, t0, [])
     Process.unlink(gc)
     Process.exit(gc, :kill)
     Pipe.forget(gc)
     traces
   end
 
-  defp feed(gc, next, total, acc) do
+  defp feed(gc, next, total, t0, acc) do
     atom = :atomics.add_get(next, 1, 1) - 1
 
     if atom < total do
+      start = System.monotonic_time(:microsecond) - t0
       send(gc, {:trace, atom})
 
       receive do
         {:traced, ^gc, ^atom, _pixels, _rays, timing} ->
           Pipe.release(gc, atom)
-          feed(gc, next, total, [%{trace_us: timing.trace_us} | acc])
+          done = System.monotonic_time(:microsecond) - t0
+          trace = %{trace_us: timing.trace_us, start_us: start, end_us: done}
+          feed(gc, next, total, t0, [trace | acc])
 
         {:atom_failed, ^gc, ^atom, message} ->
           raise "the floor's atom #{atom} failed: #{message}"
@@ -228,7 +338,8 @@ defmodule RingTracer.Bench.Balance do
       ratio: result.elapsed_us / max(result.ideal_us, 1),
       idle_pct: idle * 100,
       msgs: per.messages,
-      bytes: per.bytes
+      bytes: per.bytes,
+      tail: tail(result)
     }
   end
 

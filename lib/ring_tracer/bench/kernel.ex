@@ -14,6 +14,10 @@ defmodule RingTracer.Bench.Kernel do
   ours/POV-Ray and ring/kernel. Times are medians of `--runs` runs (default 3);
   kernel and ring renders alternate, and ring/kernel is the median of the
   pairs' ratios, so that both see the same drift in this machine's speed.
+  `ring-kernel_ms` is the ring's fixed cost in milliseconds (the median of
+  the pairs' differences), which stays meaningful as the kernel gets faster;
+  the header gives the floor under it, one dirty kernel call's cost
+  (`nif_call_us/0`), paid once per atom.
   Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
   POV-Ray's own `Max Level 5` and ADC bailout do.
   """
@@ -66,7 +70,10 @@ defmodule RingTracer.Bench.Kernel do
         if(povray, do: "", else: "; povray not installed (apt-get install povray)")
     )
 
-    header = ~w(scene setup_s trace_s Mrays/s pov_parse_s pov_trace_s ours/pov ring_s ring/kernel)
+    info("one dirty kernel call of one pixel: #{fmt(nif_call_us())} us (median of 200)")
+
+    header =
+      ~w(scene setup_s trace_s Mrays/s pov_parse_s pov_trace_s ours/pov ring_s ring/kernel ring-kernel_ms)
 
     rows =
       for name <- scenes do
@@ -98,6 +105,7 @@ defmodule RingTracer.Bench.Kernel do
         trace_us = median(Enum.map(pairs, fn {{k, _}, _} -> k end))
         ring_us = median(Enum.map(pairs, fn {_, r} -> r end))
         ring_ratio = median(Enum.map(pairs, fn {{k, _}, r} -> r / k end))
+        fixed_us = median(Enum.map(pairs, fn {{k, _}, r} -> r - k end))
 
         pov = PovRay.times(povray, Path.join(pov_dir, name <> ".pov"), size, threads, runs)
 
@@ -110,10 +118,27 @@ defmodule RingTracer.Bench.Kernel do
           pov && secs(pov.trace_us),
           pov && fmt(trace_us / max(pov.trace_us, 1)),
           secs(ring_us),
-          fmt(ring_ratio)
+          fmt(ring_ratio),
+          fmt(fixed_us / 1000)
         ]
       end
 
     print_table(header, rows)
+  end
+
+  @doc """
+  The median wall time, in microseconds, of a kernel call
+  (`RingTracer.Native.trace_atom/4` on a dirty CPU scheduler) that traces
+  one pixel (of an 8x8 image of `path`): what every atom costs beyond its
+  tracing, mostly waking a sleeping dirty scheduler thread.
+  """
+  @spec nif_call_us(Path.t()) :: float()
+  def nif_call_us(path \\ "priv/scenes/spd/tetra_s6.nff") do
+    {:ok, scene} = Scene.load(path)
+    native = Settings.to_native(%Settings{width: 8, height: 8})
+
+    for(_ <- 1..200, do: elem(:timer.tc(fn -> Native.trace_atom(scene.ref, native, 0, 1) end), 0))
+    |> median()
+    |> Kernel./(1)
   end
 end

@@ -28,13 +28,27 @@ defmodule RingTracer.BenchTest do
     assert msgs > 0 and bytes > 0
     assert row.idle_pct >= 0 and row.idle_pct <= 100
     assert length(Balance.cells(row)) == 8
+    # where the makespan went at the end: the last atom ended within it
+    assert row.tail.last_us > 0 and row.tail.last_us <= result.elapsed_us
+    assert 0 <= row.tail.tail_us and row.tail.tail_us <= row.tail.first_idle_us
+    assert row.tail.last_speed == 1
+  end
+
+  test "the cost of one dirty kernel call, as the kernel benchmark prints it" do
+    us = RingTracer.Bench.Kernel.nif_call_us(TestScenes.path("balls_s1.nff"))
+    assert is_float(us) and us > 0
   end
 
   test "the floor traces every atom through real grandchildren, and leaves none behind" do
     scene = RingTracer.Scene.load!(TestScenes.path("balls_s1.nff"))
     before = Process.list()
-    {:ok, %{elapsed_us: elapsed, ideal_us: ideal}} = Balance.floor(scene, 32, 2, 3, [1, 2])
+
+    {:ok, %{elapsed_us: elapsed, ideal_us: ideal, tail: tail}} =
+      Balance.floor(scene, 32, 2, 3, [1, 2])
+
     assert ideal > 0 and elapsed > 0
+    assert tail.last_us > 0 and tail.last_us <= elapsed and tail.last_speed in [1, 2]
+    assert tail.gives_late == 0 and tail.offer_us == nil
     # a speed of 2 makes the floor's capacity 1.5 atoms at once, so its ideal
     # is the work over 1.5: the makespan cannot beat it by much
     assert elapsed >= ideal * 0.5
