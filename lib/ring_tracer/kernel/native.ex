@@ -10,8 +10,9 @@ defmodule RingTracer.Kernel.Native do
   alias RingTracer.{Layout, Native, SceneCache, Settings}
 
   # Pixels of the preview that `atom_work/2` traces (about 0.1% of a
-  # 1024x1024 image).
+  # 1024x1024 image), and at most this share of a small image's.
   @preview_pixels 1024
+  @preview_share 1 / 64
 
   @impl RingTracer.Kernel
   def prepare(spec, _opts) do
@@ -39,16 +40,15 @@ defmodule RingTracer.Kernel.Native do
 
   @doc """
   Each atom's work, estimated from a preview: the same scene and settings
-  traced at about #{@preview_pixels} pixels in one kernel call, each image
-  row taking the work of the preview row it falls in.
+  traced at about #{@preview_pixels} pixels (`preview_size/2`) in one kernel
+  call, each image row taking the work of the preview row it falls in.
   """
   @impl RingTracer.Kernel
   def atom_work(%{settings: %Settings{region: region}}, _opts) when region != nil,
     do: {:error, "no preview of a region"}
 
   def atom_work(%{settings: %Settings{width: w, height: h} = settings} = spec, opts) do
-    scale = max(1.0, :math.sqrt(w * h / @preview_pixels))
-    {pw, ph} = {max(1, round(w / scale)), max(1, round(h / scale))}
+    {pw, ph} = preview_size(w, h)
     preview = Settings.to_native(%{settings | width: pw, height: ph})
 
     with {:ok, {scene, _}} <- prepare(spec, opts),
@@ -59,6 +59,27 @@ defmodule RingTracer.Kernel.Native do
     end
   rescue
     e in ErlangError -> {:error, "kernel raised: #{Exception.message(e)}"}
+  end
+
+  @doc """
+  The size of the preview `atom_work/2` traces for a `w` x `h` image: about
+  #{@preview_pixels} pixels, and at most 1/64 of the image's own, so that on a
+  small image (a short job) the preview does not cost a large share of
+  the job's tracing (at 64x64, #{@preview_pixels} pixels would be a quarter of it).
+
+      iex> RingTracer.Kernel.Native.preview_size(1024, 1024)
+      {32, 32}
+      iex> RingTracer.Kernel.Native.preview_size(256, 128)
+      {32, 16}
+      iex> RingTracer.Kernel.Native.preview_size(64, 64)
+      {8, 8}
+      iex> RingTracer.Kernel.Native.preview_size(4, 4)
+      {1, 1}
+  """
+  @spec preview_size(pos_integer(), pos_integer()) :: {pos_integer(), pos_integer()}
+  def preview_size(w, h) do
+    scale = max(:math.sqrt(1 / @preview_share), :math.sqrt(w * h / @preview_pixels))
+    {max(1, round(w / scale)), max(1, round(h / scale))}
   end
 
   @impl RingTracer.Kernel

@@ -1,5 +1,6 @@
 defmodule RingTracer.Kernel.NativeTest do
   use ExUnit.Case, async: true
+  doctest RingTracer.Kernel.Native
 
   alias RingTracer.{Layout, Scene, Settings}
   alias RingTracer.Job.Spec
