@@ -4,6 +4,7 @@ defmodule RingTracer.Bench.Kernel do
 
       mix ring_tracer.bench kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R]
                                    [--size 512] [--threads 2] [--children 8] [--atoms 16]
+                                   [--fixed]
 
   For each SPD scene (default: the standard sizes in `priv/scenes/spd`):
   our set-up time (read, parse, BVH) and trace time with the kernel's own
@@ -35,7 +36,7 @@ defmodule RingTracer.Bench.Kernel do
   def usage,
     do:
       "kernel [--scenes a,b] [--dir DIR] [--pov-dir DIR] [--runs R] [--size 512] " <>
-        "[--threads 2] [--children 8] [--atoms 16]"
+        "[--threads 2] [--children 8] [--atoms 16] [--fixed]"
 
   @impl RingTracer.Bench
   def run(argv) do
@@ -49,7 +50,8 @@ defmodule RingTracer.Bench.Kernel do
           size: :integer,
           threads: :integer,
           children: :integer,
-          atoms: :integer
+          atoms: :integer,
+          fixed: :boolean
         ]
       )
 
@@ -124,6 +126,81 @@ defmodule RingTracer.Bench.Kernel do
       end
 
     print_table(header, rows)
+
+    if opts[:fixed] do
+      path = Path.join(dir, hd(scenes) <> ".nff")
+
+      info(
+        "\nwhere a job's fixed cost goes (#{hd(scenes)} at 64x64, where tracing is " <>
+          "negligible; #{children} children x #{atoms} atoms; medians of #{max(runs, 15)}; ms):"
+      )
+
+      print_table(
+        ~w(part ms),
+        Enum.map(fixed_costs(path, children, atoms, max(runs, 15)), fn {part, us} ->
+          [part, fmt(us / 1000)]
+        end)
+      )
+    end
+  end
+
+  @doc """
+  Where the ring's fixed cost per job goes, on a `children` x `atoms` job
+  of a 64x64 image of the scene at `path` (tracing is then a small part
+  of the makespan): the makespans of `static` with one atom per child and
+  with `atoms`, of the ring without and with aiming, compared, each the
+  median of `runs` (the four alternate). In microseconds:
+
+    * `"start-up"`: from the job's start to its first atom's start;
+    * `"per atom"`: what one more atom adds to the makespan, no protocol
+      (`static`'s difference over the extra atoms): the kernel call's
+      boundary and the atom's messages;
+    * `"atoms"`: that, times the job's atoms;
+    * `"ring protocol"`: the ring without aiming over `static`;
+    * `"work preview"`: the ring with aiming over the ring without;
+    * `"end"`: from the last atom's end to the parent holding every atom.
+  """
+  @spec fixed_costs(Path.t(), pos_integer(), pos_integer(), pos_integer()) ::
+          [{String.t(), number()}]
+  def fixed_costs(path, children, atoms, runs) do
+    {:ok, scene} = Scene.load(path)
+    job = [children: children, atoms: atoms, width: 64, height: 64]
+
+    jobs = [
+      one: [strategy: :static, atoms: 1],
+      static: [strategy: :static],
+      ring: [aim: false],
+      aimed: [aim: true]
+    ]
+
+    render = fn how -> elem(RingTracer.render(scene, Keyword.merge(job, how)), 1) end
+    Enum.each(jobs, fn {_, how} -> render.(how) end)
+
+    results =
+      for _ <- 1..runs, {name, how} <- jobs do
+        r = render.(how)
+        first = r.atoms |> Enum.map(& &1.start_us) |> Enum.min()
+        last = r.atoms |> Enum.map(& &1.end_us) |> Enum.max()
+        {name, %{elapsed: r.elapsed_us, first: first, end: r.elapsed_us - last}}
+      end
+
+    m = fn name, key ->
+      results |> Enum.filter(&(elem(&1, 0) == name)) |> Enum.map(&elem(&1, 1)[key]) |> median()
+    end
+
+    per_atom =
+      if atoms > 1,
+        do: (m.(:static, :elapsed) - m.(:one, :elapsed)) / (children * (atoms - 1)),
+        else: 0
+
+    [
+      {"start-up", m.(:ring, :first)},
+      {"per atom", per_atom},
+      {"atoms", per_atom * children * atoms},
+      {"ring protocol", m.(:ring, :elapsed) - m.(:static, :elapsed)},
+      {"work preview", m.(:aimed, :elapsed) - m.(:ring, :elapsed)},
+      {"end", m.(:ring, :end)}
+    ]
   end
 
   @doc """

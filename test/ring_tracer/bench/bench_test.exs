@@ -39,6 +39,17 @@ defmodule RingTracer.BenchTest do
     assert is_float(us) and us > 0
   end
 
+  test "where a job's fixed cost goes, part by part" do
+    parts = RingTracer.Bench.Kernel.fixed_costs(TestScenes.path("balls_s1.nff"), 2, 2, 1)
+
+    assert Enum.map(parts, &elem(&1, 0)) ==
+             ["start-up", "per atom", "atoms", "ring protocol", "work preview", "end"]
+
+    assert Enum.all?(parts, fn {_, us} -> is_number(us) end)
+    assert {_, start} = List.keyfind(parts, "start-up", 0)
+    assert start >= 0
+  end
+
   test "the floor traces every atom through real grandchildren, and leaves none behind" do
     scene = RingTracer.Scene.load!(TestScenes.path("balls_s1.nff"))
     before = Process.list()
