@@ -18,7 +18,8 @@ defmodule RingTracer.Bench.Kernel do
   `ring-kernel_ms` is the ring's fixed cost in milliseconds (the median of
   the pairs' differences), which stays meaningful as the kernel gets faster;
   the header gives the floor under it, one dirty kernel call's cost
-  (`nif_call_us/0`), paid once per atom.
+  (`nif_call_us/1`), paid once per atom; `--fixed` adds where the fixed
+  cost goes (`fixed_costs/4`).
   Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
   POV-Ray's own `Max Level 5` and ADC bailout do.
   """
