@@ -191,10 +191,11 @@ defmodule RingTracer.Bench.Balance do
       %{first_idle_us: 40, tail_us: 1, last_us: 89, last_speed: 4, gives_late: 1, offer_us: 35}
   """
   @spec tail(%{
-          elapsed_us: non_neg_integer(),
-          atoms: [map()],
-          children: [map()],
-          events: [map()]
+          required(:elapsed_us) => non_neg_integer(),
+          required(:atoms) => [map()],
+          required(:children) => [map()],
+          required(:events) => [map()],
+          optional(atom()) => term()
         }) :: map()
   def tail(%{elapsed_us: elapsed, atoms: atoms, children: children, events: events}) do
     ends = children |> Enum.map(& &1.last_atom_us) |> Enum.reject(&is_nil/1) |> Enum.sort()
