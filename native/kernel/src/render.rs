@@ -429,8 +429,7 @@ pub fn work_by_row(scene: &Scene, settings: &Settings) -> Result<Vec<u64>, Error
 }
 
 /// Whole image with `threads` OS threads (rows handed out in chunks, in order, as threads ask).
-/// Each chunk is traced straight into its part of the image. Identical bits to [`trace_span`]
-/// over all pixels.
+/// Identical bits to [`trace_span`] over all pixels.
 pub fn render_image(
     scene: &Scene,
     settings: &Settings,
@@ -438,14 +437,49 @@ pub fn render_image(
 ) -> Result<(Vec<f32>, RayStats), Error> {
     settings.validate()?;
     let (w, h) = settings.traced_size();
+    let mut image = vec![0.0f32; w as usize * h as usize * 3];
+    let stats = render_image_into(scene, settings, threads, &mut image)?;
+    Ok((image, stats))
+}
+
+/// [`render_image`] into a buffer the caller owns, of exactly 3 floats a pixel of the traced
+/// size; each chunk of rows is traced straight into its part of it. The NIF traces into the
+/// binary it returns.
+///
+/// ```
+/// use ring_tracer_kernel::{render_image, render_image_into, Format, Scene, Settings};
+/// let nff = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n\
+///            l 0 5 5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n";
+/// let no_files = |_: &str| Err("no files".into());
+/// let scene = Scene::parse(nff.as_bytes(), Format::Nff, "doc.nff", &no_files).unwrap();
+/// let settings = Settings::for_scene(&scene);
+/// let mut out = vec![0.0; 16 * 3];
+/// let stats = render_image_into(&scene, &settings, 2, &mut out).unwrap();
+/// assert_eq!((out, stats), render_image(&scene, &settings, 1).unwrap());
+/// assert!(render_image_into(&scene, &settings, 2, &mut [0.0; 15 * 3]).is_err());
+/// ```
+pub fn render_image_into(
+    scene: &Scene,
+    settings: &Settings,
+    threads: usize,
+    out: &mut [f32],
+) -> Result<RayStats, Error> {
+    settings.validate()?;
+    let (w, h) = settings.traced_size();
     let (w, h) = (w as u64, h as u64);
+    if out.len() as u64 != w * h * 3 {
+        return Err(Error::InvalidArgument(format!(
+            "a {w}x{h} image needs {} floats, got {}",
+            w * h * 3,
+            out.len()
+        )));
+    }
     let threads = threads.clamp(1, 256);
     // SPD mode re-traces one corner row per chunk, so use taller chunks there
     let rows_per_chunk = if settings.spd { 16 } else { 2 }.min(h.max(1));
     let chunk_len = (rows_per_chunk * w * 3) as usize;
-    let mut image = vec![0.0f32; (w * h * 3) as usize];
     // (chunk index, its pixels), taken in order by whichever thread asks next
-    let chunks = Mutex::new(image.chunks_mut(chunk_len.max(1)).enumerate());
+    let chunks = Mutex::new(out.chunks_mut(chunk_len.max(1)).enumerate());
     let work = || -> Result<RayStats, Error> {
         let mut stats = RayStats::default();
         loop {
@@ -468,7 +502,7 @@ pub fn render_image(
     for r in results {
         stats += r?;
     }
-    Ok((image, stats))
+    Ok(stats)
 }
 
 fn poisoned() -> Error {
