@@ -68,6 +68,29 @@ pub fn from_srgb(v: f32) -> f32 {
     }
 }
 
+/// [`from_srgb`] over a buffer in place, bit for bit, with a small cache of the values met: an
+/// image repeats a few values often (the background, surfaces in shadow), and `powf` is a
+/// large part of tracing a simple scene. Each slot holds an input's bits and `from_srgb` of
+/// it, so a hit gives exactly what the call would.
+pub fn decode_srgb_in_place(values: &mut [f32]) {
+    const SLOTS: usize = 256;
+    // slot k holds (bits, from_srgb(f32::from_bits(bits))); 0.0 decodes to 0.0
+    let mut keys = [0u32; SLOTS];
+    let mut vals = [0.0f32; SLOTS];
+    for v in values.iter_mut() {
+        let bits = v.to_bits();
+        let k = (bits.wrapping_mul(0x9E37_79B1) >> 24) as usize % SLOTS;
+        if keys[k] == bits {
+            *v = vals[k];
+        } else {
+            let d = from_srgb(*v);
+            keys[k] = bits;
+            vals[k] = d;
+            *v = d;
+        }
+    }
+}
+
 /// Converts linear RGB floats to 8-bit sRGB bytes (same length).
 pub fn to_srgb8(rgb: &[f32]) -> Vec<u8> {
     rgb.iter().map(|&v| srgb8(v)).collect()
@@ -246,6 +269,31 @@ mod tests {
         assert_eq!(mode, 0o640);
         assert!(write_image(&t.path().join("a.bmp"), 2, 2, &rgb).is_err());
         assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
+    }
+
+    #[test]
+    fn cached_decoding_is_from_srgb() {
+        let mut rng = 0x1234_5678u32;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 17;
+            rng ^= rng << 5;
+            rng
+        };
+        // repeats, colliding slots, specials and values outside [0, 1]
+        let mut vals: Vec<f32> = (0..20_000)
+            .map(|i| match i % 5 {
+                0 => 0.25,
+                1 => f32::from_bits(next()),
+                2 => (next() % 1000) as f32 / 999.0,
+                3 => [0.0, -0.0, 1.0, f32::NAN, f32::INFINITY, -1.0, 0.04045][i % 7],
+                _ => f32::from_bits(0x3F00_0000 | (next() % 64)),
+            })
+            .collect();
+        let want: Vec<u32> = vals.iter().map(|&v| from_srgb(v).to_bits()).collect();
+        decode_srgb_in_place(&mut vals);
+        let got: Vec<u32> = vals.iter().map(|v| v.to_bits()).collect();
+        assert_eq!(got, want);
     }
 
     #[test]

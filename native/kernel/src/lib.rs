@@ -76,7 +76,9 @@ pub use integrator::{Integrator, Whitted};
 pub use light::Light;
 pub use material::{Checker, Material};
 pub use ray::Ray;
-pub use render::{render_image, trace_span, trace_span_into, work_by_row, Region, Settings};
+pub use render::{
+    render_image, render_image_into, trace_span, trace_span_into, work_by_row, Region, Settings,
+};
 pub use scene::{Format, Hit, Scene};
 pub use stats::{Counter, RayStats};
 pub use warning::{Warning, Warnings};

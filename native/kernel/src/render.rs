@@ -15,7 +15,7 @@ use crate::scene::Scene;
 use crate::stats::RayStats;
 use crate::Error;
 use glam::Vec3A;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 /// How to render. [`Settings::new`] gives the defaults of every field but the size.
 #[derive(Clone, Debug, PartialEq)]
@@ -304,7 +304,7 @@ pub fn trace_span_into(
         }
     }
     if scene.display_referred() {
-        out.iter_mut().for_each(|v| *v = crate::film::from_srgb(*v));
+        crate::film::decode_srgb_in_place(out);
     }
     stats.work = scratch.work + stats.total();
     Ok(stats)
@@ -428,10 +428,7 @@ pub fn work_by_row(scene: &Scene, settings: &Settings) -> Result<Vec<u64>, Error
         .collect()
 }
 
-/// A finished chunk of rows: (chunk index, pixels, statistics).
-type Chunk = (usize, Vec<f32>, RayStats);
-
-/// Whole image with `threads` OS threads (rows handed out in chunks by an atomic counter).
+/// Whole image with `threads` OS threads (rows handed out in chunks, in order, as threads ask).
 /// Identical bits to [`trace_span`] over all pixels.
 pub fn render_image(
     scene: &Scene,
@@ -440,51 +437,74 @@ pub fn render_image(
 ) -> Result<(Vec<f32>, RayStats), Error> {
     settings.validate()?;
     let (w, h) = settings.traced_size();
+    let mut image = vec![0.0f32; w as usize * h as usize * 3];
+    let stats = render_image_into(scene, settings, threads, &mut image)?;
+    Ok((image, stats))
+}
+
+/// [`render_image`] into a buffer the caller owns, of exactly 3 floats a pixel of the traced
+/// size; each chunk of rows is traced straight into its part of it. The NIF traces into the
+/// binary it returns.
+///
+/// ```
+/// use ring_tracer_kernel::{render_image, render_image_into, Format, Scene, Settings};
+/// let nff = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n\
+///            l 0 5 5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n";
+/// let no_files = |_: &str| Err("no files".into());
+/// let scene = Scene::parse(nff.as_bytes(), Format::Nff, "doc.nff", &no_files).unwrap();
+/// let settings = Settings::for_scene(&scene);
+/// let mut out = vec![0.0; 16 * 3];
+/// let stats = render_image_into(&scene, &settings, 2, &mut out).unwrap();
+/// assert_eq!((out, stats), render_image(&scene, &settings, 1).unwrap());
+/// assert!(render_image_into(&scene, &settings, 2, &mut [0.0; 15 * 3]).is_err());
+/// ```
+pub fn render_image_into(
+    scene: &Scene,
+    settings: &Settings,
+    threads: usize,
+    out: &mut [f32],
+) -> Result<RayStats, Error> {
+    settings.validate()?;
+    let (w, h) = settings.traced_size();
     let (w, h) = (w as u64, h as u64);
+    if out.len() as u64 != w * h * 3 {
+        return Err(Error::InvalidArgument(format!(
+            "a {w}x{h} image needs {} floats, got {}",
+            w * h * 3,
+            out.len()
+        )));
+    }
     let threads = threads.clamp(1, 256);
     // SPD mode re-traces one corner row per chunk, so use taller chunks there
     let rows_per_chunk = if settings.spd { 16 } else { 2 }.min(h.max(1));
-    let chunks = h.div_ceil(rows_per_chunk) as usize;
-    let next = AtomicUsize::new(0);
-    let results: Vec<Result<Vec<Chunk>, Error>> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..threads)
-            .map(|_| {
-                s.spawn(|| {
-                    let mut mine = Vec::new();
-                    loop {
-                        let c = next.fetch_add(1, Ordering::Relaxed);
-                        if c >= chunks {
-                            break;
-                        }
-                        let y = c as u64 * rows_per_chunk;
-                        let rows = rows_per_chunk.min(h - y);
-                        let (px, st) = trace_span(scene, settings, y * w, rows * w)?;
-                        mine.push((c, px, st));
-                    }
-                    Ok(mine)
-                })
-            })
-            .collect();
+    let chunk_len = (rows_per_chunk * w * 3) as usize;
+    // (chunk index, its pixels), taken in order by whichever thread asks next
+    let chunks = Mutex::new(out.chunks_mut(chunk_len.max(1)).enumerate());
+    let work = || -> Result<RayStats, Error> {
+        let mut stats = RayStats::default();
+        loop {
+            let next = chunks.lock().map_err(|_| poisoned())?.next();
+            let Some((c, px)) = next else {
+                return Ok(stats);
+            };
+            let start = c as u64 * rows_per_chunk * w;
+            stats += trace_span_into(scene, settings, start, px)?;
+        }
+    };
+    let results: Vec<Result<RayStats, Error>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads).map(|_| s.spawn(work)).collect();
         handles
             .into_iter()
-            .map(|h| {
-                h.join().unwrap_or_else(|_| {
-                    Err(Error::InvalidArgument("a render thread panicked".into()))
-                })
-            })
+            .map(|h| h.join().unwrap_or_else(|_| Err(poisoned())))
             .collect()
     });
-    let mut image = vec![0.0f32; (w * h * 3) as usize];
     let mut stats = RayStats::default();
-    let chunk_len = (rows_per_chunk * w * 3) as usize;
     for r in results {
-        for (c, px, st) in r? {
-            let off = c * chunk_len;
-            if let Some(dst) = image.get_mut(off..off + px.len()) {
-                dst.copy_from_slice(&px);
-            }
-            stats += st;
-        }
+        stats += r?;
     }
-    Ok((image, stats))
+    Ok(stats)
+}
+
+fn poisoned() -> Error {
+    Error::InvalidArgument("a render thread panicked".into())
 }

@@ -2,7 +2,8 @@
 //! with the kernel's own threads for benchmarks and references.
 
 use ring_tracer_kernel::{
-    render_image as kernel_render_image, trace_span, trace_span_into, work_by_row,
+    render_image as kernel_render_image, render_image_into, trace_span, trace_span_into,
+    work_by_row,
 };
 use std::time::Instant;
 
@@ -62,9 +63,21 @@ fn render_image<'a>(
     threads: u32,
 ) -> Result<(Binary<'a>, RayStatsTerm), String> {
     let settings = settings.to_kernel()?;
-    let (rgb, stats) =
-        kernel_render_image(&scene.scene, &settings, threads.max(1) as usize).map_err(message)?;
-    Ok((floats_to_binary(env, &rgb)?, stats.into()))
+    // checked before allocating the binary
+    settings.validate().map_err(message)?;
+    let (w, h) = settings.traced_size();
+    let threads = threads.max(1) as usize;
+    let mut bin = OwnedBinary::new(w as usize * h as usize * 12);
+    // traced straight into the binary, as trace_atom does
+    let stats = match bytemuck::try_cast_slice_mut::<u8, f32>(bin.as_mut_slice()) {
+        Ok(out) => render_image_into(&scene.scene, &settings, threads, out).map_err(message)?,
+        Err(_) => {
+            let (rgb, stats) =
+                kernel_render_image(&scene.scene, &settings, threads).map_err(message)?;
+            return Ok((floats_to_binary(env, &rgb)?, stats.into()));
+        }
+    };
+    Ok((bin.release(env), stats.into()))
 }
 
 /// Checks settings against the kernel's limits before a job starts.
