@@ -54,6 +54,7 @@ defmodule RingTracer.Preview.Server do
         state = %{
           table: table,
           httpd: httpd,
+          listener: listener(addr, port),
           port: port,
           addr: addr,
           log: Log.new(Keyword.take(opts, [:max_events])),
@@ -193,17 +194,51 @@ defmodule RingTracer.Preview.Server do
   @impl GenServer
   def terminate(_reason, state) do
     detach(state.handlers)
-    # A stand-alone httpd is stopped by an exit signal, which returns at
-    # once: wait until it (and with it its listening socket) is gone, so a
-    # stopped preview no longer accepts connections.
-    ref = Process.monitor(state.httpd)
-    :inets.stop(:stand_alone, state.httpd)
+    close(state.httpd, state.listener)
+  end
 
+  # A stand-alone httpd is stopped by an exit signal, which returns at once,
+  # and its listening socket belongs to a process of its own outside its
+  # supervision tree, which closes it when it learns (by a link) that the
+  # acceptor is gone: the httpd's DOWN can come before that. So wait for
+  # the httpd, then close the socket if it is still open (nothing uses it
+  # any more) and wait for that: a stopped preview accepts no connection.
+  defp close(httpd, listener) do
+    ref = Process.monitor(httpd)
+    :inets.stop(:stand_alone, httpd)
+    await_down(ref, 5_000)
+
+    if listener do
+      ref = :erlang.monitor(:port, listener)
+      if :erlang.port_info(listener) != :undefined, do: :erlang.port_close(listener)
+      await_down(ref, 5_000)
+    end
+
+    :ok
+  catch
+    :error, :badarg -> :ok
+  end
+
+  defp await_down(ref, ms) do
     receive do
       {:DOWN, ^ref, _, _, _} -> :ok
     after
-      5_000 -> :ok
+      ms -> :ok
     end
+  end
+
+  # The httpd's listening socket: the one of this VM's TCP sockets bound to
+  # its address and port that listens (a connection accepted meanwhile has
+  # the same local address).
+  defp listener(addr, port),
+    do: Enum.find(:erlang.ports(), &listening?(&1, addr, port))
+
+  defp listening?(p, addr, port) do
+    match?({:name, ~c"tcp_inet" ++ _}, :erlang.port_info(p, :name)) and
+      :inet.sockname(p) == {:ok, {addr, port}} and
+      :listen in Map.get(:inet.info(p), :states, [])
+  catch
+    _, _ -> false
   end
 
   # httpd.info/2 knows only servers started under the :inets application;
