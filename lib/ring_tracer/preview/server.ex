@@ -13,8 +13,9 @@ defmodule RingTracer.Preview.Server do
   before the preview opened. A handler only sends this process a message:
   the job never waits for the preview, nor for any viewer. While the job
   runs, the server spends at most `:cpu_share` of one core on atoms (0.01
-  by default: after an atom's work it waits 99 times as long, until the job
-  ends), and it and the viewers run at low process priority.
+  by default: after an atom's work the job's events wait in a queue 99
+  times as long, until the job ends, while the server answers everything
+  else), and it and the viewers run at low process priority.
   """
   use GenServer
 
@@ -66,6 +67,8 @@ defmodule RingTracer.Preview.Server do
           ended: :atomics.new(1, []),
           cpu_share: Keyword.get(opts, :cpu_share, 0.01),
           pending: [],
+          queue: :queue.new(),
+          pacing: nil,
           drain: nil
         }
 
@@ -129,14 +132,17 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind == :atom,
-      do: {:noreply, apply_event(state, msg)}
+      do: {:noreply, enqueue(state, msg)}
 
   def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind in [:moved, :child_event],
-      do: {:noreply, apply_event(state, msg)}
+      do: {:noreply, enqueue(state, msg)}
 
   def handle_info({:job_stop, job, _} = msg, %{log: %{job: job}} = state),
-    do: {:noreply, apply_event(state, msg)}
+    do: {:noreply, enqueue(state, msg)}
+
+  def handle_info({:pace, ref}, %{pacing: {ref, _}} = state),
+    do: {:noreply, run_queue(%{state | pacing: nil})}
 
   def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state),
     do: {:noreply, update(state, &Log.gone(&1, reason))}
@@ -252,11 +258,8 @@ defmodule RingTracer.Preview.Server do
     port
   end
 
-  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}) do
-    t = System.monotonic_time(:microsecond)
-    state = update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
-    pace(state, System.monotonic_time(:microsecond) - t)
-  end
+  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),
+    do: update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
 
   defp apply_event(state, {:moved, _job, from, to, n, at}),
     do: update(state, &Log.move(&1, from, to, n, at))
@@ -268,24 +271,51 @@ defmodule RingTracer.Preview.Server do
 
   # While the job runs, the preview spends at most `cpu_share` of one core
   # on atoms (their pixels to sRGB and base64, and so what viewers send):
-  # after each atom it waits in proportion, in slices, until the job ends.
-  # On a render too light for that, the page lags and catches up at the end.
-  defp pace(state, work_us) do
-    wait_ms = work_us * (1 - state.cpu_share) / state.cpu_share / 1000
-    wait(state.ended, round(wait_ms))
-    state
-  end
+  # the job's events wait in a queue, in order, and after each atom's work
+  # the queue pauses in proportion (a timer: meanwhile the server answers
+  # everything else, a stop at once). When the job ends, the queue runs
+  # through. On a render too light for the share, the page lags and catches
+  # up at the end.
+  defp enqueue(state, msg) do
+    state = %{state | queue: :queue.in(msg, state.queue)}
 
-  defp wait(_ended, ms) when ms <= 0, do: :ok
+    cond do
+      state.pacing == nil ->
+        run_queue(state)
 
-  defp wait(ended, ms) do
-    if :atomics.get(ended, 1) == 0 do
-      Process.sleep(min(ms, 20))
-      wait(ended, ms - 20)
-    else
-      :ok
+      ended?(state) ->
+        Process.cancel_timer(elem(state.pacing, 1))
+        run_queue(%{state | pacing: nil})
+
+      true ->
+        state
     end
   end
+
+  defp run_queue(state) do
+    case :queue.out(state.queue) do
+      {:empty, _} ->
+        state
+
+      {{:value, {:atom, _, _, _, _, _, _, _} = msg}, queue} ->
+        t = System.monotonic_time(:microsecond)
+        state = apply_event(%{state | queue: queue}, msg)
+        work_us = System.monotonic_time(:microsecond) - t
+        wait_ms = round(work_us * (1 - state.cpu_share) / state.cpu_share / 1000)
+
+        if wait_ms > 0 and not ended?(state) do
+          ref = make_ref()
+          %{state | pacing: {ref, Process.send_after(self(), {:pace, ref}, wait_ms)}}
+        else
+          run_queue(state)
+        end
+
+      {{:value, msg}, queue} ->
+        run_queue(apply_event(%{state | queue: queue}, msg))
+    end
+  end
+
+  defp ended?(state), do: :atomics.get(state.ended, 1) == 1
 
   # The parent's events (this node), and children's on `nodes` (filtered
   # there by job, when known).

@@ -238,6 +238,30 @@ defmodule RingTracer.Preview.HTTPTest do
     end
   end
 
+  test "a preview pacing its work answers a stop at once, before its job ends" do
+    # Each atom's work is followed by a pause 999 times as long: the events
+    # queue up, and the stop must not wait behind them.
+    {:ok, p} = Preview.start(cpu_share: 0.001)
+
+    {:ok, job} =
+      RingTracer.render_async(@scene,
+        width: 160,
+        height: 120,
+        children: 2,
+        atoms: 8,
+        speeds: [1000, 1000],
+        preview: p
+      )
+
+    id = job.id
+    assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= 3, 30_000
+    Preview.stop(p, 0)
+    refute_received {RingTracer, ^id, {:ok, _}}
+    assert listeners(p.port) == []
+    assert_receive {RingTracer, ^id, {:ok, result}}, 60_000
+    assert length(result.atoms) == 16
+  end
+
   @tag :tmp_dir
   test "ringtracer render --preview [PORT] serves the page while it renders", %{tmp_dir: dir} do
     out = Path.join(dir, "p.png")
