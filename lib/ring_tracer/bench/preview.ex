@@ -50,6 +50,7 @@ defmodule RingTracer.Bench.Preview do
   ]
   @resamples 10_000
   @bound 1.03
+  @settle_ms 200
 
   @impl RingTracer.Bench
   def help, do: @help
@@ -197,7 +198,13 @@ defmodule RingTracer.Bench.Preview do
 
   defp curl, do: System.find_executable("curl")
 
-  defp plain(scene, opts), do: timed(fn -> RingTracer.render(scene, opts) end)
+  # Each render starts after the same pause on both sides: on a shared
+  # machine, threads that slept longer get the cores first, and the side
+  # with set-up to do would otherwise start rested.
+  defp plain(scene, opts) do
+    Process.sleep(@settle_ms)
+    timed(fn -> RingTracer.render(scene, opts) end)
+  end
 
   defp watched(scene, opts, viewer) do
     {:ok, preview} = RingTracer.Preview.start()
@@ -205,6 +212,7 @@ defmodule RingTracer.Bench.Preview do
     watching = start_viewer(viewer, url)
     # The viewer is there when the job starts (its connecting is not the job's).
     connected(preview, 2_500)
+    Process.sleep(@settle_ms)
     tracer = trace(preview)
     run = timed(fn -> RingTracer.render(scene, Keyword.put(opts, :preview, preview)) end)
     own_us = untrace(tracer)
