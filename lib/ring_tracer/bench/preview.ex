@@ -15,20 +15,24 @@ defmodule RingTracer.Bench.Preview do
   VM's; `--viewer httpc` reads the stream from inside the VM instead
   (`viewer/2`, an SSE client on `:httpc`).
 
-  Printed: the medians of the makespans; the median of the pairs' ratios
-  (with a preview over without) with its 95% confidence interval
-  (bootstrap, 10,000 resamples of the pairs); the CPU time the VM used
-  during the job (`:erlang.statistics(:runtime)`, every thread, the NIF's
-  dirty schedulers included) without a preview, and the share the preview
-  added to it (its server, the HTTP server and the stream's handler, the
-  job's extra sends), median and interval over the pairs; then the target:
-  the interval's upper bound of the makespan ratio at most 1.03.
+  Each render starts after the same 200 ms pause. Printed: the medians of
+  the makespans; the median of the pairs' ratios (with a preview over
+  without) with its 95% confidence interval (bootstrap, 10,000 resamples
+  of the pairs); the CPU time the VM used during the job
+  (`:erlang.statistics(:runtime)`, every thread, the NIF's dirty
+  schedulers included) without a preview, and the share the preview added
+  to it (its server, the HTTP server, the stream's handler, the job's
+  sends to it), median and interval over the pairs; the time the
+  preview's own processes spent on a scheduler during the job (traced), as
+  a share of the job's CPU time (an upper bound on a loaded machine: it
+  includes moments the OS took a scheduler's thread away); then the
+  target, met only if the makespan interval's upper bound is at most 1.03.
 
   From iex, `RingTracer.Bench.Preview.measure/1` takes the same as a
   keyword list (`:viewer` an atom), and also `:depth`, `:speeds` and
-  `:strategy` as for `RingTracer.render/2`; defaults: the scene's own
-  view at 2048 x 2048 (a job of about a second here), schedulers-online children, 16 atoms per child, 61
-  pairs.
+  `:strategy` as for `RingTracer.render/2`; defaults: the scene's own view
+  at 2048 x 2048 (a job of about a second of CPU time here),
+  schedulers-online children, 16 atoms per child, 61 pairs.
   """
   @moduledoc @help
   @behaviour RingTracer.Bench
