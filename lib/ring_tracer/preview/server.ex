@@ -144,8 +144,11 @@ defmodule RingTracer.Preview.Server do
   def handle_info({:pace, ref}, %{pacing: {ref, _}} = state),
     do: {:noreply, run_queue(%{state | pacing: nil})}
 
-  def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state),
-    do: {:noreply, update(state, &Log.gone(&1, reason))}
+  # The job is over: what is queued goes to the log first.
+  def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state) do
+    :atomics.put(state.ended, 1, 1)
+    {:noreply, enqueue(state, {:gone, reason})}
+  end
 
   def handle_info({:wait, pid, cursor}, state) do
     if state.log.seq > cursor do
@@ -268,6 +271,7 @@ defmodule RingTracer.Preview.Server do
     do: update(state, &Log.event(&1, kind, from, to, at))
 
   defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
+  defp apply_event(state, {:gone, reason}), do: update(state, &Log.gone(&1, reason))
 
   # While the job runs, the preview spends at most `cpu_share` of one core
   # on atoms (their pixels to sRGB and base64, and so what viewers send):

@@ -262,6 +262,34 @@ defmodule RingTracer.Preview.HTTPTest do
     assert length(result.atoms) == 16
   end
 
+  test "a job that dies while atoms are queued: the page gets them, then the end" do
+    {:ok, p} = Preview.start(cpu_share: 0.001)
+
+    {:ok, job} =
+      RingTracer.render_async(@scene,
+        width: 160,
+        height: 120,
+        children: 2,
+        atoms: 8,
+        speeds: [1000, 1000],
+        preview: p
+      )
+
+    id = job.id
+    assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= 3, 30_000
+
+    [parent] =
+      for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Names.jobs()), do: pid
+
+    Process.exit(parent, :kill)
+    assert_receive {RingTracer, ^id, {:error, _}}, 10_000
+
+    late = frames(p.url)
+    assert length(for {_, "atom", _} <- late, do: 1) >= done
+    assert [{_, "final", %{"ok" => false}}, {_, "end", _}] = Enum.take(late, -2)
+    Preview.stop(p, 0)
+  end
+
   @tag :tmp_dir
   test "ringtracer render --preview [PORT] serves the page while it renders", %{tmp_dir: dir} do
     out = Path.join(dir, "p.png")
