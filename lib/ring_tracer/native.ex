@@ -33,6 +33,7 @@ defmodule RingTracer.Native do
   def write_image(_path, _width, _height, _pixels), do: err()
   def encode_png(_width, _height, _pixels), do: err()
   def to_srgb8_binary(_pixels), do: err()
+  def to_srgb8_base64(_pixels), do: err()
   def settings_defaults, do: err()
   def ray_counters, do: err()
 

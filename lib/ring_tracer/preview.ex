@@ -34,7 +34,8 @@ defmodule RingTracer.Preview do
 
   Cost: the job's parent sends the preview one message per atom and per
   hand-over, children one per protocol event; the preview converts an
-  atom's pixels to sRGB once, and viewers read the one log. A slow or
+  atom's pixels to sRGB base64 once (in the NIF, on a normal scheduler),
+  and viewers read the one log. A slow or
   stalled browser lags behind the log and holds no buffer; the job never
   waits for the preview (`RingTracer.Bench.Preview` measures it).
   """
@@ -97,7 +98,8 @@ defmodule RingTracer.Preview do
 
   @doc """
   Stops the preview, after waiting up to `drain_ms` (default 2000) for
-  connected browsers to have received the job's final frame.
+  connected browsers to have received the job's final frame. When it
+  returns, the page's listening socket is closed.
   """
   @spec stop(t(), non_neg_integer()) :: :ok
   def stop(%__MODULE__{pid: pid}, drain_ms \\ 2_000) do

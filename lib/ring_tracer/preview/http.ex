@@ -142,8 +142,10 @@ defmodule RingTracer.Preview.HTTP do
     ArgumentError -> :gone
   end
 
+  # As iodata (a list): the chunk's frames go to the socket as they are in
+  # the log, not copied into one binary first.
   defp deliver(m, data) do
-    case :httpd_response.send_chunk(m, IO.iodata_to_binary(data), false) do
+    case :httpd_response.send_chunk(m, List.wrap(data), false) do
       :ok -> :ok
       _ -> :closed
     end

@@ -126,12 +126,28 @@ defmodule RingTracer.Preview.Log do
           ~s(,"rays":),
           Integer.to_string(rays),
           ~s(,"px":"),
-          Base.encode64(RingTracer.Image.srgb8(pixels)),
+          px_base64(pixels),
           ~s("})
         ])
 
       append(%{log | atoms: MapSet.put(log.atoms, a)}, "atom", data)
     end
+  end
+
+  # 4096 pixels of 3 floats: a piece of the NIF's (on a normal scheduler,
+  # never taking a dirty one from the job's atoms), a multiple of 3 bytes of
+  # sRGB, so the pieces' base64 texts concatenate.
+  @piece_bytes 4096 * 12
+
+  defp px_base64(<<piece::binary-size(@piece_bytes), rest::binary>>),
+    do: [base64(piece) | px_base64(rest)]
+
+  defp px_base64(<<>>), do: []
+  defp px_base64(piece), do: [base64(piece)]
+
+  defp base64(piece) do
+    {:ok, text} = RingTracer.Native.to_srgb8_base64(piece)
+    text
   end
 
   @doc "A child's protocol event (its `at_us` is already job time)."

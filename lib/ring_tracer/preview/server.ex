@@ -13,8 +13,9 @@ defmodule RingTracer.Preview.Server do
   before the preview opened. A handler only sends this process a message:
   the job never waits for the preview, nor for any viewer. While the job
   runs, the server spends at most `:cpu_share` of one core on atoms (0.01
-  by default: after an atom's work it waits 99 times as long, until the job
-  ends), and it and the viewers run at low process priority.
+  by default: after an atom's work the job's events wait in a queue 99
+  times as long, until the job ends, while the server answers everything
+  else), and it and the viewers run at low process priority.
   """
   use GenServer
 
@@ -54,6 +55,7 @@ defmodule RingTracer.Preview.Server do
         state = %{
           table: table,
           httpd: httpd,
+          listener: listener(addr, port),
           port: port,
           addr: addr,
           log: Log.new(Keyword.take(opts, [:max_events])),
@@ -65,6 +67,8 @@ defmodule RingTracer.Preview.Server do
           ended: :atomics.new(1, []),
           cpu_share: Keyword.get(opts, :cpu_share, 0.01),
           pending: [],
+          queue: :queue.new(),
+          pacing: nil,
           drain: nil
         }
 
@@ -128,17 +132,23 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind == :atom,
-      do: {:noreply, apply_event(state, msg)}
+      do: {:noreply, enqueue(state, msg)}
 
   def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind in [:moved, :child_event],
-      do: {:noreply, apply_event(state, msg)}
+      do: {:noreply, enqueue(state, msg)}
 
   def handle_info({:job_stop, job, _} = msg, %{log: %{job: job}} = state),
-    do: {:noreply, apply_event(state, msg)}
+    do: {:noreply, enqueue(state, msg)}
 
-  def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state),
-    do: {:noreply, update(state, &Log.gone(&1, reason))}
+  def handle_info({:pace, ref}, %{pacing: {ref, _}} = state),
+    do: {:noreply, run_queue(%{state | pacing: nil})}
+
+  # The job is over: what is queued goes to the log first.
+  def handle_info({:DOWN, _, :process, parent, reason}, %{parent: parent} = state) do
+    :atomics.put(state.ended, 1, 1)
+    {:noreply, enqueue(state, {:gone, reason})}
+  end
 
   def handle_info({:wait, pid, cursor}, state) do
     if state.log.seq > cursor do
@@ -193,17 +203,51 @@ defmodule RingTracer.Preview.Server do
   @impl GenServer
   def terminate(_reason, state) do
     detach(state.handlers)
-    # A stand-alone httpd is stopped by an exit signal, which returns at
-    # once: wait until it (and with it its listening socket) is gone, so a
-    # stopped preview no longer accepts connections.
-    ref = Process.monitor(state.httpd)
-    :inets.stop(:stand_alone, state.httpd)
+    close(state.httpd, state.listener)
+  end
 
+  # A stand-alone httpd is stopped by an exit signal, which returns at once,
+  # and its listening socket belongs to a process of its own outside its
+  # supervision tree, which closes it when it learns (by a link) that the
+  # acceptor is gone: the httpd's DOWN can come before that. So wait for
+  # the httpd, then close the socket if it is still open (nothing uses it
+  # any more) and wait for that: a stopped preview accepts no connection.
+  defp close(httpd, listener) do
+    ref = Process.monitor(httpd)
+    :inets.stop(:stand_alone, httpd)
+    await_down(ref, 5_000)
+
+    if listener do
+      ref = :erlang.monitor(:port, listener)
+      if :erlang.port_info(listener) != :undefined, do: :erlang.port_close(listener)
+      await_down(ref, 5_000)
+    end
+
+    :ok
+  catch
+    :error, :badarg -> :ok
+  end
+
+  defp await_down(ref, ms) do
     receive do
       {:DOWN, ^ref, _, _, _} -> :ok
     after
-      5_000 -> :ok
+      ms -> :ok
     end
+  end
+
+  # The httpd's listening socket: the one of this VM's TCP sockets bound to
+  # its address and port that listens (a connection accepted meanwhile has
+  # the same local address).
+  defp listener(addr, port),
+    do: Enum.find(:erlang.ports(), &listening?(&1, addr, port))
+
+  defp listening?(p, addr, port) do
+    match?({:name, ~c"tcp_inet" ++ _}, :erlang.port_info(p, :name)) and
+      :inet.sockname(p) == {:ok, {addr, port}} and
+      :listen in Map.get(:inet.info(p), :states, [])
+  catch
+    _, _ -> false
   end
 
   # httpd.info/2 knows only servers started under the :inets application;
@@ -217,11 +261,8 @@ defmodule RingTracer.Preview.Server do
     port
   end
 
-  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}) do
-    t = System.monotonic_time(:microsecond)
-    state = update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
-    pace(state, System.monotonic_time(:microsecond) - t)
-  end
+  defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),
+    do: update(state, &Log.atom(&1, a, child, pixels, rays, us, at))
 
   defp apply_event(state, {:moved, _job, from, to, n, at}),
     do: update(state, &Log.move(&1, from, to, n, at))
@@ -230,27 +271,55 @@ defmodule RingTracer.Preview.Server do
     do: update(state, &Log.event(&1, kind, from, to, at))
 
   defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
+  defp apply_event(state, {:gone, reason}), do: update(state, &Log.gone(&1, reason))
 
   # While the job runs, the preview spends at most `cpu_share` of one core
   # on atoms (their pixels to sRGB and base64, and so what viewers send):
-  # after each atom it waits in proportion, in slices, until the job ends.
-  # On a render too light for that, the page lags and catches up at the end.
-  defp pace(state, work_us) do
-    wait_ms = work_us * (1 - state.cpu_share) / state.cpu_share / 1000
-    wait(state.ended, round(wait_ms))
-    state
-  end
+  # the job's events wait in a queue, in order, and after each atom's work
+  # the queue pauses in proportion (a timer: meanwhile the server answers
+  # everything else, a stop at once). When the job ends, the queue runs
+  # through. On a render too light for the share, the page lags and catches
+  # up at the end.
+  defp enqueue(state, msg) do
+    state = %{state | queue: :queue.in(msg, state.queue)}
 
-  defp wait(_ended, ms) when ms <= 0, do: :ok
+    cond do
+      state.pacing == nil ->
+        run_queue(state)
 
-  defp wait(ended, ms) do
-    if :atomics.get(ended, 1) == 0 do
-      Process.sleep(min(ms, 20))
-      wait(ended, ms - 20)
-    else
-      :ok
+      ended?(state) ->
+        Process.cancel_timer(elem(state.pacing, 1))
+        run_queue(%{state | pacing: nil})
+
+      true ->
+        state
     end
   end
+
+  defp run_queue(state) do
+    case :queue.out(state.queue) do
+      {:empty, _} ->
+        state
+
+      {{:value, {:atom, _, _, _, _, _, _, _} = msg}, queue} ->
+        t = System.monotonic_time(:microsecond)
+        state = apply_event(%{state | queue: queue}, msg)
+        work_us = System.monotonic_time(:microsecond) - t
+        wait_ms = round(work_us * (1 - state.cpu_share) / state.cpu_share / 1000)
+
+        if wait_ms > 0 and not ended?(state) do
+          ref = make_ref()
+          %{state | pacing: {ref, Process.send_after(self(), {:pace, ref}, wait_ms)}}
+        else
+          run_queue(state)
+        end
+
+      {{:value, msg}, queue} ->
+        run_queue(apply_event(%{state | queue: queue}, msg))
+    end
+  end
+
+  defp ended?(state), do: :atomics.get(state.ended, 1) == 1
 
   # The parent's events (this node), and children's on `nodes` (filtered
   # there by job, when known).

@@ -55,6 +55,26 @@ defmodule RingTracer.Preview.LogTest do
     assert Base.decode64!(a["px"]) == <<255, 255, 255, 255, 255, 255>>
   end
 
+  test "an atom's pixels are encoded piece by piece into one base64 text, any size" do
+    for n <- [1, 2, 3, 4095, 4096, 4097, 8192, 10_001] do
+      # Values across the range, out of it too, and not numbers.
+      floats = for i <- 1..(3 * n), do: rem(i * 7919, 1201) / 1000 - 0.1
+      px = for(v <- floats, into: <<>>, do: <<v::float-32-native>>)
+
+      px =
+        if n > 4,
+          do:
+            <<0x7FC00000::32-native, 0xFF800000::32-native>> <>
+              binary_part(px, 8, byte_size(px) - 8),
+          else: px
+
+      log = Log.job(Log.new(), info())
+      {_, log} = Log.take(log)
+      [{_, "atom", a}] = frames(Log.atom(log, 0, 0, px, 1, 1, nil))
+      assert a["px"] == Base.encode64(RingTracer.Image.srgb8(px)), "#{n} pixels"
+    end
+  end
+
   test "a late joiner's log starts with the atoms traced before it opened, in order" do
     results = %{4 => pixels(2, 0.5), 1 => pixels(2, 0.25)}
     log = Log.job(Log.new(), info(results, %{4 => 1, 1 => 0}))
