@@ -26,7 +26,7 @@ use crate::ray::Ray;
 use glam::{Vec3A, Vec4};
 
 /// Number of SAH bins per axis.
-const BINS: usize = 16;
+const BINS: usize = 32;
 /// Leaves never hold more than this unless the primitives cannot be separated.
 const MAX_LEAF: usize = 8;
 /// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
@@ -98,114 +98,156 @@ struct Bin {
     count: u32,
 }
 
+const EMPTY_BIN: Bin = Bin {
+    bounds: Aabb::EMPTY,
+    count: 0,
+};
+
 /// Leaves at most this big are never split: for primitives tested one at a time.
 pub(crate) const LEAF_MIN: usize = 2;
 /// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
-/// one test.
+/// one test, and the SAH counts a leaf's cost in blocks of four.
 pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
 
-/// Binary binned-SAH build; returns the nodes and the primitive order.
+/// A primitive reference during the build: its box and centre, kept in the order of the
+/// primitive array so that every pass over a node's range reads memory in sequence.
+#[derive(Clone, Copy)]
+struct BuildRef {
+    bounds: Aabb,
+    centre: Vec3A,
+}
+
+/// Tests needed for `n` primitives met `block` at a time.
+#[inline(always)]
+fn blocks_of(n: u32, block: u32) -> f32 {
+    n.div_ceil(block) as f32
+}
+
+/// The best binned-SAH split of `refs` over the three axes at once: (cost, axis, bin), cost as
+/// the children's area-weighted block counts (infinite when no split separates anything).
+fn best_split(refs: &[BuildRef], cb: &Aabb, block: u32) -> (f32, usize, usize) {
+    let ext = cb.max - cb.min;
+    let lo = cb.min;
+    // a flat axis gets scale 0: everything in bin 0, which offers no split
+    let scale = Vec3A::select(
+        ext.cmpgt(Vec3A::ZERO),
+        Vec3A::splat(BINS as f32 * 0.999_99) / ext,
+        Vec3A::ZERO,
+    );
+    let mut bins = [[EMPTY_BIN; BINS]; 3];
+    for r in refs {
+        let b = ((r.centre - lo) * scale).to_array();
+        for a in 0..3 {
+            let k = (b[a] as usize).min(BINS - 1);
+            let bin = &mut bins[a][k];
+            bin.count += 1;
+            bin.bounds = bin.bounds.union(r.bounds);
+        }
+    }
+    let mut best = (f32::INFINITY, 0usize, 0usize);
+    for (axis, bins) in bins.iter().enumerate() {
+        let mut right_cost = [0.0f32; BINS];
+        let mut acc = Aabb::EMPTY;
+        let mut c = 0;
+        for k in (1..BINS).rev() {
+            acc = acc.union(bins[k].bounds);
+            c += bins[k].count;
+            right_cost[k] = if c == 0 {
+                f32::NAN
+            } else {
+                acc.half_area() * blocks_of(c, block)
+            };
+        }
+        let mut acc = Aabb::EMPTY;
+        let mut c = 0;
+        for k in 0..BINS - 1 {
+            acc = acc.union(bins[k].bounds);
+            c += bins[k].count;
+            let rc = right_cost[k + 1];
+            if c == 0 || rc.is_nan() {
+                continue;
+            }
+            let cost = acc.half_area() * blocks_of(c, block) + rc;
+            if cost < best.0 {
+                best = (cost, axis, k);
+            }
+        }
+    }
+    best
+}
+
+/// Binary binned-SAH build; returns the nodes and the primitive order. Leaves of up to
+/// `block` primitives cost one test (they are met `block` at a time).
 fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
     let n = boxes.len();
     let mut order: Vec<u32> = (0..n as u32).collect();
     if n == 0 {
         return (Vec::new(), order);
     }
-    let centroids: Vec<Vec3A> = boxes.iter().map(|b| b.centre()).collect();
-    let mut nodes = Vec::with_capacity(2 * n);
+    let leaf_min = leaf_min(leaf_min_chosen);
+    let block = if leaf_min_chosen >= LEAF_MIN_TRIANGLES {
+        LEAF_MIN_TRIANGLES as u32
+    } else {
+        1
+    };
+    let max_leaf = MAX_LEAF.max(2 * block as usize);
+    let mut refs: Vec<BuildRef> = boxes
+        .iter()
+        .map(|&b| BuildRef {
+            bounds: b,
+            centre: b.centre(),
+        })
+        .collect();
+    let mut nodes = Vec::with_capacity(2 * n / leaf_min.max(1) + 1);
     nodes.push(Node::new(Aabb::EMPTY, 0, 0));
     // (node index, start, end, depth)
     let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
     while let Some((ni, start, end, depth)) = work.pop() {
+        let rs = &mut refs[start..end];
         let idx = &mut order[start..end];
         let mut bounds = Aabb::EMPTY;
         let mut cb = Aabb::EMPTY;
-        for &i in idx.iter() {
-            bounds = bounds.union(boxes[i as usize]);
-            cb = cb.grow(centroids[i as usize]);
+        for r in rs.iter() {
+            bounds = bounds.union(r.bounds);
+            cb = cb.grow(r.centre);
         }
         let count = end - start;
-        let make_leaf = |nodes: &mut Vec<Node>| {
+        if count <= leaf_min || depth >= MAX_DEPTH {
             nodes[ni] = Node::new(bounds, start as u32, count as u32);
-        };
-        if count <= leaf_min(leaf_min_chosen) || depth >= MAX_DEPTH {
-            make_leaf(&mut nodes);
             continue;
         }
-        let ext = cb.max - cb.min;
-        // best split over all three axes
-        let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bin
-        for axis in 0..3 {
-            let e = ext[axis];
-            if e <= 0.0 {
-                continue;
-            }
-            let lo = cb.min[axis];
-            let scale = BINS as f32 / e * 0.999_99;
-            let mut bins = [Bin {
-                bounds: Aabb::EMPTY,
-                count: 0,
-            }; BINS];
-            for &i in idx.iter() {
-                let b = (((centroids[i as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                bins[b].count += 1;
-                bins[b].bounds = bins[b].bounds.union(boxes[i as usize]);
-            }
-            let mut right_area = [0.0f32; BINS];
-            let mut right_count = [0u32; BINS];
-            let mut acc = Aabb::EMPTY;
-            let mut c = 0;
-            for k in (1..BINS).rev() {
-                acc = acc.union(bins[k].bounds);
-                c += bins[k].count;
-                right_area[k] = acc.half_area();
-                right_count[k] = c;
-            }
-            let mut acc = Aabb::EMPTY;
-            let mut c = 0;
-            for k in 0..BINS - 1 {
-                acc = acc.union(bins[k].bounds);
-                c += bins[k].count;
-                let rc = right_count[k + 1];
-                if c == 0 || rc == 0 {
-                    continue;
-                }
-                let cost = acc.half_area() * c as f32 + right_area[k + 1] * rc as f32;
-                if cost < best.0 {
-                    best = (cost, axis, k);
-                }
-            }
-        }
+        let best = best_split(rs, &cb, block);
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
         let split_cost = traversal_cost() + best.0 / parent_area;
+        let leaf_cost = blocks_of(count as u32, block);
         let mid;
-        if best.0.is_finite() && (split_cost < count as f32 || count > MAX_LEAF) {
+        if best.0.is_finite() && (split_cost < leaf_cost || count > max_leaf) {
             let (axis, bin) = (best.1, best.2);
             let lo = cb.min[axis];
-            let scale = BINS as f32 / ext[axis] * 0.999_99;
-            // in-place partition
+            let scale = BINS as f32 * 0.999_99 / (cb.max[axis] - lo);
+            // in-place partition of the references and the order alike
             let mut l = 0;
-            let mut r = idx.len();
+            let mut r = rs.len();
             while l < r {
-                let c = centroids[idx[l] as usize][axis];
-                let b = (((c - lo) * scale) as usize).min(BINS - 1);
+                let b = (((rs[l].centre[axis] - lo) * scale) as usize).min(BINS - 1);
                 if b <= bin {
                     l += 1;
                 } else {
                     r -= 1;
+                    rs.swap(l, r);
                     idx.swap(l, r);
                 }
             }
             mid = start + l;
-        } else if count > MAX_LEAF {
+        } else if count > max_leaf {
             // centroids coincide: split by position in the array to bound leaf size
             mid = start + count / 2;
         } else {
-            make_leaf(&mut nodes);
+            nodes[ni] = Node::new(bounds, start as u32, count as u32);
             continue;
         }
         if mid == start || mid == end {
-            make_leaf(&mut nodes);
+            nodes[ni] = Node::new(bounds, start as u32, count as u32);
             continue;
         }
         let left = nodes.len();
@@ -719,5 +761,88 @@ mod tests {
         });
         found.sort();
         assert_eq!(found, (0..10).map(|z| z * 100 + 43).collect::<Vec<u32>>());
+    }
+}
+
+#[cfg(test)]
+mod stats_report {
+    use super::*;
+    use crate::{raysets, Scene};
+
+    /// Shape of the hierarchy and work per ray on a big mesh, for tuning:
+    /// `RT_MESH=/tmp/knot600k.obj cargo test --release -p ring_tracer_kernel bvh_stats_report --
+    /// --ignored --nocapture`. Not a check.
+    #[test]
+    #[ignore]
+    fn bvh_stats_report() {
+        let Ok(path) = std::env::var("RT_MESH") else {
+            return;
+        };
+        let t = std::time::Instant::now();
+        let scene = Scene::load(std::path::Path::new(&path)).unwrap();
+        println!("load + build {:.3} s", t.elapsed().as_secs_f64());
+        let bvh = &scene.bvh;
+        let leaves: Vec<(usize, usize)> = bvh.leaves().collect();
+        let prims: usize = leaves.iter().map(|l| l.1).sum();
+        let blocks: usize = leaves.iter().map(|l| l.1.div_ceil(4)).sum();
+        let mut slots = 0;
+        for n in &bvh.nodes {
+            slots += n.count.iter().filter(|&&c| c != EMPTY).count();
+        }
+        println!(
+            "nodes {} leaves {} prims {} blocks {} fill {:.2} children/node",
+            bvh.nodes.len(),
+            leaves.len(),
+            prims,
+            blocks,
+            slots as f64 / bvh.nodes.len() as f64
+        );
+        let rays = raysets::incoherent(scene.bounds(), 1 << 18);
+        let mut s = Scratch::new();
+        for any in [false, true] {
+            probe::NODES.with(|c| c.set(0));
+            let mut leafv = 0u64;
+            for r in &rays {
+                bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, |f, c, t| {
+                    leafv += 1;
+                    let mut tm = t;
+                    for sh in &scene.geom.shapes[f..f + c] {
+                        if let Some(x) = scene.geom.hit(sh, r, 0.0, tm) {
+                            tm = x;
+                            if any {
+                                return -1.0;
+                            }
+                        }
+                    }
+                    tm
+                });
+            }
+            let nodes = probe::NODES.with(|c| c.get());
+            println!(
+                "incoherent any={any}: nodes/ray {:.2} leaves/ray {:.2}",
+                nodes as f64 / rays.len() as f64,
+                leafv as f64 / rays.len() as f64
+            );
+        }
+        for round in 0..2 {
+            let t = std::time::Instant::now();
+            let hits = rays
+                .iter()
+                .filter(|r| scene.intersect_with(r, f32::INFINITY, &mut s).is_some())
+                .count();
+            let a = t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            let occ = rays
+                .iter()
+                .filter(|r| scene.occluded_with(r, f32::INFINITY, &mut s))
+                .count();
+            let b = t.elapsed().as_secs_f64();
+            let m = rays.len() as f64 / 1e6;
+            println!(
+                "round {round}: closest {:.2} Mrays/s ({hits}), any {:.2} Mrays/s ({occ})",
+                m / a,
+                m / b
+            );
+        }
     }
 }
