@@ -295,11 +295,27 @@ pub(crate) const WIDTH: usize = 8;
 /// Marks an unused child slot of a [`Node8`].
 const EMPTY: u32 = u32::MAX;
 
+/// Set in a leaf's `count` when the leaf's triangles are stored as blocks of four
+/// ([`crate::tri4::TriBlocks`]): then `child` is the leaf's first block rather than its first
+/// primitive, and the low bits are the number of triangles. Set only by
+/// [`Bvh::mark_block_leaves`].
+pub(crate) const LEAF_BLOCKS: u32 = 1 << 31;
+
+/// The number of triangles of a leaf of blocks, from the `count` a visit is handed; `None` for
+/// other leaves.
+#[inline(always)]
+pub(crate) fn block_leaf_len(count: usize) -> Option<usize> {
+    let c = u32::try_from(count).ok()?;
+    (c & LEAF_BLOCKS != 0 && c != EMPTY).then_some((c & !LEAF_BLOCKS) as usize)
+}
+
 /// An 8-wide node: the boxes of up to eight children in SoA layout, tested together with SIMD
 /// (one AVX vector per plane where the CPU has AVX, else two SSE vectors; same results).
 /// `bounds[a]` holds the children's minima on axis `a`, `bounds[3 + a]` their maxima.
 /// `count[i] == 0`: child `i` is the node `child[i]`; `count[i] == EMPTY`: unused slot (its box
-/// is empty, so it is never hit); otherwise a leaf of `count[i]` primitives from `child[i]`.
+/// is empty, so it is never hit); with [`LEAF_BLOCKS`] set, a leaf of `count[i] & !LEAF_BLOCKS`
+/// triangles whose blocks start at block `child[i]`; otherwise a leaf of `count[i]` primitives
+/// from `child[i]`.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub(crate) struct Node8 {
@@ -565,7 +581,7 @@ impl Bvh {
                             continue;
                         }
                         if count != EMPTY {
-                            *work += count as u64;
+                            *work += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
                                 return tmax;
@@ -593,7 +609,7 @@ impl Bvh {
                             ic[j & 7] = node.child[i];
                             ni += 1;
                         } else if count != EMPTY && tn[i] <= tmax {
-                            *work += count as u64;
+                            *work += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
                                 return tmax;
@@ -630,7 +646,27 @@ impl Bvh {
         }
     }
 
-    /// Every leaf as (first primitive, count).
+    /// Gives each leaf `(first primitive, count)` to `blocks`, which may store the leaf's
+    /// primitives as blocks and return the first block's index: the leaf then names that block
+    /// and is marked with [`LEAF_BLOCKS`]. Leaves already marked are left alone.
+    pub fn mark_block_leaves(&mut self, mut blocks: impl FnMut(usize, usize) -> Option<u32>) {
+        for n in &mut self.nodes {
+            for i in 0..WIDTH {
+                let c = n.count[i];
+                if c == 0 || c == EMPTY || c & LEAF_BLOCKS != 0 {
+                    continue;
+                }
+                if let Some(b) = blocks(n.child[i] as usize, c as usize) {
+                    n.child[i] = b;
+                    n.count[i] = c | LEAF_BLOCKS;
+                }
+            }
+        }
+    }
+
+    /// Every leaf as (first primitive, count); after [`Bvh::mark_block_leaves`], a marked leaf
+    /// appears as (first block, count with [`LEAF_BLOCKS`]).
+    #[cfg(test)]
     pub fn leaves(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.nodes.iter().flat_map(|n| {
             (0..WIDTH).filter_map(move |i| {
@@ -782,7 +818,10 @@ mod stats_report {
         let scene = Scene::load(std::path::Path::new(&path)).unwrap();
         println!("load + build {:.3} s", t.elapsed().as_secs_f64());
         let bvh = &scene.bvh;
-        let leaves: Vec<(usize, usize)> = bvh.leaves().collect();
+        let leaves: Vec<(usize, usize)> = bvh
+            .leaves()
+            .map(|(f, c)| scene.tri_blocks.prims(f, c))
+            .collect();
         let prims: usize = leaves.iter().map(|l| l.1).sum();
         let blocks: usize = leaves.iter().map(|l| l.1.div_ceil(4)).sum();
         let mut slots = 0;
@@ -805,6 +844,7 @@ mod stats_report {
             for r in &rays {
                 bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, |f, c, t| {
                     leafv += 1;
+                    let (f, c) = scene.tri_blocks.prims(f, c);
                     let mut tm = t;
                     for sh in &scene.geom.shapes[f..f + c] {
                         if let Some(x) = scene.geom.hit(sh, r, 0.0, tm) {

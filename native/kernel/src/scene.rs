@@ -278,10 +278,10 @@ impl Scene {
             .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
                 let mut tm = tmax;
                 if let Some(leaf) = blocks.leaf(first, count) {
-                    for (k, b) in leaf.iter().enumerate() {
+                    for b in leaf {
                         if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
                             tm = t;
-                            prim = (first + 4 * k + i) as u32;
+                            prim = b.prim(i);
                         }
                     }
                     return tm;
@@ -495,9 +495,9 @@ impl Scene {
             .bvh
             .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
                 if let Some(leaf) = blocks.leaf(first, count) {
-                    for (k, b) in leaf.iter().enumerate() {
+                    for b in leaf {
                         if let Some(i) = b.any(&lanes, 0.0, tmax) {
-                            found = (Hit::NO_INSTANCE, (first + 4 * k + i) as u32);
+                            found = (Hit::NO_INSTANCE, b.prim(i));
                             return -1.0;
                         }
                     }
@@ -1044,7 +1044,8 @@ impl SceneBuilder {
             ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
-        let tri_blocks = TriBlocks::build(&bvh, &self.geom.shapes);
+        let mut bvh = bvh;
+        let tri_blocks = TriBlocks::build(&mut bvh, &self.geom.shapes);
         let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
         let instances: Vec<Instance> = order
             .iter()
@@ -1135,6 +1136,7 @@ mod tuning {
                             f32::INFINITY,
                             &mut sc,
                             |first, count, tmax| {
+                                let (first, count) = scene.tri_blocks.prims(first, count);
                                 let mut tm = tmax;
                                 for (k, s) in
                                     scene.geom.shapes[first..first + count].iter().enumerate()
@@ -1172,6 +1174,7 @@ mod tuning {
                             scene
                                 .bvh
                                 .traverse::<false>(&sr, d, &mut sc, |first, count, tmax| {
+                                    let (first, count) = scene.tri_blocks.prims(first, count);
                                     for s in &scene.geom.shapes[first..first + count] {
                                         prims += 1;
                                         if scene.geom.hit(s, &sr, 0.0, tmax).is_some() {
