@@ -86,6 +86,12 @@ impl Node {
     pub fn first(&self) -> u32 {
         self.a.w.to_bits()
     }
+    fn bounds(&self) -> Aabb {
+        Aabb {
+            min: Vec3A::from_vec4(self.a),
+            max: Vec3A::from_vec4(self.b),
+        }
+    }
     #[inline(always)]
     pub fn count(&self) -> u32 {
         self.b.w.to_bits()
@@ -176,6 +182,20 @@ fn best_split(refs: &[BuildRef], cb: &Aabb, block: u32) -> (f32, usize, usize) {
     best
 }
 
+/// Primitives met at once in a leaf: four for triangle blocks, else one.
+fn block_size(leaf_min_chosen: usize) -> u32 {
+    if leaf_min_chosen >= LEAF_MIN_TRIANGLES {
+        LEAF_MIN_TRIANGLES as u32
+    } else {
+        1
+    }
+}
+
+/// The largest leaf the build makes unless primitives cannot be separated.
+fn max_leaf(block: u32) -> usize {
+    MAX_LEAF.max(2 * block as usize)
+}
+
 /// Binary binned-SAH build; returns the nodes and the primitive order. Leaves of up to
 /// `block` primitives cost one test (they are met `block` at a time).
 fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
@@ -185,12 +205,8 @@ fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>)
         return (Vec::new(), order);
     }
     let leaf_min = leaf_min(leaf_min_chosen);
-    let block = if leaf_min_chosen >= LEAF_MIN_TRIANGLES {
-        LEAF_MIN_TRIANGLES as u32
-    } else {
-        1
-    };
-    let max_leaf = MAX_LEAF.max(2 * block as usize);
+    let block = block_size(leaf_min_chosen);
+    let max_leaf = max_leaf(block);
     let mut refs: Vec<BuildRef> = boxes
         .iter()
         .map(|&b| BuildRef {
@@ -258,6 +274,146 @@ fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>)
         work.push((left, start, mid, depth + 1));
     }
     (nodes, order)
+}
+
+/// Cost of one 8-wide node visit relative to one leaf test (a block of four triangles or one
+/// other primitive), in the collapse's SAH.
+const NODE8_COST: f32 = 1.0;
+
+/// The SAH-driven collapse of the binary tree into 8-wide nodes: for every binary node `n` and
+/// `j` in 1..=8, the least SAH cost of covering `n`'s subtree with at most `j` children of an
+/// 8-wide node, each child a leaf (a binary leaf, or a whole subtree of at most `max_leaf`
+/// primitives made one leaf, its primitives being contiguous) or an 8-wide node of its own.
+/// Computed bottom-up (children come after their parent in the binary array), then read
+/// top-down to emit the nodes.
+struct Collapse {
+    /// `cost[8 * n + j - 1]`: the least cost of `n`'s subtree in at most `j` slots.
+    cost: Vec<f32>,
+    /// How that cost is reached: [`Choice`].
+    choice: Vec<Choice>,
+    /// Per binary node: the split of the eight slots of its own 8-wide node between its left
+    /// and right children (slots for the left one).
+    node_split: Vec<u8>,
+    /// Per binary node: its primitive range (first, count).
+    ranges: Vec<(u32, u32)>,
+}
+
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Choice {
+    /// The subtree as one leaf.
+    Leaf,
+    /// The subtree as an 8-wide node.
+    Node,
+    /// `i` slots to the left child, the rest to the right.
+    Split(u8),
+}
+
+impl Collapse {
+    fn plan(bin: &[Node], block: u32, max_leaf: usize) -> Collapse {
+        let n = bin.len();
+        let mut c = Collapse {
+            cost: vec![f32::INFINITY; WIDTH * n],
+            choice: vec![Choice::Leaf; WIDTH * n],
+            node_split: vec![0; n],
+            ranges: vec![(0, 0); n],
+        };
+        // primitive ranges, bottom-up: a subtree's primitives are contiguous
+        for k in (0..n).rev() {
+            let b = &bin[k];
+            c.ranges[k] = if b.count() > 0 {
+                (b.first(), b.count())
+            } else {
+                let f = b.first() as usize;
+                match (c.ranges.get(f), c.ranges.get(f + 1)) {
+                    (Some(l), Some(r)) => (l.0.min(r.0), l.1 + r.1),
+                    _ => (0, 0),
+                }
+            };
+        }
+        for k in (0..n).rev() {
+            let b = &bin[k];
+            // boxes without area (points, lines) cost as the smallest positive area does, so
+            // that costs still grow with primitives and nodes (as for equal boxes)
+            let area = b.bounds().half_area().max(f32::MIN_POSITIVE);
+            let (_, count) = c.ranges[k];
+            let leaf_cost = area * blocks_of(count, block);
+            let base = WIDTH * k;
+            if b.count() > 0 {
+                for j in 0..WIDTH {
+                    c.cost[base + j] = leaf_cost;
+                    c.choice[base + j] = Choice::Leaf;
+                }
+                continue;
+            }
+            let (l, r) = (b.first() as usize, b.first() as usize + 1);
+            if r >= n {
+                continue;
+            }
+            // as an 8-wide node: the children share its eight slots
+            let mut best = (f32::INFINITY, 1u8);
+            for i in 1..WIDTH {
+                let v = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + WIDTH - i - 1];
+                if v < best.0 {
+                    best = (v, i as u8);
+                }
+            }
+            c.node_split[k] = best.1;
+            let node_cost = NODE8_COST * area + best.0;
+            // one slot: a leaf (when small enough) or a node
+            let (one, why) = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
+                (leaf_cost, Choice::Leaf)
+            } else {
+                (node_cost, Choice::Node)
+            };
+            c.cost[base] = one;
+            c.choice[base] = why;
+            for j in 2..=WIDTH {
+                let mut v = (c.cost[base + j - 2], c.choice[base + j - 2]);
+                for i in 1..j {
+                    let s = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + j - i - 1];
+                    if s < v.0 {
+                        v = (s, Choice::Split(i as u8));
+                    }
+                }
+                c.cost[base + j - 1] = v.0;
+                c.choice[base + j - 1] = v.1;
+            }
+        }
+        c
+    }
+
+    /// The primitive range of binary node `k`, as a leaf's (first, count).
+    fn range(&self, k: usize) -> (u32, u32) {
+        self.ranges.get(k).copied().unwrap_or((0, 0))
+    }
+
+    /// The children of the 8-wide node made for binary node `k`: (binary node, as a leaf).
+    fn node_children(&self, bin: &[Node], k: usize, out: &mut Vec<(usize, bool)>) {
+        match bin.get(k) {
+            Some(b) if b.count() == 0 => {
+                let f = b.first() as usize;
+                let i = self.node_split[k] as usize;
+                self.slots(bin, f, i, out);
+                self.slots(bin, f + 1, WIDTH - i, out);
+            }
+            // a leaf as the whole tree
+            _ => out.push((k, true)),
+        }
+    }
+
+    /// The children covering binary node `k` in at most `j` slots.
+    fn slots(&self, bin: &[Node], k: usize, j: usize, out: &mut Vec<(usize, bool)>) {
+        let j = j.clamp(1, WIDTH);
+        match self.choice.get(WIDTH * k + j - 1).copied() {
+            Some(Choice::Leaf) => out.push((k, true)),
+            Some(Choice::Split(i)) => {
+                let f = bin.get(k).map_or(0, |b| b.first() as usize);
+                self.slots(bin, f, i as usize, out);
+                self.slots(bin, f + 1, j - i as usize, out);
+            }
+            Some(Choice::Node) | None => out.push((k, false)),
+        }
+    }
 }
 
 /// A traversal stack: (node, unused, entry distance) per deferred inner node.
@@ -429,52 +585,29 @@ impl Bvh {
     /// [`Bvh::build`] never splitting leaves of up to `leaf_min` primitives.
     pub fn build_with(boxes: &[Aabb], leaf_min: usize) -> (Bvh, Vec<u32>) {
         let (bin, order) = build_binary(boxes, leaf_min);
+        let block = block_size(leaf_min);
+        let plan = Collapse::plan(&bin, block, max_leaf(block));
         let mut nodes = Vec::with_capacity(bin.len() / 4 + 1);
         if !bin.is_empty() {
-            let bounds = |n: &Node| Aabb {
-                min: Vec3A::from_vec4(n.a),
-                max: Vec3A::from_vec4(n.b),
-            };
             // (binary node, Node8 slot to fill)
             nodes.push(Node8::empty());
             let mut work = vec![(0usize, 0usize)];
-            let mut kids: Vec<usize> = Vec::with_capacity(WIDTH);
+            let mut kids: Vec<(usize, bool)> = Vec::with_capacity(WIDTH);
             while let Some((bi, slot)) = work.pop() {
-                // gather up to eight children by opening the largest interior child
                 kids.clear();
-                if bin[bi].count() > 0 {
-                    kids.push(bi);
-                } else {
-                    let f = bin[bi].first() as usize;
-                    kids.extend([f, f + 1]);
-                    while kids.len() < WIDTH {
-                        let best = kids
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, &k)| bin.get(k).is_some_and(|n| n.count() == 0))
-                            .max_by(|a, b| {
-                                bounds(&bin[*a.1])
-                                    .half_area()
-                                    .total_cmp(&bounds(&bin[*b.1]).half_area())
-                            })
-                            .map(|(i, _)| i);
-                        let Some(i) = best else { break };
-                        let k = kids.swap_remove(i);
-                        let f = bin[k].first() as usize;
-                        kids.extend([f, f + 1]);
-                    }
-                }
+                plan.node_children(&bin, bi, &mut kids);
                 let mut n8 = Node8::empty();
-                for (i, &k) in kids.iter().enumerate() {
+                for (i, &(k, leaf)) in kids.iter().enumerate().take(WIDTH) {
                     let Some(n) = bin.get(k) else { continue };
-                    let b = bounds(n);
+                    let b = n.bounds();
                     for a in 0..3 {
                         n8.bounds[a][i] = b.min[a];
                         n8.bounds[3 + a][i] = b.max[a];
                     }
-                    if n.count() > 0 {
-                        n8.child[i] = n.first();
-                        n8.count[i] = n.count();
+                    if leaf {
+                        let (first, count) = plan.range(k);
+                        n8.child[i] = first;
+                        n8.count[i] = count;
                     } else {
                         let ni = nodes.len();
                         nodes.push(Node8::empty());
