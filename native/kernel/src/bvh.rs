@@ -690,11 +690,13 @@ impl Bvh {
         let pre = RayPre::new(ray);
         let mut sp = 0usize;
         let mut cur = 0u32;
-        loop {
+        // the work is counted here and added once (not stored to memory per node)
+        let mut w = 0u64;
+        let t = 'run: loop {
             if let Some(node) = self.nodes.get(cur as usize) {
                 #[cfg(test)]
                 probe::NODES.with(|c| c.set(c.get() + 1));
-                *work += 1;
+                w += 1;
                 #[cfg(target_arch = "x86_64")]
                 let (tn, mut mask) = if AVX {
                     // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
@@ -714,10 +716,10 @@ impl Bvh {
                             continue;
                         }
                         if count != EMPTY {
-                            *work += (count & !LEAF_BLOCKS) as u64;
+                            w += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
-                                return tmax;
+                                break 'run tmax;
                             }
                         }
                     }
@@ -742,10 +744,10 @@ impl Bvh {
                             ic[j & 7] = node.child[i];
                             ni += 1;
                         } else if count != EMPTY && tn[i] <= tmax {
-                            *work += (count & !LEAF_BLOCKS) as u64;
+                            w += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
-                                return tmax;
+                                break 'run tmax;
                             }
                         }
                     }
@@ -767,7 +769,7 @@ impl Bvh {
             // pop the next inner node that may still hold a closer hit
             loop {
                 if sp == 0 {
-                    return tmax;
+                    break 'run tmax;
                 }
                 sp -= 1;
                 let (c, _, d) = stack[sp];
@@ -776,7 +778,9 @@ impl Bvh {
                     break;
                 }
             }
-        }
+        };
+        *work += w;
+        t
     }
 
     /// Gives each leaf `(first primitive, count)` to `blocks`, which may store the leaf's
