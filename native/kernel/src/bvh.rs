@@ -954,6 +954,20 @@ mod stats_report {
         let t = std::time::Instant::now();
         let scene = Scene::load(std::path::Path::new(&path)).unwrap();
         println!("load + build {:.3} s", t.elapsed().as_secs_f64());
+        let boxes: Vec<Aabb> = scene
+            .triangles()
+            .iter()
+            .map(|t| Aabb::EMPTY.grow(t[0]).grow(t[1]).grow(t[2]))
+            .collect();
+        for _ in 0..3 {
+            let t = std::time::Instant::now();
+            let (b, _) = Bvh::build_with(&boxes, LEAF_MIN_TRIANGLES);
+            println!(
+                "BVH build alone {:.3} s ({} nodes)",
+                t.elapsed().as_secs_f64(),
+                b.nodes.len()
+            );
+        }
         let bvh = &scene.bvh;
         let leaves: Vec<(usize, usize)> = bvh
             .leaves()

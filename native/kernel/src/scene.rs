@@ -275,30 +275,37 @@ impl Scene {
         let lanes = RayLanes::new(ray);
         let mut best = self
             .bvh
-            .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
-                let mut tm = tmax;
-                if let Some(leaf) = blocks.leaf(first, count) {
-                    for b in leaf {
-                        if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
-                            tm = t;
-                            prim = b.prim(i);
+            // inlined into the traversal: a call there would spill the ray's vectors per node
+            .traverse::<true>(
+                ray,
+                tmax,
+                scratch,
+                #[inline(always)]
+                |first, count, tmax| {
+                    let mut tm = tmax;
+                    if let Some(leaf) = blocks.leaf(first, count) {
+                        for b in leaf {
+                            if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
+                                tm = t;
+                                prim = b.prim(i);
+                            }
+                        }
+                        return tm;
+                    }
+                    if let Some(range) = shapes.get(first..first + count) {
+                        for (k, s) in range.iter().enumerate() {
+                            if mailbox.seen(s) {
+                                continue;
+                            }
+                            if let Some(t) = geom.hit(s, ray, 0.0, tm) {
+                                tm = t;
+                                prim = (first + k) as u32;
+                            }
                         }
                     }
-                    return tm;
-                }
-                if let Some(range) = shapes.get(first..first + count) {
-                    for (k, s) in range.iter().enumerate() {
-                        if mailbox.seen(s) {
-                            continue;
-                        }
-                        if let Some(t) = geom.hit(s, ray, 0.0, tm) {
-                            tm = t;
-                            prim = (first + k) as u32;
-                        }
-                    }
-                }
-                tm
-            });
+                    tm
+                },
+            );
         let mut instance = Hit::NO_INSTANCE;
         if !self.instances.is_empty() {
             if let Some((t, i, p)) = self.intersect_instances(ray, best, scratch) {
@@ -491,9 +498,12 @@ impl Scene {
         let mut mailbox = Mailbox::default();
         let blocks = &self.tri_blocks;
         let lanes = RayLanes::new(ray);
-        let r = self
-            .bvh
-            .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
+        let r = self.bvh.traverse::<false>(
+            ray,
+            tmax,
+            scratch,
+            #[inline(always)]
+            |first, count, tmax| {
                 if let Some(leaf) = blocks.leaf(first, count) {
                     for b in leaf {
                         if let Some(i) = b.any(&lanes, 0.0, tmax) {
@@ -515,7 +525,8 @@ impl Scene {
                     }
                 }
                 tmax
-            });
+            },
+        );
         let r = if r >= 0.0 && !self.instances.is_empty() {
             match self.instances_hit::<false>(ray, tmax, scratch) {
                 Some((_, i, p)) => {
