@@ -1,10 +1,16 @@
 //! Bounding volume hierarchy: binned SAH build, 8-wide flattened nodes, ordered traversal.
 //!
-//! Build: a binary tree with binned SAH (16 bins on each axis, iterative, depth-capped) in
-//! 32-byte nodes (box + first/count packed in the w lanes, children adjacent). It is then
-//! collapsed into 8-wide nodes (`Node8`: the eight child boxes in SoA layout, 256 bytes, i.e.
-//! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
-//! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
+//! Build: a binary tree with binned SAH (32 bins on each axis, the three axes binned in one
+//! pass over primitive references kept in the order of their range, iterative, depth-capped)
+//! in 32-byte nodes (box + first/count packed in the w lanes, children adjacent). For
+//! triangles, which are met four at a time ([`crate::tri4`]), the SAH counts a leaf's cost in
+//! blocks of four. The binary tree is then collapsed into 8-wide nodes (`Node8`: the eight
+//! child boxes in SoA layout, 256 bytes, i.e. 32 bytes per child) by SAH: bottom-up, the least
+//! cost of each binary subtree as at most 1..8 children of a wide node (a leaf, a small
+//! subtree made one leaf, or a wide node of its own), then read top-down (`Collapse`). Leaves
+//! reference contiguous ranges of the primitive array, which the scene reorders to BVH order;
+//! a leaf whose triangles are stored as blocks names its first block instead
+//! (`LEAF_BLOCKS`).
 //! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
 //! The same hierarchy serves two levels for mesh instances ([`crate::instance`]): one over the
 //! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
