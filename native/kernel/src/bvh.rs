@@ -1,10 +1,16 @@
 //! Bounding volume hierarchy: binned SAH build, 8-wide flattened nodes, ordered traversal.
 //!
-//! Build: a binary tree with binned SAH (16 bins on each axis, iterative, depth-capped) in
-//! 32-byte nodes (box + first/count packed in the w lanes, children adjacent). It is then
-//! collapsed into 8-wide nodes (`Node8`: the eight child boxes in SoA layout, 256 bytes, i.e.
-//! 32 bytes per child) by repeatedly opening the child with the largest surface area. Leaves
-//! reference contiguous ranges of the primitive array, which the scene reorders to BVH order.
+//! Build: a binary tree with binned SAH (32 bins on each axis, the three axes binned in one
+//! pass over primitive references kept in the order of their range, iterative, depth-capped)
+//! in 32-byte nodes (box + first/count packed in the w lanes, children adjacent). For
+//! triangles, which are met four at a time ([`crate::tri4`]), the SAH counts a leaf's cost in
+//! blocks of four. The binary tree is then collapsed into 8-wide nodes (`Node8`: the eight
+//! child boxes in SoA layout, 256 bytes, i.e. 32 bytes per child) by SAH: bottom-up, the least
+//! cost of each binary subtree as at most 1..8 children of a wide node (a leaf, a small
+//! subtree made one leaf, or a wide node of its own), then read top-down (`Collapse`). Leaves
+//! reference contiguous ranges of the primitive array, which the scene reorders to BVH order;
+//! a leaf whose triangles are stored as blocks names its first block instead
+//! (`LEAF_BLOCKS`).
 //! Memory is O(primitives) (O(references): long oblique cones are referenced once per piece).
 //! The same hierarchy serves two levels for mesh instances ([`crate::instance`]): one over the
 //! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
@@ -26,7 +32,7 @@ use crate::ray::Ray;
 use glam::{Vec3A, Vec4};
 
 /// Number of SAH bins per axis.
-const BINS: usize = 16;
+const BINS: usize = 32;
 /// Leaves never hold more than this unless the primitives cannot be separated.
 const MAX_LEAF: usize = 8;
 /// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
@@ -86,6 +92,12 @@ impl Node {
     pub fn first(&self) -> u32 {
         self.a.w.to_bits()
     }
+    fn bounds(&self) -> Aabb {
+        Aabb {
+            min: Vec3A::from_vec4(self.a),
+            max: Vec3A::from_vec4(self.b),
+        }
+    }
     #[inline(always)]
     pub fn count(&self) -> u32 {
         self.b.w.to_bits()
@@ -98,114 +110,166 @@ struct Bin {
     count: u32,
 }
 
+const EMPTY_BIN: Bin = Bin {
+    bounds: Aabb::EMPTY,
+    count: 0,
+};
+
 /// Leaves at most this big are never split: for primitives tested one at a time.
 pub(crate) const LEAF_MIN: usize = 2;
 /// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
-/// one test.
+/// one test, and the SAH counts a leaf's cost in blocks of four.
 pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
 
-/// Binary binned-SAH build; returns the nodes and the primitive order.
+/// A primitive reference during the build: its box and centre, kept in the order of the
+/// primitive array so that every pass over a node's range reads memory in sequence.
+#[derive(Clone, Copy)]
+struct BuildRef {
+    bounds: Aabb,
+    centre: Vec3A,
+}
+
+/// Tests needed for `n` primitives met `block` at a time.
+#[inline(always)]
+fn blocks_of(n: u32, block: u32) -> f32 {
+    n.div_ceil(block) as f32
+}
+
+/// The best binned-SAH split of `refs` over the three axes at once: (cost, axis, bin), cost as
+/// the children's area-weighted block counts (infinite when no split separates anything).
+fn best_split(refs: &[BuildRef], cb: &Aabb, block: u32) -> (f32, usize, usize) {
+    let ext = cb.max - cb.min;
+    let lo = cb.min;
+    // a flat axis gets scale 0: everything in bin 0, which offers no split
+    let scale = Vec3A::select(
+        ext.cmpgt(Vec3A::ZERO),
+        Vec3A::splat(BINS as f32 * 0.999_99) / ext,
+        Vec3A::ZERO,
+    );
+    let mut bins = [[EMPTY_BIN; BINS]; 3];
+    for r in refs {
+        let b = ((r.centre - lo) * scale).to_array();
+        for a in 0..3 {
+            let k = (b[a] as usize).min(BINS - 1);
+            let bin = &mut bins[a][k];
+            bin.count += 1;
+            bin.bounds = bin.bounds.union(r.bounds);
+        }
+    }
+    let mut best = (f32::INFINITY, 0usize, 0usize);
+    for (axis, bins) in bins.iter().enumerate() {
+        let mut right_cost = [0.0f32; BINS];
+        let mut acc = Aabb::EMPTY;
+        let mut c = 0;
+        for k in (1..BINS).rev() {
+            acc = acc.union(bins[k].bounds);
+            c += bins[k].count;
+            right_cost[k] = if c == 0 {
+                f32::NAN
+            } else {
+                acc.half_area() * blocks_of(c, block)
+            };
+        }
+        let mut acc = Aabb::EMPTY;
+        let mut c = 0;
+        for k in 0..BINS - 1 {
+            acc = acc.union(bins[k].bounds);
+            c += bins[k].count;
+            let rc = right_cost[k + 1];
+            if c == 0 || rc.is_nan() {
+                continue;
+            }
+            let cost = acc.half_area() * blocks_of(c, block) + rc;
+            if cost < best.0 {
+                best = (cost, axis, k);
+            }
+        }
+    }
+    best
+}
+
+/// Primitives met at once in a leaf: four for triangle blocks, else one.
+fn block_size(leaf_min_chosen: usize) -> u32 {
+    if leaf_min_chosen >= LEAF_MIN_TRIANGLES {
+        LEAF_MIN_TRIANGLES as u32
+    } else {
+        1
+    }
+}
+
+/// The largest leaf the build makes unless primitives cannot be separated.
+fn max_leaf(block: u32) -> usize {
+    MAX_LEAF.max(2 * block as usize)
+}
+
+/// Binary binned-SAH build; returns the nodes and the primitive order. Leaves of up to
+/// `block` primitives cost one test (they are met `block` at a time).
 fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
     let n = boxes.len();
     let mut order: Vec<u32> = (0..n as u32).collect();
     if n == 0 {
         return (Vec::new(), order);
     }
-    let centroids: Vec<Vec3A> = boxes.iter().map(|b| b.centre()).collect();
-    let mut nodes = Vec::with_capacity(2 * n);
+    let leaf_min = leaf_min(leaf_min_chosen);
+    let block = block_size(leaf_min_chosen);
+    let max_leaf = max_leaf(block);
+    let mut refs: Vec<BuildRef> = boxes
+        .iter()
+        .map(|&b| BuildRef {
+            bounds: b,
+            centre: b.centre(),
+        })
+        .collect();
+    let mut nodes = Vec::with_capacity(2 * n / leaf_min.max(1) + 1);
     nodes.push(Node::new(Aabb::EMPTY, 0, 0));
     // (node index, start, end, depth)
     let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
     while let Some((ni, start, end, depth)) = work.pop() {
+        let rs = &mut refs[start..end];
         let idx = &mut order[start..end];
         let mut bounds = Aabb::EMPTY;
         let mut cb = Aabb::EMPTY;
-        for &i in idx.iter() {
-            bounds = bounds.union(boxes[i as usize]);
-            cb = cb.grow(centroids[i as usize]);
+        for r in rs.iter() {
+            bounds = bounds.union(r.bounds);
+            cb = cb.grow(r.centre);
         }
         let count = end - start;
-        let make_leaf = |nodes: &mut Vec<Node>| {
+        if count <= leaf_min || depth >= MAX_DEPTH {
             nodes[ni] = Node::new(bounds, start as u32, count as u32);
-        };
-        if count <= leaf_min(leaf_min_chosen) || depth >= MAX_DEPTH {
-            make_leaf(&mut nodes);
             continue;
         }
-        let ext = cb.max - cb.min;
-        // best split over all three axes
-        let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, bin
-        for axis in 0..3 {
-            let e = ext[axis];
-            if e <= 0.0 {
-                continue;
-            }
-            let lo = cb.min[axis];
-            let scale = BINS as f32 / e * 0.999_99;
-            let mut bins = [Bin {
-                bounds: Aabb::EMPTY,
-                count: 0,
-            }; BINS];
-            for &i in idx.iter() {
-                let b = (((centroids[i as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                bins[b].count += 1;
-                bins[b].bounds = bins[b].bounds.union(boxes[i as usize]);
-            }
-            let mut right_area = [0.0f32; BINS];
-            let mut right_count = [0u32; BINS];
-            let mut acc = Aabb::EMPTY;
-            let mut c = 0;
-            for k in (1..BINS).rev() {
-                acc = acc.union(bins[k].bounds);
-                c += bins[k].count;
-                right_area[k] = acc.half_area();
-                right_count[k] = c;
-            }
-            let mut acc = Aabb::EMPTY;
-            let mut c = 0;
-            for k in 0..BINS - 1 {
-                acc = acc.union(bins[k].bounds);
-                c += bins[k].count;
-                let rc = right_count[k + 1];
-                if c == 0 || rc == 0 {
-                    continue;
-                }
-                let cost = acc.half_area() * c as f32 + right_area[k + 1] * rc as f32;
-                if cost < best.0 {
-                    best = (cost, axis, k);
-                }
-            }
-        }
+        let best = best_split(rs, &cb, block);
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
         let split_cost = traversal_cost() + best.0 / parent_area;
+        let leaf_cost = blocks_of(count as u32, block);
         let mid;
-        if best.0.is_finite() && (split_cost < count as f32 || count > MAX_LEAF) {
+        if best.0.is_finite() && (split_cost < leaf_cost || count > max_leaf) {
             let (axis, bin) = (best.1, best.2);
             let lo = cb.min[axis];
-            let scale = BINS as f32 / ext[axis] * 0.999_99;
-            // in-place partition
+            let scale = BINS as f32 * 0.999_99 / (cb.max[axis] - lo);
+            // in-place partition of the references and the order alike
             let mut l = 0;
-            let mut r = idx.len();
+            let mut r = rs.len();
             while l < r {
-                let c = centroids[idx[l] as usize][axis];
-                let b = (((c - lo) * scale) as usize).min(BINS - 1);
+                let b = (((rs[l].centre[axis] - lo) * scale) as usize).min(BINS - 1);
                 if b <= bin {
                     l += 1;
                 } else {
                     r -= 1;
+                    rs.swap(l, r);
                     idx.swap(l, r);
                 }
             }
             mid = start + l;
-        } else if count > MAX_LEAF {
+        } else if count > max_leaf {
             // centroids coincide: split by position in the array to bound leaf size
             mid = start + count / 2;
         } else {
-            make_leaf(&mut nodes);
+            nodes[ni] = Node::new(bounds, start as u32, count as u32);
             continue;
         }
         if mid == start || mid == end {
-            make_leaf(&mut nodes);
+            nodes[ni] = Node::new(bounds, start as u32, count as u32);
             continue;
         }
         let left = nodes.len();
@@ -216,6 +280,146 @@ fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>)
         work.push((left, start, mid, depth + 1));
     }
     (nodes, order)
+}
+
+/// Cost of one 8-wide node visit relative to one leaf test (a block of four triangles or one
+/// other primitive), in the collapse's SAH.
+const NODE8_COST: f32 = 1.0;
+
+/// The SAH-driven collapse of the binary tree into 8-wide nodes: for every binary node `n` and
+/// `j` in 1..=8, the least SAH cost of covering `n`'s subtree with at most `j` children of an
+/// 8-wide node, each child a leaf (a binary leaf, or a whole subtree of at most `max_leaf`
+/// primitives made one leaf, its primitives being contiguous) or an 8-wide node of its own.
+/// Computed bottom-up (children come after their parent in the binary array), then read
+/// top-down to emit the nodes.
+struct Collapse {
+    /// `cost[8 * n + j - 1]`: the least cost of `n`'s subtree in at most `j` slots.
+    cost: Vec<f32>,
+    /// How that cost is reached: [`Choice`].
+    choice: Vec<Choice>,
+    /// Per binary node: the split of the eight slots of its own 8-wide node between its left
+    /// and right children (slots for the left one).
+    node_split: Vec<u8>,
+    /// Per binary node: its primitive range (first, count).
+    ranges: Vec<(u32, u32)>,
+}
+
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Choice {
+    /// The subtree as one leaf.
+    Leaf,
+    /// The subtree as an 8-wide node.
+    Node,
+    /// `i` slots to the left child, the rest to the right.
+    Split(u8),
+}
+
+impl Collapse {
+    fn plan(bin: &[Node], block: u32, max_leaf: usize) -> Collapse {
+        let n = bin.len();
+        let mut c = Collapse {
+            cost: vec![f32::INFINITY; WIDTH * n],
+            choice: vec![Choice::Leaf; WIDTH * n],
+            node_split: vec![0; n],
+            ranges: vec![(0, 0); n],
+        };
+        // primitive ranges, bottom-up: a subtree's primitives are contiguous
+        for k in (0..n).rev() {
+            let b = &bin[k];
+            c.ranges[k] = if b.count() > 0 {
+                (b.first(), b.count())
+            } else {
+                let f = b.first() as usize;
+                match (c.ranges.get(f), c.ranges.get(f + 1)) {
+                    (Some(l), Some(r)) => (l.0.min(r.0), l.1 + r.1),
+                    _ => (0, 0),
+                }
+            };
+        }
+        for k in (0..n).rev() {
+            let b = &bin[k];
+            // boxes without area (points, lines) cost as the smallest positive area does, so
+            // that costs still grow with primitives and nodes (as for equal boxes)
+            let area = b.bounds().half_area().max(f32::MIN_POSITIVE);
+            let (_, count) = c.ranges[k];
+            let leaf_cost = area * blocks_of(count, block);
+            let base = WIDTH * k;
+            if b.count() > 0 {
+                for j in 0..WIDTH {
+                    c.cost[base + j] = leaf_cost;
+                    c.choice[base + j] = Choice::Leaf;
+                }
+                continue;
+            }
+            let (l, r) = (b.first() as usize, b.first() as usize + 1);
+            if r >= n {
+                continue;
+            }
+            // as an 8-wide node: the children share its eight slots
+            let mut best = (f32::INFINITY, 1u8);
+            for i in 1..WIDTH {
+                let v = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + WIDTH - i - 1];
+                if v < best.0 {
+                    best = (v, i as u8);
+                }
+            }
+            c.node_split[k] = best.1;
+            let node_cost = NODE8_COST * area + best.0;
+            // one slot: a leaf (when small enough) or a node
+            let (one, why) = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
+                (leaf_cost, Choice::Leaf)
+            } else {
+                (node_cost, Choice::Node)
+            };
+            c.cost[base] = one;
+            c.choice[base] = why;
+            for j in 2..=WIDTH {
+                let mut v = (c.cost[base + j - 2], c.choice[base + j - 2]);
+                for i in 1..j {
+                    let s = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + j - i - 1];
+                    if s < v.0 {
+                        v = (s, Choice::Split(i as u8));
+                    }
+                }
+                c.cost[base + j - 1] = v.0;
+                c.choice[base + j - 1] = v.1;
+            }
+        }
+        c
+    }
+
+    /// The primitive range of binary node `k`, as a leaf's (first, count).
+    fn range(&self, k: usize) -> (u32, u32) {
+        self.ranges.get(k).copied().unwrap_or((0, 0))
+    }
+
+    /// The children of the 8-wide node made for binary node `k`: (binary node, as a leaf).
+    fn node_children(&self, bin: &[Node], k: usize, out: &mut Vec<(usize, bool)>) {
+        match bin.get(k) {
+            Some(b) if b.count() == 0 => {
+                let f = b.first() as usize;
+                let i = self.node_split[k] as usize;
+                self.slots(bin, f, i, out);
+                self.slots(bin, f + 1, WIDTH - i, out);
+            }
+            // a leaf as the whole tree
+            _ => out.push((k, true)),
+        }
+    }
+
+    /// The children covering binary node `k` in at most `j` slots.
+    fn slots(&self, bin: &[Node], k: usize, j: usize, out: &mut Vec<(usize, bool)>) {
+        let j = j.clamp(1, WIDTH);
+        match self.choice.get(WIDTH * k + j - 1).copied() {
+            Some(Choice::Leaf) => out.push((k, true)),
+            Some(Choice::Split(i)) => {
+                let f = bin.get(k).map_or(0, |b| b.first() as usize);
+                self.slots(bin, f, i as usize, out);
+                self.slots(bin, f + 1, j - i as usize, out);
+            }
+            Some(Choice::Node) | None => out.push((k, false)),
+        }
+    }
 }
 
 /// A traversal stack: (node, unused, entry distance) per deferred inner node.
@@ -253,11 +457,27 @@ pub(crate) const WIDTH: usize = 8;
 /// Marks an unused child slot of a [`Node8`].
 const EMPTY: u32 = u32::MAX;
 
+/// Set in a leaf's `count` when the leaf's triangles are stored as blocks of four
+/// ([`crate::tri4::TriBlocks`]): then `child` is the leaf's first block rather than its first
+/// primitive, and the low bits are the number of triangles. Set only by
+/// [`Bvh::mark_block_leaves`].
+pub(crate) const LEAF_BLOCKS: u32 = 1 << 31;
+
+/// The number of triangles of a leaf of blocks, from the `count` a visit is handed; `None` for
+/// other leaves.
+#[inline(always)]
+pub(crate) fn block_leaf_len(count: usize) -> Option<usize> {
+    let c = u32::try_from(count).ok()?;
+    (c & LEAF_BLOCKS != 0 && c != EMPTY).then_some((c & !LEAF_BLOCKS) as usize)
+}
+
 /// An 8-wide node: the boxes of up to eight children in SoA layout, tested together with SIMD
 /// (one AVX vector per plane where the CPU has AVX, else two SSE vectors; same results).
 /// `bounds[a]` holds the children's minima on axis `a`, `bounds[3 + a]` their maxima.
 /// `count[i] == 0`: child `i` is the node `child[i]`; `count[i] == EMPTY`: unused slot (its box
-/// is empty, so it is never hit); otherwise a leaf of `count[i]` primitives from `child[i]`.
+/// is empty, so it is never hit); with [`LEAF_BLOCKS`] set, a leaf of `count[i] & !LEAF_BLOCKS`
+/// triangles whose blocks start at block `child[i]`; otherwise a leaf of `count[i]` primitives
+/// from `child[i]`.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub(crate) struct Node8 {
@@ -371,52 +591,29 @@ impl Bvh {
     /// [`Bvh::build`] never splitting leaves of up to `leaf_min` primitives.
     pub fn build_with(boxes: &[Aabb], leaf_min: usize) -> (Bvh, Vec<u32>) {
         let (bin, order) = build_binary(boxes, leaf_min);
+        let block = block_size(leaf_min);
+        let plan = Collapse::plan(&bin, block, max_leaf(block));
         let mut nodes = Vec::with_capacity(bin.len() / 4 + 1);
         if !bin.is_empty() {
-            let bounds = |n: &Node| Aabb {
-                min: Vec3A::from_vec4(n.a),
-                max: Vec3A::from_vec4(n.b),
-            };
             // (binary node, Node8 slot to fill)
             nodes.push(Node8::empty());
             let mut work = vec![(0usize, 0usize)];
-            let mut kids: Vec<usize> = Vec::with_capacity(WIDTH);
+            let mut kids: Vec<(usize, bool)> = Vec::with_capacity(WIDTH);
             while let Some((bi, slot)) = work.pop() {
-                // gather up to eight children by opening the largest interior child
                 kids.clear();
-                if bin[bi].count() > 0 {
-                    kids.push(bi);
-                } else {
-                    let f = bin[bi].first() as usize;
-                    kids.extend([f, f + 1]);
-                    while kids.len() < WIDTH {
-                        let best = kids
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, &k)| bin.get(k).is_some_and(|n| n.count() == 0))
-                            .max_by(|a, b| {
-                                bounds(&bin[*a.1])
-                                    .half_area()
-                                    .total_cmp(&bounds(&bin[*b.1]).half_area())
-                            })
-                            .map(|(i, _)| i);
-                        let Some(i) = best else { break };
-                        let k = kids.swap_remove(i);
-                        let f = bin[k].first() as usize;
-                        kids.extend([f, f + 1]);
-                    }
-                }
+                plan.node_children(&bin, bi, &mut kids);
                 let mut n8 = Node8::empty();
-                for (i, &k) in kids.iter().enumerate() {
+                for (i, &(k, leaf)) in kids.iter().enumerate().take(WIDTH) {
                     let Some(n) = bin.get(k) else { continue };
-                    let b = bounds(n);
+                    let b = n.bounds();
                     for a in 0..3 {
                         n8.bounds[a][i] = b.min[a];
                         n8.bounds[3 + a][i] = b.max[a];
                     }
-                    if n.count() > 0 {
-                        n8.child[i] = n.first();
-                        n8.count[i] = n.count();
+                    if leaf {
+                        let (first, count) = plan.range(k);
+                        n8.child[i] = first;
+                        n8.count[i] = count;
                     } else {
                         let ni = nodes.len();
                         nodes.push(Node8::empty());
@@ -499,11 +696,13 @@ impl Bvh {
         let pre = RayPre::new(ray);
         let mut sp = 0usize;
         let mut cur = 0u32;
-        loop {
+        // the work is counted here and added once (not stored to memory per node)
+        let mut w = 0u64;
+        let t = 'run: loop {
             if let Some(node) = self.nodes.get(cur as usize) {
                 #[cfg(test)]
                 probe::NODES.with(|c| c.set(c.get() + 1));
-                *work += 1;
+                w += 1;
                 #[cfg(target_arch = "x86_64")]
                 let (tn, mut mask) = if AVX {
                     // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
@@ -523,10 +722,10 @@ impl Bvh {
                             continue;
                         }
                         if count != EMPTY {
-                            *work += count as u64;
+                            w += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
-                                return tmax;
+                                break 'run tmax;
                             }
                         }
                     }
@@ -551,10 +750,10 @@ impl Bvh {
                             ic[j & 7] = node.child[i];
                             ni += 1;
                         } else if count != EMPTY && tn[i] <= tmax {
-                            *work += count as u64;
+                            w += (count & !LEAF_BLOCKS) as u64;
                             tmax = visit(node.child[i] as usize, count as usize, tmax);
                             if tmax < 0.0 {
-                                return tmax;
+                                break 'run tmax;
                             }
                         }
                     }
@@ -576,7 +775,7 @@ impl Bvh {
             // pop the next inner node that may still hold a closer hit
             loop {
                 if sp == 0 {
-                    return tmax;
+                    break 'run tmax;
                 }
                 sp -= 1;
                 let (c, _, d) = stack[sp];
@@ -585,10 +784,32 @@ impl Bvh {
                     break;
                 }
             }
+        };
+        *work += w;
+        t
+    }
+
+    /// Gives each leaf `(first primitive, count)` to `blocks`, which may store the leaf's
+    /// primitives as blocks and return the first block's index: the leaf then names that block
+    /// and is marked with [`LEAF_BLOCKS`]. Leaves already marked are left alone.
+    pub fn mark_block_leaves(&mut self, mut blocks: impl FnMut(usize, usize) -> Option<u32>) {
+        for n in &mut self.nodes {
+            for i in 0..WIDTH {
+                let c = n.count[i];
+                if c == 0 || c == EMPTY || c & LEAF_BLOCKS != 0 {
+                    continue;
+                }
+                if let Some(b) = blocks(n.child[i] as usize, c as usize) {
+                    n.child[i] = b;
+                    n.count[i] = c | LEAF_BLOCKS;
+                }
+            }
         }
     }
 
-    /// Every leaf as (first primitive, count).
+    /// Every leaf as (first primitive, count); after [`Bvh::mark_block_leaves`], a marked leaf
+    /// appears as (first block, count with [`LEAF_BLOCKS`]).
+    #[cfg(test)]
     pub fn leaves(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         self.nodes.iter().flat_map(|n| {
             (0..WIDTH).filter_map(move |i| {
@@ -719,5 +940,106 @@ mod tests {
         });
         found.sort();
         assert_eq!(found, (0..10).map(|z| z * 100 + 43).collect::<Vec<u32>>());
+    }
+}
+
+#[cfg(test)]
+mod stats_report {
+    use super::*;
+    use crate::{raysets, Scene};
+
+    /// Shape of the hierarchy and work per ray on a big mesh, for tuning:
+    /// `RT_MESH=/tmp/knot600k.obj cargo test --release -p ring_tracer_kernel bvh_stats_report --
+    /// --ignored --nocapture`. Not a check.
+    #[test]
+    #[ignore]
+    fn bvh_stats_report() {
+        let Ok(path) = std::env::var("RT_MESH") else {
+            return;
+        };
+        let t = std::time::Instant::now();
+        let scene = Scene::load(std::path::Path::new(&path)).unwrap();
+        println!("load + build {:.3} s", t.elapsed().as_secs_f64());
+        let boxes: Vec<Aabb> = scene
+            .triangles()
+            .iter()
+            .map(|t| Aabb::EMPTY.grow(t[0]).grow(t[1]).grow(t[2]))
+            .collect();
+        for _ in 0..3 {
+            let t = std::time::Instant::now();
+            let (b, _) = Bvh::build_with(&boxes, LEAF_MIN_TRIANGLES);
+            println!(
+                "BVH build alone {:.3} s ({} nodes)",
+                t.elapsed().as_secs_f64(),
+                b.nodes.len()
+            );
+        }
+        let bvh = &scene.bvh;
+        let leaves: Vec<(usize, usize)> = bvh
+            .leaves()
+            .map(|(f, c)| scene.tri_blocks.prims(f, c))
+            .collect();
+        let prims: usize = leaves.iter().map(|l| l.1).sum();
+        let blocks: usize = leaves.iter().map(|l| l.1.div_ceil(4)).sum();
+        let mut slots = 0;
+        for n in &bvh.nodes {
+            slots += n.count.iter().filter(|&&c| c != EMPTY).count();
+        }
+        println!(
+            "nodes {} leaves {} prims {} blocks {} fill {:.2} children/node",
+            bvh.nodes.len(),
+            leaves.len(),
+            prims,
+            blocks,
+            slots as f64 / bvh.nodes.len() as f64
+        );
+        let rays = raysets::incoherent(scene.bounds(), 1 << 18);
+        let mut s = Scratch::new();
+        for any in [false, true] {
+            probe::NODES.with(|c| c.set(0));
+            let mut leafv = 0u64;
+            for r in &rays {
+                bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, |f, c, t| {
+                    leafv += 1;
+                    let (f, c) = scene.tri_blocks.prims(f, c);
+                    let mut tm = t;
+                    for sh in &scene.geom.shapes[f..f + c] {
+                        if let Some(x) = scene.geom.hit(sh, r, 0.0, tm) {
+                            tm = x;
+                            if any {
+                                return -1.0;
+                            }
+                        }
+                    }
+                    tm
+                });
+            }
+            let nodes = probe::NODES.with(|c| c.get());
+            println!(
+                "incoherent any={any}: nodes/ray {:.2} leaves/ray {:.2}",
+                nodes as f64 / rays.len() as f64,
+                leafv as f64 / rays.len() as f64
+            );
+        }
+        for round in 0..2 {
+            let t = std::time::Instant::now();
+            let hits = rays
+                .iter()
+                .filter(|r| scene.intersect_with(r, f32::INFINITY, &mut s).is_some())
+                .count();
+            let a = t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            let occ = rays
+                .iter()
+                .filter(|r| scene.occluded_with(r, f32::INFINITY, &mut s))
+                .count();
+            let b = t.elapsed().as_secs_f64();
+            let m = rays.len() as f64 / 1e6;
+            println!(
+                "round {round}: closest {:.2} Mrays/s ({hits}), any {:.2} Mrays/s ({occ})",
+                m / a,
+                m / b
+            );
+        }
     }
 }

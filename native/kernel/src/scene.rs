@@ -275,30 +275,37 @@ impl Scene {
         let lanes = RayLanes::new(ray);
         let mut best = self
             .bvh
-            .traverse::<true>(ray, tmax, scratch, |first, count, tmax| {
-                let mut tm = tmax;
-                if let Some(leaf) = blocks.leaf(first, count) {
-                    for (k, b) in leaf.iter().enumerate() {
-                        if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
-                            tm = t;
-                            prim = (first + 4 * k + i) as u32;
+            // inlined into the traversal: a call there would spill the ray's vectors per node
+            .traverse::<true>(
+                ray,
+                tmax,
+                scratch,
+                #[inline(always)]
+                |first, count, tmax| {
+                    let mut tm = tmax;
+                    if let Some(leaf) = blocks.leaf(first, count) {
+                        for b in leaf {
+                            if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
+                                tm = t;
+                                prim = b.prim(i);
+                            }
+                        }
+                        return tm;
+                    }
+                    if let Some(range) = shapes.get(first..first + count) {
+                        for (k, s) in range.iter().enumerate() {
+                            if mailbox.seen(s) {
+                                continue;
+                            }
+                            if let Some(t) = geom.hit(s, ray, 0.0, tm) {
+                                tm = t;
+                                prim = (first + k) as u32;
+                            }
                         }
                     }
-                    return tm;
-                }
-                if let Some(range) = shapes.get(first..first + count) {
-                    for (k, s) in range.iter().enumerate() {
-                        if mailbox.seen(s) {
-                            continue;
-                        }
-                        if let Some(t) = geom.hit(s, ray, 0.0, tm) {
-                            tm = t;
-                            prim = (first + k) as u32;
-                        }
-                    }
-                }
-                tm
-            });
+                    tm
+                },
+            );
         let mut instance = Hit::NO_INSTANCE;
         if !self.instances.is_empty() {
             if let Some((t, i, p)) = self.intersect_instances(ray, best, scratch) {
@@ -491,13 +498,16 @@ impl Scene {
         let mut mailbox = Mailbox::default();
         let blocks = &self.tri_blocks;
         let lanes = RayLanes::new(ray);
-        let r = self
-            .bvh
-            .traverse::<false>(ray, tmax, scratch, |first, count, tmax| {
+        let r = self.bvh.traverse::<false>(
+            ray,
+            tmax,
+            scratch,
+            #[inline(always)]
+            |first, count, tmax| {
                 if let Some(leaf) = blocks.leaf(first, count) {
-                    for (k, b) in leaf.iter().enumerate() {
+                    for b in leaf {
                         if let Some(i) = b.any(&lanes, 0.0, tmax) {
-                            found = (Hit::NO_INSTANCE, (first + 4 * k + i) as u32);
+                            found = (Hit::NO_INSTANCE, b.prim(i));
                             return -1.0;
                         }
                     }
@@ -515,7 +525,8 @@ impl Scene {
                     }
                 }
                 tmax
-            });
+            },
+        );
         let r = if r >= 0.0 && !self.instances.is_empty() {
             match self.instances_hit::<false>(ray, tmax, scratch) {
                 Some((_, i, p)) => {
@@ -1044,7 +1055,8 @@ impl SceneBuilder {
             ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
         self.geom.shapes = shapes;
         self.geom.polygons.shrink_to_fit();
-        let tri_blocks = TriBlocks::build(&bvh, &self.geom.shapes);
+        let mut bvh = bvh;
+        let tri_blocks = TriBlocks::build(&mut bvh, &self.geom.shapes);
         let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
         let instances: Vec<Instance> = order
             .iter()
@@ -1135,6 +1147,7 @@ mod tuning {
                             f32::INFINITY,
                             &mut sc,
                             |first, count, tmax| {
+                                let (first, count) = scene.tri_blocks.prims(first, count);
                                 let mut tm = tmax;
                                 for (k, s) in
                                     scene.geom.shapes[first..first + count].iter().enumerate()
@@ -1172,6 +1185,7 @@ mod tuning {
                             scene
                                 .bvh
                                 .traverse::<false>(&sr, d, &mut sc, |first, count, tmax| {
+                                    let (first, count) = scene.tri_blocks.prims(first, count);
                                     for s in &scene.geom.shapes[first..first + count] {
                                         prims += 1;
                                         if scene.geom.hit(s, &sr, 0.0, tmax).is_some() {

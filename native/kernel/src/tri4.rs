@@ -1,6 +1,8 @@
 //! Triangles four at a time: the triangles of a BVH leaf made only of triangles are also kept
-//! in blocks of four in SoA layout ([`Tri4`], 144 bytes), and a ray meets a block's four in one
-//! SIMD Möller–Trumbore test.
+//! in blocks of four in SoA layout ([`Tri4`], 160 bytes), and a ray meets a block's four in one
+//! SIMD Möller–Trumbore test. The blocks are stored in the order of the BVH's leaves, and such
+//! a leaf names its blocks itself (see [`crate::bvh::LEAF_BLOCKS`]): no lookup between the node
+//! and the triangles.
 //!
 //! Each lane computes exactly what [`crate::geometry::hit_triangle`] computes, operation for
 //! operation (the same products, sums in the same order, one IEEE division), so the hits are
@@ -13,13 +15,15 @@ use crate::geometry::Shape;
 use crate::ray::Ray;
 use glam::{Vec3A, Vec4};
 
-/// Four triangles (`v0`, edges `e1`, `e2`), each coordinate a lane vector.
+/// Four triangles (`v0`, edges `e1`, `e2`), each coordinate a lane vector, and the index of
+/// the first one in the primitive array (lane `i` is primitive `first + i`).
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(16))]
+#[repr(C, align(32))]
 pub(crate) struct Tri4 {
     v0: [Vec4; 3],
     e1: [Vec4; 3],
     e2: [Vec4; 3],
+    first: u32,
 }
 
 /// A ray's origin and direction splatted across lanes, made once per ray.
@@ -41,12 +45,14 @@ impl RayLanes {
 }
 
 impl Tri4 {
-    /// A block of up to four triangles `(v0, e1, e2)`; missing ones are degenerate.
-    fn new(tris: &[(Vec3A, Vec3A, Vec3A)]) -> Tri4 {
+    /// A block of up to four triangles `(v0, e1, e2)`, primitives `first..`; missing ones are
+    /// degenerate.
+    fn new(tris: &[(Vec3A, Vec3A, Vec3A)], first: u32) -> Tri4 {
         let mut b = Tri4 {
             v0: [Vec4::ZERO; 3],
             e1: [Vec4::ZERO; 3],
             e2: [Vec4::ZERO; 3],
+            first,
         };
         for (i, &(v0, e1, e2)) in tris.iter().take(4).enumerate() {
             for a in 0..3 {
@@ -112,6 +118,12 @@ impl Tri4 {
         Some((best, t[best]))
     }
 
+    /// The primitive index of lane `lane`.
+    #[inline(always)]
+    pub fn prim(&self, lane: usize) -> u32 {
+        self.first + lane as u32
+    }
+
     /// The first lane hit in `(tmin, tmax)`, if any (any-hit queries).
     #[inline(always)]
     pub fn any(&self, r: &RayLanes, tmin: f32, tmax: f32) -> Option<usize> {
@@ -120,51 +132,55 @@ impl Tri4 {
     }
 }
 
-/// Marks a leaf that is not made of triangles only.
-const NONE: u32 = u32::MAX;
-
-/// The blocks of a BVH's all-triangle leaves, found by the leaf's first primitive.
+/// The blocks of a BVH's all-triangle leaves, in the order of the leaves.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct TriBlocks {
-    /// Per primitive index: the first block of the leaf starting there, or [`NONE`].
-    start: Vec<u32>,
     blocks: Vec<Tri4>,
 }
 
 impl TriBlocks {
-    /// Blocks for every leaf of `bvh` over `shapes` (in BVH order) that holds triangles only.
-    pub fn build(bvh: &Bvh, shapes: &[Shape]) -> TriBlocks {
-        let mut start = vec![NONE; shapes.len()];
+    /// Blocks for every leaf of `bvh` over `shapes` (in BVH order) that holds triangles only;
+    /// each such leaf is rewritten to name its blocks ([`Bvh::mark_block_leaves`]).
+    pub fn build(bvh: &mut Bvh, shapes: &[Shape]) -> TriBlocks {
         let mut blocks = Vec::new();
         let mut tris = Vec::with_capacity(8);
-        for (first, count) in bvh.leaves() {
-            let Some(range) = shapes.get(first..first + count) else {
-                continue;
-            };
+        bvh.mark_block_leaves(|first, count| {
+            let range = shapes.get(first..first + count)?;
             tris.clear();
             for s in range {
                 if let Shape::Triangle { v0, e1, e2 } = *s {
                     tris.push((v0, e1, e2));
                 }
             }
-            if tris.len() != count || count == 0 || blocks.len() >= NONE as usize - 8 {
-                continue;
+            if tris.len() != count || count == 0 || blocks.len() >= (u32::MAX / 2) as usize {
+                return None;
             }
-            start[first] = blocks.len() as u32;
-            blocks.extend(tris.chunks(4).map(Tri4::new));
-        }
-        TriBlocks { start, blocks }
+            let at = blocks.len() as u32;
+            blocks.extend(
+                tris.chunks(4)
+                    .enumerate()
+                    .map(|(k, t)| Tri4::new(t, (first + 4 * k) as u32)),
+            );
+            Some(at)
+        });
+        TriBlocks { blocks }
     }
 
-    /// The blocks of the leaf `(first, count)` if it holds triangles only.
+    /// The blocks of the leaf `(child, count)` handed to a traversal's visit, if it is a leaf of
+    /// triangle blocks ([`crate::bvh::LEAF_BLOCKS`] set in `count`).
     #[inline(always)]
-    pub fn leaf(&self, first: usize, count: usize) -> Option<&[Tri4]> {
-        let s = *self.start.get(first)?;
-        if s == NONE {
-            return None;
+    pub fn leaf(&self, child: usize, count: usize) -> Option<&[Tri4]> {
+        let n = crate::bvh::block_leaf_len(count)?;
+        self.blocks.get(child..child + n.div_ceil(4))
+    }
+
+    /// The primitive range `(first, count)` of any leaf `(child, count)` handed to a visit.
+    #[cfg(test)]
+    pub fn prims(&self, child: usize, count: usize) -> (usize, usize) {
+        match crate::bvh::block_leaf_len(count) {
+            Some(n) => (self.blocks.get(child).map_or(0, |b| b.first as usize), n),
+            None => (child, count),
         }
-        let s = s as usize;
-        self.blocks.get(s..s + count.div_ceil(4))
     }
 }
 
@@ -199,7 +215,7 @@ mod tests {
                 })
                 .collect();
             let n = 1 + round % 4;
-            let b = Tri4::new(&tris[..n]);
+            let b = Tri4::new(&tris[..n], 0);
             // aimed near a triangle's corner or centre, so that about half hit
             let o = v(&mut seed) * 3.0;
             let (v0, e1, e2) = tris[round % n];
@@ -233,7 +249,7 @@ mod tests {
     #[test]
     fn equal_distances_go_to_the_first_lane() {
         let t = (Vec3A::ZERO, Vec3A::X, Vec3A::Y);
-        let b = Tri4::new(&[(Vec3A::splat(5.0), Vec3A::X, Vec3A::Y), t, t]);
+        let b = Tri4::new(&[(Vec3A::splat(5.0), Vec3A::X, Vec3A::Y), t, t], 0);
         let ray = Ray::new(Vec3A::new(0.25, 0.25, 1.0), -Vec3A::Z);
         let got = b.closest(&RayLanes::new(&ray), 0.0, f32::INFINITY);
         assert_eq!(got, Some((1, 1.0)));

@@ -1,0 +1,159 @@
+//! Single-ray rates of RingTracer's kernel and Embree per CPU second, for a busy machine:
+//! `cargo run --release -p ring_tracer_embree_bench --bin cpu_ratio -- [--rounds R] MESH.obj...`
+//!
+//! The same rays as `embree_bench` (1024 x 1024 primary rays in tiles, as many incoherent ones,
+//! closest hit and any hit), one thread, ours and Embree alternating. Each cell is timed by the
+//! process's CPU time (`/proc/self/stat`, 10 ms ticks) as well as by the clock: when other
+//! programs share the cores, wall-clock rates swing with their load, while CPU-second rates
+//! only feel what they do to the caches. The ratio compares the best rounds.
+
+// the harness module of `embree_bench`; the packet calls are not used here
+#[allow(dead_code)]
+#[path = "../embree.rs"]
+mod embree;
+
+use embree::{flat, Call, Embree};
+use ring_tracer_kernel::{raysets, Ray, Scene, Scratch};
+use std::path::Path;
+use std::time::Instant;
+
+/// This process's CPU time in seconds (user + system), 0 where `/proc` is missing.
+fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    f.iter().sum::<f64>() / 100.0
+}
+
+/// (wall seconds, CPU seconds, result) of `f`.
+fn timed(f: impl FnOnce() -> u64) -> (f64, f64, u64) {
+    let (t, c) = (Instant::now(), cpu_seconds());
+    let r = f();
+    (t.elapsed().as_secs_f64(), cpu_seconds() - c, r)
+}
+
+fn bench(path: &str, rounds: usize) {
+    let mut scene = None;
+    let (lw, lc, _) = timed(|| {
+        scene = Scene::load(Path::new(path)).ok();
+        0
+    });
+    let Some(scene) = scene else {
+        eprintln!("{path}: cannot load");
+        return;
+    };
+    let tris = scene.triangles();
+    let mut emb = None;
+    let (ew, ec, _) = timed(|| {
+        emb = Some(Embree::new(&tris));
+        0
+    });
+    let embree = match emb {
+        Some(Ok(e)) => e,
+        Some(Err(e)) => {
+            eprintln!("Embree: {e}");
+            return;
+        }
+        None => return,
+    };
+    println!(
+        "\n{path}: {} triangles; ours load + BVH {lw:.2} s ({lc:.2} CPU s), Embree BVH {ew:.2} s ({ec:.2} CPU s)",
+        tris.len()
+    );
+    let b = scene.bounds();
+    let size = 1024;
+    let primary = raysets::primary(b, size);
+    let tiled: Vec<Ray> = raysets::tile_order(size)
+        .iter()
+        .map(|&i| primary[i as usize])
+        .collect();
+    let incoherent = raysets::incoherent(b, primary.len());
+    let (ft, fi) = (flat(&tiled), flat(&incoherent));
+    let rows: [(&str, &[Ray], &[f32], bool); 3] = [
+        ("primary", &tiled, &ft, false),
+        ("incoherent", &incoherent, &fi, false),
+        ("incoherent, any hit", &incoherent, &fi, true),
+    ];
+    let n = primary.len() as f64 / 1e6;
+    println!(
+        "| rays | ours, Mrays/CPU s | Embree rtcIntersect1 | ours / E1 (CPU) | ours / E1 (wall) |"
+    );
+    println!("|---|---|---|---|---|");
+    for (label, rays, fr, any) in rows {
+        let (mut o, mut e) = (Vec::new(), Vec::new());
+        let mut hits = (0, 0);
+        for _ in 0..rounds {
+            let r = timed(|| {
+                let mut s = Scratch::new();
+                rays.iter()
+                    .filter(|r| {
+                        if any {
+                            scene.occluded_with(r, f32::INFINITY, &mut s)
+                        } else {
+                            scene.intersect_with(r, f32::INFINITY, &mut s).is_some()
+                        }
+                    })
+                    .count() as u64
+            });
+            hits.0 = r.2;
+            o.push((n / r.0, n / r.1.max(0.01)));
+            let call = if any {
+                Call::Occluded1
+            } else {
+                Call::Intersect1
+            };
+            let r = timed(|| embree.trace(call, fr));
+            hits.1 = r.2;
+            e.push((n / r.0, n / r.1.max(0.01)));
+        }
+        let best = |v: &[(f64, f64)], k: usize| {
+            v.iter()
+                .map(|x| if k == 0 { x.0 } else { x.1 })
+                .fold(0.0, f64::max)
+        };
+        let range = |v: &[(f64, f64)]| {
+            let lo = v.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+            format!("{lo:.2}-{:.2}", best(v, 1))
+        };
+        println!(
+            "| {label} | {} | {} | {:.2} | {:.2} |",
+            range(&o),
+            range(&e),
+            best(&o, 1) / best(&e, 1),
+            best(&o, 0) / best(&e, 0)
+        );
+        if hits.0.abs_diff(hits.1) > rays.len() as u64 / 10_000 + 2 {
+            println!("  (hit counts differ: ours {}, Embree {})", hits.0, hits.1);
+        }
+    }
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mut rounds = 3;
+    let mut meshes = Vec::new();
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
+            _ => meshes.push(a),
+        }
+    }
+    if meshes.is_empty() {
+        eprintln!("usage: cpu_ratio [--rounds R] MESH.obj...");
+        std::process::exit(2);
+    }
+    if let Err(e) = Embree::version() {
+        eprintln!("{e}");
+        std::process::exit(1);
+    }
+    for m in &meshes {
+        bench(m, rounds.max(1));
+    }
+}
