@@ -56,6 +56,7 @@ pub mod limits;
 pub mod material;
 pub mod nff;
 pub mod obj;
+mod packet;
 pub mod polygon;
 pub mod ray;
 pub mod raysets;
