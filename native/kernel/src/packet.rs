@@ -23,6 +23,7 @@
 //! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time.
 
 use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
+use crate::geometry::Shape;
 use crate::ray::Ray;
 use crate::scene::{Hit, Mailbox, Scene};
 use crate::tri4::RayLanes;
@@ -33,6 +34,32 @@ pub(crate) const PACKET: usize = 16;
 
 /// Fewer rays of one direction-sign class are traced one by one.
 pub(crate) const MIN_GROUP: usize = 3;
+
+/// A group whose unit directions differ by more than this on some axis, or whose origins lie
+/// further apart than [`ORIGIN_SPREAD`] times the scene's size, is not coherent: its intervals
+/// would let nearly every box through, so its rays are traced one by one.
+const DIR_SPREAD: f32 = 0.125;
+
+/// See [`DIR_SPREAD`].
+const ORIGIN_SPREAD: f32 = 0.01;
+
+/// Whether the rays `members` of `rays` are coherent enough for a packet (see [`DIR_SPREAD`]).
+fn coherent(scene: &Scene, rays: &[Ray], members: u32) -> bool {
+    let (mut dlo, mut dhi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
+    let (mut olo, mut ohi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
+    for (i, r) in rays.iter().enumerate() {
+        if members & (1 << i) != 0 {
+            dlo = dlo.min(r.dir);
+            dhi = dhi.max(r.dir);
+            olo = olo.min(r.origin);
+            ohi = ohi.max(r.origin);
+        }
+    }
+    let b = scene.bounds();
+    let size = (b.max - b.min).max_element();
+    (dhi - dlo).max_element() <= DIR_SPREAD
+        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
+}
 
 /// The shared plane choice and the rays' intervals for the packet's node test.
 #[derive(Clone, Copy, Debug)]
@@ -53,6 +80,33 @@ struct Lane {
     lanes: RayLanes,
     tmax: f32,
     prim: u32,
+}
+
+/// The rays of a packet in SoA layout, for the leaf tests across rays (unused lanes: zeros,
+/// masked off by their bound of -inf).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+struct Soa {
+    o: [[f32; PACKET]; 3],
+    d: [[f32; PACKET]; 3],
+    inv: [[f32; PACKET]; 3],
+    oinv: [[f32; PACKET]; 3],
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests set this to run the SSE traversal on a machine with AVX.
+    static FORCE_SSE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether the AVX traversal runs (the CPU has AVX, and tests did not ask for SSE).
+#[inline(always)]
+fn use_avx() -> bool {
+    #[cfg(test)]
+    if FORCE_SSE.with(|f| f.get()) {
+        return false;
+    }
+    has_avx()
 }
 
 /// The three direction-sign bits of a ray (bit `a` set: negative on axis `a`), as the
@@ -154,18 +208,165 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
     (out, mask)
 }
 
+/// An all-triangle leaf (child `i` of `node`: `tris`, from primitive `first`) against the rays
+/// `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own box
+/// test (the operations of [`enters`], lane by lane), then each triangle in turn against the
+/// rays that entered, with the operations of the four-triangle test of [`crate::tri4`] (which
+/// are those of the one-triangle test) on the same values, so the same distances; among equal
+/// distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
+/// entered in `entered` (see [`traverse`]).
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn leaf_avx(
+    node: &Node8,
+    i: usize,
+    f: &Frustum,
+    soa: &Soa,
+    half: usize,
+    lanes: &mut [Lane],
+    tris: &[Shape],
+    first: usize,
+    entered: &mut Vec<(usize, f32, u32)>,
+) {
+    use std::arch::x86_64::*;
+    let base = 8 * (half & 1);
+    let mut tm = [f32::NEG_INFINITY; 8];
+    let mut limit = [f32::NEG_INFINITY; 8];
+    let mut prim = [u32::MAX; 8];
+    for j in 0..8 {
+        if let Some(l) = lanes.get(base + j) {
+            tm[j] = l.tmax;
+            prim[j] = l.prim;
+            limit[j] = if l.prim == u32::MAX {
+                l.tmax
+            } else {
+                l.tmax.next_up()
+            };
+        }
+    }
+    let p = node.planes();
+    // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
+    // each unaligned load reads 8 f32 inside one row; `tm` and `limit` are arrays of 8 f32.
+    let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
+    let mut tn = _mm256_setzero_ps();
+    // SAFETY: see above.
+    let mut tf = unsafe { _mm256_loadu_ps(tm.as_ptr()) };
+    for a in 0..3 {
+        let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
+        let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
+        let x = _mm256_set1_ps(p[f.far[a] & 7][i & 7]);
+        tn = _mm256_max_ps(tn, _mm256_sub_ps(_mm256_mul_ps(n, inv), oinv));
+        tf = _mm256_min_ps(tf, _mm256_sub_ps(_mm256_mul_ps(x, inv), oinv));
+    }
+    let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
+    let mask = _mm256_movemask_ps(inside) as u32;
+    if mask == 0 {
+        return;
+    }
+    let mut tns = [0.0f32; 8];
+    // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
+    unsafe { _mm256_storeu_ps(tns.as_mut_ptr(), tn) };
+    let mut m = mask;
+    while m != 0 {
+        let j = m.trailing_zeros() as usize & 7;
+        m &= m - 1;
+        entered.push((base + j, tns[j], tris.len() as u32));
+    }
+    let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
+    let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let mut changed = false;
+    for (k, s) in tris.iter().enumerate() {
+        let Shape::Triangle { v0, e1, e2 } = *s else {
+            continue;
+        };
+        let sp = |x: f32| _mm256_set1_ps(x);
+        let (e1x, e1y, e1z) = (sp(e1.x), sp(e1.y), sp(e1.z));
+        let (e2x, e2y, e2z) = (sp(e2.x), sp(e2.y), sp(e2.z));
+        let (mul, sub, add) = (_mm256_mul_ps, _mm256_sub_ps, _mm256_add_ps);
+        // p = dir x e2
+        let px = sub(mul(dy, e2z), mul(dz, e2y));
+        let py = sub(mul(dz, e2x), mul(dx, e2z));
+        let pz = sub(mul(dx, e2y), mul(dy, e2x));
+        let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
+        let inv = _mm256_div_ps(one, det);
+        let sx = sub(ox, sp(v0.x));
+        let sy = sub(oy, sp(v0.y));
+        let sz = sub(oz, sp(v0.z));
+        let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
+        // q = s x e1
+        let qx = sub(mul(sy, e1z), mul(sz, e1y));
+        let qy = sub(mul(sz, e1x), mul(sx, e1z));
+        let qz = sub(mul(sx, e1y), mul(sy, e1x));
+        let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
+        let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
+        // SAFETY: `limit` is 8 f32.
+        let lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+        let and = _mm256_and_ps;
+        let ok = and(
+            and(
+                and(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero), inside),
+                and(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(u, one),
+                ),
+            ),
+            and(
+                and(
+                    _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero),
+                    _mm256_cmp_ps::<_CMP_NGT_UQ>(add(u, v), one),
+                ),
+                and(
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, lim),
+                ),
+            ),
+        );
+        let mut hit = _mm256_movemask_ps(ok) as u32;
+        if hit == 0 {
+            continue;
+        }
+        let mut ts = [0.0f32; 8];
+        // SAFETY: `ts` is 8 f32, the 32 bytes an unaligned store writes.
+        unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
+        let pk = (first + k) as u32;
+        while hit != 0 {
+            let j = hit.trailing_zeros() as usize & 7;
+            hit &= hit - 1;
+            if ts[j] < tm[j] || pk < prim[j] {
+                tm[j] = ts[j];
+                prim[j] = pk;
+                limit[j] = ts[j].next_up();
+                changed = true;
+            }
+        }
+    }
+    if changed {
+        for j in 0..8 {
+            if let Some(l) = lanes.get_mut(base + j) {
+                l.tmax = tm[j];
+                l.prim = prim[j];
+            }
+        }
+    }
+}
+
 /// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
-/// `i < min(rays.len(), out.len())`. Sign groups smaller than `min_group` rays are traced one
-/// ray at a time; with `min_group <= 1` every ray goes through the packet traversal, and then
-/// the work a ray adds to `scratch.work` does not depend on the other rays of its packet (see
-/// [`traverse`]).
+/// `i < min(rays.len(), out.len())`. Unless `every_ray`, sign groups of fewer than
+/// [`MIN_GROUP`] rays or of incoherent ones are traced one ray at a time; with `every_ray` all
+/// go through the packet traversal, and then the work a ray adds to `scratch.work` does not
+/// depend on the other rays of its packet (see [`traverse`]).
 pub(crate) fn intersect(
     scene: &Scene,
     rays: &[Ray],
     tmax: f32,
     scratch: &mut Scratch,
     out: &mut [Option<Hit>],
-    min_group: usize,
+    every_ray: bool,
 ) {
     let n = rays.len().min(out.len());
     for start in (0..n).step_by(PACKET) {
@@ -180,7 +381,9 @@ pub(crate) fn intersect(
             if members == 0 {
                 continue;
             }
-            if (members.count_ones() as usize) < min_group || scene.bvh.nodes.is_empty() {
+            let single = !every_ray
+                && ((members.count_ones() as usize) < MIN_GROUP || !coherent(scene, rays, members));
+            if single || scene.bvh.nodes.is_empty() {
                 let mut m = members;
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
@@ -222,6 +425,12 @@ fn group_closest(
         tmax,
         prim: u32::MAX,
     }; PACKET];
+    let mut soa = Soa {
+        o: [[0.0; PACKET]; 3],
+        d: [[0.0; PACKET]; 3],
+        inv: [[0.0; PACKET]; 3],
+        oinv: [[0.0; PACKET]; 3],
+    };
     let mut idx = [0usize; PACKET];
     let mut k = 0usize;
     let mut m = members;
@@ -240,20 +449,24 @@ fn group_closest(
             f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
             f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
             f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
+            soa.o[a][k & 15] = r.origin[a];
+            soa.d[a][k & 15] = r.dir[a];
+            soa.inv[a][k & 15] = l.inv[a];
+            soa.oinv[a][k & 15] = l.oinv[a];
         }
         *slot = i;
         k += 1;
     }
     let lanes = &mut lanes[..k];
     #[cfg(target_arch = "x86_64")]
-    if has_avx() {
+    if use_avx() {
         // SAFETY: the CPU has AVX (checked just above).
-        unsafe { traverse_avx(scene, rays, &idx[..k], &f, lanes, scratch) };
+        unsafe { traverse_avx(scene, rays, &idx[..k], &f, &soa, lanes, scratch) };
     } else {
-        traverse::<false>(scene, rays, &idx[..k], &f, lanes, scratch);
+        traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    traverse::<false>(scene, rays, &idx[..k], &f, lanes, scratch);
+    traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
     for (l, &i) in lanes.iter().zip(idx.iter()) {
         if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
             *o = scene.finish_closest(r, l.tmax, l.prim, scratch);
@@ -272,10 +485,11 @@ unsafe fn traverse_avx(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
+    soa: &Soa,
     lanes: &mut [Lane],
     scratch: &mut Scratch,
 ) {
-    traverse::<true>(scene, rays, idx, f, lanes, scratch);
+    traverse::<true>(scene, rays, idx, f, soa, lanes, scratch);
 }
 
 /// The packet traversal of the scene's own BVH; leaves each ray's nearest hit in its lane.
@@ -290,10 +504,12 @@ fn traverse<const AVX: bool>(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
+    soa: &Soa,
     lanes: &mut [Lane],
     scratch: &mut Scratch,
 ) {
     let nodes = &scene.bvh.nodes;
+    let shapes = &scene.geom.shapes;
     let mut mailboxes = [Mailbox::default(); PACKET];
     let mut tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
     let stack = &mut scratch.stack;
@@ -333,6 +549,30 @@ fn traverse<const AVX: bool>(
                     ni += 1;
                 } else if c != EMPTY && tn[i] <= tmax {
                     let first = child[i] as usize;
+                    #[cfg(target_arch = "x86_64")]
+                    if AVX && scene.tri_blocks.leaf(first, c as usize).is_some() {
+                        if let Some(tris) = shapes.get(first..first + c as usize) {
+                            for half in 0..lanes.len().div_ceil(8) {
+                                // SAFETY: AVX is only set by traverse_avx, which runs where
+                                // the CPU has it.
+                                unsafe {
+                                    leaf_avx(
+                                        node,
+                                        i,
+                                        f,
+                                        soa,
+                                        half,
+                                        lanes,
+                                        tris,
+                                        first,
+                                        &mut entered,
+                                    )
+                                };
+                            }
+                            tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+                            continue;
+                        }
+                    }
                     let mut new_max = f32::NEG_INFINITY;
                     let lanes_mb = lanes.iter_mut().zip(idx).zip(mailboxes.iter_mut());
                     for (lane, ((l, &ri), mb)) in lanes_mb.enumerate() {
@@ -393,7 +633,6 @@ fn traverse<const AVX: bool>(
 mod tests {
     use super::*;
     use crate::camera::Camera;
-    use crate::geometry::Shape;
     use crate::material::Material;
     use crate::scene::SceneBuilder;
     use glam::Vec3A;
@@ -443,7 +682,7 @@ mod tests {
         let mut got = vec![None; rays.len()];
         scene.intersect_packet(rays, tmax, &mut scratch, &mut got);
         let mut all = vec![None; rays.len()];
-        intersect(scene, rays, tmax, &mut scratch, &mut all, 1);
+        intersect(scene, rays, tmax, &mut scratch, &mut all, true);
         for (i, (w, a)) in want.iter().zip(&all).enumerate() {
             assert!(
                 same(scene, *w, *a),
@@ -532,6 +771,10 @@ mod tests {
             let rays = bundles(&mut seed, Vec3A::ZERO, 3.0, 100);
             let tmax = if round % 5 == 4 { 4.0 } else { f32::INFINITY };
             hits += check(&scene, &rays, tmax, round < 3);
+            // the SSE traversal where the AVX one would run
+            FORCE_SSE.with(|f| f.set(true));
+            check(&scene, &rays, tmax, round < 3);
+            FORCE_SSE.with(|f| f.set(false));
             // random incoherent rays: mostly the sign groups and the single-ray fallback
             let rays: Vec<Ray> = (0..400)
                 .map(|_| Ray::new(v(&mut seed) * 4.0, v(&mut seed)))
@@ -558,6 +801,9 @@ mod tests {
         }
         let hits = check(&scene, &rays, f32::INFINITY, true);
         assert!(hits > rays.len() / 10, "{name}: {hits}");
+        FORCE_SSE.with(|f| f.set(true));
+        check(&scene, &rays, f32::INFINITY, false);
+        FORCE_SSE.with(|f| f.set(false));
         let mut seed = 0x1234_5678_9abc_def1u64;
         let b = scene.bounds();
         let size = (b.max - b.min).length() * 0.5;

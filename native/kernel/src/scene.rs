@@ -472,7 +472,7 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [Option<Hit>],
     ) {
-        crate::packet::intersect(self, rays, tmax, scratch, out, crate::packet::MIN_GROUP);
+        crate::packet::intersect(self, rays, tmax, scratch, out, false);
     }
 
     /// [`Scene::intersect_packet`] for coherent rays (a tile of eye rays): every ray goes
@@ -484,7 +484,7 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [Option<Hit>],
     ) {
-        crate::packet::intersect(self, rays, f32::INFINITY, scratch, out, 1);
+        crate::packet::intersect(self, rays, f32::INFINITY, scratch, out, true);
     }
 
     /// Any-hit queries of a packet of rays (such as the shadow rays of a tile): `out[i]` gets
