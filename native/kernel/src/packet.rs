@@ -508,13 +508,37 @@ fn traverse<const AVX: bool>(
     lanes: &mut [Lane],
     scratch: &mut Scratch,
 ) {
+    ENTERED.with(|e| {
+        let mut entered = e.take();
+        entered.clear();
+        traverse_with::<AVX>(scene, rays, idx, f, soa, lanes, scratch, &mut entered);
+        e.set(entered);
+    });
+}
+
+thread_local! {
+    /// The `entered` list of [`traverse`], kept between calls (no allocation per packet).
+    static ENTERED: std::cell::Cell<Vec<(usize, f32, u32)>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+/// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn traverse_with<const AVX: bool>(
+    scene: &Scene,
+    rays: &[Ray],
+    idx: &[usize],
+    f: &Frustum,
+    soa: &Soa,
+    lanes: &mut [Lane],
+    scratch: &mut Scratch,
+    entered: &mut Vec<(usize, f32, u32)>,
+) {
     let nodes = &scene.bvh.nodes;
     let shapes = &scene.geom.shapes;
     let mut mailboxes = [Mailbox::default(); PACKET];
     let mut tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
     let stack = &mut scratch.stack;
-    // (lane, entry distance, leaf size) of every leaf a ray tested
-    let mut entered: Vec<(usize, f32, u32)> = Vec::with_capacity(256);
     let mut sp = 0usize;
     let mut cur = 0u32;
     loop {
@@ -556,17 +580,7 @@ fn traverse<const AVX: bool>(
                                 // SAFETY: AVX is only set by traverse_avx, which runs where
                                 // the CPU has it.
                                 unsafe {
-                                    leaf_avx(
-                                        node,
-                                        i,
-                                        f,
-                                        soa,
-                                        half,
-                                        lanes,
-                                        tris,
-                                        first,
-                                        &mut entered,
-                                    )
+                                    leaf_avx(node, i, f, soa, half, lanes, tris, first, entered)
                                 };
                             }
                             tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
@@ -612,7 +626,7 @@ fn traverse<const AVX: bool>(
         // pop the next inner node that some ray may still enter before its nearest hit
         loop {
             if sp == 0 {
-                for &(lane, t, c) in &entered {
+                for &(lane, t, c) in entered.iter() {
                     if lanes.get(lane).is_some_and(|l| t <= l.tmax) {
                         scratch.work += 1 + c as u64;
                     }
