@@ -455,7 +455,7 @@ impl Scratch {
 pub(crate) const WIDTH: usize = 8;
 
 /// Marks an unused child slot of a [`Node8`].
-const EMPTY: u32 = u32::MAX;
+pub(crate) const EMPTY: u32 = u32::MAX;
 
 /// Set in a leaf's `count` when the leaf's triangles are stored as blocks of four
 /// ([`crate::tri4::TriBlocks`]): then `child` is the leaf's first block rather than its first
@@ -564,7 +564,7 @@ unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
 
 /// Whether the AVX node test can run here (checked once by std, then a cached flag).
 #[inline(always)]
-fn has_avx() -> bool {
+pub(crate) fn has_avx() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx")
@@ -821,6 +821,44 @@ impl Bvh {
 }
 
 impl Node8 {
+    /// The children's box planes: `[a]` minima on axis `a`, `[3 + a]` maxima (SoA).
+    #[inline(always)]
+    pub(crate) fn planes(&self) -> &[[f32; WIDTH]; 6] {
+        &self.bounds
+    }
+
+    /// Per child: the node index, or the first primitive of a leaf.
+    #[inline(always)]
+    pub(crate) fn children(&self) -> &[u32; WIDTH] {
+        &self.child
+    }
+
+    /// Per child: 0 for an inner node, [`EMPTY`] for an unused slot, else the leaf's size.
+    #[inline(always)]
+    pub(crate) fn counts(&self) -> &[u32; WIDTH] {
+        &self.count
+    }
+
+    /// An empty node (for tests of other modules).
+    #[cfg(test)]
+    pub(crate) fn empty_for_tests() -> Node8 {
+        Node8::empty()
+    }
+
+    /// Sets child `i`'s extent on axis `a` (for tests of other modules).
+    #[cfg(test)]
+    pub(crate) fn set_for_tests(&mut self, i: usize, a: usize, min: f32, max: f32) {
+        self.bounds[a][i] = min;
+        self.bounds[3 + a][i] = max;
+        self.count[i] = 1;
+    }
+
+    /// The single-ray node test: entry distances and the mask of children entered.
+    #[cfg(test)]
+    pub(crate) fn single_ray_test_for_tests(&self, ray: &Ray, tmax: f32) -> ([f32; WIDTH], u32) {
+        hit_sse(self, &RayPre::new(ray), tmax)
+    }
+
     fn empty() -> Node8 {
         let (inf, ninf) = ([f32::INFINITY; WIDTH], [f32::NEG_INFINITY; WIDTH]);
         Node8 {

@@ -26,7 +26,7 @@
 
 use crate::bvh::Scratch;
 use crate::ray::{reflect, refract, Ray};
-use crate::scene::Scene;
+use crate::scene::{Hit, Scene};
 use crate::stats::RayStats;
 use glam::Vec3A;
 
@@ -93,7 +93,39 @@ impl Whitted {
         stats: &mut RayStats,
         eye: bool,
     ) -> Vec3A {
-        let Some(hit) = scene.intersect_with(ray, f32::INFINITY, scratch) else {
+        let hit = scene.intersect_with(ray, f32::INFINITY, scratch);
+        self.shade(scene, ray, hit, depth, weight, scratch, stats, eye)
+    }
+
+    /// Radiance along an eye ray whose closest hit is already known (`hit` is what
+    /// [`Scene::intersect_with`] returns for it, e.g. from [`Scene::intersect_packet`]): the
+    /// same value and counts as [`Integrator::radiance`].
+    pub(crate) fn radiance_of_hit(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        hit: Option<Hit>,
+        scratch: &mut Scratch,
+        stats: &mut RayStats,
+    ) -> Vec3A {
+        stats.eye += 1;
+        self.shade(scene, ray, hit, 1, 1.0, scratch, stats, true)
+    }
+
+    /// The rest of [`Whitted::trace`] once the ray's closest hit is known.
+    #[allow(clippy::too_many_arguments)]
+    fn shade(
+        &self,
+        scene: &Scene,
+        ray: &Ray,
+        hit: Option<Hit>,
+        depth: u32,
+        weight: f32,
+        scratch: &mut Scratch,
+        stats: &mut RayStats,
+        eye: bool,
+    ) -> Vec3A {
+        let Some(hit) = hit else {
             return scene.background;
         };
         if eye {

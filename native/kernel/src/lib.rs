@@ -28,6 +28,8 @@
 //!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
 //!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
 //!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 8-wide SIMD nodes (AVX or SSE);
+//!   `packet` (private): coherent rays through it sixteen at a time
+//!   ([`Scene::intersect_packet`], the same hits as one ray at a time);
 //!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
 //!   by instances (transform, inverse, material) under a top-level BVH.
 //! - [`raysets`]: the fixed ray sets of the ray-casting benchmarks.
@@ -56,6 +58,7 @@ pub mod limits;
 pub mod material;
 pub mod nff;
 pub mod obj;
+mod packet;
 pub mod polygon;
 pub mod ray;
 pub mod raysets;

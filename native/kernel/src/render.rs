@@ -11,6 +11,7 @@ use crate::bvh::Scratch;
 use crate::camera::Camera;
 use crate::integrator::{Integrator, Whitted};
 use crate::limits;
+use crate::ray::Ray;
 use crate::scene::Scene;
 use crate::stats::RayStats;
 use crate::Error;
@@ -275,7 +276,18 @@ pub fn trace_span_into(
         let s = settings.samples;
         let inv = 1.0 / (s * s) as f32;
         let (mut px_x, mut px_y) = (start % w as u64, start / w as u64);
-        for idx in start..end {
+        if s == 1 {
+            primary_tiles(
+                scene,
+                &integ,
+                (w, h),
+                (start, end),
+                &mut scratch,
+                &mut put,
+                &mut stats,
+            );
+        }
+        for idx in (start..end).filter(|_| s > 1) {
             let x = px_x as f32;
             let y = px_y as f32;
             px_x += 1;
@@ -283,24 +295,18 @@ pub fn trace_span_into(
                 px_x = 0;
                 px_y += 1;
             }
-            let c = if s == 1 {
-                let ray = scene.camera.ray(x + 0.5, y + 0.5, w, h, span);
-                integ.radiance(scene, &ray, &mut scratch, &mut stats)
-            } else {
-                let mut acc = Vec3A::ZERO;
-                for j in 0..s {
-                    for i in 0..s {
-                        let k = (j * s + i) as u64;
-                        let (jx, jy) = jitter(idx, k);
-                        let px = x + (i as f32 + jx) / s as f32;
-                        let py = y + (j as f32 + jy) / s as f32;
-                        let ray = scene.camera.ray(px, py, w, h, span);
-                        acc += integ.radiance(scene, &ray, &mut scratch, &mut stats);
-                    }
+            let mut acc = Vec3A::ZERO;
+            for j in 0..s {
+                for i in 0..s {
+                    let k = (j * s + i) as u64;
+                    let (jx, jy) = jitter(idx, k);
+                    let px = x + (i as f32 + jx) / s as f32;
+                    let py = y + (j as f32 + jy) / s as f32;
+                    let ray = scene.camera.ray(px, py, w, h, span);
+                    acc += integ.radiance(scene, &ray, &mut scratch, &mut stats);
                 }
-                acc * inv
-            };
-            put(c);
+            }
+            put(acc * inv);
         }
     }
     if scene.display_referred() {
@@ -308,6 +314,57 @@ pub fn trace_span_into(
     }
     stats.work = scratch.work + stats.total();
     Ok(stats)
+}
+
+/// One sample per pixel through the pixel centres of the span `start..end` of a `w` x `h`
+/// image: the eye rays in 4 x 4 pixel tiles aligned to the image grid (partial where the span
+/// cuts a tile), each tile's closest hits found as one packet ([`Scene::intersect_packet`], the
+/// same hits as ray by ray), then shaded ray by ray; the pixels are put in row order.
+fn primary_tiles(
+    scene: &Scene,
+    integ: &Whitted,
+    (w, h): (u32, u32),
+    (start, end): (u64, u64),
+    scratch: &mut Scratch,
+    put: &mut impl FnMut(Vec3A),
+    stats: &mut RayStats,
+) {
+    const TILE: u64 = 4;
+    let span = Camera::centre_span(w, h);
+    let (w64, h64) = (w as u64, h as u64);
+    let mut band: Vec<Vec3A> = Vec::new();
+    let mut rays = Vec::with_capacity((TILE * TILE) as usize);
+    let mut at = Vec::with_capacity((TILE * TILE) as usize);
+    let mut hits = [None; (TILE * TILE) as usize];
+    let mut by = (start / w64) / TILE * TILE;
+    while by * w64 < end {
+        // the span's pixels in rows by..by + TILE
+        let (lo, hi) = ((by * w64).max(start), ((by + TILE) * w64).min(end));
+        band.clear();
+        band.resize((hi - lo) as usize, Vec3A::ZERO);
+        for tx in (0..w64).step_by(TILE as usize) {
+            rays.clear();
+            at.clear();
+            for y in by..(by + TILE).min(h64) {
+                for x in tx..(tx + TILE).min(w64) {
+                    let idx = y * w64 + x;
+                    if (lo..hi).contains(&idx) {
+                        let (fx, fy) = (x as f32, y as f32);
+                        rays.push(scene.camera.ray(fx + 0.5, fy + 0.5, w, h, span));
+                        at.push((idx - lo) as usize);
+                    }
+                }
+            }
+            scene.intersect_tile(&rays, scratch, &mut hits);
+            for ((ray, &i), hit) in rays.iter().zip(&at).zip(hits) {
+                if let Some(px) = band.get_mut(i) {
+                    *px = integ.radiance_of_hit(scene, ray, hit, scratch, stats);
+                }
+            }
+        }
+        band.iter().for_each(|&c| put(c));
+        by += TILE;
+    }
 }
 
 /// A span of a region: each run of it within one row of the region is the span of the whole
@@ -376,25 +433,32 @@ fn spd_span(
                 b: u64,
                 scratch: &mut Scratch,
                 stats: &mut RayStats| {
-        for cx in a..=b + 1 {
-            let Some(slot) = row.get_mut(cx as usize) else {
-                continue;
-            };
-            if slot.is_some() {
-                continue;
+        // the corners still missing, sixteen eye rays to a packet (the same hits as one by one)
+        let todo: Vec<u64> = (a..=b + 1)
+            .filter(|&cx| matches!(row.get(cx as usize), Some(None)))
+            .collect();
+        for part in todo.chunks(16) {
+            let rays: Vec<Ray> = part
+                .iter()
+                .map(|&cx| scene.camera.ray(cx as f32, cy as f32, w, h, span))
+                .collect();
+            let mut hits = [None; 16];
+            scene.intersect_tile(&rays, scratch, &mut hits);
+            for ((&cx, ray), hit) in part.iter().zip(&rays).zip(hits) {
+                let owner = cy.min(h as u64 - 1) * w64 + cx.min(w64 - 1);
+                let c = if owner >= start && owner < end {
+                    integ.radiance_of_hit(scene, ray, hit, scratch, stats)
+                } else {
+                    // another span's corner: its rays are counted there, but the work is done here
+                    let mut scratch_stats = RayStats::default();
+                    let c = integ.radiance_of_hit(scene, ray, hit, scratch, &mut scratch_stats);
+                    scratch.work += scratch_stats.total();
+                    c
+                };
+                if let Some(slot) = row.get_mut(cx as usize) {
+                    *slot = Some(c);
+                }
             }
-            let ray = scene.camera.ray(cx as f32, cy as f32, w, h, span);
-            let owner = cy.min(h as u64 - 1) * w64 + cx.min(w64 - 1);
-            let c = if owner >= start && owner < end {
-                integ.radiance(scene, &ray, scratch, stats)
-            } else {
-                // another span's corner: its rays are counted there, but the work is done here
-                let mut scratch_stats = RayStats::default();
-                let c = integ.radiance(scene, &ray, scratch, &mut scratch_stats);
-                scratch.work += scratch_stats.total();
-                c
-            };
-            *slot = Some(c);
         }
     };
     for y in y0..=y1 {

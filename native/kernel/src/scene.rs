@@ -265,15 +265,15 @@ impl Scene {
     }
 
     /// [`Scene::intersect`] reusing a traversal stack (for hot loops: one `Scratch` per thread).
+    ///
+    /// Among hits at the same distance the lowest primitive index wins (whatever the order the
+    /// leaves are visited in), so [`Scene::intersect_packet`] finds the same hits.
     #[inline]
     pub fn intersect_with(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<Hit> {
         let mut prim = u32::MAX;
-        let shapes = &self.geom.shapes;
-        let geom = &self.geom;
         let mut mailbox = Mailbox::default();
-        let blocks = &self.tri_blocks;
         let lanes = RayLanes::new(ray);
-        let mut best = self
+        let best = self
             .bvh
             // inlined into the traversal: a call there would spill the ray's vectors per node
             .traverse::<true>(
@@ -281,31 +281,71 @@ impl Scene {
                 tmax,
                 scratch,
                 #[inline(always)]
-                |first, count, tmax| {
-                    let mut tm = tmax;
-                    if let Some(leaf) = blocks.leaf(first, count) {
-                        for b in leaf {
-                            if let Some((i, t)) = b.closest(&lanes, 0.0, tm) {
-                                tm = t;
-                                prim = b.prim(i);
-                            }
-                        }
-                        return tm;
-                    }
-                    if let Some(range) = shapes.get(first..first + count) {
-                        for (k, s) in range.iter().enumerate() {
-                            if mailbox.seen(s) {
-                                continue;
-                            }
-                            if let Some(t) = geom.hit(s, ray, 0.0, tm) {
-                                tm = t;
-                                prim = (first + k) as u32;
-                            }
-                        }
-                    }
-                    tm
+                |first, count, tm| {
+                    self.leaf_closest(first, count, ray, &lanes, &mut mailbox, tm, &mut prim)
                 },
             );
+        self.finish_closest(ray, best, prim, scratch)
+    }
+
+    /// The closest-hit test of one BVH leaf `(first, count)` for `ray`, whose best hit so far is
+    /// `prim` at `tm` (`prim == u32::MAX`: none, `tm` the bound). Returns the new bound and
+    /// updates `prim`: a hit replaces it when nearer, or at the same distance with a lower index,
+    /// so the result over several leaves does not depend on their order.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub(crate) fn leaf_closest(
+        &self,
+        first: usize,
+        count: usize,
+        ray: &Ray,
+        lanes: &RayLanes,
+        mailbox: &mut Mailbox,
+        mut tm: f32,
+        prim: &mut u32,
+    ) -> f32 {
+        // a hit at exactly `tm` is taken only if it has a lower index than the hit there
+        let limit = |tm: f32, prim: u32| if prim == u32::MAX { tm } else { tm.next_up() };
+        if let Some(leaf) = self.tri_blocks.leaf(first, count) {
+            for b in leaf {
+                if let Some((i, t)) = b.closest(lanes, 0.0, limit(tm, *prim)) {
+                    let p = b.prim(i);
+                    if t < tm || p < *prim {
+                        tm = t;
+                        *prim = p;
+                    }
+                }
+            }
+            return tm;
+        }
+        if let Some(range) = self.geom.shapes.get(first..first + count) {
+            for (k, s) in range.iter().enumerate() {
+                if mailbox.seen(s) {
+                    continue;
+                }
+                if let Some(t) = self.geom.hit(s, ray, 0.0, limit(tm, *prim)) {
+                    let p = (first + k) as u32;
+                    if t < tm || p < *prim {
+                        tm = t;
+                        *prim = p;
+                    }
+                }
+            }
+        }
+        tm
+    }
+
+    /// The rest of a closest-hit query after the scene's own BVH gave `prim` at `best`
+    /// (`u32::MAX`: nothing before `best`): the mesh instances, then the planes.
+    #[inline]
+    pub(crate) fn finish_closest(
+        &self,
+        ray: &Ray,
+        mut best: f32,
+        mut prim: u32,
+        scratch: &mut Scratch,
+    ) -> Option<Hit> {
+        let shapes = &self.geom.shapes;
         let mut instance = Hit::NO_INSTANCE;
         if !self.instances.is_empty() {
             if let Some((t, i, p)) = self.intersect_instances(ray, best, scratch) {
@@ -430,7 +470,8 @@ impl Scene {
 
     /// Closest hits of a packet of rays (such as a 4 x 4 pixel tile of primary rays):
     /// `out[i]` gets what [`Scene::intersect_with`] returns for `rays[i]`, bit for bit, for
-    /// `i < min(rays.len(), out.len())`.
+    /// `i < min(rays.len(), out.len())`. Coherent rays go through the BVH together, sixteen at
+    /// a time (`packet.rs`).
     pub fn intersect_packet(
         &self,
         rays: &[Ray],
@@ -438,9 +479,19 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [Option<Hit>],
     ) {
-        for (r, o) in rays.iter().zip(out.iter_mut()) {
-            *o = self.intersect_with(r, tmax, scratch);
-        }
+        crate::packet::intersect(self, rays, tmax, scratch, out, false);
+    }
+
+    /// [`Scene::intersect_packet`] for coherent rays (a tile of eye rays): every ray goes
+    /// through the packet traversal, so the work it adds to `scratch` does not depend on the
+    /// other rays of the packet (the renderer's work counts stay additive over any split).
+    pub(crate) fn intersect_tile(
+        &self,
+        rays: &[Ray],
+        scratch: &mut Scratch,
+        out: &mut [Option<Hit>],
+    ) {
+        crate::packet::intersect(self, rays, f32::INFINITY, scratch, out, true);
     }
 
     /// Any-hit queries of a packet of rays (such as the shadow rays of a tile): `out[i]` gets
@@ -670,8 +721,8 @@ impl Scene {
 /// Remembers the last cones tested along one ray: long oblique cones are referenced by several
 /// BVH leaves, and a repeated test can never find anything new (the search interval only
 /// shrinks).
-#[derive(Default)]
-struct Mailbox {
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Mailbox {
     recent: [u32; 2],
     used: bool,
 }

@@ -1,0 +1,986 @@
+//! Coherent rays in packets: up to sixteen rays through the 8-wide BVH together.
+//!
+//! The rays of a packet whose directions have the same signs on every axis share the choice of
+//! near and far box planes, and their reciprocal directions and origins-times-reciprocals span
+//! small intervals when the rays are coherent (a 4 x 4 pixel tile of primary rays). Per node,
+//! one test of the eight child boxes against those intervals (AVX where the CPU has it, else two
+//! SSE halves; the same operations on the same values either way) bounds every ray's own box
+//! test from the safe side: a child that none of the rays can enter is rejected for all of them
+//! at the cost of one single-ray test. When the rays share their origin (eye rays), the bound
+//! is taken on `(plane - origin) * reciprocal` instead, widened for rounding, which is much
+//! tighter where a direction component is small. Inner children that pass are descended nearest first (by
+//! the packet's lower bound of the entry distance) and deferred ones are skipped when that bound
+//! is beyond every ray's current nearest hit.
+//!
+//! At a leaf each ray makes its own box test, exactly the single-ray traversal's (the same
+//! products, differences and min/max in the same order), and only the rays that pass it test the
+//! leaf's primitives, four triangles at a time ([`crate::tri4`]) or one primitive at a time for
+//! the other kinds, with [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
+//! a ray meets the leaves that its single-ray traversal meets (a leaf whose box a ray enters
+//! before its final hit is met in either order, and among equal distances the lowest primitive
+//! index wins in both), and gets the same primitive and the same distance bits. Mesh instances
+//! and planes are then handled per ray, by the single-ray code.
+//!
+//! Rays whose direction signs differ are split into groups by sign; a group of fewer than
+//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time.
+
+use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
+use crate::geometry::Shape;
+use crate::ray::Ray;
+use crate::scene::{Hit, Mailbox, Scene};
+use crate::tri4::RayLanes;
+use glam::Vec4;
+
+/// Rays traversed together.
+pub(crate) const PACKET: usize = 16;
+
+/// Fewer rays of one direction-sign class are traced one by one.
+pub(crate) const MIN_GROUP: usize = 3;
+
+/// A group whose unit directions differ by more than this on some axis, or whose origins lie
+/// further apart than [`ORIGIN_SPREAD`] times the scene's size, is not coherent: its intervals
+/// would let nearly every box through, so its rays are traced one by one.
+const DIR_SPREAD: f32 = 0.125;
+
+/// See [`DIR_SPREAD`].
+const ORIGIN_SPREAD: f32 = 0.01;
+
+/// Whether the rays `members` of `rays` are coherent enough for a packet (see [`DIR_SPREAD`]).
+fn coherent(scene: &Scene, rays: &[Ray], members: u32) -> bool {
+    let (mut dlo, mut dhi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
+    let (mut olo, mut ohi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
+    for (i, r) in rays.iter().enumerate() {
+        if members & (1 << i) != 0 {
+            dlo = dlo.min(r.dir);
+            dhi = dhi.max(r.dir);
+            olo = olo.min(r.origin);
+            ohi = ohi.max(r.origin);
+        }
+    }
+    let b = scene.bounds();
+    let size = (b.max - b.min).max_element();
+    (dhi - dlo).max_element() <= DIR_SPREAD
+        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
+}
+
+/// The shared plane choice and the rays' intervals for the packet's node test.
+#[derive(Clone, Copy, Debug)]
+struct Frustum {
+    near: [usize; 3],
+    far: [usize; 3],
+    inv_lo: [f32; 3],
+    inv_hi: [f32; 3],
+    oinv_lo: [f32; 3],
+    oinv_hi: [f32; 3],
+    /// All rays start at `o` (eye rays) and no reciprocal is huge: the node test then bounds
+    /// `(plane - o) * inv` over the rays' reciprocals, widened by `k * (|plane| + |o|)` per axis
+    /// for rounding, which is much tighter than the general intervals.
+    shared: bool,
+    o: [f32; 3],
+    k: [f32; 3],
+}
+
+/// Relative widening of the shared-origin bounds: far above the few roundings of the ray's own
+/// `plane * inv - o * inv`.
+const ROUNDING: f32 = 4e-6;
+
+/// One ray of a packet: its constants for the box and triangle tests and its best hit so far.
+#[derive(Clone, Copy, Debug)]
+struct Lane {
+    inv: [f32; 3],
+    oinv: [f32; 3],
+    lanes: RayLanes,
+    tmax: f32,
+    prim: u32,
+}
+
+/// The rays of a packet in SoA layout, for the leaf tests across rays (unused lanes: zeros,
+/// masked off by their bound of -inf).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+struct Soa {
+    o: [[f32; PACKET]; 3],
+    d: [[f32; PACKET]; 3],
+    inv: [[f32; PACKET]; 3],
+    oinv: [[f32; PACKET]; 3],
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests set this to run the SSE traversal on a machine with AVX.
+    static FORCE_SSE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether the AVX traversal runs (the CPU has AVX, and tests did not ask for SSE).
+#[inline(always)]
+fn use_avx() -> bool {
+    #[cfg(test)]
+    if FORCE_SSE.with(|f| f.get()) {
+        return false;
+    }
+    has_avx()
+}
+
+/// The three direction-sign bits of a ray (bit `a` set: negative on axis `a`), as the
+/// single-ray traversal reads them to choose its near planes.
+#[inline(always)]
+fn signs(ray: &Ray) -> usize {
+    let i = ray.inv_dir;
+    (i.x < 0.0) as usize | ((i.y < 0.0) as usize) << 1 | ((i.z < 0.0) as usize) << 2
+}
+
+/// `_mm_max_ps(a, b)` on one lane (the second operand when either is NaN).
+#[inline(always)]
+fn max_ps(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `_mm_min_ps(a, b)` on one lane.
+#[inline(always)]
+fn min_ps(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The single-ray box test of child `i` (the lane `i` of the 8-wide test in [`crate::bvh`]):
+/// the ray's entry distance if it enters the box before its `tmax`.
+#[inline(always)]
+fn enters(node: &Node8, i: usize, f: &Frustum, l: &Lane) -> Option<f32> {
+    let p = node.planes();
+    let mut tn = 0.0f32;
+    let mut tf = l.tmax;
+    for a in 0..3 {
+        let n = p[f.near[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
+        let x = p[f.far[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
+        tn = max_ps(tn, n);
+        tf = min_ps(tf, x);
+    }
+    (tn <= tf).then_some(tn)
+}
+
+/// The packet's node test with SSE (two halves; glam's scalar code off x86): per child, a
+/// lower bound of every ray's entry distance, and the mask of the children some ray may enter
+/// before `tmax` (the largest of the rays' bounds).
+#[inline(always)]
+fn node_sse(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) {
+    let p = node.planes();
+    let mut out = [0.0f32; WIDTH];
+    let mut mask = 0u32;
+    for h in 0..2 {
+        let mut tn = Vec4::ZERO;
+        let mut tf = Vec4::splat(tmax);
+        for a in 0..3 {
+            let (lo, hi) = (Vec4::splat(f.inv_lo[a]), Vec4::splat(f.inv_hi[a]));
+            let n = Vec4::from_slice(&p[f.near[a] & 7][4 * h..]);
+            let x = Vec4::from_slice(&p[f.far[a] & 7][4 * h..]);
+            if f.shared {
+                let (o, k) = (Vec4::splat(f.o[a]), Vec4::splat(f.k[a]));
+                let (dn, dx) = (n - o, x - o);
+                tn = tn.max((dn * lo).min(dn * hi) - (n.abs() + o.abs()) * k);
+                tf = tf.min((dx * lo).max(dx * hi) + (x.abs() + o.abs()) * k);
+            } else {
+                tn = tn.max((n * lo).min(n * hi) - Vec4::splat(f.oinv_hi[a]));
+                tf = tf.min((x * lo).max(x * hi) - Vec4::splat(f.oinv_lo[a]));
+            }
+        }
+        tn.write_to_slice(&mut out[4 * h..]);
+        mask |= tn.cmple(tf).bitmask() << (4 * h);
+    }
+    (out, mask)
+}
+
+/// [`node_sse`] with one AVX vector per plane: the same operations on the same values.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) {
+    use std::arch::x86_64::*;
+    let p = node.planes();
+    let mut tn = _mm256_setzero_ps();
+    let mut tf = _mm256_set1_ps(tmax);
+    for a in 0..3 {
+        let lo = _mm256_set1_ps(f.inv_lo[a]);
+        let hi = _mm256_set1_ps(f.inv_hi[a]);
+        let n = &p[f.near[a] & 7];
+        let x = &p[f.far[a] & 7];
+        // SAFETY: `n` and `x` are arrays of 8 f32, exactly the 32 bytes an unaligned load reads.
+        let (n, x) = unsafe { (_mm256_loadu_ps(n.as_ptr()), _mm256_loadu_ps(x.as_ptr())) };
+        if f.shared {
+            let (o, k) = (_mm256_set1_ps(f.o[a]), _mm256_set1_ps(f.k[a]));
+            let abs = |v| _mm256_andnot_ps(_mm256_set1_ps(-0.0), v);
+            let (dn, dx) = (_mm256_sub_ps(n, o), _mm256_sub_ps(x, o));
+            let near = _mm256_min_ps(_mm256_mul_ps(dn, lo), _mm256_mul_ps(dn, hi));
+            let far = _mm256_max_ps(_mm256_mul_ps(dx, lo), _mm256_mul_ps(dx, hi));
+            let wn = _mm256_mul_ps(_mm256_add_ps(abs(n), abs(o)), k);
+            let wx = _mm256_mul_ps(_mm256_add_ps(abs(x), abs(o)), k);
+            tn = _mm256_max_ps(tn, _mm256_sub_ps(near, wn));
+            tf = _mm256_min_ps(tf, _mm256_add_ps(far, wx));
+        } else {
+            let near = _mm256_min_ps(_mm256_mul_ps(n, lo), _mm256_mul_ps(n, hi));
+            let far = _mm256_max_ps(_mm256_mul_ps(x, lo), _mm256_mul_ps(x, hi));
+            tn = _mm256_max_ps(tn, _mm256_sub_ps(near, _mm256_set1_ps(f.oinv_hi[a])));
+            tf = _mm256_min_ps(tf, _mm256_sub_ps(far, _mm256_set1_ps(f.oinv_lo[a])));
+        }
+    }
+    let mut out = [0.0f32; WIDTH];
+    // SAFETY: `out` is 8 f32, the 32 bytes an unaligned store writes.
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), tn) };
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+    (out, mask)
+}
+
+/// An all-triangle leaf (child `i` of `node`: `tris`, from primitive `first`) against the rays
+/// `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own box
+/// test (the operations of [`enters`], lane by lane), then each triangle in turn against the
+/// rays that entered, with the operations of the four-triangle test of [`crate::tri4`] (which
+/// are those of the one-triangle test) on the same values, so the same distances; among equal
+/// distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
+/// entered in `entered` (see [`traverse`]).
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn leaf_avx(
+    node: &Node8,
+    i: usize,
+    f: &Frustum,
+    soa: &Soa,
+    half: usize,
+    lanes: &mut [Lane],
+    tris: &[Shape],
+    first: usize,
+    entered: &mut Vec<(usize, f32, u32)>,
+) {
+    use std::arch::x86_64::*;
+    let base = 8 * (half & 1);
+    let mut tm = [f32::NEG_INFINITY; 8];
+    let mut limit = [f32::NEG_INFINITY; 8];
+    let mut prim = [u32::MAX; 8];
+    for j in 0..8 {
+        if let Some(l) = lanes.get(base + j) {
+            tm[j] = l.tmax;
+            prim[j] = l.prim;
+            limit[j] = if l.prim == u32::MAX {
+                l.tmax
+            } else {
+                l.tmax.next_up()
+            };
+        }
+    }
+    let p = node.planes();
+    // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
+    // each unaligned load reads 8 f32 inside one row; `tm` and `limit` are arrays of 8 f32.
+    let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
+    let mut tn = _mm256_setzero_ps();
+    // SAFETY: see above.
+    let mut tf = unsafe { _mm256_loadu_ps(tm.as_ptr()) };
+    for a in 0..3 {
+        let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
+        let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
+        let x = _mm256_set1_ps(p[f.far[a] & 7][i & 7]);
+        tn = _mm256_max_ps(tn, _mm256_sub_ps(_mm256_mul_ps(n, inv), oinv));
+        tf = _mm256_min_ps(tf, _mm256_sub_ps(_mm256_mul_ps(x, inv), oinv));
+    }
+    let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
+    let mask = _mm256_movemask_ps(inside) as u32;
+    if mask == 0 {
+        return;
+    }
+    let mut tns = [0.0f32; 8];
+    // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
+    unsafe { _mm256_storeu_ps(tns.as_mut_ptr(), tn) };
+    let mut m = mask;
+    while m != 0 {
+        let j = m.trailing_zeros() as usize & 7;
+        m &= m - 1;
+        entered.push((base + j, tns[j], tris.len() as u32));
+    }
+    let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
+    let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
+    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    let mut changed = false;
+    for (k, s) in tris.iter().enumerate() {
+        let Shape::Triangle { v0, e1, e2 } = *s else {
+            continue;
+        };
+        let sp = |x: f32| _mm256_set1_ps(x);
+        let (e1x, e1y, e1z) = (sp(e1.x), sp(e1.y), sp(e1.z));
+        let (e2x, e2y, e2z) = (sp(e2.x), sp(e2.y), sp(e2.z));
+        let (mul, sub, add) = (_mm256_mul_ps, _mm256_sub_ps, _mm256_add_ps);
+        // p = dir x e2
+        let px = sub(mul(dy, e2z), mul(dz, e2y));
+        let py = sub(mul(dz, e2x), mul(dx, e2z));
+        let pz = sub(mul(dx, e2y), mul(dy, e2x));
+        let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
+        let inv = _mm256_div_ps(one, det);
+        let sx = sub(ox, sp(v0.x));
+        let sy = sub(oy, sp(v0.y));
+        let sz = sub(oz, sp(v0.z));
+        let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
+        // q = s x e1
+        let qx = sub(mul(sy, e1z), mul(sz, e1y));
+        let qy = sub(mul(sz, e1x), mul(sx, e1z));
+        let qz = sub(mul(sx, e1y), mul(sy, e1x));
+        let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
+        let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
+        // SAFETY: `limit` is 8 f32.
+        let lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+        let and = _mm256_and_ps;
+        let ok = and(
+            and(
+                and(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero), inside),
+                and(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(u, one),
+                ),
+            ),
+            and(
+                and(
+                    _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero),
+                    _mm256_cmp_ps::<_CMP_NGT_UQ>(add(u, v), one),
+                ),
+                and(
+                    _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, lim),
+                ),
+            ),
+        );
+        let mut hit = _mm256_movemask_ps(ok) as u32;
+        if hit == 0 {
+            continue;
+        }
+        let mut ts = [0.0f32; 8];
+        // SAFETY: `ts` is 8 f32, the 32 bytes an unaligned store writes.
+        unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
+        let pk = (first + k) as u32;
+        while hit != 0 {
+            let j = hit.trailing_zeros() as usize & 7;
+            hit &= hit - 1;
+            if ts[j] < tm[j] || pk < prim[j] {
+                tm[j] = ts[j];
+                prim[j] = pk;
+                limit[j] = ts[j].next_up();
+                changed = true;
+            }
+        }
+    }
+    if changed {
+        for j in 0..8 {
+            if let Some(l) = lanes.get_mut(base + j) {
+                l.tmax = tm[j];
+                l.prim = prim[j];
+            }
+        }
+    }
+}
+
+/// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
+/// `i < min(rays.len(), out.len())`. Unless `every_ray`, sign groups of fewer than
+/// [`MIN_GROUP`] rays or of incoherent ones are traced one ray at a time; with `every_ray` all
+/// go through the packet traversal, and then the work a ray adds to `scratch.work` does not
+/// depend on the other rays of its packet (see [`traverse`]).
+pub(crate) fn intersect(
+    scene: &Scene,
+    rays: &[Ray],
+    tmax: f32,
+    scratch: &mut Scratch,
+    out: &mut [Option<Hit>],
+    every_ray: bool,
+) {
+    let n = rays.len().min(out.len());
+    for start in (0..n).step_by(PACKET) {
+        let end = (start + PACKET).min(n);
+        let (rays, out) = (&rays[start..end], &mut out[start..end]);
+        // group by direction signs; small groups go one ray at a time
+        let mut groups = [0u32; 8];
+        for (i, r) in rays.iter().enumerate() {
+            groups[signs(r)] |= 1 << i;
+        }
+        for (class, &members) in groups.iter().enumerate() {
+            if members == 0 {
+                continue;
+            }
+            let single = !every_ray
+                && ((members.count_ones() as usize) < MIN_GROUP || !coherent(scene, rays, members));
+            if single || scene.bvh.nodes.is_empty() {
+                let mut m = members;
+                while m != 0 {
+                    let i = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
+                        *o = scene.intersect_with(r, tmax, scratch);
+                    }
+                }
+                continue;
+            }
+            group_closest(scene, rays, members, class, tmax, scratch, out);
+        }
+    }
+}
+
+/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`).
+fn group_closest(
+    scene: &Scene,
+    rays: &[Ray],
+    members: u32,
+    class: usize,
+    tmax: f32,
+    scratch: &mut Scratch,
+    out: &mut [Option<Hit>],
+) {
+    let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
+    let mut f = Frustum {
+        near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+        far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
+        inv_lo: [f32::INFINITY; 3],
+        inv_hi: [f32::NEG_INFINITY; 3],
+        oinv_lo: [f32::INFINITY; 3],
+        oinv_hi: [f32::NEG_INFINITY; 3],
+        shared: false,
+        o: [0.0; 3],
+        k: [0.0; 3],
+    };
+    let mut lanes = [Lane {
+        inv: [0.0; 3],
+        oinv: [0.0; 3],
+        lanes: RayLanes::new(&Ray::new(glam::Vec3A::ZERO, glam::Vec3A::Z)),
+        tmax,
+        prim: u32::MAX,
+    }; PACKET];
+    let mut soa = Soa {
+        o: [[0.0; PACKET]; 3],
+        d: [[0.0; PACKET]; 3],
+        inv: [[0.0; PACKET]; 3],
+        oinv: [[0.0; PACKET]; 3],
+    };
+    let mut idx = [0usize; PACKET];
+    let mut k = 0usize;
+    let mut m = members;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let (Some(r), Some(l), Some(slot)) = (rays.get(i), lanes.get_mut(k), idx.get_mut(k)) else {
+            continue;
+        };
+        let (o, d) = (r.origin, r.inv_dir);
+        l.inv = [d.x, d.y, d.z];
+        l.oinv = [o.x * d.x, o.y * d.y, o.z * d.z];
+        l.lanes = RayLanes::new(r);
+        for a in 0..3 {
+            f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
+            f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
+            f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
+            f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
+            soa.o[a][k & 15] = r.origin[a];
+            soa.d[a][k & 15] = r.dir[a];
+            soa.inv[a][k & 15] = l.inv[a];
+            soa.oinv[a][k & 15] = l.oinv[a];
+        }
+        *slot = i;
+        k += 1;
+    }
+    if let Some(first) = idx.first().and_then(|&i| rays.get(i)) {
+        let o = first.origin;
+        let same = idx[..k]
+            .iter()
+            .all(|&i| rays.get(i).is_some_and(|r| r.origin == o));
+        let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+        if same && tame {
+            f.shared = true;
+            f.o = [o.x, o.y, o.z];
+            f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
+        }
+    }
+    let lanes = &mut lanes[..k];
+    #[cfg(target_arch = "x86_64")]
+    if use_avx() {
+        // SAFETY: the CPU has AVX (checked just above).
+        unsafe { traverse_avx(scene, rays, &idx[..k], &f, &soa, lanes, scratch) };
+    } else {
+        traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
+    for (l, &i) in lanes.iter().zip(idx.iter()) {
+        if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
+            *o = scene.finish_closest(r, l.tmax, l.prim, scratch);
+        }
+    }
+}
+
+/// [`traverse`] compiled with AVX.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn traverse_avx(
+    scene: &Scene,
+    rays: &[Ray],
+    idx: &[usize],
+    f: &Frustum,
+    soa: &Soa,
+    lanes: &mut [Lane],
+    scratch: &mut Scratch,
+) {
+    traverse::<true>(scene, rays, idx, f, soa, lanes, scratch);
+}
+
+/// The packet traversal of the scene's own BVH; leaves each ray's nearest hit in its lane.
+///
+/// Work ([`Scratch::work`]): each ray is charged one unit plus the leaf's size for every leaf
+/// whose box it enters before its final nearest hit. That set does not depend on the order the
+/// leaves were met in, nor on the other rays of the packet (all of them are met, since a ray's
+/// bound never falls below its final hit), so a pixel costs the same in any tile.
+#[inline(always)]
+fn traverse<const AVX: bool>(
+    scene: &Scene,
+    rays: &[Ray],
+    idx: &[usize],
+    f: &Frustum,
+    soa: &Soa,
+    lanes: &mut [Lane],
+    scratch: &mut Scratch,
+) {
+    ENTERED.with(|e| {
+        let mut entered = e.take();
+        entered.clear();
+        traverse_with::<AVX>(scene, rays, idx, f, soa, lanes, scratch, &mut entered);
+        e.set(entered);
+    });
+}
+
+thread_local! {
+    /// The `entered` list of [`traverse`], kept between calls (no allocation per packet).
+    static ENTERED: std::cell::Cell<Vec<(usize, f32, u32)>> = const { std::cell::Cell::new(Vec::new()) };
+}
+
+/// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn traverse_with<const AVX: bool>(
+    scene: &Scene,
+    rays: &[Ray],
+    idx: &[usize],
+    f: &Frustum,
+    soa: &Soa,
+    lanes: &mut [Lane],
+    scratch: &mut Scratch,
+    entered: &mut Vec<(usize, f32, u32)>,
+) {
+    let nodes = &scene.bvh.nodes;
+    let shapes = &scene.geom.shapes;
+    let mut mailboxes = [Mailbox::default(); PACKET];
+    let mut tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+    let stack = &mut scratch.stack;
+    let mut sp = 0usize;
+    let mut cur = 0u32;
+    loop {
+        if let Some(node) = nodes.get(cur as usize) {
+            #[cfg(target_arch = "x86_64")]
+            let (tn, mut mask) = if AVX {
+                // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+                unsafe { node_avx(node, f, tmax) }
+            } else {
+                node_sse(node, f, tmax)
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let (tn, mut mask) = node_sse(node, f, tmax);
+            let (child, count) = (node.children(), node.counts());
+            // leaves at once, inner nodes kept sorted far to near
+            let mut it = [0.0f32; WIDTH];
+            let mut ic = [0u32; WIDTH];
+            let mut ni = 0usize;
+            while mask != 0 {
+                let i = mask.trailing_zeros() as usize & 7;
+                mask &= mask - 1;
+                let c = count[i];
+                if c == 0 {
+                    let mut j = ni;
+                    while j > 0 && it[(j - 1) & 7] < tn[i] {
+                        it[j & 7] = it[(j - 1) & 7];
+                        ic[j & 7] = ic[(j - 1) & 7];
+                        j -= 1;
+                    }
+                    it[j & 7] = tn[i];
+                    ic[j & 7] = child[i];
+                    ni += 1;
+                } else if c != EMPTY && tn[i] <= tmax {
+                    let first = child[i] as usize;
+                    // a leaf of triangle blocks names its first block, not its first primitive
+                    let n = crate::bvh::block_leaf_len(c as usize).unwrap_or(c as usize);
+                    #[cfg(target_arch = "x86_64")]
+                    if let (true, Some(b)) = (
+                        AVX,
+                        scene
+                            .tri_blocks
+                            .leaf(first, c as usize)
+                            .and_then(|b| b.first()),
+                    ) {
+                        let p0 = b.prim(0) as usize;
+                        if let Some(tris) = shapes.get(p0..p0 + n) {
+                            for half in 0..lanes.len().div_ceil(8) {
+                                // SAFETY: AVX is only set by traverse_avx, which runs where
+                                // the CPU has it.
+                                unsafe {
+                                    leaf_avx(node, i, f, soa, half, lanes, tris, p0, entered)
+                                };
+                            }
+                            tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+                            continue;
+                        }
+                    }
+                    let mut new_max = f32::NEG_INFINITY;
+                    let lanes_mb = lanes.iter_mut().zip(idx).zip(mailboxes.iter_mut());
+                    for (lane, ((l, &ri), mb)) in lanes_mb.enumerate() {
+                        if let Some(t) = enters(node, i, f, l) {
+                            if let Some(r) = rays.get(ri) {
+                                entered.push((lane, t, n as u32));
+                                l.tmax = scene.leaf_closest(
+                                    first,
+                                    c as usize,
+                                    r,
+                                    &l.lanes,
+                                    mb,
+                                    l.tmax,
+                                    &mut l.prim,
+                                );
+                            }
+                        }
+                        new_max = new_max.max(l.tmax);
+                    }
+                    tmax = new_max;
+                }
+            }
+            if ni > 0 {
+                if stack.len() < sp + WIDTH {
+                    stack.resize(sp + 64, (0, 0, 0.0));
+                }
+                for j in 0..ni - 1 {
+                    if let Some(slot) = stack.get_mut(sp) {
+                        *slot = (ic[j & 7], 0, it[j & 7]);
+                        sp += 1;
+                    }
+                }
+                cur = ic[(ni - 1) & 7];
+                continue;
+            }
+        }
+        // pop the next inner node that some ray may still enter before its nearest hit
+        loop {
+            if sp == 0 {
+                for &(lane, t, c) in entered.iter() {
+                    if lanes.get(lane).is_some_and(|l| t <= l.tmax) {
+                        scratch.work += 1 + c as u64;
+                    }
+                }
+                return;
+            }
+            sp -= 1;
+            let (c, _, d) = stack[sp];
+            if d <= tmax {
+                cur = c;
+                break;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+    use crate::material::Material;
+    use crate::scene::SceneBuilder;
+    use glam::Vec3A;
+    use std::path::Path;
+
+    /// xorshift for test data, in [-1, 1)
+    fn rng(seed: &mut u64) -> f32 {
+        *seed ^= *seed << 13;
+        *seed ^= *seed >> 7;
+        *seed ^= *seed << 17;
+        (*seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+    }
+
+    fn v(seed: &mut u64) -> Vec3A {
+        Vec3A::new(rng(seed), rng(seed), rng(seed))
+    }
+
+    /// Hits agree bit for bit; among the pieces of one long cone (several references to the
+    /// same shape, which the mailbox tests once) either reference names the same surface.
+    fn same(scene: &Scene, a: Option<Hit>, b: Option<Hit>) -> bool {
+        match (a, b) {
+            (None, None) => true,
+            (Some(a), Some(b)) => {
+                let shapes = &scene.geom.shapes;
+                let cone_piece = a.instance == Hit::NO_INSTANCE
+                    && b.instance == Hit::NO_INSTANCE
+                    && matches!(
+                        (shapes.get(a.prim as usize), shapes.get(b.prim as usize)),
+                        (Some(Shape::Cone(x)), Some(Shape::Cone(y))) if x == y
+                    );
+                a.t.to_bits() == b.t.to_bits()
+                    && a.instance == b.instance
+                    && (a.prim == b.prim || cone_piece)
+            }
+            _ => false,
+        }
+    }
+
+    /// Every packet of `rays` (in sixteens, and in every partial size from the start of each
+    /// sixteen) against single rays; returns the number of hits.
+    fn check(scene: &Scene, rays: &[Ray], tmax: f32, partial: bool) -> usize {
+        let mut scratch = Scratch::new();
+        let want: Vec<Option<Hit>> = rays
+            .iter()
+            .map(|r| scene.intersect_with(r, tmax, &mut scratch))
+            .collect();
+        let mut got = vec![None; rays.len()];
+        scene.intersect_packet(rays, tmax, &mut scratch, &mut got);
+        let mut all = vec![None; rays.len()];
+        intersect(scene, rays, tmax, &mut scratch, &mut all, true);
+        for (i, (w, a)) in want.iter().zip(&all).enumerate() {
+            assert!(
+                same(scene, *w, *a),
+                "ray {i}, all in packets: {w:?} != {a:?}"
+            );
+        }
+        for (i, (w, g)) in want.iter().zip(&got).enumerate() {
+            assert!(same(scene, *w, *g), "ray {i} {:?}: {w:?} != {g:?}", rays[i]);
+        }
+        if partial {
+            for (c, chunk) in rays.chunks(PACKET).enumerate().step_by(7) {
+                for len in 1..chunk.len() {
+                    let mut out = vec![None; len];
+                    scene.intersect_packet(&chunk[..len], tmax, &mut scratch, &mut out);
+                    for (k, g) in out.iter().enumerate() {
+                        let w = want[c * PACKET + k];
+                        assert!(same(scene, w, *g), "partial {len}, ray {k}: {w:?} != {g:?}");
+                    }
+                }
+            }
+        }
+        want.iter().filter(|h| h.is_some()).count()
+    }
+
+    /// Coherent bundles: 4 x 4 directions around a random one from near one origin (some with
+    /// mixed signs), plus rays sharing an exact origin.
+    fn bundles(seed: &mut u64, centre: Vec3A, size: f32, count: usize) -> Vec<Ray> {
+        let mut rays = Vec::with_capacity(count * PACKET);
+        for b in 0..count {
+            let o = centre + v(seed) * size * 2.0;
+            let aim = centre + v(seed) * size * 0.5;
+            let d = (aim - o).normalize_or(Vec3A::Z);
+            let spread = [0.002, 0.02, 0.2][b % 3];
+            let jitter = if b % 2 == 0 { 0.0 } else { size * 0.01 };
+            for _ in 0..PACKET {
+                rays.push(Ray::new(o + v(seed) * jitter, d + v(seed) * spread));
+            }
+        }
+        rays
+    }
+
+    #[test]
+    fn packets_equal_single_rays_on_random_scenes() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut hits = 0;
+        for round in 0..12 {
+            let mut b = SceneBuilder::new();
+            let m = b.material(Material::default());
+            let n = [50, 400, 3000][round % 3];
+            for k in 0..n {
+                let c = v(&mut seed) * 3.0;
+                let s = 0.05 + 0.3 * rng(&mut seed).abs();
+                let mut tri = [
+                    c + v(&mut seed) * s,
+                    c + v(&mut seed) * s,
+                    c + v(&mut seed) * s,
+                ];
+                if k % 11 == 0 {
+                    // axis-aligned triangles, whose boxes are flat
+                    tri.iter_mut().for_each(|p| p.y = c.y);
+                }
+                b.triangle(tri, None, m).unwrap();
+                if round % 2 == 1 && k % 9 == 0 {
+                    // other primitive kinds: the per-ray leaf test
+                    b.sphere(c, s * 0.5, m).unwrap();
+                    let apex = c + v(&mut seed) * 2.0;
+                    b.cone(c, s * 0.3, apex, s * 0.1, m).unwrap();
+                }
+            }
+            if round % 4 == 3 {
+                // a shared edge hit by many rays at equal distances
+                for &(x, y) in &[(0.0f32, 0.0f32), (1.0, 0.0)] {
+                    b.triangle(
+                        [
+                            Vec3A::new(x, y, 5.0),
+                            Vec3A::new(x + 1.0, y, 5.0),
+                            Vec3A::new(x, y + 1.0, 5.0),
+                        ],
+                        None,
+                        m,
+                    )
+                    .unwrap();
+                }
+            }
+            let scene = b.build();
+            let rays = bundles(&mut seed, Vec3A::ZERO, 3.0, 100);
+            let tmax = if round % 5 == 4 { 4.0 } else { f32::INFINITY };
+            hits += check(&scene, &rays, tmax, round < 3);
+            // the SSE traversal where the AVX one would run
+            FORCE_SSE.with(|f| f.set(true));
+            check(&scene, &rays, tmax, round < 3);
+            FORCE_SSE.with(|f| f.set(false));
+            // random incoherent rays: mostly the sign groups and the single-ray fallback
+            let rays: Vec<Ray> = (0..400)
+                .map(|_| Ray::new(v(&mut seed) * 4.0, v(&mut seed)))
+                .collect();
+            hits += check(&scene, &rays, f32::INFINITY, false);
+        }
+        assert!(hits > 5000, "{hits}");
+    }
+
+    /// Primary rays of an SPD scene in 4 x 4 tiles, as the renderer traces them, and bundles.
+    fn spd_scene(name: &str, n: u32) {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../priv/scenes/spd");
+        let scene = Scene::load(&dir.join(format!("{name}.nff"))).expect("SPD scene loads");
+        let span = Camera::centre_span(n, n);
+        let mut rays = Vec::new();
+        for ty in (0..n).step_by(4) {
+            for tx in (0..n).step_by(4) {
+                for y in ty..ty + 4 {
+                    for x in tx..tx + 4 {
+                        rays.push(scene.camera.ray(x as f32 + 0.5, y as f32 + 0.5, n, n, span));
+                    }
+                }
+            }
+        }
+        let hits = check(&scene, &rays, f32::INFINITY, true);
+        assert!(hits > rays.len() / 10, "{name}: {hits}");
+        FORCE_SSE.with(|f| f.set(true));
+        check(&scene, &rays, f32::INFINITY, false);
+        FORCE_SSE.with(|f| f.set(false));
+        let mut seed = 0x1234_5678_9abc_def1u64;
+        let b = scene.bounds();
+        let size = (b.max - b.min).length() * 0.5;
+        let rays = bundles(&mut seed, b.centre(), size, 100);
+        check(&scene, &rays, f32::INFINITY, false);
+    }
+
+    #[test]
+    fn packets_equal_single_rays_on_the_spd_scenes() {
+        for name in [
+            "balls_s4",
+            "gears_s4",
+            "mount_s6",
+            "rings_s7",
+            "teapot_s12",
+            "tetra_s6",
+            "tree_s11",
+        ] {
+            spd_scene(name, 96);
+        }
+    }
+
+    #[test]
+    fn the_packet_test_bounds_every_rays_own_test_and_avx_agrees() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let (mut entered, mut shared) = (0, 0);
+        for round in 0..3000 {
+            let mut node = Node8::empty_for_tests();
+            for i in 0..WIDTH - round % 3 {
+                for a in 0..3 {
+                    let (x, y) = (rng(&mut seed) * 2.0, rng(&mut seed) * 2.0);
+                    let flat = round % 4 == 0 && a == 1;
+                    node.set_for_tests(i, a, x.min(y), if flat { x.min(y) } else { x.max(y) });
+                }
+            }
+            let o = v(&mut seed) * 0.5;
+            let d = v(&mut seed);
+            // every other packet shares its origin: the shared-origin bounds
+            let jitter = if round % 2 == 0 { 0.0 } else { 0.05 };
+            let rays: Vec<Ray> = (0..PACKET)
+                .map(|_| Ray::new(o + v(&mut seed) * jitter, d + v(&mut seed) * 0.1))
+                .filter(|r| signs(r) == signs(&Ray::new(o, d)))
+                .collect();
+            if rays.is_empty() {
+                continue;
+            }
+            let class = signs(&rays[0]);
+            let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
+            let mut f = Frustum {
+                near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+                far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
+                inv_lo: [f32::INFINITY; 3],
+                inv_hi: [f32::NEG_INFINITY; 3],
+                oinv_lo: [f32::INFINITY; 3],
+                oinv_hi: [f32::NEG_INFINITY; 3],
+                shared: false,
+                o: [0.0; 3],
+                k: [0.0; 3],
+            };
+            let tmax = if round % 2 == 0 { 2.0 } else { f32::INFINITY };
+            let lanes: Vec<Lane> = rays
+                .iter()
+                .map(|r| {
+                    let (o, d) = (r.origin, r.inv_dir);
+                    let l = Lane {
+                        inv: [d.x, d.y, d.z],
+                        oinv: [o.x * d.x, o.y * d.y, o.z * d.z],
+                        lanes: RayLanes::new(r),
+                        tmax,
+                        prim: u32::MAX,
+                    };
+                    for a in 0..3 {
+                        f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
+                        f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
+                        f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
+                        f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
+                    }
+                    l
+                })
+                .collect();
+            let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+            if jitter == 0.0 && tame {
+                f.shared = true;
+                f.o = [o.x, o.y, o.z];
+                f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
+                shared += 1;
+            }
+            let (tn, mask) = node_sse(&node, &f, tmax);
+            #[cfg(target_arch = "x86_64")]
+            if has_avx() {
+                // SAFETY: the CPU has AVX (checked on the line above).
+                let (ta, ma) = unsafe { node_avx(&node, &f, tmax) };
+                assert_eq!(mask, ma);
+                assert_eq!(tn.map(f32::to_bits), ta.map(f32::to_bits));
+            }
+            for (r, l) in rays.iter().zip(&lanes) {
+                // the ray's own test, as the single-ray traversal makes it
+                let single = node.single_ray_test_for_tests(r, tmax);
+                for (i, &t) in tn.iter().enumerate() {
+                    assert_eq!(enters(&node, i, &f, l).is_some(), single.1 & (1 << i) != 0);
+                    if single.1 & (1 << i) != 0 {
+                        entered += 1;
+                        assert!(mask & (1 << i) != 0, "round {round}: child {i} missed");
+                        assert!(t <= single.0[i]);
+                    }
+                }
+            }
+        }
+        assert!(entered > 10_000 && shared > 1000, "{entered} {shared}");
+    }
+}
