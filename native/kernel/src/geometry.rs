@@ -194,7 +194,15 @@ impl ConeData {
 
 #[inline]
 fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
-    let oc = ray.origin - c.base;
+    // Solved from the ray's point nearest the base, not from its origin: far from a thin cone,
+    // |w|^2 - r^2 from the origin loses the radius to rounding (false hits a radius away).
+    let dd = ray.dir.length_squared();
+    if dd.is_nan() || dd <= 0.0 {
+        return None;
+    }
+    let t0 = (c.base - ray.origin).dot(ray.dir) / dd;
+    let near = ray.origin + ray.dir * t0;
+    let oc = near - c.base;
     let so = oc.dot(c.axis);
     let sd = ray.dir.dot(c.axis);
     let w = oc - c.axis * so;
@@ -226,11 +234,12 @@ fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
         };
         roots = if r1 <= r2 { [r1, r2] } else { [r2, r1] };
     }
-    for t in roots {
+    for tr in roots {
+        let t = t0 + tr;
         if !(t > tmin && t < tmax) {
             continue;
         }
-        let s = so + t * sd;
+        let s = so + tr * sd;
         if s < 0.0 || s > c.height || c.r0 + c.slope * s < 0.0 {
             continue;
         }
@@ -596,5 +605,33 @@ mod tests {
         assert!((t - 4.5).abs() < 1e-5);
         let n = g.geometric_normal(&s, Vec3A::new(0.5, 0.0, 0.5));
         assert!((n - Vec3A::new(1.0, 0.0, 1.0).normalize()).length() < 1e-5);
+    }
+
+    #[test]
+    fn a_thin_cone_far_away_is_hit_only_within_its_radius() {
+        // a branch tip of tree_s11: radius 0.0018, seen from about five units away
+        let base = Vec3A::new(0.3, 0.9, 0.2);
+        let axis = Vec3A::new(0.48, 0.6, 0.64);
+        let (r, h) = (0.00183f32, 0.0137f32);
+        let c = make_cone(base, r, base + axis * h, r).expect("a cone");
+        let mid = base + axis * (h / 2.0);
+        let side = axis.cross(Vec3A::Z).normalize();
+        let eye = mid + axis.cross(side).normalize() * 5.0;
+        for (k, d) in [0.0f32, 0.5, 0.9, 1.1, 1.3, 1.6, 2.0, 3.0]
+            .into_iter()
+            .enumerate()
+        {
+            for j in 0..50 {
+                // aim past the axis at distance d * r, from eyes spread around the first
+                let o = eye + Vec3A::new(0.01 * j as f32, -0.007 * j as f32, 0.003 * k as f32);
+                let target = mid + side * (d * r);
+                let hit = hit_cone(&c, &Ray::new(o, (target - o).normalize()), 0.0, 1e9);
+                assert_eq!(
+                    hit.is_some(),
+                    d < 1.0,
+                    "passing {d} radii from the axis, eye {j}"
+                );
+            }
+        }
     }
 }
