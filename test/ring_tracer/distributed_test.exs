@@ -98,11 +98,17 @@ defmodule RingTracer.DistributedTest do
       {:ok, job} =
         RingTracer.render_async(
           TestScenes.path(@scene),
-          [nodes: [frozen], children: 4, atoms: 8, speeds: [200], liveness: 1_000] ++ @size
+          [nodes: [frozen], children: 4, atoms: 8, speeds: [1000], liveness: 1_000] ++ @size
         )
 
       id = job.id
       assert_receive {RingTracer, ^id, {:progress, 1, _}}, 10_000
+      # The frozen node must still hold atoms when it stops, or the job may
+      # end without it. A `kill` is a fork, which a busy machine can delay
+      # past the whole job (about a second at this slowdown), so its
+      # children are first suspended: from then on they hold the atoms they
+      # have.
+      RingTracer.Test.Hold.children(frozen)
       {_, 0} = System.cmd("kill", ["-STOP", os_pid])
       t0 = System.monotonic_time(:millisecond)
       assert_receive {RingTracer, ^id, {:ok, result}}, 30_000
