@@ -16,10 +16,9 @@
 //!
 //! Without Embree's headers at build time the bench says so and times ours only.
 
-mod embree;
-
-use embree::{flat, Call, Embree};
-use ring_tracer_kernel::{raysets, Ray, Scene, Scratch};
+use ring_tracer_embree_bench::embree::{flat, Call, Embree};
+use ring_tracer_embree_bench::{single_hits, RaySets};
+use ring_tracer_kernel::{Ray, Scene, Scratch};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -116,13 +115,8 @@ fn bench(path: &str, rounds: usize, size: u32) {
         ),
     }
     let b = scene.bounds();
-    let primary = raysets::primary(b, size);
-    let tiled: Vec<Ray> = raysets::tile_order(size)
-        .iter()
-        .map(|&i| primary[i as usize])
-        .collect();
-    let incoherent = raysets::incoherent(b, primary.len());
-    let n = primary.len();
+    let RaySets { tiled, incoherent } = RaySets::new(b, size);
+    let n = tiled.len();
     let flat_tiled = flat(&tiled);
     let flat_inc = flat(&incoherent);
 
@@ -135,18 +129,7 @@ fn bench(path: &str, rounds: usize, size: u32) {
     let mut figs: Vec<[Figure; 6]> = rows.iter().map(|_| Default::default()).collect();
     for _ in 0..rounds {
         for (k, &(_, rays, fr, coherent, any)) in rows.iter().enumerate() {
-            let ours_single = |part: &[Ray]| {
-                let mut s = Scratch::new();
-                part.iter()
-                    .filter(|r| {
-                        if any {
-                            scene.occluded_with(r, f32::INFINITY, &mut s)
-                        } else {
-                            scene.intersect_with(r, f32::INFINITY, &mut s).is_some()
-                        }
-                    })
-                    .count() as u64
-            };
+            let ours_single = |part: &[Ray]| single_hits(&scene, part, any);
             let ours_packet = |part: &[Ray]| {
                 let mut s = Scratch::new();
                 let mut hits = 0u64;

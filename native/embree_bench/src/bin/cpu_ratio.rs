@@ -7,81 +7,42 @@
 //! programs share the cores, wall-clock rates swing with their load, while CPU-second rates
 //! only feel what they do to the caches. The ratio compares the best rounds.
 
-// the harness module of `embree_bench`; the packet calls are not used here
-#[allow(dead_code)]
-#[path = "../embree.rs"]
-mod embree;
-
-use embree::{flat, Call, Embree};
-use ring_tracer_kernel::{raysets, Ray, Scene, Scratch};
+use ring_tracer_embree_bench::embree::{flat, Call, Embree};
+use ring_tracer_embree_bench::{single_hits, timed_cpu as timed, RaySets};
+use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
-use std::time::Instant;
-
-/// This process's CPU time in seconds (user + system), 0 where `/proc` is missing.
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    let rest = stat.rsplit(')').next().unwrap_or("");
-    let f: Vec<f64> = rest
-        .split_whitespace()
-        .skip(11)
-        .take(2)
-        .filter_map(|x| x.parse().ok())
-        .collect();
-    f.iter().sum::<f64>() / 100.0
-}
-
-/// (wall seconds, CPU seconds, result) of `f`.
-fn timed(f: impl FnOnce() -> u64) -> (f64, f64, u64) {
-    let (t, c) = (Instant::now(), cpu_seconds());
-    let r = f();
-    (t.elapsed().as_secs_f64(), cpu_seconds() - c, r)
-}
 
 fn bench(path: &str, rounds: usize) {
-    let mut scene = None;
-    let (lw, lc, _) = timed(|| {
-        scene = Scene::load(Path::new(path)).ok();
-        0
-    });
-    let Some(scene) = scene else {
-        eprintln!("{path}: cannot load");
-        return;
+    let (lw, lc, scene) = timed(|| Scene::load(Path::new(path)));
+    let scene = match scene {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("{e}");
+            return;
+        }
     };
     let tris = scene.triangles();
-    let mut emb = None;
-    let (ew, ec, _) = timed(|| {
-        emb = Some(Embree::new(&tris));
-        0
-    });
-    let embree = match emb {
-        Some(Ok(e)) => e,
-        Some(Err(e)) => {
+    let (ew, ec, embree) = timed(|| Embree::new(&tris));
+    let embree = match embree {
+        Ok(e) => e,
+        Err(e) => {
             eprintln!("Embree: {e}");
             return;
         }
-        None => return,
     };
     println!(
         "\n{path}: {} triangles; ours load + BVH {lw:.2} s ({lc:.2} CPU s), Embree BVH {ew:.2} s ({ec:.2} CPU s)",
         tris.len()
     );
     let b = scene.bounds();
-    let size = 1024;
-    let primary = raysets::primary(b, size);
-    let tiled: Vec<Ray> = raysets::tile_order(size)
-        .iter()
-        .map(|&i| primary[i as usize])
-        .collect();
-    let incoherent = raysets::incoherent(b, primary.len());
+    let RaySets { tiled, incoherent } = RaySets::new(b, 1024);
     let (ft, fi) = (flat(&tiled), flat(&incoherent));
     let rows: [(&str, &[Ray], &[f32], bool); 3] = [
         ("primary", &tiled, &ft, false),
         ("incoherent", &incoherent, &fi, false),
         ("incoherent, any hit", &incoherent, &fi, true),
     ];
-    let n = primary.len() as f64 / 1e6;
+    let n = tiled.len() as f64 / 1e6;
     println!(
         "| rays | ours, Mrays/CPU s | Embree rtcIntersect1 | ours / E1 (CPU) | ours / E1 (wall) |"
     );
@@ -90,18 +51,7 @@ fn bench(path: &str, rounds: usize) {
         let (mut o, mut e) = (Vec::new(), Vec::new());
         let mut hits = (0, 0);
         for _ in 0..rounds {
-            let r = timed(|| {
-                let mut s = Scratch::new();
-                rays.iter()
-                    .filter(|r| {
-                        if any {
-                            scene.occluded_with(r, f32::INFINITY, &mut s)
-                        } else {
-                            scene.intersect_with(r, f32::INFINITY, &mut s).is_some()
-                        }
-                    })
-                    .count() as u64
-            });
+            let r = timed(|| single_hits(&scene, rays, any));
             hits.0 = r.2;
             o.push((n / r.0, n / r.1.max(0.01)));
             let call = if any {

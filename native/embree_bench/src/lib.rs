@@ -1,0 +1,69 @@
+//! The ray-casting benches' shared parts: the Embree harness ([`embree`]), the rays both
+//! kernels trace, our single-ray loop and the CPU clock.
+
+pub mod embree;
+
+use ring_tracer_kernel::{raysets, Aabb, Ray, Scene, Scratch};
+use std::time::Instant;
+
+/// The rays of one bench: `size x size` primary rays of the default OBJ view in 4 x 4 pixel
+/// tiles (16 consecutive rays are one tile) and as many incoherent ones.
+pub struct RaySets {
+    /// Primary rays, tile by tile.
+    pub tiled: Vec<Ray>,
+    /// Random origins in the central half of the box, directions on the sphere.
+    pub incoherent: Vec<Ray>,
+}
+
+impl RaySets {
+    /// The rays for a scene of bounds `b`.
+    pub fn new(b: Aabb, size: u32) -> Self {
+        let primary = raysets::primary(b, size);
+        let tiled = raysets::tile_order(size)
+            .iter()
+            .map(|&i| primary[i as usize])
+            .collect();
+        let incoherent = raysets::incoherent(b, primary.len());
+        RaySets { tiled, incoherent }
+    }
+}
+
+/// How many of `rays` hit `scene` (any hit: are occluded), one ray at a time
+/// (`Scene::intersect_with` / `Scene::occluded_with`).
+pub fn single_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {
+    let mut s = Scratch::new();
+    rays.iter()
+        .filter(|r| {
+            if any {
+                scene.occluded_with(r, f32::INFINITY, &mut s)
+            } else {
+                scene.intersect_with(r, f32::INFINITY, &mut s).is_some()
+            }
+        })
+        .count() as u64
+}
+
+/// This process's CPU time in seconds (user + system, from `/proc/self/stat`, in clock ticks
+/// of 10 ms); 0 where that file is missing. On a busy machine, rays per CPU second vary less
+/// than rays per wall second.
+pub fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // the fields after the command name in parentheses; utime and stime are the 14th and 15th
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    f.iter().sum::<f64>() / 100.0
+}
+
+/// (wall seconds, CPU seconds, result) of `f`.
+pub fn timed_cpu<T>(f: impl FnOnce() -> T) -> (f64, f64, T) {
+    let (t, c) = (Instant::now(), cpu_seconds());
+    let r = f();
+    (t.elapsed().as_secs_f64(), cpu_seconds() - c, r)
+}
