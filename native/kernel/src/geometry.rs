@@ -255,6 +255,29 @@ fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
 }
 
 impl Geometry {
+    /// Renumbers the cones in the order the shapes first name them, so that a BVH leaf's cones
+    /// (its shapes are consecutive once the shapes are in BVH order) lie together in memory.
+    /// Cones no shape names are dropped.
+    pub fn cones_in_shape_order(&mut self) {
+        let mut new_index = vec![u32::MAX; self.cones.len()];
+        let mut cones = Vec::with_capacity(self.cones.len());
+        for s in &mut self.shapes {
+            if let Shape::Cone(k) = s {
+                let Some(slot) = new_index.get_mut(*k as usize) else {
+                    continue;
+                };
+                if *slot == u32::MAX {
+                    if let Some(c) = self.cones.get(*k as usize) {
+                        *slot = cones.len() as u32;
+                        cones.push(*c);
+                    }
+                }
+                *k = *slot;
+            }
+        }
+        self.cones = cones;
+    }
+
     /// Intersects shape `i`.
     #[inline(always)]
     pub fn hit(&self, shape: &Shape, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {

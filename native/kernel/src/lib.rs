@@ -42,7 +42,9 @@
 //! f32 throughout with `glam::Vec3A`/`Vec4` (SSE2); primitives are an enum (no dynamic
 //! dispatch); per-primitive data is precomputed (triangle edges, cone frames); BVH traversal
 //! tests four boxes at once; shadow rays are any-hit with a per-light shadow cache (the last
-//! occluder is tried first; the answer does not depend on it); no allocation per ray.
+//! occluder is tried first, and dropped once it has let a few rays in a row through; the answer
+//! does not depend on it), and test a leaf's spheres and triangles before its cones; no
+//! allocation per ray.
 #![deny(missing_docs)]
 
 pub mod bvh;

@@ -86,6 +86,28 @@ impl Hit {
 /// No shadow-cache entry.
 const NO_CACHE: (u32, u32) = (u32::MAX, u32::MAX);
 
+/// Shadow-cache slots a [`Scratch`] may hold ([`Scene::occluded_cached`]).
+const CACHE_SLOTS: usize = 1 << 19;
+
+/// A cached occluder is dropped once it has let this many shadow rays of its slot in a row
+/// through: where few rays are blocked (most of a scene's shadow rays reach their light), a
+/// stale entry costs a test per ray and saves nothing.
+const CACHE_PATIENCE: u32 = 4;
+
+/// Stores `occluder` and its count of rays let through at shadow-cache `entry` (see
+/// [`Scene::occluded_cached`]), growing the cache as needed.
+#[inline]
+fn set_cache(scratch: &mut Scratch, entry: Option<usize>, occluder: (u32, u32), misses: u32) {
+    let Some(e) = entry else { return };
+    if scratch.shadow_cache.len() < e + 2 {
+        scratch.shadow_cache.resize(e + 2, NO_CACHE);
+    }
+    if let Some([c, m]) = scratch.shadow_cache.get_mut(e..e + 2) {
+        *c = occluder;
+        *m = (misses, 0);
+    }
+}
+
 /// Local surface description at a hit.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Surface {
@@ -530,25 +552,34 @@ impl Scene {
     ) -> bool {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
-        if let Some(&(ci, c)) = scratch.shadow_cache.get(slot) {
-            if ci == Hit::NO_INSTANCE {
-                if let Some(s) = shapes.get(c as usize) {
-                    scratch.work += 1;
-                    if geom.hit(s, ray, 0.0, tmax).is_some() {
-                        return true;
-                    }
-                }
+        // the slot's occluder at 2 slot, and at 2 slot + 1 how many rays in a row it let through
+        let entry = (slot < CACHE_SLOTS).then_some(2 * slot);
+        let (cached, misses) = match entry.map(|e| scratch.shadow_cache.get(e..e + 2)) {
+            Some(Some(&[c, (m, _)])) => (c, m),
+            _ => (NO_CACHE, 0),
+        };
+        if cached != NO_CACHE {
+            let (ci, c) = cached;
+            scratch.work += 1;
+            let blocked = if ci == Hit::NO_INSTANCE {
+                shapes
+                    .get(c as usize)
+                    .is_some_and(|s| geom.hit(s, ray, 0.0, tmax).is_some())
             } else {
-                scratch.work += 1;
-                if self.hits_instance_triangle(ci, c, ray, tmax) {
-                    return true;
+                self.hits_instance_triangle(ci, c, ray, tmax)
+            };
+            if blocked {
+                if misses != 0 {
+                    self::set_cache(scratch, entry, cached, 0);
                 }
+                return true;
             }
         }
         let mut found = NO_CACHE;
         let mut mailbox = Mailbox::default();
         let blocks = &self.tri_blocks;
-        let lanes = RayLanes::new(ray);
+        // made at the first triangle leaf: most shadow rays of an analytic scene meet none
+        let mut lanes = None;
         let r = self.bvh.traverse::<false>(
             ray,
             tmax,
@@ -556,8 +587,9 @@ impl Scene {
             #[inline(always)]
             |first, count, tmax| {
                 if let Some(leaf) = blocks.leaf(first, count) {
+                    let lanes = lanes.get_or_insert_with(|| RayLanes::new(ray));
                     for b in leaf {
-                        if let Some(i) = b.any(&lanes, 0.0, tmax) {
+                        if let Some(i) = b.any(lanes, 0.0, tmax) {
                             found = (Hit::NO_INSTANCE, b.prim(i));
                             return -1.0;
                         }
@@ -565,8 +597,15 @@ impl Scene {
                     return tmax;
                 }
                 if let Some(range) = shapes.get(first..first + count) {
+                    // any hit will do: the cheap tests first, the cones (dearer) after
                     for (k, s) in range.iter().enumerate() {
-                        if mailbox.seen(s) {
+                        if !matches!(s, Shape::Cone(_)) && geom.hit(s, ray, 0.0, tmax).is_some() {
+                            found = (Hit::NO_INSTANCE, (first + k) as u32);
+                            return -1.0;
+                        }
+                    }
+                    for (k, s) in range.iter().enumerate() {
+                        if !matches!(s, Shape::Cone(_)) || mailbox.seen(s) {
                             continue;
                         }
                         if geom.hit(s, ray, 0.0, tmax).is_some() {
@@ -590,15 +629,16 @@ impl Scene {
             r
         };
         if r < 0.0 {
-            if slot != usize::MAX && slot < 1 << 20 {
-                if scratch.shadow_cache.len() <= slot {
-                    scratch.shadow_cache.resize(slot + 1, NO_CACHE);
-                }
-                if let Some(c) = scratch.shadow_cache.get_mut(slot) {
-                    *c = found;
-                }
-            }
+            self::set_cache(scratch, entry, found, 0);
             return true;
+        }
+        if cached != NO_CACHE {
+            // a cached occluder that keeps letting rays through is tested no more
+            if misses + 1 >= CACHE_PATIENCE {
+                self::set_cache(scratch, entry, NO_CACHE, 0);
+            } else {
+                self::set_cache(scratch, entry, cached, misses + 1);
+            }
         }
         scratch.work += self.planes.len() as u64;
         self.planes.iter().any(|pl| {
@@ -1105,6 +1145,7 @@ impl SceneBuilder {
         let (bvh, shapes, info, bounds) =
             ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
         self.geom.shapes = shapes;
+        self.geom.cones_in_shape_order();
         self.geom.polygons.shrink_to_fit();
         let mut bvh = bvh;
         let tri_blocks = TriBlocks::build(&mut bvh, &self.geom.shapes);
@@ -1291,5 +1332,98 @@ mod limit_tests {
         }
         assert_eq!(b.geom.shapes.len() + b.planes.len(), 3);
         assert_eq!(b.primitive_count(), 3);
+    }
+}
+
+#[cfg(test)]
+mod shadow_cache_tests {
+    use super::*;
+
+    /// Spheres, cones (oblique ones split over several leaves), triangles and a plane, laid
+    /// out on a grid so that shadow rays are blocked in runs and let through in runs.
+    fn scene() -> Scene {
+        let mut b = SceneBuilder::new();
+        let m = b.material(Material::default());
+        for i in 0..12 {
+            for j in 0..12 {
+                let p = Vec3A::new(i as f32, j as f32, 0.0);
+                match (i + j) % 3 {
+                    0 => b.sphere(p, 0.3, m).unwrap(),
+                    1 => b
+                        .cone(p, 0.2, p + Vec3A::new(0.7, 0.5, 1.5), 0.1, m)
+                        .unwrap(),
+                    _ => b
+                        .triangle(
+                            [
+                                p,
+                                p + Vec3A::new(0.6, 0.0, 0.2),
+                                p + Vec3A::new(0.0, 0.6, 0.4),
+                            ],
+                            None,
+                            m,
+                        )
+                        .unwrap(),
+                }
+            }
+        }
+        b.plane(Vec3A::new(0.0, 0.0, -3.0), Vec3A::Z, m).unwrap();
+        b.build()
+    }
+
+    /// Every primitive tested, no cache, no BVH.
+    fn brute(s: &Scene, ray: &Ray, tmax: f32) -> bool {
+        s.geom
+            .shapes
+            .iter()
+            .any(|sh| s.geom.hit(sh, ray, 0.0, tmax).is_some())
+            || s.planes.iter().any(|pl| {
+                let dn = pl.normal.dot(ray.dir);
+                dn != 0.0 && {
+                    let t = (pl.d - pl.normal.dot(ray.origin)) / dn;
+                    t > 0.0 && t < tmax
+                }
+            })
+    }
+
+    #[test]
+    fn the_cache_changes_no_answer() {
+        let s = scene();
+        let mut scratch = Scratch::new();
+        let lights = [
+            Vec3A::new(5.0, 5.0, 8.0),
+            Vec3A::new(-4.0, 14.0, 3.0),
+            Vec3A::new(20.0, -3.0, 1.0),
+        ];
+        let (mut blocked, mut free) = (0, 0);
+        // shading points in scanline order, as a renderer meets them
+        for y in 0..60 {
+            for x in 0..60 {
+                let p = Vec3A::new(x as f32 * 0.2 - 0.5, y as f32 * 0.2 - 0.5, -0.6);
+                for (li, l) in lights.iter().enumerate() {
+                    let to = *l - p;
+                    let dist = to.length();
+                    let ray = Ray::from_unit(p, to / dist);
+                    let want = brute(&s, &ray, dist);
+                    for slot in [li * 8 + 1, usize::MAX, 1 << 30] {
+                        assert_eq!(
+                            s.occluded_cached(&ray, dist, &mut scratch, slot),
+                            want,
+                            "point {p:?} light {li} slot {slot}"
+                        );
+                    }
+                    if want {
+                        blocked += 1;
+                    } else {
+                        free += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            blocked > 1000 && free > 1000,
+            "{blocked} blocked, {free} free"
+        );
+        // slots far apart: the cache grows, and the bound on slots holds
+        assert!(scratch.shadow_cache.len() <= 2 * CACHE_SLOTS);
     }
 }
