@@ -1110,6 +1110,108 @@ mod tests {
         assert!(hits > 5000, "{hits}");
     }
 
+    /// The any-hit loop (one stack of leaves and nodes) and the ordered loop meet a box in front
+    /// of the ray exactly when one exists, on rays in every direction from inside and outside.
+    #[test]
+    fn any_hit_and_ordered_traversals_agree_with_brute_force() {
+        let boxes = grid();
+        let (bvh, order) = Bvh::build(&boxes);
+        let mut scratch = Scratch::new();
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut f = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // the entry distance of a box, if the ray enters it before tmax (a plain slab test)
+        let enter = |b: &Aabb, r: &Ray, tmax: f32| -> Option<f32> {
+            let (mut lo, mut hi) = (0.0f32, tmax);
+            for a in 0..3 {
+                let (t0, t1) = (
+                    (b.min[a] - r.origin[a]) * r.inv_dir[a],
+                    (b.max[a] - r.origin[a]) * r.inv_dir[a],
+                );
+                lo = lo.max(t0.min(t1));
+                hi = hi.min(t0.max(t1));
+            }
+            (lo <= hi).then_some(lo)
+        };
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..4000 {
+            let o = Vec3A::new(f() * 14.0 - 2.0, f() * 14.0 - 2.0, f() * 34.0 - 2.0);
+            let d = Vec3A::new(f() - 0.5, f() - 0.5, f() - 0.5);
+            let ray = Ray::new(o, d);
+            let tmax = if round % 2 == 0 { 4.0 } else { f32::INFINITY };
+            // boxes a clear margin inside or outside the ray's reach, so rounding cannot matter
+            let want = boxes
+                .iter()
+                .filter_map(|b| enter(b, &ray, tmax))
+                .fold(f32::INFINITY, f32::min);
+            let grown = |b: &Aabb, g: f32| Aabb {
+                min: b.min - Vec3A::splat(g),
+                max: b.max + Vec3A::splat(g),
+            };
+            let near_miss = boxes.iter().any(|b| {
+                enter(&grown(b, 1e-3), &ray, tmax).is_some()
+                    != enter(&grown(b, -1e-3), &ray, tmax).is_some()
+            });
+            if near_miss {
+                continue;
+            }
+            let any = bvh.traverse::<false>(&ray, tmax, &mut scratch, |first, count, t| {
+                let leaf = &order[first..first + count];
+                if leaf
+                    .iter()
+                    .any(|&k| enter(&boxes[k as usize], &ray, t).is_some())
+                {
+                    -1.0
+                } else {
+                    t
+                }
+            });
+            assert_eq!(any < 0.0, want.is_finite(), "round {round}");
+            // the SSE loop (what runs without AVX) gives the same answer and the same work
+            let (mut w_sse, mut w) = (0u64, 0u64);
+            let leaf_any = |first: usize, count: usize, t: f32| {
+                let leaf = &order[first..first + count];
+                if leaf
+                    .iter()
+                    .any(|&k| enter(&boxes[k as usize], &ray, t).is_some())
+                {
+                    -1.0
+                } else {
+                    t
+                }
+            };
+            let sse = bvh.traverse_loop::<false, false>(
+                &ray,
+                tmax,
+                &mut scratch.stack,
+                &mut w_sse,
+                leaf_any,
+            );
+            let all = bvh.traverse_in::<false>(&ray, tmax, &mut scratch.stack, &mut w, leaf_any);
+            assert_eq!((sse.to_bits(), w_sse), (all.to_bits(), w), "round {round}");
+            let mut best = f32::INFINITY;
+            bvh.traverse::<true>(&ray, tmax, &mut scratch, |first, count, t| {
+                for &k in &order[first..first + count] {
+                    if let Some(e) = enter(&boxes[k as usize], &ray, t) {
+                        best = best.min(e);
+                    }
+                }
+                t
+            });
+            assert_eq!(best.to_bits(), want.to_bits(), "round {round}");
+            if want.is_finite() {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 500 && misses > 500, "{hits} {misses}");
+    }
+
     #[test]
     fn traversal_finds_every_box_along_a_line() {
         let boxes = grid();
