@@ -24,8 +24,10 @@
 //! queries the children that are hit are handled nearest first: leaves are intersected
 //! immediately, the nearest inner child is descended into, the others are stacked with their
 //! entry distance and skipped later if a closer hit was found. Shadow rays use the unordered
-//! any-hit variant, which stops at the first occluder. The stack lives in a reusable
-//! [`Scratch`], so no allocation happens per ray.
+//! any-hit loop, which stops at the first occluder: leaves and inner nodes share one stack, the
+//! last child entered is handled next and the first two others are stacked without a branch,
+//! so that an incoherent ray pays about one unpredictable branch per node. The stack lives in
+//! a reusable [`Scratch`], so no allocation happens per ray.
 
 use crate::geometry::Aabb;
 use crate::ray::Ray;
@@ -48,6 +50,17 @@ pub(crate) mod probe {
         pub static NODES: Cell<u64> = const { Cell::new(0) };
         pub static TCOST: Cell<f32> = const { Cell::new(super::TRAVERSAL_COST) };
         pub static LEAF_MIN: Cell<usize> = const { Cell::new(0) };
+        /// Node visits by (inner children hit, leaves hit).
+        pub static SHAPE: std::cell::RefCell<[[u64; 9]; 9]> = const { std::cell::RefCell::new([[0; 9]; 9]) };
+    }
+
+    /// Counts a node visit that entered the children of `mask`, by kind.
+    pub fn shape(node: &super::Node8, mask: u32) {
+        let inner = mask & node.inner_mask();
+        let leaves = mask & !inner;
+        SHAPE.with(|h| {
+            h.borrow_mut()[inner.count_ones() as usize][leaves.count_ones() as usize] += 1
+        });
     }
 }
 
@@ -454,6 +467,13 @@ impl Scratch {
 /// Children per node.
 pub(crate) const WIDTH: usize = 8;
 
+/// Entries of the traversal stack that the single-ray loop addresses: a power of two above the
+/// deepest the stack can get (at most `WIDTH - 1` entries per level of a path, and a path has at
+/// most `MAX_DEPTH + 1` levels, as the build forces leaves at `MAX_DEPTH`).
+pub(crate) const STACK_CAP: usize = 512;
+const _: () = assert!((WIDTH - 1) * (MAX_DEPTH + 1) < STACK_CAP);
+const _: () = assert!(STACK_CAP.is_power_of_two());
+
 /// Marks an unused child slot of a [`Node8`].
 pub(crate) const EMPTY: u32 = u32::MAX;
 
@@ -680,9 +700,29 @@ impl Bvh {
         self.traverse_loop::<ORDERED, true>(ray, tmax, stack, work, visit)
     }
 
-    /// The traversal; `AVX` only where the CPU has it (see [`Bvh::traverse_in`]).
+    /// The traversal; `AVX` only where the CPU has it (see [`Bvh::traverse_in`]): the ordered
+    /// loop for closest hits, [`Bvh::any_loop`] for any-hit queries.
     #[inline(always)]
     fn traverse_loop<const ORDERED: bool, const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
+        if ORDERED {
+            self.ordered_loop::<AVX>(ray, tmax, stack, work, visit)
+        } else {
+            self.any_loop::<AVX>(ray, tmax, stack, work, visit)
+        }
+    }
+
+    /// Closest-hit traversal: the children hit at each node are handled nearest first: leaves
+    /// are visited at once, the nearest inner child is descended into and the others are
+    /// stacked with their entry distance, skipped later if a closer hit was found.
+    #[inline(always)]
+    fn ordered_loop<const AVX: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -712,6 +752,8 @@ impl Bvh {
                 };
                 #[cfg(not(target_arch = "x86_64"))]
                 let (tn, mut mask) = hit_sse(node, &pre, tmax);
+                #[cfg(test)]
+                probe::shape(node, mask);
                 if mask & mask.wrapping_sub(1) == 0 {
                     // zero or one child hit: the common case, no sorting or stacking
                     if mask != 0 {
@@ -741,7 +783,7 @@ impl Bvh {
                         if count == 0 {
                             // insertion keeps (it, ic) sorted far to near
                             let mut j = ni;
-                            while ORDERED && j > 0 && it[(j - 1) & 7] < tn[i] {
+                            while j > 0 && it[(j - 1) & 7] < tn[i] {
                                 it[j & 7] = it[(j - 1) & 7];
                                 ic[j & 7] = ic[(j - 1) & 7];
                                 j -= 1;
@@ -789,6 +831,107 @@ impl Bvh {
         t
     }
 
+    /// Any-hit traversal, which stops at the first visit that returns a negative value. Leaves
+    /// and inner nodes go through one stack of `(child, count, entry distance)`, in no order of
+    /// distance: per node, the last child entered is handled next, whether leaf or node, and
+    /// the others are stacked in slot order. The first two of those are stacked without a
+    /// branch (nearly every node enters at most three children), so a node costs one SIMD box
+    /// test and about one unpredictable branch, the one between leaf and node. The stack is
+    /// addressed modulo [`STACK_CAP`], which the build's depth cap keeps it below.
+    #[inline(always)]
+    fn any_loop<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        mut tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        mut visit: impl FnMut(usize, usize, f32) -> f32,
+    ) -> f32 {
+        if self.nodes.is_empty() {
+            return tmax;
+        }
+        if stack.len() < STACK_CAP {
+            stack.resize(STACK_CAP, (0, 0, 0.0));
+        }
+        let Some(st) = stack.get_mut(..STACK_CAP) else {
+            return tmax;
+        };
+        let Ok(st) = <&mut [(u32, u32, f32); STACK_CAP]>::try_from(st) else {
+            return tmax;
+        };
+        let nodes = &self.nodes[..];
+        let pre = RayPre::new(ray);
+        let mut sp = 0usize;
+        // the child handled next: (index, count as in Node8, entry distance)
+        let mut cur = (0u32, 0u32, 0.0f32);
+        // the work is counted here and added once (not stored to memory per node)
+        let mut w = 0u64;
+        let t = 'run: loop {
+            if cur.1 == 0 {
+                // an inner node
+                let Some(node) = nodes.get(cur.0 as usize) else {
+                    break 'run tmax;
+                };
+                #[cfg(test)]
+                probe::NODES.with(|c| c.set(c.get() + 1));
+                w += 1;
+                #[cfg(target_arch = "x86_64")]
+                let (tn, mask) = if AVX {
+                    // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+                    unsafe { hit_avx(node, &pre, tmax) }
+                } else {
+                    hit_sse(node, &pre, tmax)
+                };
+                #[cfg(not(target_arch = "x86_64"))]
+                let (tn, mask) = hit_sse(node, &pre, tmax);
+                #[cfg(test)]
+                probe::shape(node, mask);
+                // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
+                let near = 31 - (mask | 1).leading_zeros() as usize;
+                let mut rest = mask & !(1u32 << near);
+                // the first two of the rest without a branch (a store above the top is
+                // harmless), then any others
+                for _ in 0..2 {
+                    let i = rest.trailing_zeros() as usize & 7;
+                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    sp += (rest != 0) as usize;
+                    rest &= rest.wrapping_sub(1);
+                }
+                while rest != 0 {
+                    let i = rest.trailing_zeros() as usize & 7;
+                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    sp += 1;
+                    rest &= rest - 1;
+                }
+                if mask != 0 {
+                    let i = near & 7;
+                    cur = (node.child[i], node.count[i], tn[i]);
+                    continue;
+                }
+            } else {
+                w += (cur.1 & !LEAF_BLOCKS) as u64;
+                tmax = visit(cur.0 as usize, cur.1 as usize, tmax);
+                if tmax < 0.0 {
+                    break 'run tmax;
+                }
+            }
+            // pop the next child that may still hold a closer hit
+            loop {
+                if sp == 0 {
+                    break 'run tmax;
+                }
+                sp -= 1;
+                let e = st[sp & (STACK_CAP - 1)];
+                if e.2 <= tmax {
+                    cur = e;
+                    break;
+                }
+            }
+        };
+        *work += w;
+        t
+    }
+
     /// Gives each leaf `(first primitive, count)` to `blocks`, which may store the leaf's
     /// primitives as blocks and return the first block's index: the leaf then names that block
     /// and is marked with [`LEAF_BLOCKS`]. Leaves already marked are left alone.
@@ -821,6 +964,16 @@ impl Bvh {
 }
 
 impl Node8 {
+    /// The slots holding inner nodes (`count == 0`), as a bit mask.
+    #[cfg(test)]
+    fn inner_mask(&self) -> u32 {
+        let mut m = 0u32;
+        for (i, &c) in self.count.iter().enumerate() {
+            m |= ((c == 0) as u32) << i;
+        }
+        m
+    }
+
     /// The children's box planes: `[a]` minima on axis `a`, `[3 + a]` maxima (SoA).
     #[inline(always)]
     pub(crate) fn planes(&self) -> &[[f32; WIDTH]; 6] {
@@ -959,6 +1112,108 @@ mod tests {
         assert!(hits > 5000, "{hits}");
     }
 
+    /// The any-hit loop (one stack of leaves and nodes) and the ordered loop meet a box in front
+    /// of the ray exactly when one exists, on rays in every direction from inside and outside.
+    #[test]
+    fn any_hit_and_ordered_traversals_agree_with_brute_force() {
+        let boxes = grid();
+        let (bvh, order) = Bvh::build(&boxes);
+        let mut scratch = Scratch::new();
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut f = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // the entry distance of a box, if the ray enters it before tmax (a plain slab test)
+        let enter = |b: &Aabb, r: &Ray, tmax: f32| -> Option<f32> {
+            let (mut lo, mut hi) = (0.0f32, tmax);
+            for a in 0..3 {
+                let (t0, t1) = (
+                    (b.min[a] - r.origin[a]) * r.inv_dir[a],
+                    (b.max[a] - r.origin[a]) * r.inv_dir[a],
+                );
+                lo = lo.max(t0.min(t1));
+                hi = hi.min(t0.max(t1));
+            }
+            (lo <= hi).then_some(lo)
+        };
+        let (mut hits, mut misses) = (0, 0);
+        for round in 0..4000 {
+            let o = Vec3A::new(f() * 14.0 - 2.0, f() * 14.0 - 2.0, f() * 34.0 - 2.0);
+            let d = Vec3A::new(f() - 0.5, f() - 0.5, f() - 0.5);
+            let ray = Ray::new(o, d);
+            let tmax = if round % 2 == 0 { 4.0 } else { f32::INFINITY };
+            // boxes a clear margin inside or outside the ray's reach, so rounding cannot matter
+            let want = boxes
+                .iter()
+                .filter_map(|b| enter(b, &ray, tmax))
+                .fold(f32::INFINITY, f32::min);
+            let grown = |b: &Aabb, g: f32| Aabb {
+                min: b.min - Vec3A::splat(g),
+                max: b.max + Vec3A::splat(g),
+            };
+            let near_miss = boxes.iter().any(|b| {
+                enter(&grown(b, 1e-3), &ray, tmax).is_some()
+                    != enter(&grown(b, -1e-3), &ray, tmax).is_some()
+            });
+            if near_miss {
+                continue;
+            }
+            let any = bvh.traverse::<false>(&ray, tmax, &mut scratch, |first, count, t| {
+                let leaf = &order[first..first + count];
+                if leaf
+                    .iter()
+                    .any(|&k| enter(&boxes[k as usize], &ray, t).is_some())
+                {
+                    -1.0
+                } else {
+                    t
+                }
+            });
+            assert_eq!(any < 0.0, want.is_finite(), "round {round}");
+            // the SSE loop (what runs without AVX) gives the same answer and the same work
+            let (mut w_sse, mut w) = (0u64, 0u64);
+            let leaf_any = |first: usize, count: usize, t: f32| {
+                let leaf = &order[first..first + count];
+                if leaf
+                    .iter()
+                    .any(|&k| enter(&boxes[k as usize], &ray, t).is_some())
+                {
+                    -1.0
+                } else {
+                    t
+                }
+            };
+            let sse = bvh.traverse_loop::<false, false>(
+                &ray,
+                tmax,
+                &mut scratch.stack,
+                &mut w_sse,
+                leaf_any,
+            );
+            let all = bvh.traverse_in::<false>(&ray, tmax, &mut scratch.stack, &mut w, leaf_any);
+            assert_eq!((sse.to_bits(), w_sse), (all.to_bits(), w), "round {round}");
+            let mut best = f32::INFINITY;
+            bvh.traverse::<true>(&ray, tmax, &mut scratch, |first, count, t| {
+                for &k in &order[first..first + count] {
+                    if let Some(e) = enter(&boxes[k as usize], &ray, t) {
+                        best = best.min(e);
+                    }
+                }
+                t
+            });
+            assert_eq!(best.to_bits(), want.to_bits(), "round {round}");
+            if want.is_finite() {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 500 && misses > 500, "{hits} {misses}");
+    }
+
     #[test]
     fn traversal_finds_every_box_along_a_line() {
         let boxes = grid();
@@ -1031,34 +1286,119 @@ mod stats_report {
             blocks,
             slots as f64 / bvh.nodes.len() as f64
         );
-        let rays = raysets::incoherent(scene.bounds(), 1 << 18);
+        let mut hist = [0usize; 9];
+        for l in &leaves {
+            hist[l.1.min(8)] += 1;
+        }
+        println!("leaves by size (0..=8+): {hist:?}");
         let mut s = Scratch::new();
-        for any in [false, true] {
-            probe::NODES.with(|c| c.set(0));
-            let mut leafv = 0u64;
-            for r in &rays {
-                bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, |f, c, t| {
-                    leafv += 1;
-                    let (f, c) = scene.tri_blocks.prims(f, c);
-                    let mut tm = t;
-                    for sh in &scene.geom.shapes[f..f + c] {
-                        if let Some(x) = scene.geom.hit(sh, r, 0.0, tm) {
-                            tm = x;
-                            if any {
-                                return -1.0;
+        let b = scene.bounds();
+        for (kind, rays) in [
+            ("primary", raysets::primary(b, 512)),
+            ("incoherent", raysets::incoherent(b, 1 << 18)),
+        ] {
+            // (label, ordered, stop at the first hit)
+            for (mode, any) in [("closest", false), ("any, unordered", true)] {
+                probe::NODES.with(|c| c.set(0));
+                probe::SHAPE.with(|h| *h.borrow_mut() = [[0; 9]; 9]);
+                let (mut leafv, mut blockv) = (0u64, 0u64);
+                for r in &rays {
+                    let visit = |f: usize, c: usize, t: f32| {
+                        leafv += 1;
+                        let (f, c) = scene.tri_blocks.prims(f, c);
+                        let mut tm = t;
+                        for (k, sh) in scene.geom.shapes[f..f + c].iter().enumerate() {
+                            if k % 4 == 0 {
+                                blockv += 1;
+                            }
+                            if let Some(x) = scene.geom.hit(sh, r, 0.0, tm) {
+                                tm = x;
+                                if any {
+                                    return -1.0;
+                                }
                             }
                         }
+                        tm
+                    };
+                    if any {
+                        bvh.traverse_in::<false>(
+                            r,
+                            f32::INFINITY,
+                            &mut s.stack,
+                            &mut s.work,
+                            visit,
+                        );
+                    } else {
+                        bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, visit);
                     }
-                    tm
-                });
+                }
+                let nodes = probe::NODES.with(|c| c.get());
+                let shape = probe::SHAPE.with(|h| std::mem::take(&mut *h.borrow_mut()));
+                for (k, row) in shape.iter().enumerate().take(5) {
+                    let tot: u64 = shape.iter().flatten().sum();
+                    let pct: Vec<String> = row[..5]
+                        .iter()
+                        .map(|&x| format!("{:5.1}", 100.0 * x as f64 / tot as f64))
+                        .collect();
+                    println!("  {k} inner hit, 0..4 leaves hit: {}", pct.join(" "));
+                }
+                let n = rays.len() as f64;
+                println!(
+                    "{kind} {mode}: nodes/ray {:.2} leaves/ray {:.2} blocks/ray {:.2}",
+                    nodes as f64 / n,
+                    leafv as f64 / n,
+                    blockv as f64 / n
+                );
             }
-            let nodes = probe::NODES.with(|c| c.get());
-            println!(
-                "incoherent any={any}: nodes/ray {:.2} leaves/ray {:.2}",
-                nodes as f64 / rays.len() as f64,
-                leafv as f64 / rays.len() as f64
-            );
         }
+        // the node walk alone: every leaf entered is visited and nothing is hit
+        for (kind, rays) in [
+            ("primary", raysets::primary(b, 512)),
+            ("incoherent", raysets::incoherent(b, 1 << 18)),
+        ] {
+            for any in [false, true] {
+                probe::NODES.with(|c| c.set(0));
+                let t = std::time::Instant::now();
+                let mut leafv = 0u64;
+                for _ in 0..4 {
+                    for r in &rays {
+                        let visit = |_: usize, _: usize, t: f32| {
+                            leafv += 1;
+                            t
+                        };
+                        if any {
+                            bvh.traverse_in::<false>(
+                                r,
+                                f32::INFINITY,
+                                &mut s.stack,
+                                &mut s.work,
+                                visit,
+                            );
+                        } else {
+                            bvh.traverse_in::<true>(
+                                r,
+                                f32::INFINITY,
+                                &mut s.stack,
+                                &mut s.work,
+                                visit,
+                            );
+                        }
+                    }
+                }
+                let secs = t.elapsed().as_secs_f64();
+                let n = 4.0 * rays.len() as f64;
+                let nodes = probe::NODES.with(|c| c.get()) as f64;
+                println!(
+                    "walk only {kind} ordered={}: nodes/ray {:.2} leaves/ray {:.2}, {:.1} ns/ray, {:.2} ns/node",
+                    !any,
+                    nodes / n,
+                    leafv as f64 / n,
+                    secs * 1e9 / n,
+                    secs * 1e9 / nodes
+                );
+            }
+        }
+        let rays = raysets::incoherent(b, 1 << 18);
         for round in 0..2 {
             let t = std::time::Instant::now();
             let hits = rays
