@@ -84,18 +84,9 @@ struct Frustum {
 /// `plane * inv - o * inv`.
 const ROUNDING: f32 = 4e-6;
 
-/// One ray of a packet: its constants for the box and triangle tests and its best hit so far.
-#[derive(Clone, Copy, Debug)]
-struct Lane {
-    inv: [f32; 3],
-    oinv: [f32; 3],
-    lanes: RayLanes,
-    tmax: f32,
-    prim: u32,
-}
-
-/// The rays of a packet in SoA layout, for the leaf tests across rays (unused lanes: zeros,
-/// masked off by their bound of -inf).
+/// The rays of a packet in SoA layout, for the tests across rays, and each ray's best hit so
+/// far: `tmax` (the bound, then the nearest hit's distance) and `prim` (`u32::MAX`: none yet).
+/// Unused lanes: zeros, with a bound of -inf, so that no box test lets them in.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 struct Soa {
@@ -103,6 +94,77 @@ struct Soa {
     d: [[f32; PACKET]; 3],
     inv: [[f32; PACKET]; 3],
     oinv: [[f32; PACKET]; 3],
+    tmax: [f32; PACKET],
+    prim: [u32; PACKET],
+}
+
+impl Soa {
+    /// No rays.
+    #[inline(always)]
+    fn empty() -> Soa {
+        Soa {
+            o: [[0.0; PACKET]; 3],
+            d: [[0.0; PACKET]; 3],
+            inv: [[0.0; PACKET]; 3],
+            oinv: [[0.0; PACKET]; 3],
+            tmax: [f32::NEG_INFINITY; PACKET],
+            prim: [u32::MAX; PACKET],
+        }
+    }
+
+    /// Puts `ray` in lane `k` with the bound `tmax`; returns its reciprocal direction and
+    /// origin times it, as the single-ray box test computes them.
+    #[inline(always)]
+    fn set(&mut self, k: usize, ray: &Ray, tmax: f32) -> ([f32; 3], [f32; 3]) {
+        let k = k & (PACKET - 1);
+        let (o, d) = (ray.origin, ray.inv_dir);
+        let inv = [d.x, d.y, d.z];
+        let oinv = [o.x * d.x, o.y * d.y, o.z * d.z];
+        for a in 0..3 {
+            self.o[a][k] = ray.origin[a];
+            self.d[a][k] = ray.dir[a];
+            self.inv[a][k] = inv[a];
+            self.oinv[a][k] = oinv[a];
+        }
+        self.tmax[k] = tmax;
+        self.prim[k] = u32::MAX;
+        (inv, oinv)
+    }
+
+    /// Lane `k`'s reciprocal direction and origin times it.
+    #[inline(always)]
+    fn lane(&self, k: usize) -> ([f32; 3], [f32; 3]) {
+        let k = k & (PACKET - 1);
+        (
+            [0, 1, 2].map(|a| self.inv[a][k]),
+            [0, 1, 2].map(|a| self.oinv[a][k]),
+        )
+    }
+
+    /// The largest bound of the lanes (-inf for none).
+    #[inline(always)]
+    fn max_tmax(&self) -> f32 {
+        self.tmax
+            .iter()
+            .fold(f32::NEG_INFINITY, |m, &t| max_ps(m, t))
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod probe {
+    use std::cell::Cell;
+    thread_local! {
+        /// [node tests, leaf calls (per 8 rays), leaf calls some ray entered, triangle tests
+        /// (per 8 rays), ray-leaf entries, packets]
+        pub static COUNTS: Cell<[u64; 6]> = const { Cell::new([0; 6]) };
+    }
+    pub fn add(k: usize, n: u64) {
+        COUNTS.with(|c| {
+            let mut v = c.get();
+            v[k] += n;
+            c.set(v);
+        });
+    }
 }
 
 #[cfg(test)]
@@ -150,15 +212,22 @@ fn min_ps(a: f32, b: f32) -> f32 {
 }
 
 /// The single-ray box test of child `i` (the lane `i` of the 8-wide test in [`crate::bvh`]):
-/// the ray's entry distance if it enters the box before its `tmax`.
+/// the entry distance of the ray (reciprocal direction `inv`, origin times it `oinv`) if it
+/// enters the box before `tmax`.
 #[inline(always)]
-fn enters(node: &Node8, i: usize, f: &Frustum, l: &Lane) -> Option<f32> {
+fn enters(
+    node: &Node8,
+    i: usize,
+    f: &Frustum,
+    (inv, oinv): ([f32; 3], [f32; 3]),
+    tmax: f32,
+) -> Option<f32> {
     let p = node.planes();
     let mut tn = 0.0f32;
-    let mut tf = l.tmax;
+    let mut tf = tmax;
     for a in 0..3 {
-        let n = p[f.near[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
-        let x = p[f.far[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
+        let n = p[f.near[a] & 7][i & 7] * inv[a] - oinv[a];
+        let x = p[f.far[a] & 7][i & 7] * inv[a] - oinv[a];
         tn = max_ps(tn, n);
         tf = min_ps(tf, x);
     }
@@ -245,7 +314,7 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
 /// rays that entered, with the operations of the four-triangle test of [`crate::tri4`] (which
 /// are those of the one-triangle test) on the same values, so the same distances; among equal
 /// distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
-/// entered in `entered` (see [`traverse`]).
+/// entered in `entered` (see [`traverse`]); returns whether some ray's nearest hit changed.
 ///
 /// # Safety
 /// The CPU must have AVX.
@@ -256,36 +325,20 @@ unsafe fn leaf_avx(
     node: &Node8,
     i: usize,
     f: &Frustum,
-    soa: &Soa,
+    soa: &mut Soa,
     half: usize,
-    lanes: &mut [Lane],
     tris: &[Shape],
     first: usize,
     entered: &mut Vec<(usize, f32, u32)>,
-) {
+) -> bool {
     use std::arch::x86_64::*;
     let base = 8 * (half & 1);
-    let mut tm = [f32::NEG_INFINITY; 8];
-    let mut limit = [f32::NEG_INFINITY; 8];
-    let mut prim = [u32::MAX; 8];
-    for j in 0..8 {
-        if let Some(l) = lanes.get(base + j) {
-            tm[j] = l.tmax;
-            prim[j] = l.prim;
-            limit[j] = if l.prim == u32::MAX {
-                l.tmax
-            } else {
-                l.tmax.next_up()
-            };
-        }
-    }
     let p = node.planes();
     // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
-    // each unaligned load reads 8 f32 inside one row; `tm` and `limit` are arrays of 8 f32.
+    // each unaligned load reads 8 f32 inside one row.
     let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
     let mut tn = _mm256_setzero_ps();
-    // SAFETY: see above.
-    let mut tf = unsafe { _mm256_loadu_ps(tm.as_ptr()) };
+    let mut tf = load(&soa.tmax);
     for a in 0..3 {
         let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
         let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
@@ -295,21 +348,35 @@ unsafe fn leaf_avx(
     }
     let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
     let mask = _mm256_movemask_ps(inside) as u32;
+    #[cfg(test)]
+    probe::add(1, 1);
     if mask == 0 {
-        return;
+        return false;
+    }
+    #[cfg(test)]
+    {
+        probe::add(2, 1);
+        probe::add(4, mask.count_ones() as u64);
+        probe::add(3, tris.len() as u64);
     }
     let mut tns = [0.0f32; 8];
     // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
     unsafe { _mm256_storeu_ps(tns.as_mut_ptr(), tn) };
+    // a hit at exactly a ray's nearest distance is taken only with a lower index
+    let mut limit = [f32::NEG_INFINITY; 8];
     let mut m = mask;
     while m != 0 {
         let j = m.trailing_zeros() as usize & 7;
         m &= m - 1;
         entered.push((base + j, tns[j], tris.len() as u32));
+        let (t, pr) = (soa.tmax[(base + j) & 15], soa.prim[(base + j) & 15]);
+        limit[j] = if pr == u32::MAX { t } else { t.next_up() };
     }
     let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
     let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
     let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    // SAFETY: `limit` is 8 f32.
+    let mut lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     let mut changed = false;
     for (k, s) in tris.iter().enumerate() {
         let Shape::Triangle { v0, e1, e2 } = *s else {
@@ -335,8 +402,6 @@ unsafe fn leaf_avx(
         let qz = sub(mul(sx, e1y), mul(sy, e1x));
         let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
         let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
-        // SAFETY: `limit` is 8 f32.
-        let lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
         let and = _mm256_and_ps;
         let ok = and(
             and(
@@ -368,22 +433,18 @@ unsafe fn leaf_avx(
         while hit != 0 {
             let j = hit.trailing_zeros() as usize & 7;
             hit &= hit - 1;
-            if ts[j] < tm[j] || pk < prim[j] {
-                tm[j] = ts[j];
-                prim[j] = pk;
+            let l = (base + j) & 15;
+            if ts[j] < soa.tmax[l] || pk < soa.prim[l] {
+                soa.tmax[l] = ts[j];
+                soa.prim[l] = pk;
                 limit[j] = ts[j].next_up();
                 changed = true;
             }
         }
+        // SAFETY: `limit` is 8 f32.
+        lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     }
-    if changed {
-        for j in 0..8 {
-            if let Some(l) = lanes.get_mut(base + j) {
-                l.tmax = tm[j];
-                l.prim = prim[j];
-            }
-        }
-    }
+    changed
 }
 
 /// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
@@ -452,50 +513,32 @@ fn group_closest(
         o: [0.0; 3],
         k: [0.0; 3],
     };
-    let mut lanes = [Lane {
-        inv: [0.0; 3],
-        oinv: [0.0; 3],
-        lanes: RayLanes::new(&Ray::new(glam::Vec3A::ZERO, glam::Vec3A::Z)),
-        tmax,
-        prim: u32::MAX,
-    }; PACKET];
-    let mut soa = Soa {
-        o: [[0.0; PACKET]; 3],
-        d: [[0.0; PACKET]; 3],
-        inv: [[0.0; PACKET]; 3],
-        oinv: [[0.0; PACKET]; 3],
-    };
+    let mut soa = Soa::empty();
     let mut idx = [0usize; PACKET];
     let mut k = 0usize;
     let mut m = members;
+    let mut same = true;
+    let o = rays
+        .get(members.trailing_zeros() as usize)
+        .map_or(glam::Vec3A::ZERO, |r| r.origin);
     while m != 0 {
         let i = m.trailing_zeros() as usize;
         m &= m - 1;
-        let (Some(r), Some(l), Some(slot)) = (rays.get(i), lanes.get_mut(k), idx.get_mut(k)) else {
+        let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(k)) else {
             continue;
         };
-        let (o, d) = (r.origin, r.inv_dir);
-        l.inv = [d.x, d.y, d.z];
-        l.oinv = [o.x * d.x, o.y * d.y, o.z * d.z];
-        l.lanes = RayLanes::new(r);
+        let (inv, oinv) = soa.set(k, r, tmax);
         for a in 0..3 {
-            f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
-            f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
-            f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
-            f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
-            soa.o[a][k & 15] = r.origin[a];
-            soa.d[a][k & 15] = r.dir[a];
-            soa.inv[a][k & 15] = l.inv[a];
-            soa.oinv[a][k & 15] = l.oinv[a];
+            f.inv_lo[a] = f.inv_lo[a].min(inv[a]);
+            f.inv_hi[a] = f.inv_hi[a].max(inv[a]);
+            f.oinv_lo[a] = f.oinv_lo[a].min(oinv[a]);
+            f.oinv_hi[a] = f.oinv_hi[a].max(oinv[a]);
         }
+        same &= r.origin == o;
         *slot = i;
         k += 1;
     }
-    if let Some(first) = idx.first().and_then(|&i| rays.get(i)) {
-        let o = first.origin;
-        let same = idx[..k]
-            .iter()
-            .all(|&i| rays.get(i).is_some_and(|r| r.origin == o));
+    if k > 0 {
         let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
         if same && tame {
             f.shared = true;
@@ -503,19 +546,32 @@ fn group_closest(
             f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
         }
     }
-    let lanes = &mut lanes[..k];
+    let idx = &idx[..k];
+    #[cfg(test)]
+    probe::add(5, 1);
     #[cfg(target_arch = "x86_64")]
     if use_avx() {
         // SAFETY: the CPU has AVX (checked just above).
-        unsafe { traverse_avx(scene, rays, &idx[..k], &f, &soa, lanes, scratch) };
+        unsafe { traverse_avx(scene, rays, idx, &f, &mut soa, scratch) };
     } else {
-        traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
+        traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
-    for (l, &i) in lanes.iter().zip(idx.iter()) {
+    traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
+    // without instances and planes the hit is the BVH's (what finish_closest would return)
+    let alone = scene.instances.is_empty() && scene.planes.is_empty();
+    for (j, &i) in idx.iter().enumerate() {
+        let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
         if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
-            *o = scene.finish_closest(r, l.tmax, l.prim, scratch);
+            *o = if alone {
+                (prim != u32::MAX).then_some(Hit {
+                    t,
+                    prim,
+                    instance: Hit::NO_INSTANCE,
+                })
+            } else {
+                scene.finish_closest(r, t, prim, scratch)
+            };
         }
     }
 }
@@ -531,14 +587,14 @@ unsafe fn traverse_avx(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
-    traverse::<true>(scene, rays, idx, f, soa, lanes, scratch);
+    traverse::<true>(scene, rays, idx, f, soa, scratch);
 }
 
-/// The packet traversal of the scene's own BVH; leaves each ray's nearest hit in its lane.
+/// The packet traversal of the scene's own BVH for the rays `idx` (lane `j` is `rays[idx[j]]`);
+/// leaves each ray's nearest hit in its lane of `soa`.
 ///
 /// Work ([`Scratch::work`]): each ray is charged one unit plus the leaf's size for every leaf
 /// whose box it enters before its final nearest hit. That set does not depend on the order the
@@ -550,14 +606,13 @@ fn traverse<const AVX: bool>(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
     ENTERED.with(|e| {
         let mut entered = e.take();
         entered.clear();
-        traverse_with::<AVX>(scene, rays, idx, f, soa, lanes, scratch, &mut entered);
+        traverse_with::<AVX>(scene, rays, idx, f, soa, scratch, &mut entered);
         e.set(entered);
     });
 }
@@ -568,27 +623,27 @@ thread_local! {
 }
 
 /// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn traverse_with<const AVX: bool>(
     scene: &Scene,
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
     entered: &mut Vec<(usize, f32, u32)>,
 ) {
     let nodes = &scene.bvh.nodes;
     let shapes = &scene.geom.shapes;
     let mut mailboxes = [Mailbox::default(); PACKET];
-    let mut tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+    let mut tmax = soa.max_tmax();
     let stack = &mut scratch.stack;
     let mut sp = 0usize;
     let mut cur = 0u32;
     loop {
         if let Some(node) = nodes.get(cur as usize) {
+            #[cfg(test)]
+            probe::add(0, 1);
             #[cfg(target_arch = "x86_64")]
             let (tn, mut mask) = if AVX {
                 // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
@@ -631,37 +686,37 @@ fn traverse_with<const AVX: bool>(
                     ) {
                         let p0 = b.prim(0) as usize;
                         if let Some(tris) = shapes.get(p0..p0 + n) {
-                            for half in 0..lanes.len().div_ceil(8) {
+                            let mut changed = false;
+                            for half in 0..idx.len().div_ceil(8) {
                                 // SAFETY: AVX is only set by traverse_avx, which runs where
                                 // the CPU has it.
-                                unsafe {
-                                    leaf_avx(node, i, f, soa, half, lanes, tris, p0, entered)
-                                };
+                                changed |=
+                                    unsafe { leaf_avx(node, i, f, soa, half, tris, p0, entered) };
                             }
-                            tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+                            if changed {
+                                tmax = soa.max_tmax();
+                            }
                             continue;
                         }
                     }
-                    let mut new_max = f32::NEG_INFINITY;
-                    let lanes_mb = lanes.iter_mut().zip(idx).zip(mailboxes.iter_mut());
-                    for (lane, ((l, &ri), mb)) in lanes_mb.enumerate() {
-                        if let Some(t) = enters(node, i, f, l) {
+                    for (lane, (&ri, mb)) in idx.iter().zip(mailboxes.iter_mut()).enumerate() {
+                        let l = lane & 15;
+                        if let Some(t) = enters(node, i, f, soa.lane(l), soa.tmax[l]) {
                             if let Some(r) = rays.get(ri) {
-                                entered.push((lane, t, n as u32));
-                                l.tmax = scene.leaf_closest(
+                                entered.push((l, t, n as u32));
+                                soa.tmax[l] = scene.leaf_closest(
                                     first,
                                     c as usize,
                                     r,
-                                    &l.lanes,
+                                    &RayLanes::new(r),
                                     mb,
-                                    l.tmax,
-                                    &mut l.prim,
+                                    soa.tmax[l],
+                                    &mut soa.prim[l],
                                 );
                             }
                         }
-                        new_max = new_max.max(l.tmax);
                     }
-                    tmax = new_max;
+                    tmax = soa.max_tmax();
                 }
             }
             if ni > 0 {
@@ -682,7 +737,7 @@ fn traverse_with<const AVX: bool>(
         loop {
             if sp == 0 {
                 for &(lane, t, c) in entered.iter() {
-                    if lanes.get(lane).is_some_and(|l| t <= l.tmax) {
+                    if t <= soa.tmax[lane & 15] {
                         scratch.work += 1 + c as u64;
                     }
                 }
@@ -895,6 +950,67 @@ mod tests {
         }
     }
 
+    /// Where a packet's time goes, on the meshes named in `PACKET_STATS` (colon-separated):
+    /// `PACKET_STATS=a.obj:b.obj cargo test --release packet_stats -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn packet_stats() {
+        let Ok(list) = std::env::var("PACKET_STATS") else {
+            return;
+        };
+        for mesh in list.split(':') {
+            let scene = Scene::load(Path::new(mesh)).expect("mesh loads");
+            let b = scene.bounds();
+            let primary = crate::raysets::primary(b, 1024);
+            let rays: Vec<Ray> = crate::raysets::tile_order(1024)
+                .iter()
+                .map(|&i| primary[i as usize])
+                .collect();
+            let mut scratch = Scratch::new();
+            crate::bvh::probe::NODES.with(|c| c.set(0));
+            let mut leaves = 0u64;
+            for r in &rays {
+                scene
+                    .bvh
+                    .traverse::<true>(r, f32::INFINITY, &mut scratch, |first, count, tm| {
+                        leaves += 1;
+                        let mut prim = u32::MAX;
+                        scene.leaf_closest(
+                            first,
+                            count,
+                            r,
+                            &RayLanes::new(r),
+                            &mut Mailbox::default(),
+                            tm,
+                            &mut prim,
+                        )
+                    });
+            }
+            let nodes = crate::bvh::probe::NODES.with(|c| c.get());
+            probe::COUNTS.with(|c| c.set([0; 6]));
+            let mut out = vec![None; PACKET];
+            for p in rays.chunks(PACKET) {
+                scene.intersect_packet(p, f32::INFINITY, &mut scratch, &mut out);
+            }
+            let c = probe::COUNTS.with(|c| c.get());
+            let n = rays.len() as f64;
+            let pk = c[5] as f64;
+            println!(
+                "{mesh}: single: {:.1} nodes, {:.1} leaves per ray; packets {pk}: {:.1} node tests, \
+                 {:.1} leaf calls (of 8 rays), {:.1} entered, {:.1} triangle tests (x 8 rays), \
+                 {:.1} ray-leaf entries per packet ({:.1} per ray)",
+                nodes as f64 / n,
+                leaves as f64 / n,
+                c[0] as f64 / pk,
+                c[1] as f64 / pk,
+                c[2] as f64 / pk,
+                c[3] as f64 / pk,
+                c[4] as f64 / pk,
+                c[4] as f64 / n,
+            );
+        }
+    }
+
     #[test]
     fn the_packet_test_bounds_every_rays_own_test_and_avx_agrees() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -933,22 +1049,18 @@ mod tests {
                 k: [0.0; 3],
             };
             let tmax = if round % 2 == 0 { 2.0 } else { f32::INFINITY };
-            let lanes: Vec<Lane> = rays
+            let mut soa = Soa::empty();
+            let lanes: Vec<([f32; 3], [f32; 3])> = rays
                 .iter()
-                .map(|r| {
-                    let (o, d) = (r.origin, r.inv_dir);
-                    let l = Lane {
-                        inv: [d.x, d.y, d.z],
-                        oinv: [o.x * d.x, o.y * d.y, o.z * d.z],
-                        lanes: RayLanes::new(r),
-                        tmax,
-                        prim: u32::MAX,
-                    };
+                .enumerate()
+                .map(|(k, r)| {
+                    let l = soa.set(k, r, tmax);
+                    assert_eq!(l, soa.lane(k));
                     for a in 0..3 {
-                        f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
-                        f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
-                        f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
-                        f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
+                        f.inv_lo[a] = f.inv_lo[a].min(l.0[a]);
+                        f.inv_hi[a] = f.inv_hi[a].max(l.0[a]);
+                        f.oinv_lo[a] = f.oinv_lo[a].min(l.1[a]);
+                        f.oinv_hi[a] = f.oinv_hi[a].max(l.1[a]);
                     }
                     l
                 })
@@ -972,7 +1084,10 @@ mod tests {
                 // the ray's own test, as the single-ray traversal makes it
                 let single = node.single_ray_test_for_tests(r, tmax);
                 for (i, &t) in tn.iter().enumerate() {
-                    assert_eq!(enters(&node, i, &f, l).is_some(), single.1 & (1 << i) != 0);
+                    assert_eq!(
+                        enters(&node, i, &f, *l, tmax).is_some(),
+                        single.1 & (1 << i) != 0
+                    );
                     if single.1 & (1 << i) != 0 {
                         entered += 1;
                         assert!(mask & (1 << i) != 0, "round {round}: child {i} missed");
