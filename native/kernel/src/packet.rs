@@ -45,22 +45,39 @@ const DIR_SPREAD: f32 = 0.125;
 /// See [`DIR_SPREAD`].
 const ORIGIN_SPREAD: f32 = 0.01;
 
-/// Whether the rays `members` of `rays` are coherent enough for a packet (see [`DIR_SPREAD`]).
-fn coherent(scene: &Scene, rays: &[Ray], members: u32) -> bool {
-    let (mut dlo, mut dhi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
-    let (mut olo, mut ohi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
-    for (i, r) in rays.iter().enumerate() {
-        if members & (1 << i) != 0 {
-            dlo = dlo.min(r.dir);
-            dhi = dhi.max(r.dir);
-            olo = olo.min(r.origin);
-            ohi = ohi.max(r.origin);
-        }
-    }
+/// Whether the rays of a packet (`soa`, every lane a ray of it) are coherent enough for a
+/// packet traversal (see [`DIR_SPREAD`]).
+fn coherent(scene: &Scene, soa: &Soa) -> bool {
     let b = scene.bounds();
     let size = (b.max - b.min).max_element();
-    (dhi - dlo).max_element() <= DIR_SPREAD
-        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
+    (0..3).all(|a| {
+        let spread = |row: &[f32; PACKET]| row_max(row) - row_min(row);
+        spread(&soa.d[a]) <= DIR_SPREAD
+            && (!size.is_finite() || spread(&soa.o[a]) <= ORIGIN_SPREAD * size)
+    })
+}
+
+/// The least of a row, NaN ignored (`f32::min` over it).
+#[inline(always)]
+fn row_min(row: &[f32; PACKET]) -> f32 {
+    // `x.min(acc)` is `_mm_min_ps(x, acc)` on x86, which gives `acc` where `x` is NaN
+    let mut acc = Vec4::INFINITY;
+    for q in row.chunks_exact(4) {
+        acc = Vec4::from_slice(q).min(acc);
+    }
+    acc.to_array().iter().fold(f32::INFINITY, |m, &x| m.min(x))
+}
+
+/// The greatest of a row, NaN ignored (`f32::max` over it).
+#[inline(always)]
+fn row_max(row: &[f32; PACKET]) -> f32 {
+    let mut acc = Vec4::NEG_INFINITY;
+    for q in row.chunks_exact(4) {
+        acc = Vec4::from_slice(q).max(acc);
+    }
+    acc.to_array()
+        .iter()
+        .fold(f32::NEG_INFINITY, |m, &x| m.max(x))
 }
 
 /// The shared plane choice and the rays' intervals for the packet's node test.
@@ -131,6 +148,79 @@ impl Soa {
         (inv, oinv)
     }
 
+    /// Puts the rays `four` (at most four; missing ones: copies of the first) in lanes
+    /// `4 * g..4 * g + 4`, with no bound yet; origin times reciprocal as in [`Soa::set`].
+    #[inline(always)]
+    fn fill4(&mut self, g: usize, four: &[Ray]) {
+        let Some(r0) = four.first() else { return };
+        let r = [0, 1, 2, 3].map(|j| four.get(j).unwrap_or(r0));
+        let base = (4 * g) & (PACKET - 4);
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // a 4 x 4 transpose of the rays' vectors (the fourth lane dropped)
+            let rows = |v: [glam::Vec3A; 4]| {
+                let [a, b, c, d] = v.map(__m128::from);
+                // SAFETY: SSE is part of every x86_64 CPU (the baseline the crate is built
+                // for), and these shuffles touch no memory.
+                unsafe {
+                    let (t0, t1) = (_mm_unpacklo_ps(a, b), _mm_unpacklo_ps(c, d));
+                    let (t2, t3) = (_mm_unpackhi_ps(a, b), _mm_unpackhi_ps(c, d));
+                    [
+                        _mm_movelh_ps(t0, t1),
+                        _mm_movehl_ps(t1, t0),
+                        _mm_movelh_ps(t2, t3),
+                    ]
+                }
+                .map(Vec4::from)
+            };
+            let o = rows(r.map(|r| r.origin));
+            let d = rows(r.map(|r| r.dir));
+            let inv = rows(r.map(|r| r.inv_dir));
+            for a in 0..3 {
+                o[a].write_to_slice(&mut self.o[a][base..]);
+                d[a].write_to_slice(&mut self.d[a][base..]);
+                inv[a].write_to_slice(&mut self.inv[a][base..]);
+                (o[a] * inv[a]).write_to_slice(&mut self.oinv[a][base..]);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        for a in 0..3 {
+            let o = Vec4::new(
+                r[0].origin[a],
+                r[1].origin[a],
+                r[2].origin[a],
+                r[3].origin[a],
+            );
+            let d = Vec4::new(r[0].dir[a], r[1].dir[a], r[2].dir[a], r[3].dir[a]);
+            let inv = Vec4::new(
+                r[0].inv_dir[a],
+                r[1].inv_dir[a],
+                r[2].inv_dir[a],
+                r[3].inv_dir[a],
+            );
+            o.write_to_slice(&mut self.o[a][base..]);
+            d.write_to_slice(&mut self.d[a][base..]);
+            inv.write_to_slice(&mut self.inv[a][base..]);
+            (o * inv).write_to_slice(&mut self.oinv[a][base..]);
+        }
+    }
+
+    /// Makes lanes `k..` copies of lane 0's ray, with a bound of -inf.
+    #[inline(always)]
+    fn pad(&mut self, k: usize) {
+        for l in k.min(PACKET)..PACKET {
+            for a in 0..3 {
+                self.o[a][l] = self.o[a][0];
+                self.d[a][l] = self.d[a][0];
+                self.inv[a][l] = self.inv[a][0];
+                self.oinv[a][l] = self.oinv[a][0];
+            }
+            self.tmax[l] = f32::NEG_INFINITY;
+            self.prim[l] = u32::MAX;
+        }
+    }
+
     /// Lane `k`'s reciprocal direction and origin times it.
     #[inline(always)]
     fn lane(&self, k: usize) -> ([f32; 3], [f32; 3]) {
@@ -187,8 +277,8 @@ fn use_avx() -> bool {
 /// single-ray traversal reads them to choose its near planes.
 #[inline(always)]
 fn signs(ray: &Ray) -> usize {
-    let i = ray.inv_dir;
-    (i.x < 0.0) as usize | ((i.y < 0.0) as usize) << 1 | ((i.z < 0.0) as usize) << 2
+    // the comparisons `inv.x < 0.0`, ... as a mask
+    (ray.inv_dir.cmplt(glam::Vec3A::ZERO).bitmask() & 7) as usize
 }
 
 /// `_mm_max_ps(a, b)` on one lane (the second operand when either is NaN).
@@ -466,16 +556,23 @@ pub(crate) fn intersect(
         let (rays, out) = (&rays[start..end], &mut out[start..end]);
         // group by direction signs; small groups go one ray at a time
         let mut groups = [0u32; 8];
-        for (i, r) in rays.iter().enumerate() {
-            groups[signs(r)] |= 1 << i;
+        let c0 = rays.first().map_or(0, signs);
+        if rays.iter().all(|r| signs(r) == c0) {
+            groups[c0 & 7] = (1u32 << rays.len()) - 1;
+        } else {
+            for (i, r) in rays.iter().enumerate() {
+                groups[signs(r)] |= 1 << i;
+            }
         }
         for (class, &members) in groups.iter().enumerate() {
             if members == 0 {
                 continue;
             }
-            let single = !every_ray
-                && ((members.count_ones() as usize) < MIN_GROUP || !coherent(scene, rays, members));
-            if single || scene.bvh.nodes.is_empty() {
+            let single = !every_ray && (members.count_ones() as usize) < MIN_GROUP;
+            if single
+                || scene.bvh.nodes.is_empty()
+                || !group_closest(scene, rays, members, class, tmax, scratch, out, every_ray)
+            {
                 let mut m = members;
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
@@ -486,12 +583,13 @@ pub(crate) fn intersect(
                 }
                 continue;
             }
-            group_closest(scene, rays, members, class, tmax, scratch, out);
         }
     }
 }
 
 /// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`).
+/// Unless `every_ray`, returns false and leaves `out` alone when the rays are not coherent.
+#[allow(clippy::too_many_arguments)]
 fn group_closest(
     scene: &Scene,
     rays: &[Ray],
@@ -500,51 +598,60 @@ fn group_closest(
     tmax: f32,
     scratch: &mut Scratch,
     out: &mut [Option<Hit>],
-) {
+    every_ray: bool,
+) -> bool {
+    let mut soa = Soa::empty();
+    let mut idx = [0usize; PACKET];
+    let k = members.count_ones() as usize;
+    if members == (1u32 << rays.len().min(PACKET)) - 1 {
+        // the whole packet, in order: four rays at a time
+        for (g, four) in rays.chunks(4).enumerate() {
+            soa.fill4(g, four);
+        }
+        for (j, slot) in idx.iter_mut().enumerate().take(k) {
+            *slot = j;
+        }
+    } else {
+        let mut m = members;
+        let mut j = 0usize;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(j)) {
+                soa.set(j, r, tmax);
+                *slot = i;
+                j += 1;
+            }
+        }
+    }
+    // lanes past the rays: copies of the first ray (so that the packet's bounds are the
+    // rays'), never entering a box
+    soa.pad(k);
+    for t in soa.tmax.iter_mut().take(k) {
+        *t = tmax;
+    }
+    if k == 0 || (!every_ray && !coherent(scene, &soa)) {
+        return false;
+    }
     let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
     let mut f = Frustum {
         near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
         far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
-        inv_lo: [f32::INFINITY; 3],
-        inv_hi: [f32::NEG_INFINITY; 3],
-        oinv_lo: [f32::INFINITY; 3],
-        oinv_hi: [f32::NEG_INFINITY; 3],
+        inv_lo: [0, 1, 2].map(|a| row_min(&soa.inv[a])),
+        inv_hi: [0, 1, 2].map(|a| row_max(&soa.inv[a])),
+        oinv_lo: [0, 1, 2].map(|a| row_min(&soa.oinv[a])),
+        oinv_hi: [0, 1, 2].map(|a| row_max(&soa.oinv[a])),
         shared: false,
         o: [0.0; 3],
         k: [0.0; 3],
     };
-    let mut soa = Soa::empty();
-    let mut idx = [0usize; PACKET];
-    let mut k = 0usize;
-    let mut m = members;
-    let mut same = true;
-    let o = rays
-        .get(members.trailing_zeros() as usize)
-        .map_or(glam::Vec3A::ZERO, |r| r.origin);
-    while m != 0 {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
-        let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(k)) else {
-            continue;
-        };
-        let (inv, oinv) = soa.set(k, r, tmax);
-        for a in 0..3 {
-            f.inv_lo[a] = f.inv_lo[a].min(inv[a]);
-            f.inv_hi[a] = f.inv_hi[a].max(inv[a]);
-            f.oinv_lo[a] = f.oinv_lo[a].min(oinv[a]);
-            f.oinv_hi[a] = f.oinv_hi[a].max(oinv[a]);
-        }
-        same &= r.origin == o;
-        *slot = i;
-        k += 1;
-    }
-    if k > 0 {
-        let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
-        if same && tame {
-            f.shared = true;
-            f.o = [o.x, o.y, o.z];
-            f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
-        }
+    let o = [0, 1, 2].map(|a| soa.o[a][0]);
+    let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
+    let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+    if same && tame {
+        f.shared = true;
+        f.o = o;
+        f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
     }
     let idx = &idx[..k];
     #[cfg(test)]
@@ -559,21 +666,26 @@ fn group_closest(
     #[cfg(not(target_arch = "x86_64"))]
     traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
     // without instances and planes the hit is the BVH's (what finish_closest would return)
-    let alone = scene.instances.is_empty() && scene.planes.is_empty();
-    for (j, &i) in idx.iter().enumerate() {
-        let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
-        if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
-            *o = if alone {
-                (prim != u32::MAX).then_some(Hit {
+    if scene.instances.is_empty() && scene.planes.is_empty() {
+        for (j, &i) in idx.iter().enumerate() {
+            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+            if let Some(o) = out.get_mut(i) {
+                *o = (prim != u32::MAX).then_some(Hit {
                     t,
                     prim,
                     instance: Hit::NO_INSTANCE,
-                })
-            } else {
-                scene.finish_closest(r, t, prim, scratch)
-            };
+                });
+            }
+        }
+    } else {
+        for (j, &i) in idx.iter().enumerate() {
+            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+            if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
+                *o = scene.finish_closest(r, t, prim, scratch);
+            }
         }
     }
+    true
 }
 
 /// [`traverse`] compiled with AVX.
