@@ -25,10 +25,9 @@
 //! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time.
 
 use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
-use crate::geometry::Shape;
 use crate::ray::Ray;
 use crate::scene::{Hit, Mailbox, Scene};
-use crate::tri4::RayLanes;
+use crate::tri4::{RayLanes, Tri4};
 use glam::Vec4;
 
 /// Rays traversed together.
@@ -245,8 +244,8 @@ pub(crate) mod probe {
     use std::cell::Cell;
     thread_local! {
         /// [node tests, leaf calls (per 8 rays), leaf calls some ray entered, triangle tests
-        /// (per 8 rays), ray-leaf entries, packets]
-        pub static COUNTS: Cell<[u64; 6]> = const { Cell::new([0; 6]) };
+        /// (per 8 rays), ray-leaf entries, packets, leaves left to the few rays that entered]
+        pub static COUNTS: Cell<[u64; 7]> = const { Cell::new([0; 7]) };
     }
     pub fn add(k: usize, n: u64) {
         COUNTS.with(|c| {
@@ -398,13 +397,19 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
     (out, mask)
 }
 
-/// An all-triangle leaf (child `i` of `node`: `tris`, from primitive `first`) against the rays
-/// `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own box
-/// test (the operations of [`enters`], lane by lane), then each triangle in turn against the
-/// rays that entered, with the operations of the four-triangle test of [`crate::tri4`] (which
-/// are those of the one-triangle test) on the same values, so the same distances; among equal
-/// distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
-/// entered in `entered` (see [`traverse`]); returns whether some ray's nearest hit changed.
+/// Fewer rays than this entering a leaf of more than four triangles meet its blocks one ray
+/// at a time (four triangles per SSE test), rather than each triangle across eight rays.
+const FEW: u32 = 3;
+
+/// An all-triangle leaf (child `i` of `node`: the first `n` triangles of `blocks`) against the
+/// rays `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own
+/// box test (the operations of [`enters`], lane by lane), then each triangle in turn against
+/// the rays that entered, with the operations of the four-triangle test of [`crate::tri4`]
+/// (which are those of the one-triangle test) on the same values, so the same distances; among
+/// equal distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
+/// entered in `entered` (see [`traverse`]). Returns whether some ray's nearest hit changed, and
+/// the mask of the rays (of the eight) that entered but were left to the caller, when fewer
+/// than [`FEW`] of them entered a leaf of more than four triangles.
 ///
 /// # Safety
 /// The CPU must have AVX.
@@ -417,10 +422,10 @@ unsafe fn leaf_avx(
     f: &Frustum,
     soa: &mut Soa,
     half: usize,
-    tris: &[Shape],
-    first: usize,
+    blocks: &[Tri4],
+    n: usize,
     entered: &mut Vec<(usize, f32, u32)>,
-) -> bool {
+) -> (bool, u32) {
     use std::arch::x86_64::*;
     let base = 8 * (half & 1);
     let p = node.planes();
@@ -441,13 +446,15 @@ unsafe fn leaf_avx(
     #[cfg(test)]
     probe::add(1, 1);
     if mask == 0 {
-        return false;
+        return (false, 0);
     }
+    let few = mask.count_ones() < FEW && n > 4;
     #[cfg(test)]
     {
         probe::add(2, 1);
         probe::add(4, mask.count_ones() as u64);
-        probe::add(3, tris.len() as u64);
+        probe::add(3, if few { 0 } else { n as u64 });
+        probe::add(6, few as u64);
     }
     let mut tns = [0.0f32; 8];
     // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
@@ -458,9 +465,12 @@ unsafe fn leaf_avx(
     while m != 0 {
         let j = m.trailing_zeros() as usize & 7;
         m &= m - 1;
-        entered.push((base + j, tns[j], tris.len() as u32));
+        entered.push((base + j, tns[j], n as u32));
         let (t, pr) = (soa.tmax[(base + j) & 15], soa.prim[(base + j) & 15]);
         limit[j] = if pr == u32::MAX { t } else { t.next_up() };
+    }
+    if few {
+        return (false, mask);
     }
     let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
     let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
@@ -468,13 +478,14 @@ unsafe fn leaf_avx(
     // SAFETY: `limit` is 8 f32.
     let mut lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     let mut changed = false;
-    for (k, s) in tris.iter().enumerate() {
-        let Shape::Triangle { v0, e1, e2 } = *s else {
-            continue;
+    for k in 0..n {
+        let Some(b) = blocks.get(k / 4) else {
+            break;
         };
-        let sp = |x: f32| _mm256_set1_ps(x);
-        let (e1x, e1y, e1z) = (sp(e1.x), sp(e1.y), sp(e1.z));
-        let (e2x, e2y, e2z) = (sp(e2.x), sp(e2.y), sp(e2.z));
+        let (v0, e1, e2) = b.corners();
+        let sp = |x: &[Vec4; 3], a: usize| _mm256_set1_ps(x[a & 3][k & 3]);
+        let (e1x, e1y, e1z) = (sp(e1, 0), sp(e1, 1), sp(e1, 2));
+        let (e2x, e2y, e2z) = (sp(e2, 0), sp(e2, 1), sp(e2, 2));
         let (mul, sub, add) = (_mm256_mul_ps, _mm256_sub_ps, _mm256_add_ps);
         // p = dir x e2
         let px = sub(mul(dy, e2z), mul(dz, e2y));
@@ -482,9 +493,9 @@ unsafe fn leaf_avx(
         let pz = sub(mul(dx, e2y), mul(dy, e2x));
         let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
         let inv = _mm256_div_ps(one, det);
-        let sx = sub(ox, sp(v0.x));
-        let sy = sub(oy, sp(v0.y));
-        let sz = sub(oz, sp(v0.z));
+        let sx = sub(ox, sp(v0, 0));
+        let sy = sub(oy, sp(v0, 1));
+        let sz = sub(oz, sp(v0, 2));
         let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
         // q = s x e1
         let qx = sub(mul(sy, e1z), mul(sz, e1y));
@@ -519,7 +530,7 @@ unsafe fn leaf_avx(
         let mut ts = [0.0f32; 8];
         // SAFETY: `ts` is 8 f32, the 32 bytes an unaligned store writes.
         unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
-        let pk = (first + k) as u32;
+        let pk = b.prim(k & 3);
         while hit != 0 {
             let j = hit.trailing_zeros() as usize & 7;
             hit &= hit - 1;
@@ -534,7 +545,7 @@ unsafe fn leaf_avx(
         // SAFETY: `limit` is 8 f32.
         lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     }
-    changed
+    (changed, 0)
 }
 
 /// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
@@ -746,7 +757,6 @@ fn traverse_with<const AVX: bool>(
     entered: &mut Vec<(usize, f32, u32)>,
 ) {
     let nodes = &scene.bvh.nodes;
-    let shapes = &scene.geom.shapes;
     let mut mailboxes = [Mailbox::default(); PACKET];
     let mut tmax = soa.max_tmax();
     let stack = &mut scratch.stack;
@@ -789,27 +799,37 @@ fn traverse_with<const AVX: bool>(
                     // a leaf of triangle blocks names its first block, not its first primitive
                     let n = crate::bvh::block_leaf_len(c as usize).unwrap_or(c as usize);
                     #[cfg(target_arch = "x86_64")]
-                    if let (true, Some(b)) = (
-                        AVX,
-                        scene
-                            .tri_blocks
-                            .leaf(first, c as usize)
-                            .and_then(|b| b.first()),
-                    ) {
-                        let p0 = b.prim(0) as usize;
-                        if let Some(tris) = shapes.get(p0..p0 + n) {
-                            let mut changed = false;
-                            for half in 0..idx.len().div_ceil(8) {
-                                // SAFETY: AVX is only set by traverse_avx, which runs where
-                                // the CPU has it.
-                                changed |=
-                                    unsafe { leaf_avx(node, i, f, soa, half, tris, p0, entered) };
+                    if let (true, Some(blocks)) = (AVX, scene.tri_blocks.leaf(first, c as usize)) {
+                        let mut changed = false;
+                        for half in 0..idx.len().div_ceil(8) {
+                            // SAFETY: AVX is only set by traverse_avx, which runs where the
+                            // CPU has it.
+                            let (ch, mut left) =
+                                unsafe { leaf_avx(node, i, f, soa, half, blocks, n, entered) };
+                            changed |= ch;
+                            // the few rays that entered: one at a time, by blocks of four
+                            while left != 0 {
+                                let l = (8 * half + left.trailing_zeros() as usize) & 15;
+                                left &= left - 1;
+                                if let Some(r) = idx.get(l).and_then(|&ri| rays.get(ri)) {
+                                    let t = scene.leaf_closest(
+                                        first,
+                                        c as usize,
+                                        r,
+                                        &RayLanes::new(r),
+                                        &mut mailboxes[l],
+                                        soa.tmax[l],
+                                        &mut soa.prim[l],
+                                    );
+                                    changed |= t != soa.tmax[l];
+                                    soa.tmax[l] = t;
+                                }
                             }
-                            if changed {
-                                tmax = soa.max_tmax();
-                            }
-                            continue;
                         }
+                        if changed {
+                            tmax = soa.max_tmax();
+                        }
+                        continue;
                     }
                     for (lane, (&ri, mb)) in idx.iter().zip(mailboxes.iter_mut()).enumerate() {
                         let l = lane & 15;
@@ -869,6 +889,7 @@ fn traverse_with<const AVX: bool>(
 mod tests {
     use super::*;
     use crate::camera::Camera;
+    use crate::geometry::Shape;
     use crate::material::Material;
     use crate::scene::SceneBuilder;
     use glam::Vec3A;
@@ -962,6 +983,7 @@ mod tests {
 
     #[test]
     fn packets_equal_single_rays_on_random_scenes() {
+        probe::COUNTS.with(|c| c.set([0; 7]));
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut hits = 0;
         for round in 0..12 {
@@ -1018,6 +1040,11 @@ mod tests {
             hits += check(&scene, &rays, f32::INFINITY, false);
         }
         assert!(hits > 5000, "{hits}");
+        // both ways of meeting a leaf of blocks: across rays, and one ray at a time
+        let c = probe::COUNTS.with(|c| c.get());
+        if has_avx() {
+            assert!(c[3] > 10_000 && c[6] > 1000, "{c:?}");
+        }
     }
 
     /// Primary rays of an SPD scene in 4 x 4 tiles, as the renderer traces them, and bundles.
@@ -1099,7 +1126,7 @@ mod tests {
                     });
             }
             let nodes = crate::bvh::probe::NODES.with(|c| c.get());
-            probe::COUNTS.with(|c| c.set([0; 6]));
+            probe::COUNTS.with(|c| c.set([0; 7]));
             let mut out = vec![None; PACKET];
             for p in rays.chunks(PACKET) {
                 scene.intersect_packet(p, f32::INFINITY, &mut scratch, &mut out);
@@ -1110,7 +1137,7 @@ mod tests {
             println!(
                 "{mesh}: single: {:.1} nodes, {:.1} leaves per ray; packets {pk}: {:.1} node tests, \
                  {:.1} leaf calls (of 8 rays), {:.1} entered, {:.1} triangle tests (x 8 rays), \
-                 {:.1} ray-leaf entries per packet ({:.1} per ray)",
+                 {:.1} ray-leaf entries per packet ({:.1} per ray), {:.1} leaves one ray at a time",
                 nodes as f64 / n,
                 leaves as f64 / n,
                 c[0] as f64 / pk,
@@ -1119,6 +1146,7 @@ mod tests {
                 c[3] as f64 / pk,
                 c[4] as f64 / pk,
                 c[4] as f64 / n,
+                c[6] as f64 / pk,
             );
         }
     }
