@@ -14,15 +14,22 @@
 //!
 //! At a leaf each ray makes its own box test, exactly the single-ray traversal's (the same
 //! products, differences and min/max in the same order), and only the rays that pass it test the
-//! leaf's primitives, four triangles at a time ([`crate::tri4`]) or one primitive at a time for
-//! the other kinds, with [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
+//! leaf's primitives. A leaf of triangle blocks is met across rays with AVX, each triangle (read
+//! from the blocks themselves) against eight rays at once, with the operations of the
+//! single-ray test; when fewer than [`FEW`] of the eight enter a leaf of more than four
+//! triangles, those rays meet its blocks one at a time, four triangles per test
+//! ([`crate::tri4`]). Other leaves, and all of them without AVX, are met one ray at a time with
+//! [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
 //! a ray meets the leaves that its single-ray traversal meets (a leaf whose box a ray enters
 //! before its final hit is met in either order, and among equal distances the lowest primitive
 //! index wins in both), and gets the same primitive and the same distance bits. Mesh instances
 //! and planes are then handled per ray, by the single-ray code.
 //!
 //! Rays whose direction signs differ are split into groups by sign; a group of fewer than
-//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time.
+//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time. The rays of a
+//! packet and their nearest hits so far are kept in one SoA block ([`Soa`]); a packet of one
+//! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
+//! are taken row by row.
 
 use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
 use crate::ray::Ray;
