@@ -504,26 +504,21 @@ unsafe fn leaf_avx(
         let sy = sub(oy, sp(v0, 1));
         let sz = sub(oz, sp(v0, 2));
         let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
-        let and = _mm256_and_ps;
-        let uok = and(
-            and(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero), inside),
-            and(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(u, one),
-            ),
-        );
-        // most triangles of a leaf are missed by every ray already on `u`
-        if _mm256_movemask_ps(uok) == 0 {
-            continue;
-        }
         // q = s x e1
         let qx = sub(mul(sy, e1z), mul(sz, e1y));
         let qy = sub(mul(sz, e1x), mul(sx, e1z));
         let qz = sub(mul(sx, e1y), mul(sy, e1x));
         let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
         let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
+        let and = _mm256_and_ps;
         let ok = and(
-            uok,
+            and(
+                and(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero), inside),
+                and(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(u, one),
+                ),
+            ),
             and(
                 and(
                     _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero),
