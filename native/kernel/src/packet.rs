@@ -14,21 +14,27 @@
 //!
 //! At a leaf each ray makes its own box test, exactly the single-ray traversal's (the same
 //! products, differences and min/max in the same order), and only the rays that pass it test the
-//! leaf's primitives, four triangles at a time ([`crate::tri4`]) or one primitive at a time for
-//! the other kinds, with [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
+//! leaf's primitives. A leaf of triangle blocks is met across rays with AVX, each triangle (read
+//! from the blocks themselves) against eight rays at once, with the operations of the
+//! single-ray test; when fewer than [`FEW`] of the eight enter a leaf of more than four
+//! triangles, those rays meet its blocks one at a time, four triangles per test
+//! ([`crate::tri4`]). Other leaves, and all of them without AVX, are met one ray at a time with
+//! [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
 //! a ray meets the leaves that its single-ray traversal meets (a leaf whose box a ray enters
 //! before its final hit is met in either order, and among equal distances the lowest primitive
 //! index wins in both), and gets the same primitive and the same distance bits. Mesh instances
 //! and planes are then handled per ray, by the single-ray code.
 //!
 //! Rays whose direction signs differ are split into groups by sign; a group of fewer than
-//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time.
+//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time. The rays of a
+//! packet and their nearest hits so far are kept in one SoA block ([`Soa`]); a packet of one
+//! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
+//! are taken row by row.
 
 use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
-use crate::geometry::Shape;
 use crate::ray::Ray;
 use crate::scene::{Hit, Mailbox, Scene};
-use crate::tri4::RayLanes;
+use crate::tri4::{RayLanes, Tri4};
 use glam::Vec4;
 
 /// Rays traversed together.
@@ -45,22 +51,39 @@ const DIR_SPREAD: f32 = 0.125;
 /// See [`DIR_SPREAD`].
 const ORIGIN_SPREAD: f32 = 0.01;
 
-/// Whether the rays `members` of `rays` are coherent enough for a packet (see [`DIR_SPREAD`]).
-fn coherent(scene: &Scene, rays: &[Ray], members: u32) -> bool {
-    let (mut dlo, mut dhi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
-    let (mut olo, mut ohi) = (glam::Vec3A::INFINITY, glam::Vec3A::NEG_INFINITY);
-    for (i, r) in rays.iter().enumerate() {
-        if members & (1 << i) != 0 {
-            dlo = dlo.min(r.dir);
-            dhi = dhi.max(r.dir);
-            olo = olo.min(r.origin);
-            ohi = ohi.max(r.origin);
-        }
-    }
+/// Whether the rays of a packet (`soa`, every lane a ray of it) are coherent enough for a
+/// packet traversal (see [`DIR_SPREAD`]).
+fn coherent(scene: &Scene, soa: &Soa) -> bool {
     let b = scene.bounds();
     let size = (b.max - b.min).max_element();
-    (dhi - dlo).max_element() <= DIR_SPREAD
-        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
+    (0..3).all(|a| {
+        let spread = |row: &[f32; PACKET]| row_max(row) - row_min(row);
+        spread(&soa.d[a]) <= DIR_SPREAD
+            && (!size.is_finite() || spread(&soa.o[a]) <= ORIGIN_SPREAD * size)
+    })
+}
+
+/// The least of a row, NaN ignored (`f32::min` over it).
+#[inline(always)]
+fn row_min(row: &[f32; PACKET]) -> f32 {
+    // `x.min(acc)` is `_mm_min_ps(x, acc)` on x86, which gives `acc` where `x` is NaN
+    let mut acc = Vec4::INFINITY;
+    for q in row.chunks_exact(4) {
+        acc = Vec4::from_slice(q).min(acc);
+    }
+    acc.to_array().iter().fold(f32::INFINITY, |m, &x| m.min(x))
+}
+
+/// The greatest of a row, NaN ignored (`f32::max` over it).
+#[inline(always)]
+fn row_max(row: &[f32; PACKET]) -> f32 {
+    let mut acc = Vec4::NEG_INFINITY;
+    for q in row.chunks_exact(4) {
+        acc = Vec4::from_slice(q).max(acc);
+    }
+    acc.to_array()
+        .iter()
+        .fold(f32::NEG_INFINITY, |m, &x| m.max(x))
 }
 
 /// The shared plane choice and the rays' intervals for the packet's node test.
@@ -84,18 +107,9 @@ struct Frustum {
 /// `plane * inv - o * inv`.
 const ROUNDING: f32 = 4e-6;
 
-/// One ray of a packet: its constants for the box and triangle tests and its best hit so far.
-#[derive(Clone, Copy, Debug)]
-struct Lane {
-    inv: [f32; 3],
-    oinv: [f32; 3],
-    lanes: RayLanes,
-    tmax: f32,
-    prim: u32,
-}
-
-/// The rays of a packet in SoA layout, for the leaf tests across rays (unused lanes: zeros,
-/// masked off by their bound of -inf).
+/// The rays of a packet in SoA layout, for the tests across rays, and each ray's best hit so
+/// far: `tmax` (the bound, then the nearest hit's distance) and `prim` (`u32::MAX`: none yet).
+/// Unused lanes: zeros, with a bound of -inf, so that no box test lets them in.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
 struct Soa {
@@ -103,6 +117,150 @@ struct Soa {
     d: [[f32; PACKET]; 3],
     inv: [[f32; PACKET]; 3],
     oinv: [[f32; PACKET]; 3],
+    tmax: [f32; PACKET],
+    prim: [u32; PACKET],
+}
+
+impl Soa {
+    /// No rays.
+    #[inline(always)]
+    fn empty() -> Soa {
+        Soa {
+            o: [[0.0; PACKET]; 3],
+            d: [[0.0; PACKET]; 3],
+            inv: [[0.0; PACKET]; 3],
+            oinv: [[0.0; PACKET]; 3],
+            tmax: [f32::NEG_INFINITY; PACKET],
+            prim: [u32::MAX; PACKET],
+        }
+    }
+
+    /// Puts `ray` in lane `k` with the bound `tmax`; returns its reciprocal direction and
+    /// origin times it, as the single-ray box test computes them.
+    #[inline(always)]
+    fn set(&mut self, k: usize, ray: &Ray, tmax: f32) -> ([f32; 3], [f32; 3]) {
+        let k = k & (PACKET - 1);
+        let (o, d) = (ray.origin, ray.inv_dir);
+        let inv = [d.x, d.y, d.z];
+        let oinv = [o.x * d.x, o.y * d.y, o.z * d.z];
+        for a in 0..3 {
+            self.o[a][k] = ray.origin[a];
+            self.d[a][k] = ray.dir[a];
+            self.inv[a][k] = inv[a];
+            self.oinv[a][k] = oinv[a];
+        }
+        self.tmax[k] = tmax;
+        self.prim[k] = u32::MAX;
+        (inv, oinv)
+    }
+
+    /// Puts the rays `four` (at most four; missing ones: copies of the first) in lanes
+    /// `4 * g..4 * g + 4`, with no bound yet; origin times reciprocal as in [`Soa::set`].
+    #[inline(always)]
+    fn fill4(&mut self, g: usize, four: &[Ray]) {
+        let Some(r0) = four.first() else { return };
+        let r = [0, 1, 2, 3].map(|j| four.get(j).unwrap_or(r0));
+        let base = (4 * g) & (PACKET - 4);
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // a 4 x 4 transpose of the rays' vectors (the fourth lane dropped)
+            let rows = |v: [glam::Vec3A; 4]| {
+                let [a, b, c, d] = v.map(__m128::from);
+                // SAFETY: SSE is part of every x86_64 CPU (the baseline the crate is built
+                // for), and these shuffles touch no memory.
+                unsafe {
+                    let (t0, t1) = (_mm_unpacklo_ps(a, b), _mm_unpacklo_ps(c, d));
+                    let (t2, t3) = (_mm_unpackhi_ps(a, b), _mm_unpackhi_ps(c, d));
+                    [
+                        _mm_movelh_ps(t0, t1),
+                        _mm_movehl_ps(t1, t0),
+                        _mm_movelh_ps(t2, t3),
+                    ]
+                }
+                .map(Vec4::from)
+            };
+            let o = rows(r.map(|r| r.origin));
+            let d = rows(r.map(|r| r.dir));
+            let inv = rows(r.map(|r| r.inv_dir));
+            for a in 0..3 {
+                o[a].write_to_slice(&mut self.o[a][base..]);
+                d[a].write_to_slice(&mut self.d[a][base..]);
+                inv[a].write_to_slice(&mut self.inv[a][base..]);
+                (o[a] * inv[a]).write_to_slice(&mut self.oinv[a][base..]);
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        for a in 0..3 {
+            let o = Vec4::new(
+                r[0].origin[a],
+                r[1].origin[a],
+                r[2].origin[a],
+                r[3].origin[a],
+            );
+            let d = Vec4::new(r[0].dir[a], r[1].dir[a], r[2].dir[a], r[3].dir[a]);
+            let inv = Vec4::new(
+                r[0].inv_dir[a],
+                r[1].inv_dir[a],
+                r[2].inv_dir[a],
+                r[3].inv_dir[a],
+            );
+            o.write_to_slice(&mut self.o[a][base..]);
+            d.write_to_slice(&mut self.d[a][base..]);
+            inv.write_to_slice(&mut self.inv[a][base..]);
+            (o * inv).write_to_slice(&mut self.oinv[a][base..]);
+        }
+    }
+
+    /// Makes lanes `k..` copies of lane 0's ray, with a bound of -inf.
+    #[inline(always)]
+    fn pad(&mut self, k: usize) {
+        for l in k.min(PACKET)..PACKET {
+            for a in 0..3 {
+                self.o[a][l] = self.o[a][0];
+                self.d[a][l] = self.d[a][0];
+                self.inv[a][l] = self.inv[a][0];
+                self.oinv[a][l] = self.oinv[a][0];
+            }
+            self.tmax[l] = f32::NEG_INFINITY;
+            self.prim[l] = u32::MAX;
+        }
+    }
+
+    /// Lane `k`'s reciprocal direction and origin times it.
+    #[inline(always)]
+    fn lane(&self, k: usize) -> ([f32; 3], [f32; 3]) {
+        let k = k & (PACKET - 1);
+        (
+            [0, 1, 2].map(|a| self.inv[a][k]),
+            [0, 1, 2].map(|a| self.oinv[a][k]),
+        )
+    }
+
+    /// The largest bound of the lanes (-inf for none).
+    #[inline(always)]
+    fn max_tmax(&self) -> f32 {
+        self.tmax
+            .iter()
+            .fold(f32::NEG_INFINITY, |m, &t| max_ps(m, t))
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod probe {
+    use std::cell::Cell;
+    thread_local! {
+        /// [node tests, leaf calls (per 8 rays), leaf calls some ray entered, triangle tests
+        /// (per 8 rays), ray-leaf entries, packets, leaves left to the few rays that entered]
+        pub static COUNTS: Cell<[u64; 7]> = const { Cell::new([0; 7]) };
+    }
+    pub fn add(k: usize, n: u64) {
+        COUNTS.with(|c| {
+            let mut v = c.get();
+            v[k] += n;
+            c.set(v);
+        });
+    }
 }
 
 #[cfg(test)]
@@ -125,8 +283,8 @@ fn use_avx() -> bool {
 /// single-ray traversal reads them to choose its near planes.
 #[inline(always)]
 fn signs(ray: &Ray) -> usize {
-    let i = ray.inv_dir;
-    (i.x < 0.0) as usize | ((i.y < 0.0) as usize) << 1 | ((i.z < 0.0) as usize) << 2
+    // the comparisons `inv.x < 0.0`, ... as a mask
+    (ray.inv_dir.cmplt(glam::Vec3A::ZERO).bitmask() & 7) as usize
 }
 
 /// `_mm_max_ps(a, b)` on one lane (the second operand when either is NaN).
@@ -150,15 +308,22 @@ fn min_ps(a: f32, b: f32) -> f32 {
 }
 
 /// The single-ray box test of child `i` (the lane `i` of the 8-wide test in [`crate::bvh`]):
-/// the ray's entry distance if it enters the box before its `tmax`.
+/// the entry distance of the ray (reciprocal direction `inv`, origin times it `oinv`) if it
+/// enters the box before `tmax`.
 #[inline(always)]
-fn enters(node: &Node8, i: usize, f: &Frustum, l: &Lane) -> Option<f32> {
+fn enters(
+    node: &Node8,
+    i: usize,
+    f: &Frustum,
+    (inv, oinv): ([f32; 3], [f32; 3]),
+    tmax: f32,
+) -> Option<f32> {
     let p = node.planes();
     let mut tn = 0.0f32;
-    let mut tf = l.tmax;
+    let mut tf = tmax;
     for a in 0..3 {
-        let n = p[f.near[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
-        let x = p[f.far[a] & 7][i & 7] * l.inv[a] - l.oinv[a];
+        let n = p[f.near[a] & 7][i & 7] * inv[a] - oinv[a];
+        let x = p[f.far[a] & 7][i & 7] * inv[a] - oinv[a];
         tn = max_ps(tn, n);
         tf = min_ps(tf, x);
     }
@@ -239,13 +404,19 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
     (out, mask)
 }
 
-/// An all-triangle leaf (child `i` of `node`: `tris`, from primitive `first`) against the rays
-/// `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own box
-/// test (the operations of [`enters`], lane by lane), then each triangle in turn against the
-/// rays that entered, with the operations of the four-triangle test of [`crate::tri4`] (which
-/// are those of the one-triangle test) on the same values, so the same distances; among equal
-/// distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
-/// entered in `entered` (see [`traverse`]).
+/// Fewer rays than this entering a leaf of more than four triangles meet its blocks one ray
+/// at a time (four triangles per SSE test), rather than each triangle across eight rays.
+const FEW: u32 = 3;
+
+/// An all-triangle leaf (child `i` of `node`: the first `n` triangles of `blocks`) against the
+/// rays `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own
+/// box test (the operations of [`enters`], lane by lane), then each triangle in turn against
+/// the rays that entered, with the operations of the four-triangle test of [`crate::tri4`]
+/// (which are those of the one-triangle test) on the same values, so the same distances; among
+/// equal distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
+/// entered in `entered` (see [`traverse`]). Returns whether some ray's nearest hit changed, and
+/// the mask of the rays (of the eight) that entered but were left to the caller, when fewer
+/// than [`FEW`] of them entered a leaf of more than four triangles.
 ///
 /// # Safety
 /// The CPU must have AVX.
@@ -256,36 +427,20 @@ unsafe fn leaf_avx(
     node: &Node8,
     i: usize,
     f: &Frustum,
-    soa: &Soa,
+    soa: &mut Soa,
     half: usize,
-    lanes: &mut [Lane],
-    tris: &[Shape],
-    first: usize,
+    blocks: &[Tri4],
+    n: usize,
     entered: &mut Vec<(usize, f32, u32)>,
-) {
+) -> (bool, u32) {
     use std::arch::x86_64::*;
     let base = 8 * (half & 1);
-    let mut tm = [f32::NEG_INFINITY; 8];
-    let mut limit = [f32::NEG_INFINITY; 8];
-    let mut prim = [u32::MAX; 8];
-    for j in 0..8 {
-        if let Some(l) = lanes.get(base + j) {
-            tm[j] = l.tmax;
-            prim[j] = l.prim;
-            limit[j] = if l.prim == u32::MAX {
-                l.tmax
-            } else {
-                l.tmax.next_up()
-            };
-        }
-    }
     let p = node.planes();
     // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
-    // each unaligned load reads 8 f32 inside one row; `tm` and `limit` are arrays of 8 f32.
+    // each unaligned load reads 8 f32 inside one row.
     let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
     let mut tn = _mm256_setzero_ps();
-    // SAFETY: see above.
-    let mut tf = unsafe { _mm256_loadu_ps(tm.as_ptr()) };
+    let mut tf = load(&soa.tmax);
     for a in 0..3 {
         let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
         let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
@@ -295,29 +450,49 @@ unsafe fn leaf_avx(
     }
     let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
     let mask = _mm256_movemask_ps(inside) as u32;
+    #[cfg(test)]
+    probe::add(1, 1);
     if mask == 0 {
-        return;
+        return (false, 0);
+    }
+    let few = mask.count_ones() < FEW && n > 4;
+    #[cfg(test)]
+    {
+        probe::add(2, 1);
+        probe::add(4, mask.count_ones() as u64);
+        probe::add(3, if few { 0 } else { n as u64 });
+        probe::add(6, few as u64);
     }
     let mut tns = [0.0f32; 8];
     // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
     unsafe { _mm256_storeu_ps(tns.as_mut_ptr(), tn) };
+    // a hit at exactly a ray's nearest distance is taken only with a lower index
+    let mut limit = [f32::NEG_INFINITY; 8];
     let mut m = mask;
     while m != 0 {
         let j = m.trailing_zeros() as usize & 7;
         m &= m - 1;
-        entered.push((base + j, tns[j], tris.len() as u32));
+        entered.push((base + j, tns[j], n as u32));
+        let (t, pr) = (soa.tmax[(base + j) & 15], soa.prim[(base + j) & 15]);
+        limit[j] = if pr == u32::MAX { t } else { t.next_up() };
+    }
+    if few {
+        return (false, mask);
     }
     let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
     let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
     let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
+    // SAFETY: `limit` is 8 f32.
+    let mut lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     let mut changed = false;
-    for (k, s) in tris.iter().enumerate() {
-        let Shape::Triangle { v0, e1, e2 } = *s else {
-            continue;
+    for k in 0..n {
+        let Some(b) = blocks.get(k / 4) else {
+            break;
         };
-        let sp = |x: f32| _mm256_set1_ps(x);
-        let (e1x, e1y, e1z) = (sp(e1.x), sp(e1.y), sp(e1.z));
-        let (e2x, e2y, e2z) = (sp(e2.x), sp(e2.y), sp(e2.z));
+        let (v0, e1, e2) = b.corners();
+        let sp = |x: &[Vec4; 3], a: usize| _mm256_set1_ps(x[a & 3][k & 3]);
+        let (e1x, e1y, e1z) = (sp(e1, 0), sp(e1, 1), sp(e1, 2));
+        let (e2x, e2y, e2z) = (sp(e2, 0), sp(e2, 1), sp(e2, 2));
         let (mul, sub, add) = (_mm256_mul_ps, _mm256_sub_ps, _mm256_add_ps);
         // p = dir x e2
         let px = sub(mul(dy, e2z), mul(dz, e2y));
@@ -325,9 +500,9 @@ unsafe fn leaf_avx(
         let pz = sub(mul(dx, e2y), mul(dy, e2x));
         let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
         let inv = _mm256_div_ps(one, det);
-        let sx = sub(ox, sp(v0.x));
-        let sy = sub(oy, sp(v0.y));
-        let sz = sub(oz, sp(v0.z));
+        let sx = sub(ox, sp(v0, 0));
+        let sy = sub(oy, sp(v0, 1));
+        let sz = sub(oz, sp(v0, 2));
         let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
         // q = s x e1
         let qx = sub(mul(sy, e1z), mul(sz, e1y));
@@ -335,8 +510,6 @@ unsafe fn leaf_avx(
         let qz = sub(mul(sx, e1y), mul(sy, e1x));
         let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
         let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
-        // SAFETY: `limit` is 8 f32.
-        let lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
         let and = _mm256_and_ps;
         let ok = and(
             and(
@@ -364,26 +537,22 @@ unsafe fn leaf_avx(
         let mut ts = [0.0f32; 8];
         // SAFETY: `ts` is 8 f32, the 32 bytes an unaligned store writes.
         unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
-        let pk = (first + k) as u32;
+        let pk = b.prim(k & 3);
         while hit != 0 {
             let j = hit.trailing_zeros() as usize & 7;
             hit &= hit - 1;
-            if ts[j] < tm[j] || pk < prim[j] {
-                tm[j] = ts[j];
-                prim[j] = pk;
+            let l = (base + j) & 15;
+            if ts[j] < soa.tmax[l] || pk < soa.prim[l] {
+                soa.tmax[l] = ts[j];
+                soa.prim[l] = pk;
                 limit[j] = ts[j].next_up();
                 changed = true;
             }
         }
+        // SAFETY: `limit` is 8 f32.
+        lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
     }
-    if changed {
-        for j in 0..8 {
-            if let Some(l) = lanes.get_mut(base + j) {
-                l.tmax = tm[j];
-                l.prim = prim[j];
-            }
-        }
-    }
+    (changed, 0)
 }
 
 /// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
@@ -405,16 +574,23 @@ pub(crate) fn intersect(
         let (rays, out) = (&rays[start..end], &mut out[start..end]);
         // group by direction signs; small groups go one ray at a time
         let mut groups = [0u32; 8];
-        for (i, r) in rays.iter().enumerate() {
-            groups[signs(r)] |= 1 << i;
+        let c0 = rays.first().map_or(0, signs);
+        if rays.iter().all(|r| signs(r) == c0) {
+            groups[c0 & 7] = (1u32 << rays.len()) - 1;
+        } else {
+            for (i, r) in rays.iter().enumerate() {
+                groups[signs(r)] |= 1 << i;
+            }
         }
         for (class, &members) in groups.iter().enumerate() {
             if members == 0 {
                 continue;
             }
-            let single = !every_ray
-                && ((members.count_ones() as usize) < MIN_GROUP || !coherent(scene, rays, members));
-            if single || scene.bvh.nodes.is_empty() {
+            let single = !every_ray && (members.count_ones() as usize) < MIN_GROUP;
+            if single
+                || scene.bvh.nodes.is_empty()
+                || !group_closest(scene, rays, members, class, tmax, scratch, out, every_ray)
+            {
                 let mut m = members;
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
@@ -425,12 +601,13 @@ pub(crate) fn intersect(
                 }
                 continue;
             }
-            group_closest(scene, rays, members, class, tmax, scratch, out);
         }
     }
 }
 
 /// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`).
+/// Unless `every_ray`, returns false and leaves `out` alone when the rays are not coherent.
+#[allow(clippy::too_many_arguments)]
 fn group_closest(
     scene: &Scene,
     rays: &[Ray],
@@ -439,85 +616,94 @@ fn group_closest(
     tmax: f32,
     scratch: &mut Scratch,
     out: &mut [Option<Hit>],
-) {
+    every_ray: bool,
+) -> bool {
+    let mut soa = Soa::empty();
+    let mut idx = [0usize; PACKET];
+    let k = members.count_ones() as usize;
+    if members == (1u32 << rays.len().min(PACKET)) - 1 {
+        // the whole packet, in order: four rays at a time
+        for (g, four) in rays.chunks(4).enumerate() {
+            soa.fill4(g, four);
+        }
+        for (j, slot) in idx.iter_mut().enumerate().take(k) {
+            *slot = j;
+        }
+    } else {
+        let mut m = members;
+        let mut j = 0usize;
+        while m != 0 {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            if let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(j)) {
+                soa.set(j, r, tmax);
+                *slot = i;
+                j += 1;
+            }
+        }
+    }
+    // lanes past the rays: copies of the first ray (so that the packet's bounds are the
+    // rays'), never entering a box
+    soa.pad(k);
+    for t in soa.tmax.iter_mut().take(k) {
+        *t = tmax;
+    }
+    if k == 0 || (!every_ray && !coherent(scene, &soa)) {
+        return false;
+    }
     let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
     let mut f = Frustum {
         near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
         far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
-        inv_lo: [f32::INFINITY; 3],
-        inv_hi: [f32::NEG_INFINITY; 3],
-        oinv_lo: [f32::INFINITY; 3],
-        oinv_hi: [f32::NEG_INFINITY; 3],
+        inv_lo: [0, 1, 2].map(|a| row_min(&soa.inv[a])),
+        inv_hi: [0, 1, 2].map(|a| row_max(&soa.inv[a])),
+        oinv_lo: [0, 1, 2].map(|a| row_min(&soa.oinv[a])),
+        oinv_hi: [0, 1, 2].map(|a| row_max(&soa.oinv[a])),
         shared: false,
         o: [0.0; 3],
         k: [0.0; 3],
     };
-    let mut lanes = [Lane {
-        inv: [0.0; 3],
-        oinv: [0.0; 3],
-        lanes: RayLanes::new(&Ray::new(glam::Vec3A::ZERO, glam::Vec3A::Z)),
-        tmax,
-        prim: u32::MAX,
-    }; PACKET];
-    let mut soa = Soa {
-        o: [[0.0; PACKET]; 3],
-        d: [[0.0; PACKET]; 3],
-        inv: [[0.0; PACKET]; 3],
-        oinv: [[0.0; PACKET]; 3],
-    };
-    let mut idx = [0usize; PACKET];
-    let mut k = 0usize;
-    let mut m = members;
-    while m != 0 {
-        let i = m.trailing_zeros() as usize;
-        m &= m - 1;
-        let (Some(r), Some(l), Some(slot)) = (rays.get(i), lanes.get_mut(k), idx.get_mut(k)) else {
-            continue;
-        };
-        let (o, d) = (r.origin, r.inv_dir);
-        l.inv = [d.x, d.y, d.z];
-        l.oinv = [o.x * d.x, o.y * d.y, o.z * d.z];
-        l.lanes = RayLanes::new(r);
-        for a in 0..3 {
-            f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
-            f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
-            f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
-            f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
-            soa.o[a][k & 15] = r.origin[a];
-            soa.d[a][k & 15] = r.dir[a];
-            soa.inv[a][k & 15] = l.inv[a];
-            soa.oinv[a][k & 15] = l.oinv[a];
-        }
-        *slot = i;
-        k += 1;
+    let o = [0, 1, 2].map(|a| soa.o[a][0]);
+    let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
+    let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+    if same && tame {
+        f.shared = true;
+        f.o = o;
+        f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
     }
-    if let Some(first) = idx.first().and_then(|&i| rays.get(i)) {
-        let o = first.origin;
-        let same = idx[..k]
-            .iter()
-            .all(|&i| rays.get(i).is_some_and(|r| r.origin == o));
-        let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
-        if same && tame {
-            f.shared = true;
-            f.o = [o.x, o.y, o.z];
-            f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
-        }
-    }
-    let lanes = &mut lanes[..k];
+    let idx = &idx[..k];
+    #[cfg(test)]
+    probe::add(5, 1);
     #[cfg(target_arch = "x86_64")]
     if use_avx() {
         // SAFETY: the CPU has AVX (checked just above).
-        unsafe { traverse_avx(scene, rays, &idx[..k], &f, &soa, lanes, scratch) };
+        unsafe { traverse_avx(scene, rays, idx, &f, &mut soa, scratch) };
     } else {
-        traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
+        traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    traverse::<false>(scene, rays, &idx[..k], &f, &soa, lanes, scratch);
-    for (l, &i) in lanes.iter().zip(idx.iter()) {
-        if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
-            *o = scene.finish_closest(r, l.tmax, l.prim, scratch);
+    traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
+    // without instances and planes the hit is the BVH's (what finish_closest would return)
+    if scene.instances.is_empty() && scene.planes.is_empty() {
+        for (j, &i) in idx.iter().enumerate() {
+            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+            if let Some(o) = out.get_mut(i) {
+                *o = (prim != u32::MAX).then_some(Hit {
+                    t,
+                    prim,
+                    instance: Hit::NO_INSTANCE,
+                });
+            }
+        }
+    } else {
+        for (j, &i) in idx.iter().enumerate() {
+            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+            if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
+                *o = scene.finish_closest(r, t, prim, scratch);
+            }
         }
     }
+    true
 }
 
 /// [`traverse`] compiled with AVX.
@@ -531,14 +717,14 @@ unsafe fn traverse_avx(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
-    traverse::<true>(scene, rays, idx, f, soa, lanes, scratch);
+    traverse::<true>(scene, rays, idx, f, soa, scratch);
 }
 
-/// The packet traversal of the scene's own BVH; leaves each ray's nearest hit in its lane.
+/// The packet traversal of the scene's own BVH for the rays `idx` (lane `j` is `rays[idx[j]]`);
+/// leaves each ray's nearest hit in its lane of `soa`.
 ///
 /// Work ([`Scratch::work`]): each ray is charged one unit plus the leaf's size for every leaf
 /// whose box it enters before its final nearest hit. That set does not depend on the order the
@@ -550,14 +736,13 @@ fn traverse<const AVX: bool>(
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
     ENTERED.with(|e| {
         let mut entered = e.take();
         entered.clear();
-        traverse_with::<AVX>(scene, rays, idx, f, soa, lanes, scratch, &mut entered);
+        traverse_with::<AVX>(scene, rays, idx, f, soa, scratch, &mut entered);
         e.set(entered);
     });
 }
@@ -568,27 +753,26 @@ thread_local! {
 }
 
 /// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn traverse_with<const AVX: bool>(
     scene: &Scene,
     rays: &[Ray],
     idx: &[usize],
     f: &Frustum,
-    soa: &Soa,
-    lanes: &mut [Lane],
+    soa: &mut Soa,
     scratch: &mut Scratch,
     entered: &mut Vec<(usize, f32, u32)>,
 ) {
     let nodes = &scene.bvh.nodes;
-    let shapes = &scene.geom.shapes;
     let mut mailboxes = [Mailbox::default(); PACKET];
-    let mut tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
+    let mut tmax = soa.max_tmax();
     let stack = &mut scratch.stack;
     let mut sp = 0usize;
     let mut cur = 0u32;
     loop {
         if let Some(node) = nodes.get(cur as usize) {
+            #[cfg(test)]
+            probe::add(0, 1);
             #[cfg(target_arch = "x86_64")]
             let (tn, mut mask) = if AVX {
                 // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
@@ -622,46 +806,56 @@ fn traverse_with<const AVX: bool>(
                     // a leaf of triangle blocks names its first block, not its first primitive
                     let n = crate::bvh::block_leaf_len(c as usize).unwrap_or(c as usize);
                     #[cfg(target_arch = "x86_64")]
-                    if let (true, Some(b)) = (
-                        AVX,
-                        scene
-                            .tri_blocks
-                            .leaf(first, c as usize)
-                            .and_then(|b| b.first()),
-                    ) {
-                        let p0 = b.prim(0) as usize;
-                        if let Some(tris) = shapes.get(p0..p0 + n) {
-                            for half in 0..lanes.len().div_ceil(8) {
-                                // SAFETY: AVX is only set by traverse_avx, which runs where
-                                // the CPU has it.
-                                unsafe {
-                                    leaf_avx(node, i, f, soa, half, lanes, tris, p0, entered)
-                                };
+                    if let (true, Some(blocks)) = (AVX, scene.tri_blocks.leaf(first, c as usize)) {
+                        let mut changed = false;
+                        for half in 0..idx.len().div_ceil(8) {
+                            // SAFETY: AVX is only set by traverse_avx, which runs where the
+                            // CPU has it.
+                            let (ch, mut left) =
+                                unsafe { leaf_avx(node, i, f, soa, half, blocks, n, entered) };
+                            changed |= ch;
+                            // the few rays that entered: one at a time, by blocks of four
+                            while left != 0 {
+                                let l = (8 * half + left.trailing_zeros() as usize) & 15;
+                                left &= left - 1;
+                                if let Some(r) = idx.get(l).and_then(|&ri| rays.get(ri)) {
+                                    let t = scene.leaf_closest(
+                                        first,
+                                        c as usize,
+                                        r,
+                                        &RayLanes::new(r),
+                                        &mut mailboxes[l],
+                                        soa.tmax[l],
+                                        &mut soa.prim[l],
+                                    );
+                                    changed |= t != soa.tmax[l];
+                                    soa.tmax[l] = t;
+                                }
                             }
-                            tmax = lanes.iter().fold(f32::NEG_INFINITY, |m, l| m.max(l.tmax));
-                            continue;
                         }
+                        if changed {
+                            tmax = soa.max_tmax();
+                        }
+                        continue;
                     }
-                    let mut new_max = f32::NEG_INFINITY;
-                    let lanes_mb = lanes.iter_mut().zip(idx).zip(mailboxes.iter_mut());
-                    for (lane, ((l, &ri), mb)) in lanes_mb.enumerate() {
-                        if let Some(t) = enters(node, i, f, l) {
+                    for (lane, (&ri, mb)) in idx.iter().zip(mailboxes.iter_mut()).enumerate() {
+                        let l = lane & 15;
+                        if let Some(t) = enters(node, i, f, soa.lane(l), soa.tmax[l]) {
                             if let Some(r) = rays.get(ri) {
-                                entered.push((lane, t, n as u32));
-                                l.tmax = scene.leaf_closest(
+                                entered.push((l, t, n as u32));
+                                soa.tmax[l] = scene.leaf_closest(
                                     first,
                                     c as usize,
                                     r,
-                                    &l.lanes,
+                                    &RayLanes::new(r),
                                     mb,
-                                    l.tmax,
-                                    &mut l.prim,
+                                    soa.tmax[l],
+                                    &mut soa.prim[l],
                                 );
                             }
                         }
-                        new_max = new_max.max(l.tmax);
                     }
-                    tmax = new_max;
+                    tmax = soa.max_tmax();
                 }
             }
             if ni > 0 {
@@ -681,11 +875,13 @@ fn traverse_with<const AVX: bool>(
         // pop the next inner node that some ray may still enter before its nearest hit
         loop {
             if sp == 0 {
+                let mut w = 0u64;
                 for &(lane, t, c) in entered.iter() {
-                    if lanes.get(lane).is_some_and(|l| t <= l.tmax) {
-                        scratch.work += 1 + c as u64;
+                    if t <= soa.tmax[lane & 15] {
+                        w += 1 + c as u64;
                     }
                 }
+                scratch.work += w;
                 return;
             }
             sp -= 1;
@@ -702,6 +898,7 @@ fn traverse_with<const AVX: bool>(
 mod tests {
     use super::*;
     use crate::camera::Camera;
+    use crate::geometry::Shape;
     use crate::material::Material;
     use crate::scene::SceneBuilder;
     use glam::Vec3A;
@@ -795,6 +992,7 @@ mod tests {
 
     #[test]
     fn packets_equal_single_rays_on_random_scenes() {
+        probe::COUNTS.with(|c| c.set([0; 7]));
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut hits = 0;
         for round in 0..12 {
@@ -851,6 +1049,11 @@ mod tests {
             hits += check(&scene, &rays, f32::INFINITY, false);
         }
         assert!(hits > 5000, "{hits}");
+        // both ways of meeting a leaf of blocks: across rays, and one ray at a time
+        let c = probe::COUNTS.with(|c| c.get());
+        if has_avx() {
+            assert!(c[3] > 10_000 && c[6] > 1000, "{c:?}");
+        }
     }
 
     /// Primary rays of an SPD scene in 4 x 4 tiles, as the renderer traces them, and bundles.
@@ -895,6 +1098,68 @@ mod tests {
         }
     }
 
+    /// Where a packet's time goes, on the meshes named in `PACKET_STATS` (colon-separated):
+    /// `PACKET_STATS=a.obj:b.obj cargo test --release packet_stats -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn packet_stats() {
+        let Ok(list) = std::env::var("PACKET_STATS") else {
+            return;
+        };
+        for mesh in list.split(':') {
+            let scene = Scene::load(Path::new(mesh)).expect("mesh loads");
+            let b = scene.bounds();
+            let primary = crate::raysets::primary(b, 1024);
+            let rays: Vec<Ray> = crate::raysets::tile_order(1024)
+                .iter()
+                .map(|&i| primary[i as usize])
+                .collect();
+            let mut scratch = Scratch::new();
+            crate::bvh::probe::NODES.with(|c| c.set(0));
+            let mut leaves = 0u64;
+            for r in &rays {
+                scene
+                    .bvh
+                    .traverse::<true>(r, f32::INFINITY, &mut scratch, |first, count, tm| {
+                        leaves += 1;
+                        let mut prim = u32::MAX;
+                        scene.leaf_closest(
+                            first,
+                            count,
+                            r,
+                            &RayLanes::new(r),
+                            &mut Mailbox::default(),
+                            tm,
+                            &mut prim,
+                        )
+                    });
+            }
+            let nodes = crate::bvh::probe::NODES.with(|c| c.get());
+            probe::COUNTS.with(|c| c.set([0; 7]));
+            let mut out = vec![None; PACKET];
+            for p in rays.chunks(PACKET) {
+                scene.intersect_packet(p, f32::INFINITY, &mut scratch, &mut out);
+            }
+            let c = probe::COUNTS.with(|c| c.get());
+            let n = rays.len() as f64;
+            let pk = c[5] as f64;
+            println!(
+                "{mesh}: single: {:.1} nodes, {:.1} leaves per ray; packets {pk}: {:.1} node tests, \
+                 {:.1} leaf calls (of 8 rays), {:.1} entered, {:.1} triangle tests (x 8 rays), \
+                 {:.1} ray-leaf entries per packet ({:.1} per ray), {:.1} leaves one ray at a time",
+                nodes as f64 / n,
+                leaves as f64 / n,
+                c[0] as f64 / pk,
+                c[1] as f64 / pk,
+                c[2] as f64 / pk,
+                c[3] as f64 / pk,
+                c[4] as f64 / pk,
+                c[4] as f64 / n,
+                c[6] as f64 / pk,
+            );
+        }
+    }
+
     #[test]
     fn the_packet_test_bounds_every_rays_own_test_and_avx_agrees() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -933,22 +1198,18 @@ mod tests {
                 k: [0.0; 3],
             };
             let tmax = if round % 2 == 0 { 2.0 } else { f32::INFINITY };
-            let lanes: Vec<Lane> = rays
+            let mut soa = Soa::empty();
+            let lanes: Vec<([f32; 3], [f32; 3])> = rays
                 .iter()
-                .map(|r| {
-                    let (o, d) = (r.origin, r.inv_dir);
-                    let l = Lane {
-                        inv: [d.x, d.y, d.z],
-                        oinv: [o.x * d.x, o.y * d.y, o.z * d.z],
-                        lanes: RayLanes::new(r),
-                        tmax,
-                        prim: u32::MAX,
-                    };
+                .enumerate()
+                .map(|(k, r)| {
+                    let l = soa.set(k, r, tmax);
+                    assert_eq!(l, soa.lane(k));
                     for a in 0..3 {
-                        f.inv_lo[a] = f.inv_lo[a].min(l.inv[a]);
-                        f.inv_hi[a] = f.inv_hi[a].max(l.inv[a]);
-                        f.oinv_lo[a] = f.oinv_lo[a].min(l.oinv[a]);
-                        f.oinv_hi[a] = f.oinv_hi[a].max(l.oinv[a]);
+                        f.inv_lo[a] = f.inv_lo[a].min(l.0[a]);
+                        f.inv_hi[a] = f.inv_hi[a].max(l.0[a]);
+                        f.oinv_lo[a] = f.oinv_lo[a].min(l.1[a]);
+                        f.oinv_hi[a] = f.oinv_hi[a].max(l.1[a]);
                     }
                     l
                 })
@@ -972,7 +1233,10 @@ mod tests {
                 // the ray's own test, as the single-ray traversal makes it
                 let single = node.single_ray_test_for_tests(r, tmax);
                 for (i, &t) in tn.iter().enumerate() {
-                    assert_eq!(enters(&node, i, &f, l).is_some(), single.1 & (1 << i) != 0);
+                    assert_eq!(
+                        enters(&node, i, &f, *l, tmax).is_some(),
+                        single.1 & (1 << i) != 0
+                    );
                     if single.1 & (1 << i) != 0 {
                         entered += 1;
                         assert!(mask & (1 << i) != 0, "round {round}: child {i} missed");

@@ -118,6 +118,13 @@ impl Tri4 {
         Some((best, t[best]))
     }
 
+    /// The four triangles' `v0`, `e1` and `e2`, one lane vector per coordinate (for tests of
+    /// one triangle across several rays).
+    #[inline(always)]
+    pub(crate) fn corners(&self) -> (&[Vec4; 3], &[Vec4; 3], &[Vec4; 3]) {
+        (&self.v0, &self.e1, &self.e2)
+    }
+
     /// The primitive index of lane `lane`.
     #[inline(always)]
     pub fn prim(&self, lane: usize) -> u32 {
