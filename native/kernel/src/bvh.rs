@@ -531,6 +531,26 @@ impl RayPre {
     }
 }
 
+/// A traversal's test of `node`'s eight boxes (see [`hit_sse`]), with AVX when `AVX` is set,
+/// counted for the tests' probes.
+#[inline(always)]
+fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
+    #[cfg(test)]
+    probe::NODES.with(|c| c.set(c.get() + 1));
+    #[cfg(target_arch = "x86_64")]
+    let hit = if AVX {
+        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+        unsafe { hit_avx(node, pre, tmax) }
+    } else {
+        hit_sse(node, pre, tmax)
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let hit = hit_sse(node, pre, tmax);
+    #[cfg(test)]
+    probe::shape(node, hit.1);
+    hit
+}
+
 /// The box test with SSE (two halves of four; glam's scalar code off x86): entry distances of
 /// the eight children and the mask of those entered before `tmax`.
 #[inline(always)]
@@ -740,20 +760,8 @@ impl Bvh {
         let mut w = 0u64;
         let t = 'run: loop {
             if let Some(node) = self.nodes.get(cur as usize) {
-                #[cfg(test)]
-                probe::NODES.with(|c| c.set(c.get() + 1));
                 w += 1;
-                #[cfg(target_arch = "x86_64")]
-                let (tn, mut mask) = if AVX {
-                    // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
-                    unsafe { hit_avx(node, &pre, tmax) }
-                } else {
-                    hit_sse(node, &pre, tmax)
-                };
-                #[cfg(not(target_arch = "x86_64"))]
-                let (tn, mut mask) = hit_sse(node, &pre, tmax);
-                #[cfg(test)]
-                probe::shape(node, mask);
+                let (tn, mut mask) = node_test::<AVX>(node, &pre, tmax);
                 if mask & mask.wrapping_sub(1) == 0 {
                     // zero or one child hit: the common case, no sorting or stacking
                     if mask != 0 {
@@ -872,20 +880,8 @@ impl Bvh {
                 let Some(node) = nodes.get(cur.0 as usize) else {
                     break 'run tmax;
                 };
-                #[cfg(test)]
-                probe::NODES.with(|c| c.set(c.get() + 1));
                 w += 1;
-                #[cfg(target_arch = "x86_64")]
-                let (tn, mask) = if AVX {
-                    // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
-                    unsafe { hit_avx(node, &pre, tmax) }
-                } else {
-                    hit_sse(node, &pre, tmax)
-                };
-                #[cfg(not(target_arch = "x86_64"))]
-                let (tn, mask) = hit_sse(node, &pre, tmax);
-                #[cfg(test)]
-                probe::shape(node, mask);
+                let (tn, mask) = node_test::<AVX>(node, &pre, tmax);
                 // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
                 let near = 31 - (mask | 1).leading_zeros() as usize;
                 let mut rest = mask & !(1u32 << near);
