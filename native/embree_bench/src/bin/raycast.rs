@@ -1,34 +1,17 @@
 //! Ray casting with the kernel alone, for profiling (`perf stat` / `perf record`) and for
 //! checking that a kernel change keeps every hit:
-//! `cargo run --release -p ring_tracer_kernel --example raycast -- MESH.obj [KIND] [REPEAT] [DUMP]`
+//! `cargo run --release -p ring_tracer_embree_bench --bin raycast -- MESH.obj [KIND] [REPEAT] [DUMP]`
 //!
 //! KIND: `primary`, `incoherent` (default) or `any` (the incoherent rays as shadow queries),
 //! the rays of [`ring_tracer_kernel::raysets`] (1024 x 1024). Prints the load time, the rate
 //! and a checksum of the answers; with DUMP, writes each ray's answer (primitive and `t` bits,
 //! or the any-hit flag) to that file, one per line, so two builds can be compared with `cmp`.
 
+use ring_tracer_embree_bench::cpu_seconds;
 use ring_tracer_kernel::{raysets, Scene, Scratch};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
-
-/// This process's CPU time in seconds (user + system, from `/proc/self/stat`, in clock ticks
-/// of 10 ms); 0 where that file is missing. On a busy machine, rays per CPU second vary less
-/// than rays per wall second.
-fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // the fields after the command name in parentheses; utime and stime are the 14th and 15th
-    let rest = stat.rsplit(')').next().unwrap_or("");
-    let f: Vec<f64> = rest
-        .split_whitespace()
-        .skip(11)
-        .take(2)
-        .filter_map(|x| x.parse().ok())
-        .collect();
-    f.iter().sum::<f64>() / 100.0
-}
 
 fn main() -> std::io::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
