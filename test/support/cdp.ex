@@ -19,7 +19,9 @@ defmodule RingTracer.Test.CDP do
 
     port = Port.open({:spawn_executable, "/bin/sh"}, [:binary, :exit_status, args: ["-c", cmd]])
     cdp = %__MODULE__{port: port}
-    {targets, cdp} = call(cdp, "Target.getTargets", %{})
+    # The first reply waits for chromium's cold start, which took over 30 s
+    # with both cores busy and the rest of the suite running.
+    {targets, cdp} = call(cdp, "Target.getTargets", %{}, 120_000)
     page = Enum.find(targets["targetInfos"], &(&1["type"] == "page"))
 
     {%{"sessionId" => session}, cdp} =
