@@ -140,7 +140,9 @@ defmodule RingTracer.FailureTest do
                atoms: 50,
                width: 256,
                height: 256,
-               speeds: [20],
+               # Slow enough that the job cannot end within the timeout
+               # however the machine's load moves the trace times.
+               speeds: [1000],
                timeout: 200
              )
 

@@ -379,19 +379,22 @@ defmodule RingTracer.Strategy.RingTest do
   end
 
   test "adaptive atoms: children of unequal speeds trace pieces that tile the image; split: false (the default) keeps atoms whole" do
-    job = [children: 8, atoms: 4, speeds: Enum.to_list(1..8), costs: 3000]
+    # Eight atoms a child, 10 ms each at full speed: the job lasts long
+    # enough that hand-overs come after both sides have measured a rate, even
+    # when the schedulers are busy with other work.
+    job = [children: 8, atoms: 8, speeds: Enum.to_list(1..8), costs: 10_000]
     {:ok, r} = RingTracer.simulate([strategy: :ring, split: true] ++ job)
     ids = Enum.map(r.atoms, & &1.atom)
-    layout = RingTracer.Layout.new(32, 1, 8, 4)
+    layout = RingTracer.Layout.new(64, 1, 8, 8)
     assert Enum.any?(ids, &is_tuple/1)
     assert ids == Enum.uniq(ids)
     assert RingTracer.Job.Coverage.tiles?(layout, ids)
-    assert length(ids) == 32 + Enum.sum(Enum.map(r.children, & &1.splits))
+    assert length(ids) == 64 + Enum.sum(Enum.map(r.children, & &1.splits))
     assert r.messages.result.count == length(ids)
 
     for opts <- [[split: false], []] do
       {:ok, fixed} = RingTracer.simulate([strategy: :ring] ++ opts ++ job)
-      assert Enum.sort(Enum.map(fixed.atoms, & &1.atom)) == Enum.to_list(0..31)
+      assert Enum.sort(Enum.map(fixed.atoms, & &1.atom)) == Enum.to_list(0..63)
       assert Enum.all?(fixed.children, &(&1.splits == 0))
     end
   end
