@@ -383,18 +383,19 @@ defmodule RingTracer.Strategy.RingTest do
     # enough that hand-overs come after both sides have measured a rate, even
     # when the schedulers are busy with other work.
     job = [children: 8, atoms: 8, speeds: Enum.to_list(1..8), costs: 10_000]
+    n = job[:children] * job[:atoms]
     {:ok, r} = RingTracer.simulate([strategy: :ring, split: true] ++ job)
     ids = Enum.map(r.atoms, & &1.atom)
-    layout = RingTracer.Layout.new(64, 1, 8, 8)
+    layout = RingTracer.Layout.new(n, 1, job[:children], job[:atoms])
     assert Enum.any?(ids, &is_tuple/1)
     assert ids == Enum.uniq(ids)
     assert RingTracer.Job.Coverage.tiles?(layout, ids)
-    assert length(ids) == 64 + Enum.sum(Enum.map(r.children, & &1.splits))
+    assert length(ids) == n + Enum.sum(Enum.map(r.children, & &1.splits))
     assert r.messages.result.count == length(ids)
 
     for opts <- [[split: false], []] do
       {:ok, fixed} = RingTracer.simulate([strategy: :ring] ++ opts ++ job)
-      assert Enum.sort(Enum.map(fixed.atoms, & &1.atom)) == Enum.to_list(0..63)
+      assert Enum.sort(Enum.map(fixed.atoms, & &1.atom)) == Enum.to_list(0..(n - 1))
       assert Enum.all?(fixed.children, &(&1.splits == 0))
     end
   end
