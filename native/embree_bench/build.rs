@@ -8,8 +8,11 @@ fn main() {
     println!("cargo::rerun-if-changed=c/embree_side.c");
     println!("cargo::rerun-if-env-changed=EMBREE_INCLUDE");
     let include = std::env::var("EMBREE_INCLUDE").unwrap_or_else(|_| "/usr/include".into());
-    // installing libembree-dev later rebuilds the bench with Embree (a missing path reruns this)
-    println!("cargo::rerun-if-changed={include}/embree3/rtcore.h");
+    // Installing libembree-dev later rebuilds the bench with Embree. A missing path reruns this
+    // script on every build; once present, the directory is watched rather than the header,
+    // because dpkg keeps the header's mtime from its packaging (older than any build here) but
+    // the directory it creates has the time of the install.
+    println!("cargo::rerun-if-changed={include}/embree3");
     if !Path::new(&include).join("embree3/rtcore.h").exists() {
         println!(
             "cargo::warning=Embree 3 headers not found ({include}/embree3/rtcore.h): \
