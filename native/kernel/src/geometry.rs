@@ -209,10 +209,16 @@ impl ConeData {
 
 #[inline]
 fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
-    let bo = c.base - ray.origin;
-    if c.surely_missed(bo, ray.dir) {
+    if c.surely_missed(c.base - ray.origin, ray.dir) {
         return None;
     }
+    hit_cone_exact(c, ray, tmin, tmax)
+}
+
+/// The cone's quadratic, without [`ConeData::surely_missed`] before it.
+#[inline]
+fn hit_cone_exact(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
+    let bo = c.base - ray.origin;
     // Solved from the ray's point nearest the base, not from its origin: far from a thin cone,
     // |w|^2 - r^2 from the origin loses the radius to rounding (false hits a radius away).
     let dd = ray.dir.length_squared();
@@ -425,6 +431,56 @@ pub(crate) fn make_cone(base: Vec3A, r0: f32, apex: Vec3A, r1: f32) -> Option<Co
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The sure-miss test before the cone's quadratic never drops a hit the quadratic finds,
+    /// over thin and wide cones and cylinders, rays from near and far (origins up to 1e6 away),
+    /// and still rejects most rays that pass wide of the cone.
+    #[test]
+    fn cone_sure_miss_keeps_every_hit() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let (mut hits, mut rejected) = (0, 0);
+        for round in 0..200_000 {
+            let base = Vec3A::new(rnd(), rnd(), rnd()) * 10.0;
+            let apex = base + Vec3A::new(rnd(), rnd(), rnd()) * 5.0;
+            let scale = [1e-4, 1e-2, 1.0][round % 3];
+            let (r0, r1) = (rnd().abs() * scale, rnd().abs() * scale);
+            let r1 = if round % 4 == 0 { r0 } else { r1 };
+            let Some(c) = make_cone(base, r0, apex, r1) else {
+                continue;
+            };
+            let far = [1.0, 1e3, 1e6][(round / 3) % 3];
+            let o = Vec3A::new(rnd(), rnd(), rnd()) * far;
+            // aimed at a point near the surface, or anywhere
+            let s = rnd().abs() * c.height;
+            let side = Vec3A::new(rnd(), rnd(), rnd()).normalize_or_zero();
+            let target = c.base + c.axis * s + side * (c.r0 + c.slope * s) * (1.0 + rnd() * 0.01);
+            let d = if round % 2 == 0 {
+                target - o
+            } else {
+                Vec3A::new(rnd(), rnd(), rnd())
+            };
+            let r = Ray::new(o, d);
+            let exact = hit_cone_exact(&c, &r, 0.0, f32::INFINITY);
+            let missed = c.surely_missed(c.base - r.origin, r.dir);
+            assert!(
+                !(missed && exact.is_some()),
+                "round {round}: {c:?}, {r:?} hits at {exact:?} but was called a sure miss"
+            );
+            assert_eq!(hit_cone(&c, &r, 0.0, f32::INFINITY), exact);
+            hits += exact.is_some() as u32;
+            rejected += missed as u32;
+        }
+        assert!(
+            hits > 20_000 && rejected > 50_000,
+            "{hits} hits, {rejected} rejected"
+        );
+    }
 
     fn ray(o: [f32; 3], d: [f32; 3]) -> Ray {
         Ray::new(Vec3A::from_array(o), Vec3A::from_array(d))
