@@ -31,7 +31,7 @@ defmodule RingTracer.Bench.Preview do
   From iex, `RingTracer.Bench.Preview.measure/1` takes the same as a
   keyword list (`:viewer` an atom), and also `:depth`, `:speeds` and
   `:strategy` as for `RingTracer.render/2`; defaults: the scene's own view
-  at 2048 x 2048 (a job of about a second of CPU time here),
+  at 2048 x 2048 (a job of about 0.7 s of CPU time here),
   schedulers-online children, 16 atoms per child, 61 pairs.
   """
   @moduledoc @help
