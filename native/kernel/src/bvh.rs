@@ -1073,12 +1073,8 @@ mod tests {
     #[test]
     fn avx_and_sse_node_tests_agree_bit_for_bit() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut f = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 4.0 - 2.0
-        };
+        // in [-2, 2)
+        let mut f = || crate::test_rng::rng(&mut seed) * 2.0;
         let mut hits = 0;
         for round in 0..5000 {
             let mut node = Node8::empty();

@@ -438,12 +438,7 @@ mod tests {
     #[test]
     fn cone_sure_miss_keeps_every_hit() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-        };
+        let mut rnd = || crate::test_rng::rng(&mut seed);
         let (mut hits, mut rejected) = (0, 0);
         for round in 0..200_000 {
             let base = Vec3A::new(rnd(), rnd(), rnd()) * 10.0;

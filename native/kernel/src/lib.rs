@@ -67,6 +67,8 @@ pub mod raysets;
 pub mod render;
 pub mod scene;
 pub mod stats;
+#[cfg(test)]
+mod test_rng;
 pub mod toml_scene;
 mod tri4;
 pub mod warning;

@@ -904,13 +904,7 @@ mod tests {
     use glam::Vec3A;
     use std::path::Path;
 
-    /// xorshift for test data, in [-1, 1)
-    fn rng(seed: &mut u64) -> f32 {
-        *seed ^= *seed << 13;
-        *seed ^= *seed >> 7;
-        *seed ^= *seed << 17;
-        (*seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    }
+    use crate::test_rng::rng;
 
     fn v(seed: &mut u64) -> Vec3A {
         Vec3A::new(rng(seed), rng(seed), rng(seed))

@@ -196,13 +196,7 @@ mod tests {
     use super::*;
     use crate::geometry::hit_triangle;
 
-    /// xorshift for test data
-    fn rng(seed: &mut u64) -> f32 {
-        *seed ^= *seed << 13;
-        *seed ^= *seed >> 7;
-        *seed ^= *seed << 17;
-        (*seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
-    }
+    use crate::test_rng::rng;
 
     #[test]
     fn lanes_agree_bit_for_bit_with_the_scalar_test() {
