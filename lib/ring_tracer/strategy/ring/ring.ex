@@ -22,10 +22,13 @@ defmodule RingTracer.Strategy.Ring do
     * `:aim` — whether an idle child sends its offer straight to the sibling
       it expects to stay busy longest (default false; see
       `RingTracer.Strategy.Ring.Aim`);
-    * `:split` — adaptive atoms (default true): a hand-over can give part
-      of an atom, near the end of the giver's atoms or to an offerer too
-      slow for a whole one (`RingTracer.Strategy.Ring.Share.part/7`);
-      `false` keeps atoms whole, as the paper does.
+    * `:split` — adaptive atoms: a hand-over can give part of an atom,
+      near the end of the giver's atoms or to an offerer too slow for a
+      whole one (`RingTracer.Strategy.Ring.Share.part/7`); `false` keeps
+      atoms whole, as the paper does. Absent here it is true, but
+      `RingTracer.render/2` and `RingTracer.simulate/1` pass `false` unless
+      asked for `split: true` (`RingTracer.Strategies`), so renders keep
+      atoms whole by default.
 
   ## State
 
