@@ -317,7 +317,7 @@ pub fn trace_span_into(
 }
 
 /// The side of the pixel tiles whose eye rays [`primary_tiles`] traces as one packet.
-const PRIMARY_TILE: u64 = 4;
+const TILE: u64 = 4;
 
 /// One sample per pixel through the pixel centres of the span `start..end` of a `w` x `h`
 /// image: the eye rays in 4 x 4 pixel tiles aligned to the image grid (partial where the span
@@ -332,7 +332,6 @@ fn primary_tiles(
     put: &mut impl FnMut(Vec3A),
     stats: &mut RayStats,
 ) {
-    const TILE: u64 = PRIMARY_TILE;
     let span = Camera::centre_span(w, h);
     let (w64, h64) = (w as u64, h as u64);
     let mut band: Vec<Vec3A> = Vec::new();
@@ -544,7 +543,7 @@ pub fn render_image_into(
     let threads = threads.clamp(1, 256);
     // SPD mode re-traces one corner row per chunk, so use taller chunks there; otherwise a
     // chunk is one band of primary_tiles' 4 x 4 tiles, so that no chunk cuts a packet in half
-    let rows_per_chunk = if settings.spd { 16 } else { PRIMARY_TILE }.min(h.max(1));
+    let rows_per_chunk = if settings.spd { 16 } else { TILE }.min(h.max(1));
     let chunk_len = (rows_per_chunk * w * 3) as usize;
     // (chunk index, its pixels), taken in order by whichever thread asks next
     let chunks = Mutex::new(out.chunks_mut(chunk_len.max(1)).enumerate());
