@@ -196,12 +196,30 @@ defmodule RingTracer.Layout do
   piece that is a whole atom is its index).
   """
   @spec split(atom_id(), pos_integer(), pos_integer()) :: {atom_id(), atom_id()}
-  def split(a, k, n) when is_integer(a), do: split({a, 0, 1, 1}, k, n)
+  def split(a, k, n) when is_integer(k) and is_integer(n) and k > 0 and k < n,
+    do: {parts(a, 0, k, n), parts(a, k, n, n)}
 
-  def split({a, lo, hi, d}, k, n) when is_integer(k) and is_integer(n) and k > 0 and k < n do
-    cut = lo * n + k * (hi - lo)
-    {piece(a, lo * n, cut, d * n), piece(a, cut, hi * n, d * n)}
-  end
+  @doc """
+  Parts `from` up to (not including) `to` of atom or piece `a` cut into `n`
+  equal parts (`0 <= from < to <= n`), with the smallest grid, as
+  `split/3` writes them: a grandchild traces a long atom part by part
+  (`RingTracer.Job.Grandchild`), and its child may cut off the parts not
+  yet started.
+
+      iex> RingTracer.Layout.parts(3, 2, 4, 8)
+      {3, 1, 2, 4}
+      iex> RingTracer.Layout.parts({3, 1, 2, 4}, 0, 1, 2)
+      {3, 2, 3, 8}
+      iex> RingTracer.Layout.parts({3, 1, 2, 4}, 0, 4, 4)
+      {3, 1, 2, 4}
+  """
+  @spec parts(atom_id(), non_neg_integer(), pos_integer(), pos_integer()) :: atom_id()
+  def parts(a, from, to, n) when is_integer(a), do: parts({a, 0, 1, 1}, from, to, n)
+
+  def parts({a, lo, hi, d}, from, to, n)
+      when is_integer(n) and is_integer(from) and is_integer(to) and 0 <= from and from < to and
+             to <= n,
+      do: piece(a, lo * n + from * (hi - lo), lo * n + to * (hi - lo), d * n)
 
   defp piece(a, 0, d, d), do: a
 

@@ -14,7 +14,8 @@ defmodule RingTracer.Result do
     * `:children` — one map per child, in ring order: `:index`, `:node`,
       `:speed`, atoms `:own`, `:given`, `:received`, `:splits` (atoms it cut
       in two to give part of one: adaptive atoms, one item more each, so
-      `traced == own - given + received + splits`), `:handovers` (hand-over
+      `traced == own - given + received + splits`), `:cuts` (of those, cuts of
+      the atom being traced, `RingTracer.Job.Pipe.cut/3`), `:handovers` (hand-over
       messages received), `:traced` (atoms and pieces), offers `:offers_sent`, `:offers_passed`
       (offer messages: offers passed on together count once),
       `:offers_consumed` (for `:steal`, requests sent, refused and granted),
@@ -101,6 +102,7 @@ defmodule RingTracer.Result do
           required(:given) => non_neg_integer(),
           required(:received) => non_neg_integer(),
           required(:splits) => non_neg_integer(),
+          required(:cuts) => non_neg_integer(),
           required(:handovers) => non_neg_integer(),
           required(:traced) => non_neg_integer(),
           required(:offers_sent) => non_neg_integer(),

@@ -56,6 +56,11 @@ defmodule RingTracer.Strategy do
     * `{:give, pid, index, n, {k, d}}` — the same, and with the `n` atoms
       the last `k` of `d` parts of the next one (`RingTracer.Layout.split/3`:
       its first parts stay with the child);
+    * `{:cut, pid, index, keep}` — cuts the atom being traced, where its
+      grandchild traces it in parts (`parts/2`, `RingTracer.Job.Pipe.cut/3`):
+      of the parts not yet started, the first `keep` share (0.0 to 1.0,
+      rounded down in parts) is queued again, the rest is handed over as
+      with `:give` (nothing, when every part has started: a refusal);
     * `{:queue, atoms}` — queues atoms handed over to the child, which
       starts on them (and, holding nothing new, is idle again);
     * `{:left, pid, index}` — the child's left sibling is now `index`;
@@ -70,6 +75,7 @@ defmodule RingTracer.Strategy do
           {:send, to(), kind(), term()}
           | {:give, pid(), non_neg_integer(), non_neg_integer()}
           | {:give, pid(), non_neg_integer(), non_neg_integer(), part() | nil}
+          | {:cut, pid(), non_neg_integer(), float()}
           | {:queue, [Layout.atom_id()]}
           | {:left, pid(), non_neg_integer()}
           | :finished
@@ -102,6 +108,13 @@ defmodule RingTracer.Strategy do
 
   @doc "A child's strategy state at the start (default: `%{}`)."
   @callback init(options()) :: state()
+
+  @doc """
+  In how many parts (kernel calls) the grandchild traces the atom the child
+  puts in its pipe now; parts not yet started can be cut off (`{:cut, ...}`).
+  Default: 1, whole.
+  """
+  @callback parts(View.t(), state()) :: pos_integer()
 
   @doc "The child has nothing queued and nothing in its grandchild's pipe."
   @callback idle(View.t(), state()) :: result(effect())
@@ -144,6 +157,9 @@ defmodule RingTracer.Strategy do
       def init(_options), do: %{}
 
       @impl RingTracer.Strategy
+      def parts(_view, _state), do: 1
+
+      @impl RingTracer.Strategy
       def handle_message(message, view, state),
         do: RingTracer.Strategy.default_message(message, view, state)
 
@@ -161,6 +177,7 @@ defmodule RingTracer.Strategy do
 
       defoverridable initial_atoms: 3,
                      init: 1,
+                     parts: 2,
                      handle_message: 3,
                      handover_news: 2,
                      parent_start: 2,

@@ -2,7 +2,8 @@ defmodule RingTracer.ProtocolPropertyTest do
   @moduledoc """
   The ring protocol under adversarial schedules: random ring sizes, atoms,
   image sizes, speeds, strategies, layouts (strips or interleaved), aimed
-  offers or not, adaptive atoms (pieces) or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
+  offers or not, adaptive atoms (pieces, and cuts of atoms being traced in
+  parts) or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
   and `RingTracer.Test.FaultyKernel`), child kills and
   how soon offers may wait at a child (`:hold_after`), against the real
   parent, children and kernel. Every job ends with the single-process
@@ -71,7 +72,11 @@ defmodule RingTracer.ProtocolPropertyTest do
         # strategy has a child send, and on each atom's result.
         opts =
           Keyword.merge(job,
-            strategy: RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos),
+            # With adaptive atoms, atoms in parts however short (`part_us`,
+            # `part_rows`), so that cuts of the atom being traced happen on
+            # these tiny jobs.
+            strategy:
+              RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
             kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
           )
 
@@ -129,6 +134,68 @@ defmodule RingTracer.ProtocolPropertyTest do
       end,
       numtests
     )
+  end
+
+  test "property: cuts of atoms being traced in parts tile the image, with message delays and kills" do
+    # Atoms that take real time (the simulated kernel: up to milliseconds each) on
+    # children up to 8x apart, so that offers reach slow children mid-atom.
+    import :proper_types
+
+    gen =
+      {integer(2, 5), integer(4, 12), list(integer(1, 8)), integer(4, 12), integer(0, 3),
+       integer(0, 1), integer(0, 1_000_000)}
+
+    cuts = :counters.new(1, [])
+    numtests = div(String.to_integer(System.get_env("PROPER_NUMTESTS", "1000")), 20)
+
+    RingTracer.PropErCase.check(
+      gen,
+      fn {n, k, speeds, ms, chaos, kills, seed} ->
+        :rand.seed(:exsss, {seed, n, k})
+        # Costs that vary from atom to atom (1 to `ms` milliseconds), so that
+        # the share rule's plans miss and offers come while parts are left.
+        costs = for _ <- 1..(n * k), do: :rand.uniform(ms * 1000)
+        job = [children: n, atoms: k, speeds: speeds, costs: costs]
+        # Cuts for any offerer at all (`cut_faster: 0.0`), not only much faster ones.
+        inner =
+          {RingTracer.Strategy.Ring,
+           [split: true, part_us: 0, part_rows: 0, cut_faster: 0.0, aim: n > 2]}
+
+        strategy = {RingTracer.Test.DelayedStrategy, [inner: inner, jitter: chaos]}
+
+        # A kill at a random moment of the job's first half.
+        killer =
+          spawn(fn ->
+            Process.sleep(:rand.uniform(div(k * ms, 2) + 1))
+
+            case {kills, children()} do
+              {1, [_ | _] = kids} -> Process.exit(Enum.random(kids), :kill)
+              _ -> :ok
+            end
+          end)
+
+        result = RingTracer.simulate([strategy: strategy] ++ job)
+        Process.exit(killer, :kill)
+
+        case result do
+          {:ok, r} ->
+            ids = Enum.map(r.atoms, & &1.atom)
+            :counters.add(cuts, 1, Enum.sum(Enum.map(r.children, &Map.get(&1, :cuts, 0))))
+            lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
+            layout = RingTracer.Layout.new(n * k, 1, n, k)
+
+            ids == Enum.uniq(ids) and
+              (lost_records or RingTracer.Job.Coverage.tiles?(layout, ids))
+
+          _ ->
+            false
+        end
+      end,
+      numtests
+    )
+
+    # The property is about cuts: they happened (13 to 20 in 50 cases).
+    assert :counters.get(cuts, 1) > 0
   end
 
   # After kills, at most twice the messages of the same job without them

@@ -18,7 +18,10 @@ defmodule RingTracer.Test.DelayedStrategy do
   @spec wrap(keyword(), keyword()) :: RingTracer.Strategy.t()
   def wrap(opts, delays) do
     {:ok, valid} = RingTracer.Options.validate(opts)
-    {__MODULE__, [inner: RingTracer.Strategies.from_options(valid)] ++ delays}
+    # Options of the inner strategy's own that `render/2` does not take.
+    {own, delays} = Keyword.split(delays, [:part_us, :part_rows, :cut_faster])
+    {module, inner} = RingTracer.Strategies.from_options(valid)
+    {__MODULE__, [inner: {module, inner ++ own}] ++ delays}
   end
 
   @impl true
@@ -32,6 +35,9 @@ defmodule RingTracer.Test.DelayedStrategy do
     {module, inner} = options[:inner]
     module.init(inner)
   end
+
+  @impl true
+  def parts(view, state), do: inner(view).parts(inner_view(view), state)
 
   @impl true
   def idle(view, state), do: child(view, &inner(view).idle(&1, state))
@@ -73,6 +79,13 @@ defmodule RingTracer.Test.DelayedStrategy do
   end
 
   defp delay({:give, pid, index, n}, view), do: delay({:give, pid, index, n, nil}, view)
+
+  defp delay({:cut, pid, index, keep}, view) do
+    case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
+      0 -> {:cut, pid, index, keep}
+      ms -> {:cut, relay(pid, ms), index, keep}
+    end
+  end
 
   defp delay({:give, pid, index, n, part}, view) do
     case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do

@@ -54,6 +54,7 @@ defmodule RingTracer.Job.Child do
     grandchild: nil,
     queue: [],
     in_flight: [],
+    parts: %{},
     current_since: 0,
     attempts: %{},
     done: 0,
@@ -69,7 +70,9 @@ defmodule RingTracer.Job.Child do
   @typedoc """
   A child's state: its spec, place in the ring and left sibling, its
   grandchild and the atoms queued for it (`queue`) or in its pipe
-  (`in_flight`, the one being traced first), tries per atom, its status,
+  (`in_flight`, the one being traced first), the atoms in its pipe traced in
+  parts (`parts`: how many, or `:cut` for the piece left after a cut), tries
+  per atom, its status,
   its strategy's state, messages that came before the ring (`early`), and
   what it reports at the end (`traffic`, `events`, `atoms`, `stats`).
   """
@@ -87,6 +90,7 @@ defmodule RingTracer.Job.Child do
           grandchild: pid() | nil,
           queue: [Layout.atom_id()],
           in_flight: [Layout.atom_id()],
+          parts: %{Layout.atom_id() => pos_integer() | :cut},
           current_since: integer(),
           attempts: %{Layout.atom_id() => pos_integer()},
           done: non_neg_integer(),
@@ -223,11 +227,45 @@ defmodule RingTracer.Job.Child do
     waiting = waiting(state)
 
     if g > length(give) and waiting != nil and Pipe.revoke(state.grandchild, waiting) do
-      {[waiting | give], %{state | in_flight: List.delete(state.in_flight, waiting)}}
+      {[waiting | give],
+       %{
+         state
+         | in_flight: List.delete(state.in_flight, waiting),
+           parts: Map.delete(state.parts, waiting)
+       }}
     else
       {give, state}
     end
   end
+
+  # Cuts the atom being traced (`Pipe.cut/3`): of the parts its grandchild
+  # has not started, the first `keep` share (rounded down, in parts) is
+  # queued again here, the rest is returned, to hand over. Nothing when every
+  # part has started (a refusal, then).
+  defp cut(%{in_flight: [atom | later], parts: parts} = state, keep) do
+    with n when is_integer(n) <- Map.get(parts, atom),
+         {:ok, started} <- Pipe.cut(state.grandchild, atom, n) do
+      kept = started + floor((n - started) * keep)
+      head = Layout.parts(atom, 0, started, n)
+      parts = parts |> Map.delete(atom) |> Map.put(head, :cut)
+
+      queue =
+        if kept > started,
+          do: [Layout.parts(atom, started, kept, n) | state.queue],
+          else: state.queue
+
+      state = %{state | in_flight: [head | later], parts: parts, queue: queue}
+      # each piece beyond the atom's first counts as a split
+      state = bump(bump(state, :splits), :cuts)
+      state = if kept > started and kept < n, do: bump(state, :splits), else: state
+      given = if kept < n, do: [Layout.parts(atom, kept, n, n)], else: []
+      {given, fill_pipe(state)}
+    else
+      _ -> {[], state}
+    end
+  end
+
+  defp cut(state, _keep), do: {[], state}
 
   # Hands `atoms` over to sibling `to` at `pid` (possibly none: a refusal),
   # then tells the parent, which keeps account of where atoms are
@@ -283,6 +321,7 @@ defmodule RingTracer.Job.Child do
       given: 0,
       received: 0,
       splits: 0,
+      cuts: 0,
       handovers: 0,
       traced: 0,
       offers_sent: 0,
@@ -325,9 +364,27 @@ defmodule RingTracer.Job.Child do
       rate: rate(state),
       mean_atom_us: mean_atom_us(state),
       remaining_us: if(in_flight > 0, do: expected_remaining_us(state)),
+      cuttable: cuttable(state),
       now: job_time(state)
     }
   end
+
+  # Parts not yet started of the atom being traced, if it is traced in parts
+  # (what `Pipe.cut/3` would take now, unless a part starts meanwhile).
+  defp cuttable(%{in_flight: [atom | _], parts: parts, grandchild: gc}) when gc != nil do
+    case Map.get(parts, atom) do
+      n when is_integer(n) ->
+        case Pipe.started(gc, atom) do
+          0 -> 0
+          started -> max(n - started, 0)
+        end
+
+      _ ->
+        0
+    end
+  end
+
+  defp cuttable(_state), do: 0
 
   defp share(nil), do: nil
 
@@ -368,6 +425,12 @@ defmodule RingTracer.Job.Child do
 
   defp effect(state, {:give, pid, to, n, part}) do
     {atoms, state} = take_last(state, n, part)
+    {news, strategy_state} = state.strategy.handover_news(view(state), state.strategy_state)
+    hand_over(%{state | strategy_state: strategy_state}, pid, to, atoms, news)
+  end
+
+  defp effect(state, {:cut, pid, to, keep}) do
+    {atoms, state} = cut(state, keep)
     {news, strategy_state} = state.strategy.handover_news(view(state), state.strategy_state)
     hand_over(%{state | strategy_state: strategy_state}, pid, to, atoms, news)
   end
@@ -484,6 +547,7 @@ defmodule RingTracer.Job.Child do
     state = %{
       state
       | in_flight: List.delete(state.in_flight, atom),
+        parts: Map.delete(state.parts, atom),
         current_since: now(),
         attempts: Map.delete(state.attempts, atom),
         done: state.done + 1,
@@ -517,9 +581,11 @@ defmodule RingTracer.Job.Child do
   defp handle({:EXIT, gc, reason}, %{grandchild: gc} = state) when reason != :normal do
     # Only atoms the grandchild had started count an attempt: the one
     # waiting behind it in its pipe was never tried.
-    {started, waiting} = Enum.split_with(state.in_flight, &Pipe.claimed?(gc, &1))
+    {started, waiting} =
+      Enum.split_with(state.in_flight, &(Pipe.claimed?(gc, &1) or state.parts[&1] == :cut))
+
     Pipe.forget(gc)
-    state = bump(%{state | grandchild: nil}, :grandchild_restarts)
+    state = bump(%{state | grandchild: nil, parts: %{}}, :grandchild_restarts)
     message = "grandchild exited: #{inspect(reason)}"
 
     {:noreply, retry(spawn_grandchild(state), started, message, waiting)}
@@ -558,6 +624,8 @@ defmodule RingTracer.Job.Child do
     case failed do
       nil ->
         state = if state.grandchild, do: state, else: spawn_grandchild(state)
+        # Retried whole: a cut must not take parts of them any more.
+        state = %{state | parts: Map.drop(state.parts, atoms ++ untried)}
 
         Enum.each(atoms ++ untried, fn atom ->
           Pipe.release(state.grandchild, atom)
@@ -588,12 +656,33 @@ defmodule RingTracer.Job.Child do
 
   defp fill_pipe(%{queue: [atom | rest], in_flight: in_flight} = state)
        when length(in_flight) < @pipe_depth do
-    send(state.grandchild, {:trace, atom})
+    state = %{state | queue: rest}
+
+    state =
+      case parts_of(state, atom) do
+        1 ->
+          send(state.grandchild, {:trace, atom})
+          state
+
+        n ->
+          send(state.grandchild, {:trace, atom, n})
+          %{state | parts: Map.put(state.parts, atom, n)}
+      end
+
     state = if in_flight == [], do: %{state | current_since: now()}, else: state
-    fill_pipe(%{state | queue: rest, in_flight: in_flight ++ [atom]})
+    fill_pipe(%{state | in_flight: in_flight ++ [atom]})
   end
 
   defp fill_pipe(state), do: state
+
+  # In how many parts the grandchild traces `atom` (the strategy's
+  # `parts/2`, which sees the atom's rows).
+  defp parts_of(state, atom) do
+    {_, count} = Layout.span(state.spec.layout, atom)
+    view = %{view(state) | next_rows: count / state.spec.layout.width}
+
+    max(state.strategy.parts(view, state.strategy_state), 1)
+  end
 
   defp maybe_idle(%{queue: [], in_flight: [], status: :working} = state), do: idle(state)
 

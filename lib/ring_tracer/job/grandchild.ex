@@ -16,7 +16,12 @@ defmodule RingTracer.Job.Grandchild do
   may have taken the queued atom back to hand it to a sibling, and then the
   grandchild skips it.
 
-  Messages in: `{:trace, atom}`. Messages out, to the child:
+  A long atom may be traced in parts (`{:trace, atom, n}`: `n` kernel calls,
+  each followed by its slowdown), so that its child can cut off the parts
+  not yet started for a faster sibling (`RingTracer.Job.Pipe.cut/3`); the
+  parts traced come back as one piece (`RingTracer.Layout.parts/4`).
+
+  Messages in: `{:trace, atom}`, `{:trace, atom, n}`. Messages out, to the child:
   `{:traced, self(), atom, pixels, rays, timing}` (timing: `:trace_us`,
   `:started_at`, `:ended_at` in system microseconds) or
   `{:atom_failed, self(), atom, message}`.
@@ -35,32 +40,91 @@ defmodule RingTracer.Job.Grandchild do
   defp loop(child, kernel, layout, slowdown) do
     receive do
       {:trace, atom} ->
-        # The child may have taken the atom back for a sibling (`Pipe`).
-        slowdown =
-          if Pipe.claim(self(), atom) do
-            {message, slowdown} = trace(kernel, layout, slowdown, atom)
-            send(child, message)
-            slowdown
-          else
-            slowdown
-          end
+        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, 1))
 
-        loop(child, kernel, layout, slowdown)
+      {:trace, atom, n} ->
+        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, n))
     end
   end
 
-  defp trace({kernel, context}, layout, slowdown, atom) do
-    {first, count} = Layout.span(layout, atom)
+  # The child may have taken the atom back for a sibling (`Pipe`).
+  defp take(child, kernel, layout, slowdown, atom, n) do
+    if Pipe.claim(self(), atom) do
+      {message, slowdown} = trace(kernel, layout, slowdown, atom, n)
+      send(child, message)
+      slowdown
+    else
+      slowdown
+    end
+  end
+
+  # Traces `atom` in `n` parts, one kernel call each, taking each part after
+  # the first from the pipe (`Pipe.next/2`): the child may cut the rest off
+  # for a sibling. Pixels, counters and times add up over the parts traced,
+  # which are reported as one atom or piece.
+  defp trace(kernel, layout, slowdown, atom, n) do
     started = System.system_time(:microsecond)
+    acc = %{pixels: [], rays: nil, us: 0, slowdown: slowdown}
+
+    case parts(kernel, layout, atom, n, 0, acc) do
+      {:ok, done, acc} ->
+        traced = if done == n, do: atom, else: Layout.parts(atom, 0, done, n)
+
+        timing = %{
+          trace_us: acc.us,
+          started_at: started,
+          ended_at: System.system_time(:microsecond)
+        }
+
+        pixels = IO.iodata_to_binary(Enum.reverse(acc.pixels))
+        {{:traced, self(), traced, pixels, acc.rays, timing}, acc.slowdown}
+
+      {:error, message, acc} ->
+        # An earlier cut left us only its first parts: they are what failed.
+        failed =
+          case n > 1 && Pipe.fail(self(), atom) do
+            kept when is_integer(kept) -> Layout.parts(atom, 0, kept, n)
+            _ -> atom
+          end
+
+        {{:atom_failed, self(), failed, message}, acc.slowdown}
+    end
+  end
+
+  defp parts(_kernel, _layout, _atom, n, n, acc), do: {:ok, n, acc}
+
+  defp parts(kernel, layout, atom, n, i, acc) do
+    if i == 0 or Pipe.next(self(), atom) do
+      part = if n == 1, do: atom, else: Layout.parts(atom, i, i + 1, n)
+
+      case trace_one(kernel, layout, acc.slowdown, part) do
+        {:ok, pixels, rays, us, slowdown} ->
+          rays = if acc.rays, do: Map.merge(acc.rays, rays, fn _, a, b -> a + b end), else: rays
+
+          acc = %{
+            acc
+            | pixels: [pixels | acc.pixels],
+              rays: rays,
+              us: acc.us + us,
+              slowdown: slowdown
+          }
+
+          parts(kernel, layout, atom, n, i + 1, acc)
+
+        {:error, message} ->
+          {:error, message, acc}
+      end
+    else
+      {:ok, i, acc}
+    end
+  end
+
+  defp trace_one({kernel, context}, layout, slowdown, atom) do
+    {first, count} = Layout.span(layout, atom)
 
     case kernel.trace(context, first, count, atom) do
-      {:ok, pixels, rays, us} ->
-        slowdown = Slowdown.wait(slowdown, us)
-        timing = %{trace_us: us, started_at: started, ended_at: System.system_time(:microsecond)}
-        {{:traced, self(), atom, pixels, rays, timing}, slowdown}
-
-      {:error, message} ->
-        {{:atom_failed, self(), atom, message}, slowdown}
+      {:ok, pixels, rays, us} -> {:ok, pixels, rays, us, Slowdown.wait(slowdown, us)}
+      {:error, message} -> {:error, message}
     end
   end
 end

@@ -19,12 +19,25 @@ defmodule RingTracer.Job.Pipe do
   grandchild deletes a revoked entry when it skips the atom; a child whose
   grandchild died `forget/1`s everything of that grandchild.
 
+  ## Cutting the atom being traced
+
+  A grandchild may trace a long atom in parts (`RingTracer.Job.Grandchild`):
+  the entry then counts the parts it has started. Before each part after
+  the first it takes the next one (`next/2`); its child may `cut/3` the atom
+  meanwhile, which takes every part not yet started, for a faster sibling.
+  Both are one `:ets.update_counter/3` on the same entry, so each part goes
+  to exactly one side: the cut adds #{1_000_000} to the count, and returns
+  how many parts the grandchild had started; the grandchild's next
+  `next/2` sees the mark, and it stops there.
+
   The table belongs to this process, started by the application on every
   node (a grandchild and its child always share a node). A child killed
   outright cannot forget its grandchild's entries, so this process sweeps
   out the entries of dead grandchildren once a minute.
   """
   use GenServer
+
+  alias RingTracer.Layout
 
   @table RingTracer.Names.pipe_table()
   @sweep_ms 60_000
@@ -33,10 +46,14 @@ defmodule RingTracer.Job.Pipe do
   @spec start_link(term()) :: GenServer.on_start()
   def start_link(_), do: GenServer.start_link(__MODULE__, [], name: __MODULE__)
 
+  # Added to an entry's count of started parts by a cut (and by a grandchild
+  # that failed on an atom, so that no cut follows): far above any count.
+  @cut 1_000_000
+
   @doc "The grandchild takes `atom` for tracing; `false` if its child took it back first."
-  @spec claim(pid(), non_neg_integer()) :: boolean()
+  @spec claim(pid(), Layout.atom_id()) :: boolean()
   def claim(gc, atom) do
-    if :ets.insert_new(@table, {{gc, atom}}) do
+    if :ets.insert_new(@table, {{gc, atom}, 1}) do
       true
     else
       :ets.delete(@table, {gc, atom})
@@ -45,20 +62,79 @@ defmodule RingTracer.Job.Pipe do
   end
 
   @doc "Whether `gc` has claimed `atom` (started it, for a grandchild that is gone)."
-  @spec claimed?(pid(), non_neg_integer()) :: boolean()
+  @spec claimed?(pid(), Layout.atom_id()) :: boolean()
   def claimed?(gc, atom), do: :ets.member(@table, {gc, atom})
 
+  @doc "How many parts of `atom` `gc` has started (0: none, or taken back)."
+  @spec started(pid(), Layout.atom_id()) :: non_neg_integer()
+  def started(gc, atom) do
+    case :ets.lookup(@table, {gc, atom}) do
+      [{_, n}] when n < @cut -> n
+      [_] -> @cut
+      [] -> 0
+    end
+  end
+
   @doc "The child takes `atom` back from `gc`'s pipe; `false` if `gc` has started it."
-  @spec revoke(pid(), non_neg_integer()) :: boolean()
-  def revoke(gc, atom), do: :ets.insert_new(@table, {{gc, atom}})
+  @spec revoke(pid(), Layout.atom_id()) :: boolean()
+  def revoke(gc, atom), do: :ets.insert_new(@table, {{gc, atom}, 0})
+
+  @doc """
+  The grandchild, tracing `atom` in parts, takes the next part: `true`, or
+  `false` if its child has cut the atom (the grandchild then stops, and
+  deletes the entry: the child is done with it).
+  """
+  @spec next(pid(), Layout.atom_id()) :: boolean()
+  def next(gc, atom) do
+    if :ets.update_counter(@table, {gc, atom}, {2, 1}) < @cut do
+      true
+    else
+      :ets.delete(@table, {gc, atom})
+      false
+    end
+  end
+
+  @doc """
+  The child cuts `atom`, which `gc` is tracing in `n` parts: `{:ok, started}`,
+  where the parts from `started` on are the child's now, or `:none` when
+  there is nothing to take (every part started, the atom finished or failed,
+  or not started at all: then it is not the atom being traced).
+  """
+  @spec cut(pid(), Layout.atom_id(), pos_integer()) :: {:ok, pos_integer()} | :none
+  def cut(gc, atom, n) do
+    case add(gc, atom, @cut) do
+      v when is_integer(v) and v - @cut >= 1 and v - @cut < n -> {:ok, v - @cut}
+      _ -> :none
+    end
+  end
+
+  # Adds `k` to the entry's count and returns it; `nil` without an entry
+  # (none is made: one would look like a revocation to the grandchild).
+  defp add(gc, atom, k) do
+    :ets.update_counter(@table, {gc, atom}, {2, k})
+  rescue
+    ArgumentError -> nil
+  end
+
+  @doc """
+  The grandchild failed on `atom`: no cut may take its parts from now on.
+  Returns how many parts an earlier cut left it (`nil`: no cut came).
+  """
+  @spec fail(pid(), Layout.atom_id()) :: pos_integer() | nil
+  def fail(gc, atom) do
+    case add(gc, atom, @cut) do
+      v when is_integer(v) and v >= 2 * @cut -> v - 2 * @cut
+      _ -> nil
+    end
+  end
 
   @doc "The child has `atom`'s pixels: the claim is over."
-  @spec release(pid(), non_neg_integer()) :: true
+  @spec release(pid(), Layout.atom_id()) :: true
   def release(gc, atom), do: :ets.delete(@table, {gc, atom})
 
   @doc "Forgets every claim and revocation of `gc` (dead or stopped)."
   @spec forget(pid()) :: true
-  def forget(gc), do: :ets.match_delete(@table, {{gc, :_}})
+  def forget(gc), do: :ets.match_delete(@table, {{gc, :_}, :_})
 
   @impl GenServer
   def init([]) do
@@ -86,7 +162,7 @@ defmodule RingTracer.Job.Pipe do
   def sweep do
     dead =
       :ets.foldl(
-        fn {{gc, _} = key}, acc -> if Process.alive?(gc), do: acc, else: [key | acc] end,
+        fn {{gc, _} = key, _}, acc -> if Process.alive?(gc), do: acc, else: [key | acc] end,
         [],
         @table
       )

@@ -20,6 +20,10 @@ defmodule RingTracer.Strategy.View do
       microsecond (`nil` before it has traced work); `:mean_atom_us` — wall
       time per atom (`nil` before its first); `:remaining_us` — how long the
       atom being traced should still take (`nil` when none or unknown);
+      `:cuttable` — parts of the atom being traced not yet started, where
+      its grandchild traces it in parts (`RingTracer.Job.Pipe.cut/3`; 0:
+      none); `:next_rows` — image rows in the atom it puts in the pipe
+      next (for `RingTracer.Strategy.parts/2`; 0.0 elsewhere);
     * `:now` — job microseconds (wall clock since the job's start, the
       same for every process of the job).
   """
@@ -43,6 +47,8 @@ defmodule RingTracer.Strategy.View do
     remaining: 0,
     in_flight: 0,
     done: 0,
+    cuttable: 0,
+    next_rows: 0.0,
     now: 0
   ]
 
@@ -64,6 +70,8 @@ defmodule RingTracer.Strategy.View do
           rate: float() | nil,
           mean_atom_us: non_neg_integer() | nil,
           remaining_us: non_neg_integer() | nil,
+          cuttable: non_neg_integer(),
+          next_rows: float(),
           now: integer()
         }
 end

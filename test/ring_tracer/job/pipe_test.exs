@@ -31,7 +31,7 @@ defmodule RingTracer.Job.PipeTest do
     assert Pipe.revoke(gc, 2)
     Pipe.forget(gc)
     Pipe.forget(other)
-    assert :ets.match(RingTracer.Names.pipe_table(), {{gc, :"$1"}}) == []
+    assert :ets.match(RingTracer.Names.pipe_table(), {{gc, :"$1"}, :_}) == []
   end
 
   test "the sweep removes the entries of dead grandchildren only", %{gc: gc} do
@@ -46,7 +46,7 @@ defmodule RingTracer.Job.PipeTest do
 
     table = RingTracer.Names.pipe_table()
     assert :ets.lookup(table, {dead, 1}) == []
-    assert :ets.lookup(table, {alive, 1}) == [{{alive, 1}}]
+    assert :ets.lookup(table, {alive, 1}) == [{{alive, 1}, 1}]
     Pipe.forget(alive)
     Pipe.forget(gc)
   end
@@ -62,6 +62,66 @@ defmodule RingTracer.Job.PipeTest do
 
       assert Enum.count(wins, & &1) == 1
       Pipe.forget(gc)
+    end
+  end
+
+  describe "cutting an atom traced in parts" do
+    test "the cut takes the parts not started; the grandchild stops there", %{gc: gc} do
+      assert Pipe.claim(gc, 4)
+      assert Pipe.next(gc, 4)
+      assert Pipe.started(gc, 4) == 2
+      # Parts 0 and 1 are the grandchild's, 2 to 7 the child's.
+      assert Pipe.cut(gc, 4, 8) == {:ok, 2}
+      refute Pipe.next(gc, 4)
+      assert :ets.lookup(RingTracer.Names.pipe_table(), {gc, 4}) == []
+    end
+
+    test "nothing to cut: every part started, the atom not started, or failed", %{gc: gc} do
+      assert Pipe.claim(gc, 1)
+      assert Pipe.next(gc, 1)
+      assert Pipe.cut(gc, 1, 2) == :none
+      assert Pipe.cut(gc, 2, 4) == :none
+      # No entry is made by a cut: the grandchild can still claim atom 2.
+      assert Pipe.claim(gc, 2)
+      assert Pipe.fail(gc, 2) == nil
+      assert Pipe.cut(gc, 2, 4) == :none
+      assert Pipe.revoke(gc, 3)
+      assert Pipe.cut(gc, 3, 4) == :none
+    end
+
+    test "a grandchild failing after a cut learns which parts were left to it", %{gc: gc} do
+      assert Pipe.claim(gc, 6)
+      assert Pipe.cut(gc, 6, 4) == {:ok, 1}
+      assert Pipe.fail(gc, 6) == 1
+    end
+
+    test "each part goes to exactly one side when the cut races the grandchild" do
+      for round <- 1..200 do
+        gc = spawn(fn -> :ok end)
+        parent = self()
+        n = 8
+        true = Pipe.claim(gc, round)
+
+        spawn(fn ->
+          taken =
+            Enum.reduce_while(1..(n - 1), 1, fn _, k ->
+              if Pipe.next(gc, round), do: {:cont, k + 1}, else: {:halt, k}
+            end)
+
+          send(parent, {:grandchild, taken})
+        end)
+
+        spawn(fn -> send(parent, {:child, Pipe.cut(gc, round, n)}) end)
+        assert_receive {:grandchild, taken}
+        assert_receive {:child, cut}
+
+        case cut do
+          {:ok, from} -> assert from == taken
+          :none -> assert taken == n
+        end
+
+        Pipe.forget(gc)
+      end
     end
   end
 end

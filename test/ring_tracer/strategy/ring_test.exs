@@ -16,7 +16,7 @@ defmodule RingTracer.Strategy.RingTest do
       id: make_ref(),
       source: nil,
       settings: nil,
-      layout: nil,
+      layout: RingTracer.Layout.new(640, 1, 4, 16),
       caller: me,
       strategy: {Ring, Keyword.get(fields, :options, [])}
     }
@@ -220,6 +220,50 @@ defmodule RingTracer.Strategy.RingTest do
     RingTracer.Job.Pipe.forget(gc)
   end
 
+  test "adaptive atoms: an offer from a much faster sibling cuts the atom being traced in parts" do
+    # Atom 5 in 8 parts, 3 of them started (this test plays the grandchild).
+    RingTracer.Job.Pipe.claim(self(), 5)
+    for _ <- 1..2, do: assert(RingTracer.Job.Pipe.next(self(), 5))
+    busy = child(in_flight: [5], parts: %{5 => 8}, options: [split: true])
+    on_exit(fn -> RingTracer.Job.Pipe.forget(self()) end)
+    assert Child.view(busy).cuttable == 5
+
+    # 4x faster than us: of the 5 parts not started we keep 1 (a fifth), and
+    # the other 4 (half the atom) go to the offerer.
+    cut = handle(busy, {:help_offer, %{offer(2) | rate: 4.0}})
+    assert_received {:handover, 1, [{5, 1, 2, 2}]}
+    assert_received {:gave, 1, 2, [{5, 1, 2, 2}]}
+    assert cut.in_flight == [{5, 0, 3, 8}, {5, 3, 4, 8}]
+    assert cut.stats.cuts == 1 and cut.stats.splits == 2
+    # The grandchild stops after its third part.
+    refute RingTracer.Job.Pipe.next(self(), 5)
+
+    # An offer from a sibling as fast as we are does not cut.
+    RingTracer.Job.Pipe.claim(self(), 6)
+    same = child(in_flight: [6], parts: %{6 => 8}, options: [split: true])
+    assert handle(same, {:help_offer, offer(2)}).in_flight == [6]
+    refute_received {:handover, _, _}
+  end
+
+  test "adaptive atoms: a child traces its atoms in parts once it has heard of a faster sibling" do
+    view = fn fields -> struct!(Child.view(child(options: [split: true])), fields) end
+    heard = %{heard: [{4.0, 2, 9}]}
+    # 1 work unit per µs, 10 ms per atom, 16 rows: the sibling is 4x faster.
+    assert Ring.parts(view.(next_rows: 16.0), heard) == 4
+    # Not shorter than 2 ms, nor than 4 rows; a power of two.
+    assert Ring.parts(view.(next_rows: 16.0, mean_atom_us: 6_000), heard) == 2
+    assert Ring.parts(view.(next_rows: 12.0), heard) == 2
+    assert Ring.parts(view.(next_rows: 16.0), %{heard: [{64.0, 2, 9}]}) == 4
+    assert Ring.parts(view.(next_rows: 64.0, mean_atom_us: 20_000), %{heard: [{64.0, 2, 9}]}) == 8
+    # Before the first atom is back: 4 parts (of at least 4 rows).
+    assert Ring.parts(view.(next_rows: 16.0, mean_atom_us: nil), %{}) == 4
+    assert Ring.parts(view.(next_rows: 8.0, mean_atom_us: nil), %{}) == 2
+    # Whole: nobody faster heard of, or whole atoms asked for.
+    assert Ring.parts(view.(next_rows: 16.0), %{}) == 1
+    assert Ring.parts(view.(next_rows: 16.0), %{heard: [{1.5, 2, 9}]}) == 1
+    assert Ring.parts(%{view.(next_rows: 16.0) | options: [split: false]}, heard) == 1
+  end
+
   test "an atom handed over again while the child still holds it is not queued twice" do
     # (PropEr found this: master after a kill, with delayed messages. Twice in
     # a pipe, the second copy met the first one's claim and was skipped, and
@@ -228,7 +272,9 @@ defmodule RingTracer.Strategy.RingTest do
     again = Child.receive_atoms(busy, [19, 7, 8])
 
     assert (again.in_flight ++ again.queue) |> Enum.sort() == [7, 8, 19]
+    # Nobody faster heard of: whole.
     assert_received {:trace, 7}
+    refute_received {:trace, 19, _}
     refute_received {:trace, 19}
   end
 

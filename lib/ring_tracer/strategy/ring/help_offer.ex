@@ -30,6 +30,13 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
       `k` eighths of the next one too, near the end of the giver's atoms or
       (`g` 0) to an offerer too slow for a whole atom
       (`RingTracer.Strategy.Ring.Share.part/7`);
+    * with adaptive atoms, nothing queued to give, and the atom being traced
+      in parts with parts not yet started (`cuttable` in the view), to an
+      offerer at least 1.5x faster -> `{:cut, keep}`: the child cuts that
+      atom, keeps the `keep` share of its parts not started (both then end
+      together, `keep` = giver's rate / both rates) and hands the rest over
+      (`RingTracer.Job.Pipe.cut/3`): a fast child does not wait for a slow
+      one's last atom;
     * the child is idle itself, its own offer still out, and the offer has
       not wrapped -> `:park`;
     * the child is tracing its last atom, which should end within half of
@@ -145,6 +152,10 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
 
   @hold_after 16
 
+  # How much faster than the giver an offerer must be to get parts of the
+  # atom being traced (a cut costs a message and a kernel call).
+  @cut_faster 1.5
+
   @doc "Hops an offer walks before it may wait at a child (the `:hold_after` default)."
   @spec default_hold_after() :: pos_integer()
   def default_hold_after, do: @hold_after
@@ -188,7 +199,9 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
           optional(:remaining_us) => non_neg_integer() | nil,
           optional(:hold_after) => pos_integer(),
           optional(:split) => boolean(),
-          optional(:last_share) => float() | nil
+          optional(:last_share) => float() | nil,
+          optional(:cuttable) => non_neg_integer(),
+          optional(:cut_faster) => float()
         }
 
   @type decision ::
@@ -200,6 +213,7 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
           | :pass
           | {:give, pos_integer()}
           | {:give, non_neg_integer(), {pos_integer(), 8}}
+          | {:cut, float()}
 
   @doc """
   What the child described by `view` does with `offer`.
@@ -224,6 +238,13 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
       :pass
       iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{index: 0, remaining: 0, in_flight: 1, rate: 2.0, offer_seq: nil, ring_size: 16}, far)
       :home
+      iex> slow = %{index: 0, remaining: 0, in_flight: 1, rate: 0.5, offer_seq: nil, split: true, cuttable: 5}
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(slow, offer)
+      {:cut, 0.2}
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{slow | rate: 1.6}, offer)
+      :pass
+      iex> RingTracer.Strategy.Ring.HelpOffer.decide(%{slow | rate: nil}, offer)
+      {:cut, 0.0}
   """
   @spec decide(view(), t()) :: decision()
   def decide(%{index: me, offer_seq: current}, %__MODULE__{origin: me, seq: seq}) do
@@ -235,8 +256,9 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
 
     case Share.give(view.remaining, view.in_flight, rate, view.rate, helper) do
       0 ->
-        case part(view, offer, helper, 0) do
+        case part(view, offer, helper, 0) || cut(view, offer) do
           nil when view.offer_seq != nil and not wrapped -> :park
+          {:cut, _} = cut -> cut
           nil -> if holds?(view, offer), do: :hold, else: walk_on(view, offer)
           part -> {:give, 0, part}
         end
@@ -263,6 +285,30 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
   end
 
   defp part(_view, _offer, _helper, _g), do: nil
+
+  # Adaptive atoms: parts of the atom being traced, to a much faster offerer
+  # (as for the share rule, one that has finished its atoms before the giver
+  # finished its first is: it gets every part not started).
+  defp cut(%{split: true, remaining: 0, rate: mine} = view, %__MODULE__{rate: theirs}) do
+    cond do
+      Map.get(view, :cuttable, 0) == 0 ->
+        nil
+
+      not is_number(theirs) ->
+        nil
+
+      mine == nil ->
+        {:cut, 0.0}
+
+      mine > 0 and theirs >= Map.get(view, :cut_faster, @cut_faster) * mine ->
+        {:cut, mine / (mine + theirs)}
+
+      true ->
+        nil
+    end
+  end
+
+  defp cut(_view, _offer), do: nil
 
   # An offer that has walked as many hops as the ring has live children
   # without reaching its origin goes home (see "Strays").

@@ -28,7 +28,15 @@ defmodule RingTracer.Strategy.Ring do
       atoms whole, as the paper does. Absent here it is true, but
       `RingTracer.render/2` and `RingTracer.simulate/1` pass `false` unless
       asked for `split: true` (`RingTracer.Strategies`), so renders keep
-      atoms whole by default.
+      atoms whole by default. With it, a child slower than a sibling it
+      has heard of traces its atoms in parts, and an offer from a sibling
+      at least 1.5x faster can take the parts of its atom not yet started
+      (`RingTracer.Job.Pipe.cut/3`);
+    * `:part_us`, `:part_rows` — with `:split`, the shortest part worth a
+      kernel call of its own, in microseconds of the child's wall time per
+      atom (default 2000) and in image rows (default 4); `:cut_faster` —
+      how much faster than a child an offerer must be to take parts of its
+      atom being traced (default 1.5).
 
   ## State
 
@@ -46,6 +54,12 @@ defmodule RingTracer.Strategy.Ring do
   # Offers in a list leave one at a time (each may give atoms, and the next
   # one sees what is left), then together (`flush/1`).
   @answer {__MODULE__, :answer}
+
+  # Adaptive atoms: at most this many parts per atom, each at least this long.
+  @max_parts 8
+  @part_us 2_000
+  @part_rows 4
+  @first_parts 4
 
   ## The parent's side of aiming: a preview of each atom's work, traced beside
   ## the children's first atoms where the kernel can make one, then one board
@@ -104,6 +118,45 @@ defmodule RingTracer.Strategy.Ring do
   defp board(_view, board), do: {board, []}
 
   ## A child's side
+
+  # With adaptive atoms, a child slower than a sibling it has heard of
+  # traces its atoms in parts, so that the last one can be cut for a faster
+  # sibling (`RingTracer.Strategy.Ring.HelpOffer`, `{:cut, keep}`): no more
+  # parts than that sibling is faster, none shorter than `:part_us` (each
+  # part is a kernel call) or than `:part_rows` rows (the kernel traces
+  # primary rays in tiles of 4 x 4 pixels); a power of two, at most 8.
+  # Before its first atom is back a child knows nothing of its speed, and
+  # the two atoms it starts with are the ones most likely to end late on a
+  # slow machine: those go in 4 parts.
+  @impl true
+  def parts(view, state) do
+    part_rows = max(Keyword.get(view.options, :part_rows, @part_rows), 1.0e-9)
+
+    cond do
+      not split?(view) ->
+        1
+
+      view.mean_atom_us == nil ->
+        power_of_two(min(@first_parts, view.next_rows / part_rows))
+
+      true ->
+        part_us = max(Keyword.get(view.options, :part_us, @part_us), 1)
+        faster = faster(view, Map.get(state, :heard, []))
+        power_of_two(Enum.min([faster, view.mean_atom_us / part_us, view.next_rows / part_rows]))
+    end
+  end
+
+  defp power_of_two(n) when n >= 2, do: min(2 ** floor(:math.log2(n)), @max_parts)
+  defp power_of_two(_n), do: 1
+
+  # How many times faster than this child the fastest it has heard of is
+  # (0 before it has heard of anyone).
+  defp faster(view, heard) do
+    case {view.rate, Enum.reject(heard, &(elem(&1, 1) == view.index))} do
+      {mine, [{fastest, _, _} | _]} when is_number(mine) and mine > 0 -> fastest / mine
+      _ -> 0
+    end
+  end
 
   @impl true
   def idle(view, state), do: idle(view, state, aim?(view))
@@ -254,7 +307,9 @@ defmodule RingTracer.Strategy.Ring do
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
       hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after()),
       split: split?(view),
-      last_share: view.last_share
+      last_share: view.last_share,
+      cuttable: view.cuttable,
+      cut_faster: Keyword.get(view.options, :cut_faster, 1.5)
     }
 
     case HelpOffer.decide(decision_view, offer) do
@@ -277,6 +332,14 @@ defmodule RingTracer.Strategy.Ring do
         {state,
          [
            {:give, offer.pid, offer.origin, g},
+           {:event, :give, offer.origin},
+           {:stat, :offers_consumed}
+         ]}
+
+      {:cut, keep} ->
+        {state,
+         [
+           {:cut, offer.pid, offer.origin, keep},
            {:event, :give, offer.origin},
            {:stat, :offers_consumed}
          ]}
