@@ -26,7 +26,7 @@ defmodule RingTracer.Job.Pipe do
   the first it takes the next one (`next/2`); its child may `cut/3` the atom
   meanwhile, which takes every part not yet started, for a faster sibling.
   Both are one `:ets.update_counter/3` on the same entry, so each part goes
-  to exactly one side: the cut adds #{1_000_000} to the count, and returns
+  to exactly one side: the cut adds a million to the count, and returns
   how many parts the grandchild had started; the grandchild's next
   `next/2` sees the mark, and it stops there.
 
@@ -123,8 +123,13 @@ defmodule RingTracer.Job.Pipe do
   @spec fail(pid(), Layout.atom_id()) :: pos_integer() | nil
   def fail(gc, atom) do
     case add(gc, atom, @cut) do
-      v when is_integer(v) and v >= 2 * @cut -> v - 2 * @cut
-      _ -> nil
+      v when is_integer(v) and v >= 2 * @cut ->
+        # The child, which cut, is done with the entry (it retries the piece).
+        :ets.delete(@table, {gc, atom})
+        v - 2 * @cut
+
+      _ ->
+        nil
     end
   end
 

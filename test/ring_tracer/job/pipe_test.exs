@@ -93,6 +93,7 @@ defmodule RingTracer.Job.PipeTest do
       assert Pipe.claim(gc, 6)
       assert Pipe.cut(gc, 6, 4) == {:ok, 1}
       assert Pipe.fail(gc, 6) == 1
+      assert :ets.lookup(RingTracer.Names.pipe_table(), {gc, 6}) == []
     end
 
     test "each part goes to exactly one side when the cut races the grandchild" do
