@@ -52,14 +52,7 @@ defmodule RingTracer.Job.Pipe do
 
   @doc "The grandchild takes `atom` for tracing; `false` if its child took it back first."
   @spec claim(pid(), Layout.atom_id()) :: boolean()
-  def claim(gc, atom) do
-    if :ets.insert_new(@table, {{gc, atom}, 1}) do
-      true
-    else
-      :ets.delete(@table, {gc, atom})
-      false
-    end
-  end
+  def claim(gc, atom), do: won(:ets.insert_new(@table, {{gc, atom}, 1}), gc, atom)
 
   @doc "Whether `gc` has claimed `atom` (started it, for a grandchild that is gone)."
   @spec claimed?(pid(), Layout.atom_id()) :: boolean()
@@ -85,13 +78,15 @@ defmodule RingTracer.Job.Pipe do
   deletes the entry: the child is done with it).
   """
   @spec next(pid(), Layout.atom_id()) :: boolean()
-  def next(gc, atom) do
-    if :ets.update_counter(@table, {gc, atom}, {2, 1}) < @cut do
-      true
-    else
-      :ets.delete(@table, {gc, atom})
-      false
-    end
+  def next(gc, atom), do: won(:ets.update_counter(@table, {gc, atom}, {2, 1}) < @cut, gc, atom)
+
+  # The grandchild's side: on losing, it deletes the entry (its child is
+  # done with it).
+  defp won(true, _gc, _atom), do: true
+
+  defp won(false, gc, atom) do
+    :ets.delete(@table, {gc, atom})
+    false
   end
 
   @doc """
