@@ -80,21 +80,20 @@ defmodule RingTracer.Test.DelayedStrategy do
 
   defp delay({:give, pid, index, n}, view), do: delay({:give, pid, index, n, nil}, view)
 
-  defp delay({:cut, pid, index, keep}, view) do
-    case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
-      0 -> {:cut, pid, index, keep}
-      ms -> {:cut, relay(pid, ms), index, keep}
-    end
-  end
+  defp delay({:cut, pid, index, keep}, view), do: {:cut, handover_to(pid, view), index, keep}
 
-  defp delay({:give, pid, index, n, part}, view) do
-    case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
-      0 -> {:give, pid, index, n, part}
-      ms -> {:give, relay(pid, ms), index, n, part}
-    end
-  end
+  defp delay({:give, pid, index, n, part}, view),
+    do: {:give, handover_to(pid, view), index, n, part}
 
   defp delay(effect, _view), do: effect
+
+  # Where a hand-over goes: to the offerer, or through a relay that holds it.
+  defp handover_to(pid, view) do
+    case Keyword.get(view.options, :handover_delay, 0) + jitter(view) do
+      0 -> pid
+      ms -> relay(pid, ms)
+    end
+  end
 
   defp jitter(view) do
     case Keyword.get(view.options, :jitter, 0) do

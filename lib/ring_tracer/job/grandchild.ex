@@ -28,7 +28,7 @@ defmodule RingTracer.Job.Grandchild do
   """
 
   alias RingTracer.Job.{Pipe, Slowdown}
-  alias RingTracer.Layout
+  alias RingTracer.{Layout, Rays}
 
   @doc "Spawns a grandchild linked to the calling child."
   @spec start_link({module(), term()}, Layout.t(), number()) :: pid()
@@ -64,7 +64,7 @@ defmodule RingTracer.Job.Grandchild do
   # which are reported as one atom or piece.
   defp trace(kernel, layout, slowdown, atom, n) do
     started = System.system_time(:microsecond)
-    acc = %{pixels: [], rays: nil, us: 0, slowdown: slowdown}
+    acc = %{pixels: [], rays: Rays.zero(), us: 0, slowdown: slowdown}
 
     case parts(kernel, layout, atom, n, 0, acc) do
       {:ok, done, acc} ->
@@ -99,12 +99,10 @@ defmodule RingTracer.Job.Grandchild do
 
       case trace_one(kernel, layout, acc.slowdown, part) do
         {:ok, pixels, rays, us, slowdown} ->
-          rays = if acc.rays, do: Map.merge(acc.rays, rays, fn _, a, b -> a + b end), else: rays
-
           acc = %{
             acc
             | pixels: [pixels | acc.pixels],
-              rays: rays,
+              rays: Rays.add(acc.rays, rays),
               us: acc.us + us,
               slowdown: slowdown
           }

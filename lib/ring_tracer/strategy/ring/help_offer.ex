@@ -160,6 +160,10 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
   @spec default_hold_after() :: pos_integer()
   def default_hold_after, do: @hold_after
 
+  @doc "How much faster an offerer must be to cut the atom being traced (the `:cut_faster` default)."
+  @spec default_cut_faster() :: float()
+  def default_cut_faster, do: @cut_faster
+
   @type t :: %__MODULE__{
           origin: non_neg_integer(),
           pid: pid(),

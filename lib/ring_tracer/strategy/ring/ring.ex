@@ -36,7 +36,7 @@ defmodule RingTracer.Strategy.Ring do
       kernel call of its own, in microseconds of the child's wall time per
       atom (default 2000) and in image rows (default 4); `:cut_faster` —
       how much faster than a child an offerer must be to take parts of its
-      atom being traced (default 1.5).
+      atom being traced (default #{RingTracer.Strategy.Ring.HelpOffer.default_cut_faster()}).
 
   ## State
 
@@ -309,7 +309,7 @@ defmodule RingTracer.Strategy.Ring do
       split: split?(view),
       last_share: view.last_share,
       cuttable: view.cuttable,
-      cut_faster: Keyword.get(view.options, :cut_faster, 1.5)
+      cut_faster: Keyword.get(view.options, :cut_faster, HelpOffer.default_cut_faster())
     }
 
     case HelpOffer.decide(decision_view, offer) do
