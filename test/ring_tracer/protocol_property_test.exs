@@ -208,9 +208,6 @@ defmodule RingTracer.ProtocolPropertyTest do
   # offers likewise: offers that walked on together in one message in the
   # clean run may walk one by one in the other (timing alone decides), and
   # the last offer of each of the N children may walk N hops: N * N on top.
-  # (PropEr found a case of 7 children of one atom each, 31 messages clean,
-  # 61 to 71 with kills that killed nobody still busy: every child sent one
-  # offer, and they walked alone.)
   defp no_storm?(_result, nil, _strategy, _n), do: true
 
   defp no_storm?(result, {:ok, clean}, strategy, n) do
