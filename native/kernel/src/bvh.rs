@@ -16,17 +16,18 @@
 //! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
 //! stack ([`Scratch`] holds both).
 //!
-//! Traversal tests the eight child boxes at once, with AVX where the CPU has it (detected at
-//! run time; the whole traversal loop is then compiled for AVX) and otherwise with two SSE
-//! vectors (`Vec4`; glam's scalar code off x86), the same operations on the same values either
-//! way, so the same hits on every machine. Per ray, the reciprocal direction and the near/far
-//! plane rows are chosen once (no min/max per axis, no branch per node). For closest-hit
-//! queries the children that are hit are handled nearest first: leaves are intersected
-//! immediately, the nearest inner child is descended into, the others are stacked with their
-//! entry distance and skipped later if a closer hit was found. Shadow rays use the unordered
-//! any-hit loop, which stops at the first occluder: leaves and inner nodes share one stack, the
-//! last child entered is handled next and the first two others are stacked without a branch,
-//! so that an incoherent ray pays about one unpredictable branch per node. The stack lives in
+//! Traversal tests the eight child boxes at once, with AVX and FMA where the CPU has them
+//! (detected at run time; the whole traversal loop is then compiled for them) and otherwise
+//! with two SSE vectors (`Vec4`; glam's scalar code off x86), the same operations on the same
+//! values either way (one fused multiply-subtract per plane, in software where the CPU has no
+//! FMA), so the same hits on every machine. Per ray, the reciprocal direction and the near/far
+//! plane rows are chosen once (no min/max per axis, no branch per node). Both loops keep leaves
+//! and inner nodes on one stack. For closest-hit queries the children that are hit are sorted
+//! by entry distance: the nearest, leaf or node, is handled next and the others are stacked far
+//! to near, each skipped when popped if a closer hit was found meanwhile. Shadow rays use the
+//! unordered any-hit loop, which stops at the first occluder: the last child entered is handled
+//! next and the first two others are stacked without a branch, so that an incoherent ray pays
+//! about one unpredictable branch per node. The stack lives in
 //! a reusable [`Scratch`], so no allocation happens per ray.
 
 use crate::geometry::Aabb;
@@ -539,7 +540,7 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     probe::NODES.with(|c| c.set(c.get() + 1));
     #[cfg(target_arch = "x86_64")]
     let hit = if AVX {
-        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX and FMA.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
         hit_sse(node, pre, tmax)
@@ -564,8 +565,9 @@ fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
             let (inv, oinv) = (Vec4::splat(r.inv[a]), Vec4::splat(r.oinv[a]));
             let n = Vec4::from_slice(&node.bounds[r.near[a] & 7][4 * h..]);
             let f = Vec4::from_slice(&node.bounds[r.far[a] & 7][4 * h..]);
-            tn = tn.max(n * inv - oinv);
-            tf = tf.min(f * inv - oinv);
+            // fused, as the AVX path's fmsub: one rounding, so the same distances
+            tn = tn.max(n.mul_add(inv, -oinv));
+            tf = tf.min(f.mul_add(inv, -oinv));
         }
         tn.write_to_slice(&mut out[4 * h..]);
         mask |= tn.cmple(tf).bitmask() << (4 * h);
@@ -573,13 +575,13 @@ fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     (out, mask)
 }
 
-/// [`hit_sse`] with one AVX vector per plane: the same operations on the same values, so the
-/// same distances and mask.
+/// [`hit_sse`] with one AVX vector per plane: the same operations on the same values (one
+/// fused multiply-subtract per plane), so the same distances and mask.
 ///
 /// # Safety
-/// The CPU must have AVX.
+/// The CPU must have AVX and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,fma")]
 #[inline]
 unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     use std::arch::x86_64::*;
@@ -592,8 +594,8 @@ unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
         let f = &node.bounds[r.far[a] & 7];
         // SAFETY: `n` and `f` are arrays of 8 f32, exactly the 32 bytes an unaligned load reads.
         let (n, f) = unsafe { (_mm256_loadu_ps(n.as_ptr()), _mm256_loadu_ps(f.as_ptr())) };
-        tn = _mm256_max_ps(tn, _mm256_sub_ps(_mm256_mul_ps(n, inv), oinv));
-        tf = _mm256_min_ps(tf, _mm256_sub_ps(_mm256_mul_ps(f, inv), oinv));
+        tn = _mm256_max_ps(tn, _mm256_fmsub_ps(n, inv, oinv));
+        tf = _mm256_min_ps(tf, _mm256_fmsub_ps(f, inv, oinv));
     }
     let mut out = [0.0f32; WIDTH];
     // SAFETY: `out` is 8 f32, the 32 bytes an unaligned store writes.
@@ -602,12 +604,13 @@ unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     (out, mask)
 }
 
-/// Whether the AVX node test can run here (checked once by std, then a cached flag).
+/// Whether the AVX node test can run here: the CPU has AVX and FMA (checked once by std, then
+/// cached flags). Elsewhere the SSE test computes the same fused products in software.
 #[inline(always)]
-pub(crate) fn has_avx() -> bool {
+pub(crate) fn has_avx_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx")
+        std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("fma")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -669,9 +672,8 @@ impl Bvh {
     }
 
     /// Visits leaves, `visit(first, count, tmax) -> new tmax`. With `ORDERED`, the children hit
-    /// at each node are handled nearest first: leaves are visited at once, the nearest inner
-    /// child is descended into and the others are stacked. Stops when a visit returns a negative
-    /// value (any-hit queries).
+    /// at each node are handled nearest first, leaves and inner nodes alike. Stops when a visit
+    /// returns a negative value (any-hit queries).
     #[inline(always)]
     pub fn traverse<const ORDERED: bool>(
         &self,
@@ -696,19 +698,19 @@ impl Bvh {
         visit: impl FnMut(usize, usize, f32) -> f32,
     ) -> f32 {
         #[cfg(target_arch = "x86_64")]
-        if has_avx() {
-            // SAFETY: the CPU has AVX (checked just above).
+        if has_avx_fma() {
+            // SAFETY: the CPU has AVX and FMA (checked just above).
             return unsafe { self.traverse_avx::<ORDERED>(ray, tmax, stack, work, visit) };
         }
         self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit)
     }
 
-    /// [`Bvh::traverse_loop`] compiled with AVX.
+    /// [`Bvh::traverse_loop`] compiled with AVX and FMA.
     ///
     /// # Safety
-    /// The CPU must have AVX.
+    /// The CPU must have AVX and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,fma")]
     unsafe fn traverse_avx<const ORDERED: bool>(
         &self,
         ray: &Ray,
@@ -738,9 +740,11 @@ impl Bvh {
         }
     }
 
-    /// Closest-hit traversal: the children hit at each node are handled nearest first: leaves
-    /// are visited at once, the nearest inner child is descended into and the others are
-    /// stacked with their entry distance, skipped later if a closer hit was found.
+    /// Closest-hit traversal through one stack of leaves and nodes: the children hit at each
+    /// node are sorted by entry distance, the nearest (leaf or node) is handled next and the
+    /// others are stacked far to near, each skipped when popped if a closer hit was found
+    /// meanwhile. The stack is addressed modulo [`STACK_CAP`], which the build's depth cap
+    /// keeps it below.
     #[inline(always)]
     fn ordered_loop<const AVX: bool>(
         &self,
@@ -753,84 +757,85 @@ impl Bvh {
         if self.nodes.is_empty() {
             return tmax;
         }
+        if stack.len() < STACK_CAP {
+            stack.resize(STACK_CAP, (0, 0, 0.0));
+        }
+        let Some(st) = stack.get_mut(..STACK_CAP) else {
+            return tmax;
+        };
+        let Ok(st) = <&mut [(u32, u32, f32); STACK_CAP]>::try_from(st) else {
+            return tmax;
+        };
+        let nodes = &self.nodes[..];
         let pre = RayPre::new(ray);
         let mut sp = 0usize;
-        let mut cur = 0u32;
+        // the child handled next: (index, count as in Node8, entry distance)
+        let mut cur = (0u32, 0u32, 0.0f32);
         // the work is counted here and added once (not stored to memory per node)
         let mut w = 0u64;
         let t = 'run: loop {
-            if let Some(node) = self.nodes.get(cur as usize) {
+            if cur.1 == 0 {
+                let Some(node) = nodes.get(cur.0 as usize) else {
+                    break 'run tmax;
+                };
                 w += 1;
                 let (tn, mut mask) = node_test::<AVX>(node, &pre, tmax);
-                if mask & mask.wrapping_sub(1) == 0 {
-                    // zero or one child hit: the common case, no sorting or stacking
+                if mask != 0 {
+                    let i = mask.trailing_zeros() as usize & 7;
+                    mask &= mask - 1;
+                    let mut near = (node.child[i], node.count[i], tn[i]);
                     if mask != 0 {
-                        let i = mask.trailing_zeros() as usize & 7;
-                        let count = node.count[i];
-                        if count == 0 {
-                            cur = node.child[i];
-                            continue;
-                        }
-                        if count != EMPTY {
-                            w += (count & !LEAF_BLOCKS) as u64;
-                            tmax = visit(node.child[i] as usize, count as usize, tmax);
-                            if tmax < 0.0 {
-                                break 'run tmax;
-                            }
-                        }
-                    }
-                } else {
-                    // several children: leaves at once, inner nodes nearest first
-                    let mut it = [0.0f32; WIDTH];
-                    let mut ic = [0u32; WIDTH];
-                    let mut ni = 0usize;
-                    while mask != 0 {
-                        let i = mask.trailing_zeros() as usize & 7;
+                        // the second child: the farther of the two is stacked
+                        let j = mask.trailing_zeros() as usize & 7;
                         mask &= mask - 1;
-                        let count = node.count[i];
-                        if count == 0 {
-                            // insertion keeps (it, ic) sorted far to near
-                            let mut j = ni;
-                            while j > 0 && it[(j - 1) & 7] < tn[i] {
-                                it[j & 7] = it[(j - 1) & 7];
-                                ic[j & 7] = ic[(j - 1) & 7];
-                                j -= 1;
-                            }
-                            it[j & 7] = tn[i];
-                            ic[j & 7] = node.child[i];
-                            ni += 1;
-                        } else if count != EMPTY && tn[i] <= tmax {
-                            w += (count & !LEAF_BLOCKS) as u64;
-                            tmax = visit(node.child[i] as usize, count as usize, tmax);
-                            if tmax < 0.0 {
-                                break 'run tmax;
-                            }
+                        let mut far = (node.child[j], node.count[j], tn[j]);
+                        if far.2 < near.2 {
+                            std::mem::swap(&mut near, &mut far);
                         }
-                    }
-                    if ni > 0 {
-                        if stack.len() < sp + WIDTH {
-                            stack.resize(sp + 64, (0, 0, 0.0));
-                        }
-                        for j in 0..ni - 1 {
-                            if let Some(slot) = stack.get_mut(sp) {
-                                *slot = (ic[j & 7], 0, it[j & 7]);
+                        if mask == 0 {
+                            st[sp & (STACK_CAP - 1)] = far;
+                            sp += 1;
+                        } else {
+                            // three or more: insertion into the top of the stack, far to near
+                            let base = sp;
+                            st[sp & (STACK_CAP - 1)] = far;
+                            sp += 1;
+                            while mask != 0 {
+                                let k = mask.trailing_zeros() as usize & 7;
+                                mask &= mask - 1;
+                                let mut e = (node.child[k], node.count[k], tn[k]);
+                                if e.2 < near.2 {
+                                    std::mem::swap(&mut near, &mut e);
+                                }
+                                let mut j = sp;
+                                while j > base && st[(j - 1) & (STACK_CAP - 1)].2 < e.2 {
+                                    st[j & (STACK_CAP - 1)] = st[(j - 1) & (STACK_CAP - 1)];
+                                    j -= 1;
+                                }
+                                st[j & (STACK_CAP - 1)] = e;
                                 sp += 1;
                             }
                         }
-                        cur = ic[(ni - 1) & 7];
-                        continue;
                     }
+                    cur = near;
+                    continue;
+                }
+            } else {
+                w += (cur.1 & !LEAF_BLOCKS) as u64;
+                tmax = visit(cur.0 as usize, cur.1 as usize, tmax);
+                if tmax < 0.0 {
+                    break 'run tmax;
                 }
             }
-            // pop the next inner node that may still hold a closer hit
+            // pop the next child that may still hold a closer hit
             loop {
                 if sp == 0 {
                     break 'run tmax;
                 }
                 sp -= 1;
-                let (c, _, d) = stack[sp];
-                if d <= tmax {
-                    cur = c;
+                let e = st[sp & (STACK_CAP - 1)];
+                if e.2 <= tmax {
+                    cur = e;
                     break;
                 }
             }
@@ -1094,8 +1099,8 @@ mod tests {
             let tmax = if round % 2 == 0 { 3.0 } else { f32::INFINITY };
             let (t, m) = hit_sse(&node, &pre, tmax);
             hits += m.count_ones();
-            if has_avx() {
-                // SAFETY: the CPU has AVX (checked on the line above).
+            if has_avx_fma() {
+                // SAFETY: the CPU has AVX and FMA (checked on the line above).
                 let (ta, ma) = unsafe { hit_avx(&node, &pre, tmax) };
                 assert_eq!(m, ma);
                 assert_eq!(t.map(f32::to_bits), ta.map(f32::to_bits));

@@ -31,7 +31,7 @@
 //! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
 //! are taken row by row.
 
-use crate::bvh::{has_avx, Node8, Scratch, EMPTY, WIDTH};
+use crate::bvh::{has_avx_fma, Node8, Scratch, EMPTY, WIDTH};
 use crate::ray::Ray;
 use crate::scene::{Hit, Mailbox, Scene};
 use crate::tri4::{RayLanes, Tri4};
@@ -269,14 +269,14 @@ thread_local! {
     static FORCE_SSE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Whether the AVX traversal runs (the CPU has AVX, and tests did not ask for SSE).
+/// Whether the AVX traversal runs (the CPU has AVX and FMA, and tests did not ask for SSE).
 #[inline(always)]
 fn use_avx() -> bool {
     #[cfg(test)]
     if FORCE_SSE.with(|f| f.get()) {
         return false;
     }
-    has_avx()
+    has_avx_fma()
 }
 
 /// The three direction-sign bits of a ray (bit `a` set: negative on axis `a`), as the
@@ -322,8 +322,9 @@ fn enters(
     let mut tn = 0.0f32;
     let mut tf = tmax;
     for a in 0..3 {
-        let n = p[f.near[a] & 7][i & 7] * inv[a] - oinv[a];
-        let x = p[f.far[a] & 7][i & 7] * inv[a] - oinv[a];
+        // fused, as that test's fmsub
+        let n = p[f.near[a] & 7][i & 7].mul_add(inv[a], -oinv[a]);
+        let x = p[f.far[a] & 7][i & 7].mul_add(inv[a], -oinv[a]);
         tn = max_ps(tn, n);
         tf = min_ps(tf, x);
     }
@@ -351,8 +352,10 @@ fn node_sse(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) {
                 tn = tn.max((dn * lo).min(dn * hi) - (n.abs() + o.abs()) * k);
                 tf = tf.min((dx * lo).max(dx * hi) + (x.abs() + o.abs()) * k);
             } else {
-                tn = tn.max((n * lo).min(n * hi) - Vec4::splat(f.oinv_hi[a]));
-                tf = tf.min((x * lo).max(x * hi) - Vec4::splat(f.oinv_lo[a]));
+                // fused as the rays' own test is, so a bound of its values
+                let (oh, ol) = (Vec4::splat(-f.oinv_hi[a]), Vec4::splat(-f.oinv_lo[a]));
+                tn = tn.max(n.mul_add(lo, oh).min(n.mul_add(hi, oh)));
+                tf = tf.min(x.mul_add(lo, ol).max(x.mul_add(hi, ol)));
             }
         }
         tn.write_to_slice(&mut out[4 * h..]);
@@ -361,12 +364,13 @@ fn node_sse(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) {
     (out, mask)
 }
 
-/// [`node_sse`] with one AVX vector per plane: the same operations on the same values.
+/// [`node_sse`] with one AVX vector per plane: the same operations on the same values (fused
+/// multiply-subtracts where it has `mul_add`).
 ///
 /// # Safety
-/// The CPU must have AVX.
+/// The CPU must have AVX and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,fma")]
 #[inline]
 unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) {
     use std::arch::x86_64::*;
@@ -391,10 +395,11 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
             tn = _mm256_max_ps(tn, _mm256_sub_ps(near, wn));
             tf = _mm256_min_ps(tf, _mm256_add_ps(far, wx));
         } else {
-            let near = _mm256_min_ps(_mm256_mul_ps(n, lo), _mm256_mul_ps(n, hi));
-            let far = _mm256_max_ps(_mm256_mul_ps(x, lo), _mm256_mul_ps(x, hi));
-            tn = _mm256_max_ps(tn, _mm256_sub_ps(near, _mm256_set1_ps(f.oinv_hi[a])));
-            tf = _mm256_min_ps(tf, _mm256_sub_ps(far, _mm256_set1_ps(f.oinv_lo[a])));
+            let (oh, ol) = (_mm256_set1_ps(f.oinv_hi[a]), _mm256_set1_ps(f.oinv_lo[a]));
+            let near = _mm256_min_ps(_mm256_fmsub_ps(n, lo, oh), _mm256_fmsub_ps(n, hi, oh));
+            let far = _mm256_max_ps(_mm256_fmsub_ps(x, lo, ol), _mm256_fmsub_ps(x, hi, ol));
+            tn = _mm256_max_ps(tn, near);
+            tf = _mm256_min_ps(tf, far);
         }
     }
     let mut out = [0.0f32; WIDTH];
@@ -419,9 +424,9 @@ const FEW: u32 = 3;
 /// than [`FEW`] of them entered a leaf of more than four triangles.
 ///
 /// # Safety
-/// The CPU must have AVX.
+/// The CPU must have AVX and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,fma")]
 #[allow(clippy::too_many_arguments)]
 unsafe fn leaf_avx(
     node: &Node8,
@@ -676,7 +681,7 @@ fn group_closest(
     probe::add(5, 1);
     #[cfg(target_arch = "x86_64")]
     if use_avx() {
-        // SAFETY: the CPU has AVX (checked just above).
+        // SAFETY: the CPU has AVX and FMA (checked just above).
         unsafe { traverse_avx(scene, rays, idx, &f, &mut soa, scratch) };
     } else {
         traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
@@ -709,9 +714,9 @@ fn group_closest(
 /// [`traverse`] compiled with AVX.
 ///
 /// # Safety
-/// The CPU must have AVX.
+/// The CPU must have AVX and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,fma")]
 unsafe fn traverse_avx(
     scene: &Scene,
     rays: &[Ray],
@@ -1045,7 +1050,7 @@ mod tests {
         assert!(hits > 5000, "{hits}");
         // both ways of meeting a leaf of blocks: across rays, and one ray at a time
         let c = probe::COUNTS.with(|c| c.get());
-        if has_avx() {
+        if has_avx_fma() {
             assert!(c[3] > 10_000 && c[6] > 1000, "{c:?}");
         }
     }
@@ -1217,8 +1222,8 @@ mod tests {
             }
             let (tn, mask) = node_sse(&node, &f, tmax);
             #[cfg(target_arch = "x86_64")]
-            if has_avx() {
-                // SAFETY: the CPU has AVX (checked on the line above).
+            if has_avx_fma() {
+                // SAFETY: the CPU has AVX and FMA (checked on the line above).
                 let (ta, ma) = unsafe { node_avx(&node, &f, tmax) };
                 assert_eq!(mask, ma);
                 assert_eq!(tn.map(f32::to_bits), ta.map(f32::to_bits));
