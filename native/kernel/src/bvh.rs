@@ -618,6 +618,30 @@ pub(crate) fn has_avx_fma() -> bool {
     }
 }
 
+/// The first [`STACK_CAP`] entries of a traversal stack, grown to that size if needed, as a
+/// fixed array (so that indices taken modulo its size need no bounds check).
+#[inline(always)]
+fn fixed_stack(stack: &mut Stack) -> Option<&mut [(u32, u32, f32); STACK_CAP]> {
+    if stack.len() < STACK_CAP {
+        stack.resize(STACK_CAP, (0, 0, 0.0));
+    }
+    <&mut [(u32, u32, f32); STACK_CAP]>::try_from(stack.get_mut(..STACK_CAP)?).ok()
+}
+
+/// Pops the next stacked child that may still hold a hit before `tmax` (entry distance at most
+/// `tmax`), skipping the others; `None` when the stack is empty.
+#[inline(always)]
+fn pop(st: &[(u32, u32, f32); STACK_CAP], sp: &mut usize, tmax: f32) -> Option<(u32, u32, f32)> {
+    while *sp > 0 {
+        *sp -= 1;
+        let e = st[*sp & (STACK_CAP - 1)];
+        if e.2 <= tmax {
+            return Some(e);
+        }
+    }
+    None
+}
+
 /// The hierarchy: a binary SAH tree collapsed into 8-wide nodes.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bvh {
@@ -757,13 +781,7 @@ impl Bvh {
         if self.nodes.is_empty() {
             return tmax;
         }
-        if stack.len() < STACK_CAP {
-            stack.resize(STACK_CAP, (0, 0, 0.0));
-        }
-        let Some(st) = stack.get_mut(..STACK_CAP) else {
-            return tmax;
-        };
-        let Ok(st) = <&mut [(u32, u32, f32); STACK_CAP]>::try_from(st) else {
+        let Some(st) = fixed_stack(stack) else {
             return tmax;
         };
         let nodes = &self.nodes[..];
@@ -827,17 +845,9 @@ impl Bvh {
                     break 'run tmax;
                 }
             }
-            // pop the next child that may still hold a closer hit
-            loop {
-                if sp == 0 {
-                    break 'run tmax;
-                }
-                sp -= 1;
-                let e = st[sp & (STACK_CAP - 1)];
-                if e.2 <= tmax {
-                    cur = e;
-                    break;
-                }
+            match pop(st, &mut sp, tmax) {
+                Some(e) => cur = e,
+                None => break 'run tmax,
             }
         };
         *work += w;
@@ -863,13 +873,7 @@ impl Bvh {
         if self.nodes.is_empty() {
             return tmax;
         }
-        if stack.len() < STACK_CAP {
-            stack.resize(STACK_CAP, (0, 0, 0.0));
-        }
-        let Some(st) = stack.get_mut(..STACK_CAP) else {
-            return tmax;
-        };
-        let Ok(st) = <&mut [(u32, u32, f32); STACK_CAP]>::try_from(st) else {
+        let Some(st) = fixed_stack(stack) else {
             return tmax;
         };
         let nodes = &self.nodes[..];
@@ -916,17 +920,9 @@ impl Bvh {
                     break 'run tmax;
                 }
             }
-            // pop the next child that may still hold a closer hit
-            loop {
-                if sp == 0 {
-                    break 'run tmax;
-                }
-                sp -= 1;
-                let e = st[sp & (STACK_CAP - 1)];
-                if e.2 <= tmax {
-                    cur = e;
-                    break;
-                }
+            match pop(st, &mut sp, tmax) {
+                Some(e) => cur = e,
+                None => break 'run tmax,
             }
         };
         *work += w;
