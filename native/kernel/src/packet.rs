@@ -413,6 +413,40 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
 /// at a time (four triangles per SSE test), rather than each triangle across eight rays.
 const FEW: u32 = 3;
 
+/// Each ray's own box test of child `i` of `node` (the operations of [`enters`], lane by lane)
+/// for the rays `8 * half..8 * half + 8` of a packet: their entry distances, and all ones in
+/// the lanes of those that enter before their own bound.
+///
+/// # Safety
+/// The CPU must have AVX and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,fma")]
+#[inline]
+unsafe fn rays_enter_avx(
+    node: &Node8,
+    i: usize,
+    f: &Frustum,
+    soa: &Soa,
+    half: usize,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    let base = 8 * (half & 1);
+    let p = node.planes();
+    // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
+    // each unaligned load reads 8 f32 inside one row.
+    let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
+    let mut tn = _mm256_setzero_ps();
+    let mut tf = load(&soa.tmax);
+    for a in 0..3 {
+        let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
+        let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
+        let x = _mm256_set1_ps(p[f.far[a] & 7][i & 7]);
+        tn = _mm256_max_ps(tn, _mm256_fmsub_ps(n, inv, oinv));
+        tf = _mm256_min_ps(tf, _mm256_fmsub_ps(x, inv, oinv));
+    }
+    (tn, _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf))
+}
+
 /// An all-triangle leaf (child `i` of `node`: the first `n` triangles of `blocks`) against the
 /// rays `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own
 /// box test (the operations of [`enters`], lane by lane), then each triangle in turn against
@@ -439,22 +473,13 @@ unsafe fn leaf_avx(
     entered: &mut Vec<(usize, f32, u32)>,
 ) -> (bool, u32) {
     use std::arch::x86_64::*;
+    // SAFETY: the caller's CPU has AVX and FMA, as this function's.
+    let (tn, inside) = unsafe { rays_enter_avx(node, i, f, soa, half) };
+    let mask = _mm256_movemask_ps(inside) as u32;
     let base = 8 * (half & 1);
-    let p = node.planes();
     // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
     // each unaligned load reads 8 f32 inside one row.
     let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
-    let mut tn = _mm256_setzero_ps();
-    let mut tf = load(&soa.tmax);
-    for a in 0..3 {
-        let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
-        let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
-        let x = _mm256_set1_ps(p[f.far[a] & 7][i & 7]);
-        tn = _mm256_max_ps(tn, _mm256_sub_ps(_mm256_mul_ps(n, inv), oinv));
-        tf = _mm256_min_ps(tf, _mm256_sub_ps(_mm256_mul_ps(x, inv), oinv));
-    }
-    let inside = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
-    let mask = _mm256_movemask_ps(inside) as u32;
     #[cfg(test)]
     probe::add(1, 1);
     if mask == 0 {
@@ -1227,6 +1252,29 @@ mod tests {
                 let (ta, ma) = unsafe { node_avx(&node, &f, tmax) };
                 assert_eq!(mask, ma);
                 assert_eq!(tn.map(f32::to_bits), ta.map(f32::to_bits));
+            }
+            // the leaves' AVX test of the rays, lane by lane, against `enters`
+            #[cfg(target_arch = "x86_64")]
+            if has_avx_fma() {
+                for i in 0..WIDTH {
+                    for half in 0..2 {
+                        // SAFETY: the CPU has AVX and FMA (checked above).
+                        let (t, inside) = unsafe { rays_enter_avx(&node, i, &f, &soa, half) };
+                        let (mut tl, mut il) = ([0.0f32; 8], [0.0f32; 8]);
+                        // SAFETY: `tl` and `il` are 8 f32, the 32 bytes an unaligned store writes.
+                        unsafe {
+                            std::arch::x86_64::_mm256_storeu_ps(tl.as_mut_ptr(), t);
+                            std::arch::x86_64::_mm256_storeu_ps(il.as_mut_ptr(), inside);
+                        }
+                        for (j, l) in lanes.iter().enumerate().skip(8 * half).take(8) {
+                            let want = enters(&node, i, &f, *l, tmax);
+                            assert_eq!(il[j - 8 * half].to_bits() != 0, want.is_some());
+                            if let Some(w) = want {
+                                assert_eq!(tl[j - 8 * half].to_bits(), w.to_bits());
+                            }
+                        }
+                    }
+                }
             }
             for (r, l) in rays.iter().zip(&lanes) {
                 // the ray's own test, as the single-ray traversal makes it
