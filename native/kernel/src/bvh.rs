@@ -628,6 +628,15 @@ fn fixed_stack(stack: &mut Stack) -> Option<&mut [(u32, u32, f32); STACK_CAP]> {
     <&mut [(u32, u32, f32); STACK_CAP]>::try_from(stack.get_mut(..STACK_CAP)?).ok()
 }
 
+/// The lowest child left in `mask` as a stack entry (index, count as in [`Node8`], entry
+/// distance from `tn`), taken out of `mask`, which must not be empty.
+#[inline(always)]
+fn take_child(node: &Node8, tn: &[f32; WIDTH], mask: &mut u32) -> (u32, u32, f32) {
+    let i = mask.trailing_zeros() as usize & 7;
+    *mask &= mask.wrapping_sub(1);
+    (node.child[i], node.count[i], tn[i])
+}
+
 /// Pops the next stacked child that may still hold a hit before `tmax` (entry distance at most
 /// `tmax`), skipping the others; `None` when the stack is empty.
 #[inline(always)]
@@ -799,14 +808,10 @@ impl Bvh {
                 w += 1;
                 let (tn, mut mask) = node_test::<AVX>(node, &pre, tmax);
                 if mask != 0 {
-                    let i = mask.trailing_zeros() as usize & 7;
-                    mask &= mask - 1;
-                    let mut near = (node.child[i], node.count[i], tn[i]);
+                    let mut near = take_child(node, &tn, &mut mask);
                     if mask != 0 {
                         // the second child: the farther of the two is stacked
-                        let j = mask.trailing_zeros() as usize & 7;
-                        mask &= mask - 1;
-                        let mut far = (node.child[j], node.count[j], tn[j]);
+                        let mut far = take_child(node, &tn, &mut mask);
                         if far.2 < near.2 {
                             std::mem::swap(&mut near, &mut far);
                         }
@@ -819,9 +824,7 @@ impl Bvh {
                             st[sp & (STACK_CAP - 1)] = far;
                             sp += 1;
                             while mask != 0 {
-                                let k = mask.trailing_zeros() as usize & 7;
-                                mask &= mask - 1;
-                                let mut e = (node.child[k], node.count[k], tn[k]);
+                                let mut e = take_child(node, &tn, &mut mask);
                                 if e.2 < near.2 {
                                     std::mem::swap(&mut near, &mut e);
                                 }
