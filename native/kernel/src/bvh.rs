@@ -448,6 +448,9 @@ pub struct Scratch {
     /// Last occluder found per shadow-cache slot: (instance or `u32::MAX` for the scene's own
     /// primitives, primitive); `(u32::MAX, u32::MAX)` = none.
     pub(crate) shadow_cache: Vec<(u32, u32)>,
+    /// The packet traversal's list of (lane, entry distance, leaf size) of every leaf a ray
+    /// tested (`packet.rs`), kept between packets.
+    pub(crate) entered: Vec<(usize, f32, u32)>,
     /// Work done with this scratch so far: BVH nodes visited plus primitives handed to the
     /// leaf test (see [`crate::RayStats::work`]).
     pub(crate) work: u64,
@@ -460,6 +463,7 @@ impl Scratch {
             stack: Vec::new(),
             inner_stack: Vec::new(),
             shadow_cache: Vec::new(),
+            entered: Vec::new(),
             work: 0,
         }
     }
@@ -500,7 +504,7 @@ pub(crate) fn block_leaf_len(count: usize) -> Option<usize> {
 /// triangles whose blocks start at block `child[i]`; otherwise a leaf of `count[i]` primitives
 /// from `child[i]`.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
+#[repr(C, align(128))]
 pub(crate) struct Node8 {
     bounds: [[f32; WIDTH]; 6],
     child: [u32; WIDTH],

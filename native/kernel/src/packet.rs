@@ -769,17 +769,12 @@ fn traverse<const AVX: bool>(
     soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
-    ENTERED.with(|e| {
-        let mut entered = e.take();
-        entered.clear();
-        traverse_with::<AVX>(scene, rays, idx, f, soa, scratch, &mut entered);
-        e.set(entered);
-    });
-}
-
-thread_local! {
-    /// The `entered` list of [`traverse`], kept between calls (no allocation per packet).
-    static ENTERED: std::cell::Cell<Vec<(usize, f32, u32)>> = const { std::cell::Cell::new(Vec::new()) };
+    // kept in the scratch between calls (no allocation per packet); taken out here rather
+    // than reached through a closure, which would not be compiled for AVX and FMA
+    let mut entered = std::mem::take(&mut scratch.entered);
+    entered.clear();
+    traverse_with::<AVX>(scene, rays, idx, f, soa, scratch, &mut entered);
+    scratch.entered = entered;
 }
 
 /// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
