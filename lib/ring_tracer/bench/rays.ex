@@ -7,7 +7,8 @@ defmodule RingTracer.Bench.Rays do
   For each mesh (the SPD teapot tessellation is
   `../shared/scenes/meshes/spd_teapot_s12_tess.obj`): the same triangles and the
   same rays (`size` x `size` primary rays in 4 x 4 tiles, and as many
-  incoherent ones, closest hit and any hit) through our kernel and through
+  incoherent ones, closest hit and any hit; the primary hits' shadow rays
+  towards a point light, any hit) through our kernel and through
   Embree 3 (`rtcIntersect1`, `rtcIntersect16`, `rtcOccluded1/16`), one
   thread and two, alternating in each round; prints Mrays/s ranges and the
   ratios of the best rounds. Embree is timed by the project's own C harness

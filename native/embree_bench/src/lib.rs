@@ -28,6 +28,25 @@ impl RaySets {
     }
 }
 
+/// Shadow rays of the primary hits of `tiled` (in their order, so nearly every sixteen come
+/// from one tile): from each hit point, moved back along the eye ray by a hundred-thousandth
+/// of the scene's size, towards a point light outside the box beyond its far corner (so an
+/// unbounded any-hit query answers them).
+pub fn shadow_rays(scene: &Scene, tiled: &[Ray]) -> Vec<Ray> {
+    let b = scene.bounds();
+    let size = (b.max - b.min).max_element();
+    let light = b.max + (b.max - b.min) * 2.0;
+    let mut s = Scratch::new();
+    tiled
+        .iter()
+        .filter_map(|r| {
+            let h = scene.intersect_with(r, f32::INFINITY, &mut s)?;
+            let p = r.at(h.t) - r.dir * (1e-5 * size);
+            Some(Ray::new(p, light - p))
+        })
+        .collect()
+}
+
 /// How many of `rays` hit `scene` (any hit: are occluded), one ray at a time
 /// (`Scene::intersect_with` / `Scene::occluded_with`).
 pub fn single_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {

@@ -7,17 +7,20 @@
 //! over the rounds (Mrays/s, the machine may be busy: compare columns of one run only).
 //! Rays ([`ring_tracer_kernel::raysets`]): N x N primary rays (default 1024) of the default
 //! OBJ view, and as many incoherent rays (random origins in the central half of the box,
-//! directions on the sphere), closest hit; the incoherent ones also as any-hit shadow queries.
+//! directions on the sphere), closest hit; the incoherent ones also as any-hit shadow queries,
+//! and the shadow rays of the primary hits towards a point light outside the box
+//! ([`ring_tracer_embree_bench::shadow_rays`]), coherent any-hit queries.
 //! Columns: single rays on 1 thread (`Scene::intersect_with` / `occluded_with` against
 //! `rtcIntersect1` / `rtcOccluded1`), packets of 16 on 1 thread (ours: `Scene::intersect_packet`
-//! on 4 x 4 pixel tiles; Embree: `rtcIntersect16`, on the same tiles with the coherent flag
-//! for primary rays), and single rays on 2 threads. Hit counts must agree (they are printed
+//! and `occluded_packet` on 4 x 4 pixel tiles and their shadow rays; Embree: `rtcIntersect16` /
+//! `rtcOccluded16` on the same sixteens, with the coherent flag for those two), and single
+//! rays on 2 threads. Hit counts must agree (they are printed
 //! when they differ by more than a few rays on triangle edges).
 //!
 //! Without Embree's headers at build time the bench says so and times ours only.
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree};
-use ring_tracer_embree_bench::{single_hits, RaySets};
+use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
 use ring_tracer_kernel::{Ray, Scene, Scratch};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -119,11 +122,20 @@ fn bench(path: &str, rounds: usize, size: u32) {
     let n = tiled.len();
     let flat_tiled = flat(&tiled);
     let flat_inc = flat(&incoherent);
+    let shadow = shadow_rays(&scene, &tiled);
+    let flat_shadow = flat(&shadow);
 
-    let rows: [Row; 3] = [
+    let rows: [Row; 4] = [
         ("primary (coherent)", &tiled, &flat_tiled, true, false),
         ("incoherent", &incoherent, &flat_inc, false, false),
         ("incoherent, any hit", &incoherent, &flat_inc, false, true),
+        (
+            "shadow rays of primary hits",
+            &shadow,
+            &flat_shadow,
+            true,
+            true,
+        ),
     ];
     // per row: ours 1, Embree 1, ours 16, Embree 16, ours 2 threads, Embree 2 threads
     let mut figs: Vec<[Figure; 6]> = rows.iter().map(|_| Default::default()).collect();
@@ -152,17 +164,17 @@ fn bench(path: &str, rounds: usize, size: u32) {
                 (Call::Intersect1, Call::Intersect16 { coherent })
             };
             let f = &mut figs[k];
-            f[0].add(n, timed(1, rays, CHUNK, ours_single));
+            f[0].add(rays.len(), timed(1, rays, CHUNK, ours_single));
             if let Ok(e) = &embree {
-                f[1].add(n, timed(1, fr, 6 * CHUNK, |p| e.trace(one, p)));
+                f[1].add(rays.len(), timed(1, fr, 6 * CHUNK, |p| e.trace(one, p)));
             }
-            f[2].add(n, timed(1, rays, CHUNK, ours_packet));
+            f[2].add(rays.len(), timed(1, rays, CHUNK, ours_packet));
             if let Ok(e) = &embree {
-                f[3].add(n, timed(1, fr, 6 * CHUNK, |p| e.trace(sixteen, p)));
+                f[3].add(rays.len(), timed(1, fr, 6 * CHUNK, |p| e.trace(sixteen, p)));
             }
-            f[4].add(n, timed(2, rays, CHUNK, ours_single));
+            f[4].add(rays.len(), timed(2, rays, CHUNK, ours_single));
             if let Ok(e) = &embree {
-                f[5].add(n, timed(2, fr, 6 * CHUNK, |p| e.trace(one, p)));
+                f[5].add(rays.len(), timed(2, fr, 6 * CHUNK, |p| e.trace(one, p)));
             }
         }
     }

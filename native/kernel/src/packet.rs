@@ -25,6 +25,11 @@
 //! index wins in both), and gets the same primitive and the same distance bits. Mesh instances
 //! and planes are then handled per ray, by the single-ray code.
 //!
+//! Any-hit queries (shadow rays) take the same path: a ray is done at its first hit, its lanes
+//! then closed (bound -inf) so that they enter no more boxes, and it is occluded exactly when
+//! its single-ray any-hit query says so (that query looks for a hit of the same primitive
+//! tests on the same interval; mesh instances and planes are asked per ray as it asks them).
+//!
 //! Rays whose direction signs differ are split into groups by sign; a group of fewer than
 //! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time. The rays of a
 //! packet and their nearest hits so far are kept in one SoA block ([`Soa`]); a packet of one
@@ -61,6 +66,24 @@ fn coherent(scene: &Scene, soa: &Soa) -> bool {
         spread(&soa.d[a]) <= DIR_SPREAD
             && (!size.is_finite() || spread(&soa.o[a]) <= ORIGIN_SPREAD * size)
     })
+}
+
+/// [`coherent`] for a whole packet of rays, before they are sorted into sign groups: false
+/// when their directions or origins spread too far for any group of them to pass it.
+#[inline(always)]
+fn rays_coherent(scene: &Scene, rays: &[Ray]) -> bool {
+    let Some(r0) = rays.first() else {
+        return true;
+    };
+    let (mut dlo, mut dhi, mut olo, mut ohi) = (r0.dir, r0.dir, r0.origin, r0.origin);
+    for r in rays {
+        (dlo, dhi) = (dlo.min(r.dir), dhi.max(r.dir));
+        (olo, ohi) = (olo.min(r.origin), ohi.max(r.origin));
+    }
+    let b = scene.bounds();
+    let size = (b.max - b.min).max_element();
+    (dhi - dlo).max_element() <= DIR_SPREAD
+        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
 }
 
 /// The least of a row, NaN ignored (`f32::min` over it).
@@ -101,6 +124,8 @@ struct Frustum {
     shared: bool,
     o: [f32; 3],
     k: [f32; 3],
+    /// An any-hit query: a ray's lanes are closed (bound -inf) at its first hit.
+    any: bool,
 }
 
 /// Relative widening of the shared-origin bounds: far above the few roundings of the ray's own
@@ -235,6 +260,17 @@ impl Soa {
             [0, 1, 2].map(|a| self.inv[a][k]),
             [0, 1, 2].map(|a| self.oinv[a][k]),
         )
+    }
+
+    /// Closes the lanes that have a hit (bound -inf: they enter no more boxes), for any-hit
+    /// queries.
+    #[inline(always)]
+    fn close_hit_lanes(&mut self) {
+        for (t, &p) in self.tmax.iter_mut().zip(&self.prim) {
+            if p != u32::MAX {
+                *t = f32::NEG_INFINITY;
+            }
+        }
     }
 
     /// The largest bound of the lanes (-inf for none).
@@ -585,23 +621,121 @@ unsafe fn leaf_avx(
     (changed, 0)
 }
 
-/// Closest hits: `out[i]` gets [`Scene::intersect_with`]`(rays[i], tmax)` for every
-/// `i < min(rays.len(), out.len())`. Unless `every_ray`, sign groups of fewer than
-/// [`MIN_GROUP`] rays or of incoherent ones are traced one ray at a time; with `every_ray` all
-/// go through the packet traversal, and then the work a ray adds to `scratch.work` does not
-/// depend on the other rays of its packet (see [`traverse`]).
-pub(crate) fn intersect(
+/// What a packet query leaves for each of its rays.
+pub(crate) trait Answers {
+    /// Any-hit queries: a ray is done at its first hit (its lanes then enter no more boxes).
+    const ANY: bool;
+    /// The number of answers (rays beyond it are not traced).
+    fn len(&self) -> usize;
+    /// Answers ray `i` (of the packet's slice of rays) alone, with the single-ray query.
+    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch);
+    /// Answers ray `i` once the packet's traversal of the scene's own BVH left it `prim` at `t`
+    /// (`u32::MAX`: nothing before `t`, which is then its bound `tmax`).
+    #[allow(clippy::too_many_arguments)]
+    fn finish(
+        &mut self,
+        scene: &Scene,
+        i: usize,
+        ray: &Ray,
+        tmax: f32,
+        t: f32,
+        prim: u32,
+        scratch: &mut Scratch,
+    );
+}
+
+/// Closest hits: what [`Scene::intersect_with`] returns.
+impl Answers for [Option<Hit>] {
+    const ANY: bool = false;
+    fn len(&self) -> usize {
+        <[Option<Hit>]>::len(self)
+    }
+    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch) {
+        if let Some(o) = self.get_mut(i) {
+            *o = scene.intersect_with(ray, tmax, scratch);
+        }
+    }
+    fn finish(
+        &mut self,
+        scene: &Scene,
+        i: usize,
+        ray: &Ray,
+        _tmax: f32,
+        t: f32,
+        prim: u32,
+        scratch: &mut Scratch,
+    ) {
+        let Some(o) = self.get_mut(i) else { return };
+        // without instances and planes the hit is the BVH's (what finish_closest would return)
+        *o = if scene.instances.is_empty() && scene.planes.is_empty() {
+            (prim != u32::MAX).then_some(Hit {
+                t,
+                prim,
+                instance: Hit::NO_INSTANCE,
+            })
+        } else {
+            scene.finish_closest(ray, t, prim, scratch)
+        };
+    }
+}
+
+/// Occlusion: what [`Scene::occluded_with`] returns. A primitive of the scene's own BVH hit
+/// before the bound is what its any-hit traversal looks for (the same tests on the same
+/// interval), and the mesh instances and planes are then asked as it asks them.
+impl Answers for [bool] {
+    const ANY: bool = true;
+    fn len(&self) -> usize {
+        <[bool]>::len(self)
+    }
+    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch) {
+        if let Some(o) = self.get_mut(i) {
+            *o = scene.occluded_with(ray, tmax, scratch);
+        }
+    }
+    fn finish(
+        &mut self,
+        scene: &Scene,
+        i: usize,
+        ray: &Ray,
+        tmax: f32,
+        _t: f32,
+        prim: u32,
+        scratch: &mut Scratch,
+    ) {
+        if let Some(o) = self.get_mut(i) {
+            *o = prim != u32::MAX || scene.occluded_beyond_bvh(ray, tmax, scratch).is_some();
+        }
+    }
+}
+
+/// A packet query: `out`'s answer for `rays[i]` is the single-ray query's with the bound
+/// `tmax(i)`, for every `i < min(rays.len(), out.len())`. Unless `every_ray`, sign groups of
+/// fewer than [`MIN_GROUP`] rays or of incoherent ones are traced one ray at a time; with
+/// `every_ray` all go through the packet traversal, and then the work a ray adds to
+/// `scratch.work` does not depend on the other rays of its packet (see [`traverse`]).
+pub(crate) fn trace<A: Answers + ?Sized>(
     scene: &Scene,
     rays: &[Ray],
-    tmax: f32,
+    tmax: impl Fn(usize) -> f32,
     scratch: &mut Scratch,
-    out: &mut [Option<Hit>],
+    out: &mut A,
     every_ray: bool,
 ) {
     let n = rays.len().min(out.len());
     for start in (0..n).step_by(PACKET) {
         let end = (start + PACKET).min(n);
-        let (rays, out) = (&rays[start..end], &mut out[start..end]);
+        let rays = &rays[start..end];
+        let mut bounds = [0.0f32; PACKET];
+        for (i, b) in bounds.iter_mut().enumerate().take(rays.len()) {
+            *b = tmax(start + i);
+        }
+        if !every_ray && !rays_coherent(scene, rays) {
+            // no group of these can pass `coherent` (its spreads are within the packet's)
+            for (i, (r, &b)) in rays.iter().zip(&bounds).enumerate() {
+                out.single(scene, start + i, r, b, scratch);
+            }
+            continue;
+        }
         // group by direction signs; small groups go one ray at a time
         let mut groups = [0u32; 8];
         let c0 = rays.first().map_or(0, signs);
@@ -619,33 +753,36 @@ pub(crate) fn intersect(
             let single = !every_ray && (members.count_ones() as usize) < MIN_GROUP;
             if single
                 || scene.bvh.nodes.is_empty()
-                || !group_closest(scene, rays, members, class, tmax, scratch, out, every_ray)
+                || !group(
+                    scene, rays, members, class, &bounds, scratch, start, out, every_ray,
+                )
             {
                 let mut m = members;
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
-                        *o = scene.intersect_with(r, tmax, scratch);
+                    if let (Some(r), Some(&b)) = (rays.get(i), bounds.get(i)) {
+                        out.single(scene, start + i, r, b, scratch);
                     }
                 }
-                continue;
             }
         }
     }
 }
 
-/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`).
-/// Unless `every_ray`, returns false and leaves `out` alone when the rays are not coherent.
+/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
+/// with the bound `tmax[i]`; its answer goes to `out`'s `at + i`). Unless `every_ray`, returns
+/// false and leaves `out` alone when the rays are not coherent.
 #[allow(clippy::too_many_arguments)]
-fn group_closest(
+fn group<A: Answers + ?Sized>(
     scene: &Scene,
     rays: &[Ray],
     members: u32,
     class: usize,
-    tmax: f32,
+    tmax: &[f32; PACKET],
     scratch: &mut Scratch,
-    out: &mut [Option<Hit>],
+    at: usize,
+    out: &mut A,
     every_ray: bool,
 ) -> bool {
     let mut soa = Soa::empty();
@@ -666,7 +803,7 @@ fn group_closest(
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
             if let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(j)) {
-                soa.set(j, r, tmax);
+                soa.set(j, r, tmax[i & 15]);
                 *slot = i;
                 j += 1;
             }
@@ -675,8 +812,8 @@ fn group_closest(
     // lanes past the rays: copies of the first ray (so that the packet's bounds are the
     // rays'), never entering a box
     soa.pad(k);
-    for t in soa.tmax.iter_mut().take(k) {
-        *t = tmax;
+    for (t, &i) in soa.tmax.iter_mut().zip(&idx).take(k) {
+        *t = tmax[i & 15];
     }
     if k == 0 || (!every_ray && !coherent(scene, &soa)) {
         return false;
@@ -692,6 +829,7 @@ fn group_closest(
         shared: false,
         o: [0.0; 3],
         k: [0.0; 3],
+        any: A::ANY,
     };
     let o = [0, 1, 2].map(|a| soa.o[a][0]);
     let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
@@ -713,24 +851,10 @@ fn group_closest(
     }
     #[cfg(not(target_arch = "x86_64"))]
     traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
-    // without instances and planes the hit is the BVH's (what finish_closest would return)
-    if scene.instances.is_empty() && scene.planes.is_empty() {
-        for (j, &i) in idx.iter().enumerate() {
-            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
-            if let Some(o) = out.get_mut(i) {
-                *o = (prim != u32::MAX).then_some(Hit {
-                    t,
-                    prim,
-                    instance: Hit::NO_INSTANCE,
-                });
-            }
-        }
-    } else {
-        for (j, &i) in idx.iter().enumerate() {
-            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
-            if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(i)) {
-                *o = scene.finish_closest(r, t, prim, scratch);
-            }
+    for (j, &i) in idx.iter().enumerate() {
+        let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+        if let Some(r) = rays.get(i) {
+            out.finish(scene, at + i, r, tmax[i & 15], t, prim, scratch);
         }
     }
     true
@@ -759,7 +883,8 @@ unsafe fn traverse_avx(
 /// Work ([`Scratch::work`]): each ray is charged one unit plus the leaf's size for every leaf
 /// whose box it enters before its final nearest hit. That set does not depend on the order the
 /// leaves were met in, nor on the other rays of the packet (all of them are met, since a ray's
-/// bound never falls below its final hit), so a pixel costs the same in any tile.
+/// bound never falls below its final hit), so a pixel costs the same in any tile. In an
+/// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
 #[inline(always)]
 fn traverse<const AVX: bool>(
     scene: &Scene,
@@ -859,6 +984,9 @@ fn traverse_with<const AVX: bool>(
                             }
                         }
                         if changed {
+                            if f.any {
+                                soa.close_hit_lanes();
+                            }
                             tmax = soa.max_tmax();
                         }
                         continue;
@@ -879,6 +1007,9 @@ fn traverse_with<const AVX: bool>(
                                 );
                             }
                         }
+                    }
+                    if f.any {
+                        soa.close_hit_lanes();
                     }
                     tmax = soa.max_tmax();
                 }
@@ -902,7 +1033,8 @@ fn traverse_with<const AVX: bool>(
             if sp == 0 {
                 let mut w = 0u64;
                 for &(lane, t, c) in entered.iter() {
-                    if t <= soa.tmax[lane & 15] {
+                    // (an any-hit query's closed lanes: every leaf they met)
+                    if f.any || t <= soa.tmax[lane & 15] {
                         w += 1 + c as u64;
                     }
                 }
@@ -967,7 +1099,7 @@ mod tests {
         let mut got = vec![None; rays.len()];
         scene.intersect_packet(rays, tmax, &mut scratch, &mut got);
         let mut all = vec![None; rays.len()];
-        intersect(scene, rays, tmax, &mut scratch, &mut all, true);
+        trace(scene, rays, |_| tmax, &mut scratch, &mut all[..], true);
         for (i, (w, a)) in want.iter().zip(&all).enumerate() {
             assert!(
                 same(scene, *w, *a),
@@ -988,6 +1120,36 @@ mod tests {
                     }
                 }
             }
+        }
+        // occlusion, with a bound per ray: some at the nearest hit (which then does not count),
+        // some just past it
+        let bounds: Vec<f32> = want
+            .iter()
+            .enumerate()
+            .map(|(i, w)| match (w, i % 3) {
+                (Some(h), 0) => h.t,
+                (Some(h), 1) => h.t.next_up(),
+                _ => tmax,
+            })
+            .collect();
+        let occluded: Vec<bool> = rays
+            .iter()
+            .zip(&bounds)
+            .map(|(r, &b)| scene.occluded_with(r, b, &mut scratch))
+            .collect();
+        let mut got = vec![false; rays.len()];
+        trace(
+            scene,
+            rays,
+            |i| bounds[i],
+            &mut scratch,
+            &mut got[..],
+            false,
+        );
+        let mut all = vec![false; rays.len()];
+        trace(scene, rays, |i| bounds[i], &mut scratch, &mut all[..], true);
+        for (i, ((w, g), a)) in occluded.iter().zip(&got).zip(&all).enumerate() {
+            assert!(w == g && w == a, "ray {i}, occluded: {w} {g} {a}");
         }
         want.iter().filter(|h| h.is_some()).count()
     }
@@ -1215,6 +1377,7 @@ mod tests {
                 shared: false,
                 o: [0.0; 3],
                 k: [0.0; 3],
+                any: false,
             };
             let tmax = if round % 2 == 0 { 2.0 } else { f32::INFINITY };
             let mut soa = Soa::empty();

@@ -501,7 +501,7 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [Option<Hit>],
     ) {
-        crate::packet::intersect(self, rays, tmax, scratch, out, false);
+        crate::packet::trace(self, rays, |_| tmax, scratch, out, false);
     }
 
     /// [`Scene::intersect_packet`] for coherent rays (a tile of eye rays): every ray goes
@@ -513,11 +513,12 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [Option<Hit>],
     ) {
-        crate::packet::intersect(self, rays, f32::INFINITY, scratch, out, true);
+        crate::packet::trace(self, rays, |_| f32::INFINITY, scratch, out, true);
     }
 
     /// Any-hit queries of a packet of rays (such as the shadow rays of a tile): `out[i]` gets
-    /// what [`Scene::occluded_with`] returns for `rays[i]`.
+    /// what [`Scene::occluded_with`] returns for `rays[i]`. Coherent rays go through the BVH
+    /// together, sixteen at a time, each done at its first hit (`packet.rs`).
     pub fn occluded_packet(
         &self,
         rays: &[Ray],
@@ -525,9 +526,7 @@ impl Scene {
         scratch: &mut Scratch,
         out: &mut [bool],
     ) {
-        for (r, o) in rays.iter().zip(out.iter_mut()) {
-            *o = self.occluded_with(r, tmax, scratch);
-        }
+        crate::packet::trace(self, rays, |_| tmax, scratch, out, false);
     }
 
     /// True if anything blocks `ray` before `tmax` (any-hit, early exit).
@@ -617,19 +616,13 @@ impl Scene {
                 tmax
             },
         );
-        let r = if r >= 0.0 && !self.instances.is_empty() {
-            match self.instances_hit::<false>(ray, tmax, scratch) {
-                Some((_, i, p)) => {
-                    found = (i, p);
-                    -1.0
-                }
-                None => r,
-            }
-        } else {
-            r
-        };
         if r < 0.0 {
             self::set_cache(scratch, entry, found, 0);
+            return true;
+        }
+        let beyond = self.occluded_beyond_bvh(ray, tmax, scratch);
+        if let Some(f) = beyond.filter(|&f| f != NO_CACHE) {
+            self::set_cache(scratch, entry, f, 0);
             return true;
         }
         if cached != NO_CACHE {
@@ -640,14 +633,35 @@ impl Scene {
                 self::set_cache(scratch, entry, cached, misses + 1);
             }
         }
-        scratch.work += self.planes.len() as u64;
-        self.planes.iter().any(|pl| {
-            let dn = pl.normal.dot(ray.dir);
-            dn != 0.0 && {
-                let t = (pl.d - pl.normal.dot(ray.origin)) / dn;
-                t > 0.0 && t < tmax
+        beyond.is_some()
+    }
+
+    /// The rest of an any-hit query once the scene's own BVH let `ray` through: the mesh
+    /// instances, then the planes. `Some((instance, triangle))` for an instance's triangle,
+    /// `Some(NO_CACHE)` for a plane, `None` when nothing blocks the ray before `tmax`.
+    #[inline]
+    pub(crate) fn occluded_beyond_bvh(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<(u32, u32)> {
+        if !self.instances.is_empty() {
+            if let Some((_, i, p)) = self.instances_hit::<false>(ray, tmax, scratch) {
+                return Some((i, p));
             }
-        })
+        }
+        scratch.work += self.planes.len() as u64;
+        self.planes
+            .iter()
+            .any(|pl| {
+                let dn = pl.normal.dot(ray.dir);
+                dn != 0.0 && {
+                    let t = (pl.d - pl.normal.dot(ray.origin)) / dn;
+                    t > 0.0 && t < tmax
+                }
+            })
+            .then_some(NO_CACHE)
     }
 
     /// Surface data at a hit.
