@@ -48,7 +48,7 @@ pub(crate) const PACKET: usize = 16;
 /// Fewer rays of one direction-sign class are traced one by one.
 pub(crate) const MIN_GROUP: usize = 3;
 
-/// A group whose unit directions differ by more than this on some axis, or whose origins lie
+/// A packet whose unit directions differ by more than this on some axis, or whose origins lie
 /// further apart than [`ORIGIN_SPREAD`] times the scene's size, is not coherent: its intervals
 /// would let nearly every box through, so its rays are traced one by one.
 const DIR_SPREAD: f32 = 0.125;
@@ -56,27 +56,17 @@ const DIR_SPREAD: f32 = 0.125;
 /// See [`DIR_SPREAD`].
 const ORIGIN_SPREAD: f32 = 0.01;
 
-/// Whether the rays of a packet (`soa`, every lane a ray of it) are coherent enough for a
-/// packet traversal (see [`DIR_SPREAD`]).
-fn coherent(scene: &Scene, soa: &Soa) -> bool {
-    let b = scene.bounds();
-    let size = (b.max - b.min).max_element();
-    (0..3).all(|a| {
-        let spread = |row: &[f32; PACKET]| row_max(row) - row_min(row);
-        spread(&soa.d[a]) <= DIR_SPREAD
-            && (!size.is_finite() || spread(&soa.o[a]) <= ORIGIN_SPREAD * size)
-    })
-}
-
-/// [`coherent`] for a whole packet of rays, before they are sorted into sign groups: false
-/// when their directions or origins spread too far for any group of them to pass it.
+/// Whether a packet of rays is coherent enough for a packet traversal (see [`DIR_SPREAD`]);
+/// then so is every sign group of it, whose spreads are within the packet's. A NaN in a
+/// direction or an origin makes it incoherent.
 #[inline(always)]
-fn rays_coherent(scene: &Scene, rays: &[Ray]) -> bool {
+fn coherent(scene: &Scene, rays: &[Ray]) -> bool {
     let Some(r0) = rays.first() else {
         return true;
     };
     let (mut dlo, mut dhi, mut olo, mut ohi) = (r0.dir, r0.dir, r0.origin, r0.origin);
     for r in rays {
+        // `min`/`max` with the ray second: a NaN there is kept (as _mm_min_ps keeps it)
         (dlo, dhi) = (dlo.min(r.dir), dhi.max(r.dir));
         (olo, ohi) = (olo.min(r.origin), ohi.max(r.origin));
     }
@@ -709,10 +699,10 @@ impl Answers for [bool] {
 }
 
 /// A packet query: `out`'s answer for `rays[i]` is the single-ray query's with the bound
-/// `tmax(i)`, for every `i < min(rays.len(), out.len())`. Unless `every_ray`, sign groups of
-/// fewer than [`MIN_GROUP`] rays or of incoherent ones are traced one ray at a time; with
-/// `every_ray` all go through the packet traversal, and then the work a ray adds to
-/// `scratch.work` does not depend on the other rays of its packet (see [`traverse`]).
+/// `tmax(i)`, for every `i < min(rays.len(), out.len())`. Unless `every_ray`, incoherent
+/// packets ([`coherent`]) and sign groups of fewer than [`MIN_GROUP`] rays are traced one ray
+/// at a time; with `every_ray` all go through the packet traversal, and then the work a ray
+/// adds to `scratch.work` does not depend on the other rays of its packet (see [`traverse`]).
 pub(crate) fn trace<A: Answers + ?Sized>(
     scene: &Scene,
     rays: &[Ray],
@@ -729,8 +719,7 @@ pub(crate) fn trace<A: Answers + ?Sized>(
         for (i, b) in bounds.iter_mut().enumerate().take(rays.len()) {
             *b = tmax(start + i);
         }
-        if !every_ray && !rays_coherent(scene, rays) {
-            // no group of these can pass `coherent` (its spreads are within the packet's)
+        if !every_ray && !coherent(scene, rays) {
             for (i, (r, &b)) in rays.iter().zip(&bounds).enumerate() {
                 out.single(scene, start + i, r, b, scratch);
             }
@@ -751,12 +740,7 @@ pub(crate) fn trace<A: Answers + ?Sized>(
                 continue;
             }
             let single = !every_ray && (members.count_ones() as usize) < MIN_GROUP;
-            if single
-                || scene.bvh.nodes.is_empty()
-                || !group(
-                    scene, rays, members, class, &bounds, scratch, start, out, every_ray,
-                )
-            {
+            if single || scene.bvh.nodes.is_empty() {
                 let mut m = members;
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
@@ -765,14 +749,15 @@ pub(crate) fn trace<A: Answers + ?Sized>(
                         out.single(scene, start + i, r, b, scratch);
                     }
                 }
+            } else {
+                group(scene, rays, members, class, &bounds, scratch, start, out);
             }
         }
     }
 }
 
 /// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
-/// with the bound `tmax[i]`; its answer goes to `out`'s `at + i`). Unless `every_ray`, returns
-/// false and leaves `out` alone when the rays are not coherent.
+/// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
 #[allow(clippy::too_many_arguments)]
 fn group<A: Answers + ?Sized>(
     scene: &Scene,
@@ -783,8 +768,7 @@ fn group<A: Answers + ?Sized>(
     scratch: &mut Scratch,
     at: usize,
     out: &mut A,
-    every_ray: bool,
-) -> bool {
+) {
     let mut soa = Soa::empty();
     let mut idx = [0usize; PACKET];
     let k = members.count_ones() as usize;
@@ -815,8 +799,8 @@ fn group<A: Answers + ?Sized>(
     for (t, &i) in soa.tmax.iter_mut().zip(&idx).take(k) {
         *t = tmax[i & 15];
     }
-    if k == 0 || (!every_ray && !coherent(scene, &soa)) {
-        return false;
+    if k == 0 {
+        return;
     }
     let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
     let mut f = Frustum {
@@ -857,7 +841,6 @@ fn group<A: Answers + ?Sized>(
             out.finish(scene, at + i, r, tmax[i & 15], t, prim, scratch);
         }
     }
-    true
 }
 
 /// [`traverse`] compiled with AVX.
