@@ -3,6 +3,7 @@ defmodule RingTracer.Bench.Rays do
   Rays per second in the kernel alone, next to Intel Embree's.
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024]
+                                 [--embree-isa best|sse4.2|avx|avx2|avx512]
 
   For each mesh (the SPD teapot tessellation is
   `../shared/scenes/meshes/spd_teapot_s12_tess.obj`): the same triangles and the
@@ -14,6 +15,8 @@ defmodule RingTracer.Bench.Rays do
   ratios of the best rounds. Embree is timed by the project's own C harness
   (`native/embree_bench`), built when Debian's `libembree-dev` is installed;
   without it the table says so and times ours only. No BEAM in the loop.
+  `--embree-isa` caps the instruction set Embree may use (by default the
+  widest the CPU has: AVX-512 where there is, while ours uses AVX2).
   `cargo run --release -p ring_tracer_kernel --example big_mesh -- OUT.obj`
   writes a 600k-triangle mesh.
   """
@@ -24,14 +27,16 @@ defmodule RingTracer.Bench.Rays do
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024]"
+  def usage, do: "rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024] [--embree-isa ISA]"
 
   @impl RingTracer.Bench
   def run(argv) do
-    {opts, meshes, _} = OptionParser.parse(argv, strict: [rounds: :integer, size: :integer])
+    {opts, meshes, _} =
+      OptionParser.parse(argv, strict: [rounds: :integer, size: :integer, embree_isa: :string])
+
     if meshes == [], do: Mix.raise("usage: mix ring_tracer.bench #{usage()}")
     cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
-    flags = for {k, v} <- opts, do: ["--#{k}", Integer.to_string(v)]
+    flags = for {k, v} <- opts, do: ["--#{String.replace(to_string(k), "_", "-")}", to_string(v)]
 
     args =
       ~w(run --release -q -p ring_tracer_embree_bench --) ++

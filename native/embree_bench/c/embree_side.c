@@ -19,14 +19,17 @@ static struct eb_scene the_scenes[8];
 
 const char *eb_version(void) { return RTC_VERSION_STRING; }
 
-/* Returns a handle >= 0, or -1 when Embree refuses the device or the scene. */
-int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris) {
+/* Returns a handle >= 0, or -1 when Embree refuses the device or the scene. `config` is the
+ * device's configuration string (the caller passes one of a fixed set: "threads=1", optionally
+ * with ",isa=..."). */
+int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
+           const char *config) {
   int h = -1;
   for (int i = 0; i < 8; i++)
     if (the_scenes[i].device == NULL) { h = i; break; }
   if (h < 0) return -1;
-  /* one build thread: the machine is shared and the figures are per tracing thread */
-  RTCDevice device = rtcNewDevice("threads=1");
+  /* one build thread (in config): the machine is shared and the figures are per tracing thread */
+  RTCDevice device = rtcNewDevice(config);
   if (device == NULL) return -1;
   RTCScene scene = rtcNewScene(device);
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);

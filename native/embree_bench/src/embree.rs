@@ -8,7 +8,13 @@ mod ffi {
     use std::os::raw::{c_char, c_int};
     extern "C" {
         pub fn eb_version() -> *const c_char;
-        pub fn eb_new(verts: *const f32, nverts: usize, idx: *const u32, ntris: usize) -> c_int;
+        pub fn eb_new(
+            verts: *const f32,
+            nverts: usize,
+            idx: *const u32,
+            ntris: usize,
+            config: *const c_char,
+        ) -> c_int;
         pub fn eb_free(h: c_int);
         pub fn eb_intersect1(h: c_int, rays: *const f32, n: usize) -> u64;
         pub fn eb_occluded1(h: c_int, rays: *const f32, n: usize) -> u64;
@@ -42,6 +48,70 @@ pub enum Call {
     },
 }
 
+/// The instruction set Embree's device may use: by default the widest the CPU has (its
+/// AVX-512 code on CPUs with AVX-512, 16 rays to a register in `rtcIntersect16`); the others
+/// cap it, e.g. at AVX2, the widest our kernel uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Isa {
+    /// The widest the CPU has.
+    #[default]
+    Best,
+    /// `sse4.2`.
+    Sse42,
+    /// `avx`.
+    Avx,
+    /// `avx2`.
+    Avx2,
+    /// `avx512`.
+    Avx512,
+}
+
+impl Isa {
+    /// The names `--embree-isa` takes, with their values.
+    pub const NAMES: [(&'static str, Isa); 5] = [
+        ("best", Isa::Best),
+        ("sse4.2", Isa::Sse42),
+        ("avx", Isa::Avx),
+        ("avx2", Isa::Avx2),
+        ("avx512", Isa::Avx512),
+    ];
+
+    /// The ISA named `name` (one of [`Isa::NAMES`]).
+    pub fn parse(name: &str) -> Result<Isa, String> {
+        Isa::NAMES
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, isa)| isa)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Isa::NAMES.iter().map(|(n, _)| *n).collect();
+                format!(
+                    "--embree-isa {name:?}: expected one of {}",
+                    names.join(", ")
+                )
+            })
+    }
+
+    /// Its name in [`Isa::NAMES`].
+    pub fn name(self) -> &'static str {
+        Isa::NAMES
+            .iter()
+            .find(|(_, i)| *i == self)
+            .map_or("best", |(n, _)| n)
+    }
+
+    /// The device configuration: one build thread, and the ISA cap.
+    #[cfg_attr(not(embree), allow(dead_code))]
+    fn config(self) -> &'static std::ffi::CStr {
+        match self {
+            Isa::Best => c"threads=1",
+            Isa::Sse42 => c"threads=1,isa=sse4.2",
+            Isa::Avx => c"threads=1,isa=avx",
+            Isa::Avx2 => c"threads=1,isa=avx2",
+            Isa::Avx512 => c"threads=1,isa=avx512",
+        }
+    }
+}
+
 /// Rays as the harness takes them: origin and direction, 6 floats each.
 pub fn flat(rays: &[ring_tracer_kernel::Ray]) -> Vec<f32> {
     rays.iter()
@@ -71,8 +141,9 @@ impl Embree {
         }
     }
 
-    /// Builds Embree's BVH over the triangles (each given by its three corners).
-    pub fn new(tris: &[[Vec3A; 3]]) -> Result<Embree, String> {
+    /// Builds Embree's BVH over the triangles (each given by its three corners), on a device
+    /// capped at `isa`.
+    pub fn new(tris: &[[Vec3A; 3]], isa: Isa) -> Result<Embree, String> {
         #[cfg(embree)]
         {
             let verts: Vec<f32> = tris
@@ -82,9 +153,17 @@ impl Embree {
             let idx: Vec<u32> = (0..(3 * tris.len()) as u32).collect();
             // SAFETY: `verts` holds 3 floats per vertex for 3 * tris.len() vertices and `idx`
             // 3 indices per triangle, all below the vertex count; eb_new copies both before
-            // returning and keeps no pointer to them.
-            let handle =
-                unsafe { ffi::eb_new(verts.as_ptr(), idx.len(), idx.as_ptr(), tris.len()) };
+            // returning and keeps no pointer to them; the configuration is a static
+            // NUL-terminated string.
+            let handle = unsafe {
+                ffi::eb_new(
+                    verts.as_ptr(),
+                    idx.len(),
+                    idx.as_ptr(),
+                    tris.len(),
+                    isa.config().as_ptr(),
+                )
+            };
             if handle < 0 {
                 return Err("Embree refused the device or the scene".into());
             }
@@ -92,7 +171,7 @@ impl Embree {
         }
         #[cfg(not(embree))]
         {
-            let _ = tris;
+            let _ = (tris, isa);
             Err(Embree::version().unwrap_err())
         }
     }
@@ -148,8 +227,15 @@ mod tests {
             Vec3A::new(1.0, 1.0, 0.0),
             Vec3A::new(0.0, 1.0, 0.0),
         ];
-        let e = Embree::new(&[[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).expect("embree");
         assert!(!Embree::version().unwrap().is_empty());
+        // every ISA cap the CPU can run (Embree refuses a device above what the CPU has)
+        let caps = [Isa::Best, Isa::Sse42, Isa::Avx, Isa::Avx2, Isa::Avx512];
+        let tris = [[q[0], q[1], q[2]], [q[0], q[2], q[3]]];
+        let devices: Vec<Embree> = caps
+            .iter()
+            .filter_map(|&i| Embree::new(&tris, i).ok())
+            .collect();
+        assert!(devices.len() >= 2, "{} devices", devices.len());
         let rays: Vec<Ray> = (0..17)
             .map(|i| {
                 let x = (i % 4) as f32 * 0.5 + 0.1;
@@ -165,7 +251,19 @@ mod tests {
             Call::Intersect16 { coherent: true },
             Call::Occluded16 { coherent: false },
         ] {
-            assert_eq!(e.trace(call, &f), 5, "{call:?}");
+            for e in &devices {
+                assert_eq!(e.trace(call, &f), 5, "{call:?}");
+            }
         }
+    }
+
+    #[test]
+    fn isa_names_round_trip() {
+        for (name, isa) in Isa::NAMES {
+            assert_eq!(Isa::parse(name), Ok(isa));
+            assert_eq!(isa.name(), name);
+        }
+        let e = Isa::parse("avx2,threads=64").unwrap_err();
+        assert!(e.contains("expected one of best, sse4.2"), "{e}");
     }
 }

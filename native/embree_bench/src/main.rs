@@ -1,6 +1,12 @@
 //! Ray casting, RingTracer's kernel next to Intel Embree 3, same rays, same run.
 //!
-//! `cargo run --release -p ring_tracer_embree_bench -- [--rounds R] [--size N] MESH.obj...`
+//! `cargo run --release -p ring_tracer_embree_bench -- [--rounds R] [--size N] [--embree-isa ISA]
+//! MESH.obj...`
+//!
+//! `--embree-isa` caps the instruction set of Embree's device (`best`, the default: the widest
+//! the CPU has; `sse4.2`, `avx`, `avx2`, `avx512`). On a CPU with AVX-512 Embree's packets of
+//! 16 then run its AVX-512 code, sixteen rays to a register, where ours use AVX2 (two halves of
+//! eight); `--embree-isa avx2` compares the two at the same width.
 //!
 //! For each mesh: both BVHs are built once, then R rounds (default 3) each time every
 //! measurement below, ours and Embree's alternating, and the table gives each one's range
@@ -19,7 +25,7 @@
 //!
 //! Without Embree's headers at build time the bench says so and times ours only.
 
-use ring_tracer_embree_bench::embree::{flat, Call, Embree};
+use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
 use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
 use ring_tracer_kernel::{Ray, Scene, Scratch};
 use std::path::Path;
@@ -87,7 +93,7 @@ const CHUNK: usize = 4096;
 /// A table row: label, our rays, Embree's (flat), coherent, any-hit.
 type Row<'a> = (&'static str, &'a [Ray], &'a [f32], bool, bool);
 
-fn bench(path: &str, rounds: usize, size: u32) {
+fn bench(path: &str, rounds: usize, size: u32, isa: Isa) {
     let t0 = Instant::now();
     let scene = match Scene::load(Path::new(path)) {
         Ok(s) => s,
@@ -99,7 +105,7 @@ fn bench(path: &str, rounds: usize, size: u32) {
     let ours_build = t0.elapsed().as_secs_f64();
     let tris = scene.triangles();
     let t1 = Instant::now();
-    let embree = Embree::new(&tris);
+    let embree = Embree::new(&tris, isa);
     let embree_build = t1.elapsed().as_secs_f64();
     let name = Path::new(path)
         .file_name()
@@ -227,23 +233,37 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let mut rounds = 3;
     let mut size = 1024;
+    let mut isa = Isa::Best;
     let mut meshes = Vec::new();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
             "--size" => size = args.next().and_then(|v| v.parse().ok()).unwrap_or(size),
+            "--embree-isa" => match Isa::parse(&args.next().unwrap_or_default()) {
+                Ok(i) => isa = i,
+                Err(e) => {
+                    eprintln!("{e}");
+                    std::process::exit(2);
+                }
+            },
             _ => meshes.push(a),
         }
     }
     if meshes.is_empty() {
-        eprintln!("usage: embree_bench [--rounds R] [--size N] MESH.obj...");
+        eprintln!("usage: embree_bench [--rounds R] [--size N] [--embree-isa ISA] MESH.obj...");
         std::process::exit(2);
     }
     match Embree::version() {
-        Ok(v) => println!("Embree {v} (the project's harness, native/embree_bench/c)"),
+        Ok(v) => println!(
+            "Embree {v} (the project's harness, native/embree_bench/c), ISA: {}",
+            match isa {
+                Isa::Best => "the widest the CPU has (--embree-isa caps it)".to_string(),
+                i => format!("at most {} (--embree-isa)", i.name()),
+            }
+        ),
         Err(e) => println!("{e}"),
     }
     for m in &meshes {
-        bench(m, rounds.max(1), size.max(4));
+        bench(m, rounds.max(1), size.max(4), isa);
     }
 }

@@ -1,5 +1,6 @@
 //! Single-ray rates of RingTracer's kernel and Embree per CPU second, for a busy machine:
-//! `cargo run --release -p ring_tracer_embree_bench --bin cpu_ratio -- [--rounds R] MESH.obj...`
+//! `cargo run --release -p ring_tracer_embree_bench --bin cpu_ratio -- [--rounds R]
+//! [--embree-isa ISA] MESH.obj...` (ISA as for `embree_bench`).
 //!
 //! The same rays as `embree_bench` (1024 x 1024 primary rays in tiles, as many incoherent ones,
 //! closest hit and any hit), one thread, ours and Embree alternating. Each cell is timed by the
@@ -7,12 +8,12 @@
 //! programs share the cores, wall-clock rates swing with their load, while CPU-second rates
 //! only feel what they do to the caches. The ratio compares the best rounds.
 
-use ring_tracer_embree_bench::embree::{flat, Call, Embree};
+use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
 use ring_tracer_embree_bench::{single_hits, timed_cpu as timed, RaySets};
 use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
 
-fn bench(path: &str, rounds: usize) {
+fn bench(path: &str, rounds: usize, isa: Isa) {
     let (lw, lc, scene) = timed(|| Scene::load(Path::new(path)));
     let scene = match scene {
         Ok(s) => s,
@@ -22,7 +23,7 @@ fn bench(path: &str, rounds: usize) {
         }
     };
     let tris = scene.triangles();
-    let (ew, ec, embree) = timed(|| Embree::new(&tris));
+    let (ew, ec, embree) = timed(|| Embree::new(&tris, isa));
     let embree = match embree {
         Ok(e) => e,
         Err(e) => {
@@ -88,15 +89,23 @@ fn bench(path: &str, rounds: usize) {
 fn main() {
     let mut args = std::env::args().skip(1);
     let mut rounds = 3;
+    let mut isa = Isa::Best;
     let mut meshes = Vec::new();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
+            "--embree-isa" => match Isa::parse(&args.next().unwrap_or_default()) {
+                Ok(i) => isa = i,
+                Err(e) => {
+                    eprintln!("{e}");
+                    std::process::exit(2);
+                }
+            },
             _ => meshes.push(a),
         }
     }
     if meshes.is_empty() {
-        eprintln!("usage: cpu_ratio [--rounds R] MESH.obj...");
+        eprintln!("usage: cpu_ratio [--rounds R] [--embree-isa ISA] MESH.obj...");
         std::process::exit(2);
     }
     if let Err(e) = Embree::version() {
@@ -104,6 +113,6 @@ fn main() {
         std::process::exit(1);
     }
     for m in &meshes {
-        bench(m, rounds.max(1));
+        bench(m, rounds.max(1), isa);
     }
 }
