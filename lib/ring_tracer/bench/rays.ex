@@ -16,7 +16,8 @@ defmodule RingTracer.Bench.Rays do
   (`native/embree_bench`), built when Debian's `libembree-dev` is installed;
   without it the table says so and times ours only. No BEAM in the loop.
   `--embree-isa` caps the instruction set Embree may use (by default the
-  widest the CPU has: AVX-512 where there is, while ours uses AVX2).
+  widest the CPU has: AVX-512 where there is, which ours uses only in its
+  packets' leaf tests).
   `cargo run --release -p ring_tracer_kernel --example big_mesh -- OUT.obj`
   writes a 600k-triangle mesh.
   """

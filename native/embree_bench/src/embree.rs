@@ -50,7 +50,7 @@ pub enum Call {
 
 /// The instruction set Embree's device may use: by default the widest the CPU has (its
 /// AVX-512 code on CPUs with AVX-512, 16 rays to a register in `rtcIntersect16`); the others
-/// cap it, e.g. at AVX2, the widest our kernel uses.
+/// cap it, e.g. at AVX2, which our kernel uses for all but its packets' leaf tests.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Isa {
     /// The widest the CPU has.

@@ -29,7 +29,8 @@
 //!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
 //!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 8-wide SIMD nodes (AVX or SSE);
 //!   `packet` (private): coherent rays through it sixteen at a time
-//!   ([`Scene::intersect_packet`], the same hits as one ray at a time);
+//!   ([`Scene::intersect_packet`], [`Scene::occluded_packet`], the same answers as one ray at a
+//!   time), its leaf tests eight or sixteen rays to a vector (`lanes`, private);
 //!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
 //!   by instances (transform, inverse, material) under a top-level BVH.
 //! - [`raysets`]: the fixed ray sets of the ray-casting benchmarks.
@@ -41,7 +42,7 @@
 //! ## Speed
 //! f32 throughout with `glam::Vec3A`/`Vec4` (SSE2); primitives are an enum (no dynamic
 //! dispatch); per-primitive data is precomputed (triangle edges, cone frames); BVH traversal
-//! tests four boxes at once; shadow rays are any-hit with a per-light shadow cache (the last
+//! tests eight boxes at once; shadow rays are any-hit with a per-light shadow cache (the last
 //! occluder is tried first, and dropped once it has let a few rays in a row through; the answer
 //! does not depend on it), and test a leaf's spheres and triangles before its cones; no
 //! allocation per ray.
@@ -55,6 +56,7 @@ pub mod film;
 pub mod geometry;
 pub mod instance;
 pub mod integrator;
+mod lanes;
 pub mod light;
 pub mod limits;
 pub mod material;

@@ -15,9 +15,10 @@
 //! At a leaf each ray makes its own box test, exactly the single-ray traversal's (the same
 //! products, differences and min/max in the same order), and only the rays that pass it test the
 //! leaf's primitives. A leaf of triangle blocks is met across rays with AVX, each triangle (read
-//! from the blocks themselves) against eight rays at once, with the operations of the
-//! single-ray test; when fewer than [`FEW`] of the eight enter a leaf of more than four
-//! triangles, those rays meet its blocks one at a time, four triangles per test
+//! from the blocks themselves) against eight rays at once, or all sixteen where the CPU has
+//! AVX-512 ([`crate::lanes`]), with the operations of the single-ray test; when fewer than
+//! [`FEW`] of those enter a leaf of more than four triangles, they meet its blocks one at a
+//! time, four triangles per test
 //! ([`crate::tri4`]). Other leaves, and all of them without AVX, are met one ray at a time with
 //! [`Scene::leaf_closest`], the leaf test of [`Scene::intersect_with`]. So
 //! a ray meets the leaves that its single-ray traversal meets (a leaf whose box a ray enters
@@ -37,6 +38,8 @@
 //! are taken row by row.
 
 use crate::bvh::{has_avx_fma, Node8, Scratch, EMPTY, WIDTH};
+#[cfg(target_arch = "x86_64")]
+use crate::lanes::{Avx16, Avx8, Lanes};
 use crate::ray::Ray;
 use crate::scene::{Hit, Mailbox, Scene};
 use crate::tri4::{RayLanes, Tri4};
@@ -295,6 +298,30 @@ thread_local! {
     static FORCE_SSE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
+#[cfg(test)]
+thread_local! {
+    /// Tests set this to run the eight-lane leaf tests on a machine with AVX-512.
+    static FORCE_AVX2: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether the leaf tests take sixteen lanes at once (the CPU has AVX-512F as well as AVX and
+/// FMA, and tests did not ask for fewer).
+#[inline(always)]
+fn use_avx512() -> bool {
+    #[cfg(test)]
+    if FORCE_AVX2.with(|f| f.get()) {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        use_avx() && std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
 /// Whether the AVX traversal runs (the CPU has AVX and FMA, and tests did not ask for SSE).
 #[inline(always)]
 fn use_avx() -> bool {
@@ -436,76 +463,76 @@ unsafe fn node_avx(node: &Node8, f: &Frustum, tmax: f32) -> ([f32; WIDTH], u32) 
 }
 
 /// Fewer rays than this entering a leaf of more than four triangles meet its blocks one ray
-/// at a time (four triangles per SSE test), rather than each triangle across eight rays.
+/// at a time (four triangles per SSE test), rather than each triangle across eight (or sixteen)
+/// rays.
 const FEW: u32 = 3;
 
 /// Each ray's own box test of child `i` of `node` (the operations of [`enters`], lane by lane)
-/// for the rays `8 * half..8 * half + 8` of a packet: their entry distances, and all ones in
-/// the lanes of those that enter before their own bound.
+/// for the rays `L::N * part..L::N * part + L::N` of a packet: their entry distances, and the
+/// lanes of those that enter before their own bound.
 ///
 /// # Safety
-/// The CPU must have AVX and FMA.
+/// The CPU must have the features of the width `L` (see [`crate::lanes`]).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx,fma")]
-#[inline]
-unsafe fn rays_enter_avx(
+#[inline(always)]
+unsafe fn rays_enter<L: Lanes>(
     node: &Node8,
     i: usize,
     f: &Frustum,
     soa: &Soa,
-    half: usize,
-) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
-    use std::arch::x86_64::*;
-    let base = 8 * (half & 1);
+    part: usize,
+) -> (L::V, L::M) {
+    let base = (L::N * part) & (PACKET - 1);
     let p = node.planes();
-    // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
-    // each unaligned load reads 8 f32 inside one row.
-    let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
-    let mut tn = _mm256_setzero_ps();
-    let mut tf = load(&soa.tmax);
-    for a in 0..3 {
-        let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
-        let n = _mm256_set1_ps(p[f.near[a] & 7][i & 7]);
-        let x = _mm256_set1_ps(p[f.far[a] & 7][i & 7]);
-        tn = _mm256_max_ps(tn, _mm256_fmsub_ps(n, inv, oinv));
-        tf = _mm256_min_ps(tf, _mm256_fmsub_ps(x, inv, oinv));
+    // SAFETY (here and below): the caller's CPU has the width's features; `soa`'s rows are
+    // arrays of 16 f32 and `base + L::N <= 16` (`L::N` is 8 or 16, `part` below 16 / L::N), so
+    // each load reads L::N f32 inside one row.
+    let load = |row: &[f32; PACKET]| unsafe { L::load(row.as_ptr().add(base)) };
+    unsafe {
+        let mut tn = L::splat(0.0);
+        let mut tf = load(&soa.tmax);
+        for a in 0..3 {
+            let (inv, oinv) = (load(&soa.inv[a]), load(&soa.oinv[a]));
+            let n = L::splat(p[f.near[a] & 7][i & 7]);
+            let x = L::splat(p[f.far[a] & 7][i & 7]);
+            tn = L::max(tn, L::fmsub(n, inv, oinv));
+            tf = L::min(tf, L::fmsub(x, inv, oinv));
+        }
+        (tn, L::le(tn, tf))
     }
-    (tn, _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf))
 }
 
 /// An all-triangle leaf (child `i` of `node`: the first `n` triangles of `blocks`) against the
-/// rays `8 * half..8 * half + 8` of a packet, eight rays to an AVX vector: first each ray's own
-/// box test (the operations of [`enters`], lane by lane), then each triangle in turn against
-/// the rays that entered, with the operations of the four-triangle test of [`crate::tri4`]
-/// (which are those of the one-triangle test) on the same values, so the same distances; among
-/// equal distances the lowest index wins, as in [`Scene::leaf_closest`]. Records the rays that
-/// entered in `entered` (see [`traverse`]). Returns whether some ray's nearest hit changed, and
-/// the mask of the rays (of the eight) that entered but were left to the caller, when fewer
-/// than [`FEW`] of them entered a leaf of more than four triangles.
+/// rays `L::N * part..L::N * part + L::N` of a packet, `L::N` rays to a vector: first each
+/// ray's own box test (the operations of [`enters`], lane by lane), then each triangle in turn
+/// against the rays that entered, with the operations of the four-triangle test of
+/// [`crate::tri4`] (which are those of the one-triangle test) on the same values, so the same
+/// distances; among equal distances the lowest index wins, as in [`Scene::leaf_closest`].
+/// Records the rays that entered in `entered` (see [`traverse`]). Returns whether some ray's
+/// nearest hit changed, and the mask of the rays (of these `L::N`) that entered but were left
+/// to the caller, when fewer than [`FEW`] of them entered a leaf of more than four triangles.
 ///
 /// # Safety
-/// The CPU must have AVX and FMA.
+/// The CPU must have the features of the width `L` (see [`crate::lanes`]).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx,fma")]
 #[allow(clippy::too_many_arguments)]
-unsafe fn leaf_avx(
+#[inline(always)]
+unsafe fn leaf_lanes<L: Lanes>(
     node: &Node8,
     i: usize,
     f: &Frustum,
     soa: &mut Soa,
-    half: usize,
+    part: usize,
     blocks: &[Tri4],
     n: usize,
     entered: &mut Vec<(usize, f32, u32)>,
 ) -> (bool, u32) {
-    use std::arch::x86_64::*;
-    // SAFETY: the caller's CPU has AVX and FMA, as this function's.
-    let (tn, inside) = unsafe { rays_enter_avx(node, i, f, soa, half) };
-    let mask = _mm256_movemask_ps(inside) as u32;
-    let base = 8 * (half & 1);
-    // SAFETY (every load below): `soa`'s rows are arrays of 16 f32 and `base` is 0 or 8, so
-    // each unaligned load reads 8 f32 inside one row.
-    let load = |row: &[f32; PACKET]| unsafe { _mm256_loadu_ps(row.as_ptr().add(base)) };
+    // SAFETY (every `unsafe` below): the caller's CPU has the width's features; the loads and
+    // stores are of L::N f32 inside arrays of 16 (see rays_enter).
+    let (tn, inside) = unsafe { rays_enter::<L>(node, i, f, soa, part) };
+    let mask = unsafe { L::bits(inside) };
+    let base = (L::N * part) & (PACKET - 1);
+    let load = |row: &[f32; PACKET]| unsafe { L::load(row.as_ptr().add(base)) };
     #[cfg(test)]
     probe::add(1, 1);
     if mask == 0 {
@@ -519,17 +546,17 @@ unsafe fn leaf_avx(
         probe::add(3, if few { 0 } else { n as u64 });
         probe::add(6, few as u64);
     }
-    let mut tns = [0.0f32; 8];
-    // SAFETY: `tns` is 8 f32, the 32 bytes an unaligned store writes.
-    unsafe { _mm256_storeu_ps(tns.as_mut_ptr(), tn) };
+    let mut tns = [0.0f32; PACKET];
+    unsafe { L::store(tns.as_mut_ptr(), tn) };
     // a hit at exactly a ray's nearest distance is taken only with a lower index
-    let mut limit = [f32::NEG_INFINITY; 8];
+    let mut limit = [f32::NEG_INFINITY; PACKET];
     let mut m = mask;
     while m != 0 {
-        let j = m.trailing_zeros() as usize & 7;
+        let j = m.trailing_zeros() as usize & (PACKET - 1);
         m &= m - 1;
-        entered.push((base + j, tns[j], n as u32));
-        let (t, pr) = (soa.tmax[(base + j) & 15], soa.prim[(base + j) & 15]);
+        let l = (base + j) & (PACKET - 1);
+        entered.push((l, tns[j], n as u32));
+        let (t, pr) = (soa.tmax[l], soa.prim[l]);
         limit[j] = if pr == u32::MAX { t } else { t.next_up() };
     }
     if few {
@@ -537,67 +564,58 @@ unsafe fn leaf_avx(
     }
     let [ox, oy, oz] = [0, 1, 2].map(|a| load(&soa.o[a]));
     let [dx, dy, dz] = [0, 1, 2].map(|a| load(&soa.d[a]));
-    let (zero, one) = (_mm256_setzero_ps(), _mm256_set1_ps(1.0));
-    // SAFETY: `limit` is 8 f32.
-    let mut lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+    let (zero, one) = unsafe { (L::splat(0.0), L::splat(1.0)) };
+    let mut lim = unsafe { L::load(limit.as_ptr()) };
     let mut changed = false;
     for k in 0..n {
         let Some(b) = blocks.get(k / 4) else {
             break;
         };
         let (v0, e1, e2) = b.corners();
-        let sp = |x: &[Vec4; 3], a: usize| _mm256_set1_ps(x[a & 3][k & 3]);
-        let (e1x, e1y, e1z) = (sp(e1, 0), sp(e1, 1), sp(e1, 2));
-        let (e2x, e2y, e2z) = (sp(e2, 0), sp(e2, 1), sp(e2, 2));
-        let (mul, sub, add) = (_mm256_mul_ps, _mm256_sub_ps, _mm256_add_ps);
-        // p = dir x e2
-        let px = sub(mul(dy, e2z), mul(dz, e2y));
-        let py = sub(mul(dz, e2x), mul(dx, e2z));
-        let pz = sub(mul(dx, e2y), mul(dy, e2x));
-        let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
-        let inv = _mm256_div_ps(one, det);
-        let sx = sub(ox, sp(v0, 0));
-        let sy = sub(oy, sp(v0, 1));
-        let sz = sub(oz, sp(v0, 2));
-        let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
-        // q = s x e1
-        let qx = sub(mul(sy, e1z), mul(sz, e1y));
-        let qy = sub(mul(sz, e1x), mul(sx, e1z));
-        let qz = sub(mul(sx, e1y), mul(sy, e1x));
-        let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
-        let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
-        let and = _mm256_and_ps;
-        let ok = and(
-            and(
-                and(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, zero), inside),
+        let (t, mut hit) = unsafe {
+            let sp = |x: &[Vec4; 3], a: usize| L::splat(x[a & 3][k & 3]);
+            let (e1x, e1y, e1z) = (sp(e1, 0), sp(e1, 1), sp(e1, 2));
+            let (e2x, e2y, e2z) = (sp(e2, 0), sp(e2, 1), sp(e2, 2));
+            let (mul, sub, add) = (L::mul, L::sub, L::add);
+            // p = dir x e2
+            let px = sub(mul(dy, e2z), mul(dz, e2y));
+            let py = sub(mul(dz, e2x), mul(dx, e2z));
+            let pz = sub(mul(dx, e2y), mul(dy, e2x));
+            let det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz));
+            let inv = L::div(one, det);
+            let sx = sub(ox, sp(v0, 0));
+            let sy = sub(oy, sp(v0, 1));
+            let sz = sub(oz, sp(v0, 2));
+            let u = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv);
+            // q = s x e1
+            let qx = sub(mul(sy, e1z), mul(sz, e1y));
+            let qy = sub(mul(sz, e1x), mul(sx, e1z));
+            let qz = sub(mul(sx, e1y), mul(sy, e1x));
+            let v = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv);
+            let t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv);
+            let and = |a, b| L::and(a, b);
+            let ok = and(
                 and(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(u, zero),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(u, one),
-                ),
-            ),
-            and(
-                and(
-                    _mm256_cmp_ps::<_CMP_NLT_UQ>(v, zero),
-                    _mm256_cmp_ps::<_CMP_NGT_UQ>(add(u, v), one),
+                    and(L::ne(det, zero), inside),
+                    and(L::ge(u, zero), L::le(u, one)),
                 ),
                 and(
-                    _mm256_cmp_ps::<_CMP_GT_OQ>(t, zero),
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(t, lim),
+                    and(L::not_lt(v, zero), L::not_gt(add(u, v), one)),
+                    and(L::gt(t, zero), L::lt(t, lim)),
                 ),
-            ),
-        );
-        let mut hit = _mm256_movemask_ps(ok) as u32;
+            );
+            (t, L::bits(ok))
+        };
         if hit == 0 {
             continue;
         }
-        let mut ts = [0.0f32; 8];
-        // SAFETY: `ts` is 8 f32, the 32 bytes an unaligned store writes.
-        unsafe { _mm256_storeu_ps(ts.as_mut_ptr(), t) };
+        let mut ts = [0.0f32; PACKET];
+        unsafe { L::store(ts.as_mut_ptr(), t) };
         let pk = b.prim(k & 3);
         while hit != 0 {
-            let j = hit.trailing_zeros() as usize & 7;
+            let j = hit.trailing_zeros() as usize & (PACKET - 1);
             hit &= hit - 1;
-            let l = (base + j) & 15;
+            let l = (base + j) & (PACKET - 1);
             if ts[j] < soa.tmax[l] || pk < soa.prim[l] {
                 soa.tmax[l] = ts[j];
                 soa.prim[l] = pk;
@@ -605,8 +623,7 @@ unsafe fn leaf_avx(
                 changed = true;
             }
         }
-        // SAFETY: `limit` is 8 f32.
-        lim = unsafe { _mm256_loadu_ps(limit.as_ptr()) };
+        lim = unsafe { L::load(limit.as_ptr()) };
     }
     (changed, 0)
 }
@@ -827,14 +844,17 @@ fn group<A: Answers + ?Sized>(
     #[cfg(test)]
     probe::add(5, 1);
     #[cfg(target_arch = "x86_64")]
-    if use_avx() {
+    if use_avx512() {
+        // SAFETY: the CPU has AVX, FMA and AVX-512F (checked just above).
+        unsafe { traverse_avx512(scene, rays, idx, &f, &mut soa, scratch) };
+    } else if use_avx() {
         // SAFETY: the CPU has AVX and FMA (checked just above).
         unsafe { traverse_avx(scene, rays, idx, &f, &mut soa, scratch) };
     } else {
-        traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
+        traverse::<false, false>(scene, rays, idx, &f, &mut soa, scratch);
     }
     #[cfg(not(target_arch = "x86_64"))]
-    traverse::<false>(scene, rays, idx, &f, &mut soa, scratch);
+    traverse::<false, false>(scene, rays, idx, &f, &mut soa, scratch);
     for (j, &i) in idx.iter().enumerate() {
         let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
         if let Some(r) = rays.get(i) {
@@ -857,7 +877,25 @@ unsafe fn traverse_avx(
     soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
-    traverse::<true>(scene, rays, idx, f, soa, scratch);
+    traverse::<true, false>(scene, rays, idx, f, soa, scratch);
+}
+
+/// [`traverse`] compiled with AVX-512F too, whose leaf tests take the sixteen rays of a packet
+/// in one vector (the same operations on each lane, so the same bits, as eight to a vector).
+///
+/// # Safety
+/// The CPU must have AVX, FMA and AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,fma,avx512f")]
+unsafe fn traverse_avx512(
+    scene: &Scene,
+    rays: &[Ray],
+    idx: &[usize],
+    f: &Frustum,
+    soa: &mut Soa,
+    scratch: &mut Scratch,
+) {
+    traverse::<true, true>(scene, rays, idx, f, soa, scratch);
 }
 
 /// The packet traversal of the scene's own BVH for the rays `idx` (lane `j` is `rays[idx[j]]`);
@@ -869,7 +907,7 @@ unsafe fn traverse_avx(
 /// bound never falls below its final hit), so a pixel costs the same in any tile. In an
 /// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
 #[inline(always)]
-fn traverse<const AVX: bool>(
+fn traverse<const AVX: bool, const WIDE: bool>(
     scene: &Scene,
     rays: &[Ray],
     idx: &[usize],
@@ -881,13 +919,13 @@ fn traverse<const AVX: bool>(
     // than reached through a closure, which would not be compiled for AVX and FMA
     let mut entered = std::mem::take(&mut scratch.entered);
     entered.clear();
-    traverse_with::<AVX>(scene, rays, idx, f, soa, scratch, &mut entered);
+    traverse_with::<AVX, WIDE>(scene, rays, idx, f, soa, scratch, &mut entered);
     scratch.entered = entered;
 }
 
 /// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
 #[inline(always)]
-fn traverse_with<const AVX: bool>(
+fn traverse_with<const AVX: bool, const WIDE: bool>(
     scene: &Scene,
     rays: &[Ray],
     idx: &[usize],
@@ -941,15 +979,22 @@ fn traverse_with<const AVX: bool>(
                     #[cfg(target_arch = "x86_64")]
                     if let (true, Some(blocks)) = (AVX, scene.tri_blocks.leaf(first, c as usize)) {
                         let mut changed = false;
-                        for half in 0..idx.len().div_ceil(8) {
-                            // SAFETY: AVX is only set by traverse_avx, which runs where the
-                            // CPU has it.
-                            let (ch, mut left) =
-                                unsafe { leaf_avx(node, i, f, soa, half, blocks, n, entered) };
+                        let width = if WIDE { Avx16::N } else { Avx8::N };
+                        for part in 0..idx.len().div_ceil(width) {
+                            // SAFETY: AVX is only set by traverse_avx, and WIDE by
+                            // traverse_avx512, which run where the CPU has AVX and FMA, and
+                            // AVX-512F as well.
+                            let (ch, mut left) = unsafe {
+                                if WIDE {
+                                    leaf_lanes::<Avx16>(node, i, f, soa, part, blocks, n, entered)
+                                } else {
+                                    leaf_lanes::<Avx8>(node, i, f, soa, part, blocks, n, entered)
+                                }
+                            };
                             changed |= ch;
                             // the few rays that entered: one at a time, by blocks of four
                             while left != 0 {
-                                let l = (8 * half + left.trailing_zeros() as usize) & 15;
+                                let l = (width * part + left.trailing_zeros() as usize) & 15;
                                 left &= left - 1;
                                 if let Some(r) = idx.get(l).and_then(|&ri| rays.get(ri)) {
                                     let t = scene.leaf_closest(
@@ -1154,6 +1199,39 @@ mod tests {
         rays
     }
 
+    /// [`rays_enter`] at the width `L` against [`enters`], lane by lane, distances bit for bit.
+    ///
+    /// # Safety
+    /// The CPU must have the width's features.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn rays_enter_agrees<L: Lanes>(
+        node: &Node8,
+        f: &Frustum,
+        soa: &Soa,
+        lanes: &[([f32; 3], [f32; 3])],
+        tmax: f32,
+    ) {
+        for i in 0..WIDTH {
+            for part in 0..PACKET / L::N {
+                // SAFETY: the caller's CPU has the width's features; `tl` is 16 f32.
+                let (tl, bits) = unsafe {
+                    let (t, inside) = rays_enter::<L>(node, i, f, soa, part);
+                    let mut tl = [0.0f32; PACKET];
+                    L::store(tl.as_mut_ptr(), t);
+                    (tl, L::bits(inside))
+                };
+                for (j, l) in lanes.iter().enumerate().skip(L::N * part).take(L::N) {
+                    let k = j - L::N * part;
+                    let want = enters(node, i, f, *l, tmax);
+                    assert_eq!((bits >> k) & 1 != 0, want.is_some(), "{} lanes", L::N);
+                    if let Some(w) = want {
+                        assert_eq!(tl[k].to_bits(), w.to_bits(), "{} lanes", L::N);
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn packets_equal_single_rays_on_random_scenes() {
         probe::COUNTS.with(|c| c.set([0; 7]));
@@ -1202,10 +1280,13 @@ mod tests {
             let rays = bundles(&mut seed, Vec3A::ZERO, 3.0, 100);
             let tmax = if round % 5 == 4 { 4.0 } else { f32::INFINITY };
             hits += check(&scene, &rays, tmax, round < 3);
-            // the SSE traversal where the AVX one would run
+            // the SSE traversal where the AVX one would run, and eight lanes where sixteen would
             FORCE_SSE.with(|f| f.set(true));
             check(&scene, &rays, tmax, round < 3);
             FORCE_SSE.with(|f| f.set(false));
+            FORCE_AVX2.with(|f| f.set(true));
+            check(&scene, &rays, tmax, round < 3);
+            FORCE_AVX2.with(|f| f.set(false));
             // random incoherent rays: mostly the sign groups and the single-ray fallback
             let rays: Vec<Ray> = (0..400)
                 .map(|_| Ray::new(v(&mut seed) * 4.0, v(&mut seed)))
@@ -1394,27 +1475,14 @@ mod tests {
                 assert_eq!(mask, ma);
                 assert_eq!(tn.map(f32::to_bits), ta.map(f32::to_bits));
             }
-            // the leaves' AVX test of the rays, lane by lane, against `enters`
+            // the leaves' test of the rays, lane by lane, against `enters`, at both widths
             #[cfg(target_arch = "x86_64")]
             if has_avx_fma() {
-                for i in 0..WIDTH {
-                    for half in 0..2 {
-                        // SAFETY: the CPU has AVX and FMA (checked above).
-                        let (t, inside) = unsafe { rays_enter_avx(&node, i, &f, &soa, half) };
-                        let (mut tl, mut il) = ([0.0f32; 8], [0.0f32; 8]);
-                        // SAFETY: `tl` and `il` are 8 f32, the 32 bytes an unaligned store writes.
-                        unsafe {
-                            std::arch::x86_64::_mm256_storeu_ps(tl.as_mut_ptr(), t);
-                            std::arch::x86_64::_mm256_storeu_ps(il.as_mut_ptr(), inside);
-                        }
-                        for (j, l) in lanes.iter().enumerate().skip(8 * half).take(8) {
-                            let want = enters(&node, i, &f, *l, tmax);
-                            assert_eq!(il[j - 8 * half].to_bits() != 0, want.is_some());
-                            if let Some(w) = want {
-                                assert_eq!(tl[j - 8 * half].to_bits(), w.to_bits());
-                            }
-                        }
-                    }
+                // SAFETY: the CPU has AVX and FMA (checked above).
+                unsafe { rays_enter_agrees::<Avx8>(&node, &f, &soa, &lanes, tmax) };
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    // SAFETY: and AVX-512F (checked on the line above).
+                    unsafe { rays_enter_agrees::<Avx16>(&node, &f, &soa, &lanes, tmax) };
                 }
             }
             for (r, l) in rays.iter().zip(&lanes) {
