@@ -629,52 +629,34 @@ unsafe fn leaf_lanes<L: Lanes>(
 }
 
 /// What a packet query leaves for each of its rays.
-pub(crate) trait Answers {
+pub(crate) trait Answer: Sized {
     /// Any-hit queries: a ray is done at its first hit (its lanes then enter no more boxes).
     const ANY: bool;
-    /// The number of answers (rays beyond it are not traced).
-    fn len(&self) -> usize;
-    /// Answers ray `i` (of the packet's slice of rays) alone, with the single-ray query.
-    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch);
-    /// Answers ray `i` once the packet's traversal of the scene's own BVH left it `prim` at `t`
-    /// (`u32::MAX`: nothing before `t`, which is then its bound `tmax`).
-    #[allow(clippy::too_many_arguments)]
-    fn finish(
-        &mut self,
-        scene: &Scene,
-        i: usize,
-        ray: &Ray,
-        tmax: f32,
-        t: f32,
-        prim: u32,
-        scratch: &mut Scratch,
-    );
+    /// The answer for `ray` alone, from the single-ray query.
+    fn single(scene: &Scene, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Self;
+    /// The answer for a ray once the packet's traversal of the scene's own BVH is done with it.
+    fn finish(scene: &Scene, left: Left<'_>, scratch: &mut Scratch) -> Self;
+}
+
+/// What the packet's traversal of the scene's own BVH left for a ray: `prim` at `t`
+/// (`u32::MAX`: nothing before `t`, which is then its bound `tmax`).
+pub(crate) struct Left<'r> {
+    ray: &'r Ray,
+    tmax: f32,
+    t: f32,
+    prim: u32,
 }
 
 /// Closest hits: what [`Scene::intersect_with`] returns.
-impl Answers for [Option<Hit>] {
+impl Answer for Option<Hit> {
     const ANY: bool = false;
-    fn len(&self) -> usize {
-        <[Option<Hit>]>::len(self)
+    fn single(scene: &Scene, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Self {
+        scene.intersect_with(ray, tmax, scratch)
     }
-    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch) {
-        if let Some(o) = self.get_mut(i) {
-            *o = scene.intersect_with(ray, tmax, scratch);
-        }
-    }
-    fn finish(
-        &mut self,
-        scene: &Scene,
-        i: usize,
-        ray: &Ray,
-        _tmax: f32,
-        t: f32,
-        prim: u32,
-        scratch: &mut Scratch,
-    ) {
-        let Some(o) = self.get_mut(i) else { return };
+    fn finish(scene: &Scene, left: Left<'_>, scratch: &mut Scratch) -> Self {
+        let Left { ray, t, prim, .. } = left;
         // without instances and planes the hit is the BVH's (what finish_closest would return)
-        *o = if scene.instances.is_empty() && scene.planes.is_empty() {
+        if scene.instances.is_empty() && scene.planes.is_empty() {
             (prim != u32::MAX).then_some(Hit {
                 t,
                 prim,
@@ -682,36 +664,23 @@ impl Answers for [Option<Hit>] {
             })
         } else {
             scene.finish_closest(ray, t, prim, scratch)
-        };
+        }
     }
 }
 
 /// Occlusion: what [`Scene::occluded_with`] returns. A primitive of the scene's own BVH hit
 /// before the bound is what its any-hit traversal looks for (the same tests on the same
 /// interval), and the mesh instances and planes are then asked as it asks them.
-impl Answers for [bool] {
+impl Answer for bool {
     const ANY: bool = true;
-    fn len(&self) -> usize {
-        <[bool]>::len(self)
+    fn single(scene: &Scene, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Self {
+        scene.occluded_with(ray, tmax, scratch)
     }
-    fn single(&mut self, scene: &Scene, i: usize, ray: &Ray, tmax: f32, scratch: &mut Scratch) {
-        if let Some(o) = self.get_mut(i) {
-            *o = scene.occluded_with(ray, tmax, scratch);
-        }
-    }
-    fn finish(
-        &mut self,
-        scene: &Scene,
-        i: usize,
-        ray: &Ray,
-        tmax: f32,
-        _t: f32,
-        prim: u32,
-        scratch: &mut Scratch,
-    ) {
-        if let Some(o) = self.get_mut(i) {
-            *o = prim != u32::MAX || scene.occluded_beyond_bvh(ray, tmax, scratch).is_some();
-        }
+    fn finish(scene: &Scene, left: Left<'_>, scratch: &mut Scratch) -> Self {
+        let Left {
+            ray, tmax, prim, ..
+        } = left;
+        prim != u32::MAX || scene.occluded_beyond_bvh(ray, tmax, scratch).is_some()
     }
 }
 
@@ -720,12 +689,12 @@ impl Answers for [bool] {
 /// packets ([`coherent`]) and sign groups of fewer than [`MIN_GROUP`] rays are traced one ray
 /// at a time; with `every_ray` all go through the packet traversal, and then the work a ray
 /// adds to `scratch.work` does not depend on the other rays of its packet (see [`traverse`]).
-pub(crate) fn trace<A: Answers + ?Sized>(
+pub(crate) fn trace<A: Answer>(
     scene: &Scene,
     rays: &[Ray],
     tmax: impl Fn(usize) -> f32,
     scratch: &mut Scratch,
-    out: &mut A,
+    out: &mut [A],
     every_ray: bool,
 ) {
     let n = rays.len().min(out.len());
@@ -738,7 +707,9 @@ pub(crate) fn trace<A: Answers + ?Sized>(
         }
         if !every_ray && !coherent(scene, rays) {
             for (i, (r, &b)) in rays.iter().zip(&bounds).enumerate() {
-                out.single(scene, start + i, r, b, scratch);
+                if let Some(o) = out.get_mut(start + i) {
+                    *o = A::single(scene, r, b, scratch);
+                }
             }
             continue;
         }
@@ -762,8 +733,10 @@ pub(crate) fn trace<A: Answers + ?Sized>(
                 while m != 0 {
                     let i = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    if let (Some(r), Some(&b)) = (rays.get(i), bounds.get(i)) {
-                        out.single(scene, start + i, r, b, scratch);
+                    if let (Some(r), Some(&b), Some(o)) =
+                        (rays.get(i), bounds.get(i), out.get_mut(start + i))
+                    {
+                        *o = A::single(scene, r, b, scratch);
                     }
                 }
             } else {
@@ -776,7 +749,7 @@ pub(crate) fn trace<A: Answers + ?Sized>(
 /// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
 /// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
 #[allow(clippy::too_many_arguments)]
-fn group<A: Answers + ?Sized>(
+fn group<A: Answer>(
     scene: &Scene,
     rays: &[Ray],
     members: u32,
@@ -784,7 +757,7 @@ fn group<A: Answers + ?Sized>(
     tmax: &[f32; PACKET],
     scratch: &mut Scratch,
     at: usize,
-    out: &mut A,
+    out: &mut [A],
 ) {
     let mut soa = Soa::empty();
     let mut idx = [0usize; PACKET];
@@ -858,7 +831,15 @@ fn group<A: Answers + ?Sized>(
     for (j, &i) in idx.iter().enumerate() {
         let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
         if let Some(r) = rays.get(i) {
-            out.finish(scene, at + i, r, tmax[i & 15], t, prim, scratch);
+            let left = Left {
+                ray: r,
+                tmax: tmax[i & 15],
+                t,
+                prim,
+            };
+            if let Some(o) = out.get_mut(at + i) {
+                *o = A::finish(scene, left, scratch);
+            }
         }
     }
 }
