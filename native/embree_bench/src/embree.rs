@@ -91,6 +91,15 @@ impl Isa {
             })
     }
 
+    /// The ISA an `--embree-isa` argument names; exits with status 2 and the list of names
+    /// when it names none.
+    pub fn from_arg(arg: Option<String>) -> Isa {
+        Isa::parse(&arg.unwrap_or_default()).unwrap_or_else(|e| {
+            eprintln!("{e}");
+            std::process::exit(2)
+        })
+    }
+
     /// Its name in [`Isa::NAMES`].
     pub fn name(self) -> &'static str {
         Isa::NAMES
@@ -99,16 +108,16 @@ impl Isa {
             .map_or("best", |(n, _)| n)
     }
 
-    /// The device configuration: one build thread, and the ISA cap.
+    /// The device configuration: one build thread, and the ISA cap (Embree's own names are
+    /// those of [`Isa::NAMES`]).
     #[cfg_attr(not(embree), allow(dead_code))]
-    fn config(self) -> &'static std::ffi::CStr {
-        match self {
-            Isa::Best => c"threads=1",
-            Isa::Sse42 => c"threads=1,isa=sse4.2",
-            Isa::Avx => c"threads=1,isa=avx",
-            Isa::Avx2 => c"threads=1,isa=avx2",
-            Isa::Avx512 => c"threads=1,isa=avx512",
-        }
+    fn config(self) -> std::ffi::CString {
+        let cap = match self {
+            Isa::Best => String::new(),
+            isa => format!(",isa={}", isa.name()),
+        };
+        // the names hold no NUL
+        std::ffi::CString::new(format!("threads=1{cap}")).unwrap_or_default()
     }
 }
 
@@ -153,15 +162,16 @@ impl Embree {
             let idx: Vec<u32> = (0..(3 * tris.len()) as u32).collect();
             // SAFETY: `verts` holds 3 floats per vertex for 3 * tris.len() vertices and `idx`
             // 3 indices per triangle, all below the vertex count; eb_new copies both before
-            // returning and keeps no pointer to them; the configuration is a static
-            // NUL-terminated string.
+            // returning and keeps no pointer to them; `config` is a NUL-terminated string that
+            // outlives the call.
+            let config = isa.config();
             let handle = unsafe {
                 ffi::eb_new(
                     verts.as_ptr(),
                     idx.len(),
                     idx.as_ptr(),
                     tris.len(),
-                    isa.config().as_ptr(),
+                    config.as_ptr(),
                 )
             };
             if handle < 0 {

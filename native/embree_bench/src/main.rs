@@ -240,13 +240,7 @@ fn main() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
             "--size" => size = args.next().and_then(|v| v.parse().ok()).unwrap_or(size),
-            "--embree-isa" => match Isa::parse(&args.next().unwrap_or_default()) {
-                Ok(i) => isa = i,
-                Err(e) => {
-                    eprintln!("{e}");
-                    std::process::exit(2);
-                }
-            },
+            "--embree-isa" => isa = Isa::from_arg(args.next()),
             _ => meshes.push(a),
         }
     }

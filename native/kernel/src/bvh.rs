@@ -504,7 +504,7 @@ pub(crate) fn block_leaf_len(count: usize) -> Option<usize> {
 /// triangles whose blocks start at block `child[i]`; otherwise a leaf of `count[i]` primitives
 /// from `child[i]`.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(128))]
+#[repr(C, align(64))]
 pub(crate) struct Node8 {
     bounds: [[f32; WIDTH]; 6],
     child: [u32; WIDTH],

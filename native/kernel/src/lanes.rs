@@ -75,177 +75,147 @@ pub(crate) struct Avx8;
 /// Sixteen lanes: AVX-512F (with AVX and FMA).
 pub(crate) struct Avx16;
 
-impl Lanes for Avx8 {
-    const N: usize = 8;
-    type V = __m256;
-    type M = __m256;
+/// Implements [`Lanes`] for `$t` from one family of intrinsics: `$p` is their prefix
+/// (`_mm256` or `_mm512`), `$cmp` the comparison taking the predicate as a constant
+/// (`_mm256_cmp_ps` gives a vector mask, `_mm512_cmp_ps_mask` a bit mask), `$and` and `$bits`
+/// what to do with those masks. The rest are the same operations at either width (vmaxps and
+/// vminps give their second operand where either is NaN or both are zeros, as _mm_max_ps).
+macro_rules! lanes {
+    ($t:ty, $n:expr, $v:ty, $m:ty, $cmp:ident, $and:expr, $bits:expr,
+     $load:ident, $store:ident, $set1:ident, $mul:ident, $sub:ident, $add:ident, $div:ident,
+     $max:ident, $min:ident, $fmsub:ident) => {
+        impl Lanes for $t {
+            const N: usize = $n;
+            type V = $v;
+            type M = $m;
 
-    #[inline(always)]
-    unsafe fn load(p: *const f32) -> __m256 {
-        // SAFETY: the caller's contract (`p` points to 8 f32; the CPU has AVX).
-        unsafe { _mm256_loadu_ps(p) }
-    }
-    #[inline(always)]
-    unsafe fn store(p: *mut f32, v: __m256) {
-        // SAFETY: the caller's contract (`p` points to 8 writable f32; the CPU has AVX).
-        unsafe { _mm256_storeu_ps(p, v) }
-    }
-    // SAFETY (every method below): register operations, no memory; the caller's CPU has AVX
-    // and FMA.
-    #[inline(always)]
-    unsafe fn splat(x: f32) -> __m256 {
-        unsafe { _mm256_set1_ps(x) }
-    }
-    #[inline(always)]
-    unsafe fn mul(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_mul_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn sub(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_sub_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn add(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_add_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn div(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_div_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_max_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_min_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn fmsub(a: __m256, b: __m256, c: __m256) -> __m256 {
-        unsafe { _mm256_fmsub_ps(a, b, c) }
-    }
-    #[inline(always)]
-    unsafe fn le(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn lt(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn ge(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_GE_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn gt(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_GT_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn ne(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_NEQ_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn not_lt(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_NLT_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn not_gt(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_cmp_ps::<_CMP_NGT_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn and(a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_and_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn bits(m: __m256) -> u32 {
-        unsafe { _mm256_movemask_ps(m) as u32 }
-    }
+            #[inline(always)]
+            unsafe fn load(p: *const f32) -> $v {
+                // SAFETY: the caller's contract (`p` points to N f32; the CPU has the features).
+                unsafe { $load(p) }
+            }
+            #[inline(always)]
+            unsafe fn store(p: *mut f32, v: $v) {
+                // SAFETY: the caller's contract (`p` points to N writable f32; the CPU has the
+                // features).
+                unsafe { $store(p, v) }
+            }
+            // SAFETY (every method below): register operations, no memory; the caller's CPU
+            // has the width's features.
+            #[inline(always)]
+            unsafe fn splat(x: f32) -> $v {
+                unsafe { $set1(x) }
+            }
+            #[inline(always)]
+            unsafe fn mul(a: $v, b: $v) -> $v {
+                unsafe { $mul(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn sub(a: $v, b: $v) -> $v {
+                unsafe { $sub(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn add(a: $v, b: $v) -> $v {
+                unsafe { $add(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn div(a: $v, b: $v) -> $v {
+                unsafe { $div(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn max(a: $v, b: $v) -> $v {
+                unsafe { $max(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn min(a: $v, b: $v) -> $v {
+                unsafe { $min(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn fmsub(a: $v, b: $v, c: $v) -> $v {
+                unsafe { $fmsub(a, b, c) }
+            }
+            #[inline(always)]
+            unsafe fn le(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_LE_OQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn lt(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_LT_OQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn ge(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_GE_OQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn gt(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_GT_OQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn ne(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_NEQ_UQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn not_lt(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_NLT_UQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn not_gt(a: $v, b: $v) -> $m {
+                unsafe { $cmp::<_CMP_NGT_UQ>(a, b) }
+            }
+            #[inline(always)]
+            unsafe fn and(a: $m, b: $m) -> $m {
+                #[allow(unused_unsafe)]
+                unsafe {
+                    $and(a, b)
+                }
+            }
+            #[inline(always)]
+            unsafe fn bits(m: $m) -> u32 {
+                #[allow(unused_unsafe)]
+                unsafe {
+                    $bits(m)
+                }
+            }
+        }
+    };
 }
 
-impl Lanes for Avx16 {
-    const N: usize = 16;
-    type V = __m512;
-    type M = __mmask16;
+lanes!(
+    Avx8,
+    8,
+    __m256,
+    __m256,
+    _mm256_cmp_ps,
+    |a, b| _mm256_and_ps(a, b),
+    |m| _mm256_movemask_ps(m) as u32,
+    _mm256_loadu_ps,
+    _mm256_storeu_ps,
+    _mm256_set1_ps,
+    _mm256_mul_ps,
+    _mm256_sub_ps,
+    _mm256_add_ps,
+    _mm256_div_ps,
+    _mm256_max_ps,
+    _mm256_min_ps,
+    _mm256_fmsub_ps
+);
 
-    #[inline(always)]
-    unsafe fn load(p: *const f32) -> __m512 {
-        // SAFETY: the caller's contract (`p` points to 16 f32; the CPU has AVX-512F).
-        unsafe { _mm512_loadu_ps(p) }
-    }
-    #[inline(always)]
-    unsafe fn store(p: *mut f32, v: __m512) {
-        // SAFETY: the caller's contract (`p` points to 16 writable f32; the CPU has AVX-512F).
-        unsafe { _mm512_storeu_ps(p, v) }
-    }
-    // SAFETY (every method below): register operations, no memory; the caller's CPU has
-    // AVX-512F.
-    #[inline(always)]
-    unsafe fn splat(x: f32) -> __m512 {
-        unsafe { _mm512_set1_ps(x) }
-    }
-    #[inline(always)]
-    unsafe fn mul(a: __m512, b: __m512) -> __m512 {
-        unsafe { _mm512_mul_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn sub(a: __m512, b: __m512) -> __m512 {
-        unsafe { _mm512_sub_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn add(a: __m512, b: __m512) -> __m512 {
-        unsafe { _mm512_add_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn div(a: __m512, b: __m512) -> __m512 {
-        unsafe { _mm512_div_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn max(a: __m512, b: __m512) -> __m512 {
-        // vmaxps at any width: `b` where either is NaN or both are zeros
-        unsafe { _mm512_max_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn min(a: __m512, b: __m512) -> __m512 {
-        unsafe { _mm512_min_ps(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn fmsub(a: __m512, b: __m512, c: __m512) -> __m512 {
-        unsafe { _mm512_fmsub_ps(a, b, c) }
-    }
-    #[inline(always)]
-    unsafe fn le(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_LE_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn lt(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_LT_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn ge(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_GE_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn gt(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn ne(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_NEQ_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn not_lt(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_NLT_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn not_gt(a: __m512, b: __m512) -> __mmask16 {
-        unsafe { _mm512_cmp_ps_mask::<_CMP_NGT_UQ>(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn and(a: __mmask16, b: __mmask16) -> __mmask16 {
-        a & b
-    }
-    #[inline(always)]
-    unsafe fn bits(m: __mmask16) -> u32 {
-        m as u32
-    }
-}
+lanes!(
+    Avx16,
+    16,
+    __m512,
+    __mmask16,
+    _mm512_cmp_ps_mask,
+    |a: __mmask16, b: __mmask16| a & b,
+    |m: __mmask16| m as u32,
+    _mm512_loadu_ps,
+    _mm512_storeu_ps,
+    _mm512_set1_ps,
+    _mm512_mul_ps,
+    _mm512_sub_ps,
+    _mm512_add_ps,
+    _mm512_div_ps,
+    _mm512_max_ps,
+    _mm512_min_ps,
+    _mm512_fmsub_ps
+);

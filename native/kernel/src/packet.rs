@@ -255,15 +255,19 @@ impl Soa {
         )
     }
 
-    /// Closes the lanes that have a hit (bound -inf: they enter no more boxes), for any-hit
-    /// queries.
+    /// The packet's bound after a leaf: the largest of the lanes' bounds, once an any-hit
+    /// query (`any`) has closed the lanes that have a hit (bound -inf: they enter no more
+    /// boxes).
     #[inline(always)]
-    fn close_hit_lanes(&mut self) {
-        for (t, &p) in self.tmax.iter_mut().zip(&self.prim) {
-            if p != u32::MAX {
-                *t = f32::NEG_INFINITY;
+    fn bound_after_leaf(&mut self, any: bool) -> f32 {
+        if any {
+            for (t, &p) in self.tmax.iter_mut().zip(&self.prim) {
+                if p != u32::MAX {
+                    *t = f32::NEG_INFINITY;
+                }
             }
         }
+        self.max_tmax()
     }
 
     /// The largest bound of the lanes (-inf for none).
@@ -706,11 +710,8 @@ pub(crate) fn trace<A: Answer>(
             *b = tmax(start + i);
         }
         if !every_ray && !coherent(scene, rays) {
-            for (i, (r, &b)) in rays.iter().zip(&bounds).enumerate() {
-                if let Some(o) = out.get_mut(start + i) {
-                    *o = A::single(scene, r, b, scratch);
-                }
-            }
+            let all = (1u32 << rays.len()) - 1;
+            singles(scene, rays, all, &bounds, scratch, start, out);
             continue;
         }
         // group by direction signs; small groups go one ray at a time
@@ -729,19 +730,31 @@ pub(crate) fn trace<A: Answer>(
             }
             let single = !every_ray && (members.count_ones() as usize) < MIN_GROUP;
             if single || scene.bvh.nodes.is_empty() {
-                let mut m = members;
-                while m != 0 {
-                    let i = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if let (Some(r), Some(&b), Some(o)) =
-                        (rays.get(i), bounds.get(i), out.get_mut(start + i))
-                    {
-                        *o = A::single(scene, r, b, scratch);
-                    }
-                }
+                singles(scene, rays, members, &bounds, scratch, start, out);
             } else {
                 group(scene, rays, members, class, &bounds, scratch, start, out);
             }
+        }
+    }
+}
+
+/// The rays `members` of a packet (bit `i` for `rays[i]`, with the bound `tmax[i]`) one at a
+/// time; ray `i`'s answer goes to `out`'s `at + i`.
+fn singles<A: Answer>(
+    scene: &Scene,
+    rays: &[Ray],
+    members: u32,
+    tmax: &[f32; PACKET],
+    scratch: &mut Scratch,
+    at: usize,
+    out: &mut [A],
+) {
+    let mut m = members;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if let (Some(r), Some(&b), Some(o)) = (rays.get(i), tmax.get(i), out.get_mut(at + i)) {
+            *o = A::single(scene, r, b, scratch);
         }
     }
 }
@@ -993,10 +1006,7 @@ fn traverse_with<const AVX: bool, const WIDE: bool>(
                             }
                         }
                         if changed {
-                            if f.any {
-                                soa.close_hit_lanes();
-                            }
-                            tmax = soa.max_tmax();
+                            tmax = soa.bound_after_leaf(f.any);
                         }
                         continue;
                     }
@@ -1017,10 +1027,7 @@ fn traverse_with<const AVX: bool, const WIDE: bool>(
                             }
                         }
                     }
-                    if f.any {
-                        soa.close_hit_lanes();
-                    }
-                    tmax = soa.max_tmax();
+                    tmax = soa.bound_after_leaf(f.any);
                 }
             }
             if ni > 0 {

@@ -94,13 +94,7 @@ fn main() {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
-            "--embree-isa" => match Isa::parse(&args.next().unwrap_or_default()) {
-                Ok(i) => isa = i,
-                Err(e) => {
-                    eprintln!("{e}");
-                    std::process::exit(2);
-                }
-            },
+            "--embree-isa" => isa = Isa::from_arg(args.next()),
             _ => meshes.push(a),
         }
     }
