@@ -16,11 +16,12 @@
 //! instances' world boxes, whose leaf visits traverse a mesh's own hierarchy with a second
 //! stack ([`Scratch`] holds both).
 //!
-//! Traversal tests the eight child boxes at once, with AVX and FMA where the CPU has them
+//! Traversal tests the eight child boxes at once, with AVX2 and FMA where the CPU has them
 //! (detected at run time; the whole traversal loop is then compiled for them) and otherwise
-//! with two SSE vectors (`Vec4`; glam's scalar code off x86), the same operations on the same
-//! values either way (one fused multiply-subtract per plane, in software where the CPU has no
-//! FMA), so the same hits on every machine. Per ray, the reciprocal direction and the near/far
+//! with portable code, the same operations on the same values either way (one fused
+//! multiply-subtract per plane, in software where the CPU has no FMA; the maxima, minima and
+//! the final comparison on the distances' bits as signed integers, which order non-negative
+//! floats as floats and cost a cycle each), so the same hits on every machine. Per ray, the reciprocal direction and the near/far
 //! plane rows are chosen once (no min/max per axis, no branch per node). Both loops keep leaves
 //! and inner nodes on one stack. For closest-hit queries the children that are hit are sorted
 //! by entry distance: the nearest, leaf or node, is handled next and the others are stacked far
@@ -544,7 +545,7 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     probe::NODES.with(|c| c.set(c.get() + 1));
     #[cfg(target_arch = "x86_64")]
     let hit = if AVX {
-        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX and FMA.
+        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
         hit_sse(node, pre, tmax)
@@ -556,65 +557,91 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     hit
 }
 
-/// The box test with SSE (two halves of four; glam's scalar code off x86): entry distances of
-/// the eight children and the mask of those entered before `tmax`.
+/// The bits of `x` as a signed integer: among non-negative floats (and +inf) the same order
+/// as the floats, and every negative float (-0 included) below every non-negative one. The
+/// box test takes its maxima and minima and its final comparison in this order: one-cycle
+/// integer operations in place of four-cycle float ones on the traversal's critical path.
+/// Entry distances are clamped at +0, so an entered child's distance is exactly the float
+/// maximum; an exit distance below zero on any axis (or a bound `tmax` below zero) gives a
+/// negative integer, which every entry distance exceeds, so such a child is never entered,
+/// as with float order (-0 included: a box left exactly at the origin is not entered).
+#[inline(always)]
+fn order_bits(x: f32) -> i32 {
+    x.to_bits() as i32
+}
+
+/// The box test without SIMD intrinsics (x86 without AVX2 and FMA, and other targets; the
+/// compiler vectorises it where it can): entry distances of the eight children and the mask
+/// of those entered before `tmax`. Per lane, one fused multiply-subtract per plane, then the
+/// maxima and minima pairwise in [`order_bits`]'s order, as [`hit_avx`] does.
 #[inline(always)]
 fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     let mut out = [0.0f32; WIDTH];
     let mut mask = 0u32;
-    for h in 0..2 {
-        let mut tn = Vec4::ZERO;
-        let mut tf = Vec4::splat(tmax);
-        for a in 0..3 {
-            let (inv, oinv) = (Vec4::splat(r.inv[a]), Vec4::splat(r.oinv[a]));
-            let n = Vec4::from_slice(&node.bounds[r.near[a] & 7][4 * h..]);
-            let f = Vec4::from_slice(&node.bounds[r.far[a] & 7][4 * h..]);
-            // fused, as the AVX path's fmsub: one rounding, so the same distances
-            tn = tn.max(n.mul_add(inv, -oinv));
-            tf = tf.min(f.mul_add(inv, -oinv));
-        }
-        tn.write_to_slice(&mut out[4 * h..]);
-        mask |= tn.cmple(tf).bitmask() << (4 * h);
+    let plane = |row: usize, a: usize, i: usize| {
+        order_bits(node.bounds[row & 7][i].mul_add(r.inv[a], -r.oinv[a]))
+    };
+    for (i, o) in out.iter_mut().enumerate() {
+        let n = [0, 1, 2].map(|a| plane(r.near[a], a, i));
+        let f = [0, 1, 2].map(|a| plane(r.far[a], a, i));
+        let tn = n[0].max(n[1]).max(n[2].max(0));
+        let tf = f[0].min(f[1]).min(f[2].min(order_bits(tmax)));
+        *o = f32::from_bits(tn as u32);
+        mask |= u32::from(tn <= tf) << i;
     }
     (out, mask)
 }
 
 /// [`hit_sse`] with one AVX vector per plane: the same operations on the same values (one
-/// fused multiply-subtract per plane), so the same distances and mask.
+/// fused multiply-subtract per plane, integer maxima and minima in the same pairs), so the
+/// same distances and mask.
+///
+/// Always inlined, and only into the traversal compiled for AVX2 and FMA
+/// ([`Bvh::traverse_avx`]), where the intrinsics it calls are inlined in turn (a call to it
+/// would cost more than the test).
 ///
 /// # Safety
-/// The CPU must have AVX and FMA.
+/// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx,fma")]
-#[inline]
+#[inline(always)]
 unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     use std::arch::x86_64::*;
-    let mut tn = _mm256_setzero_ps();
-    let mut tf = _mm256_set1_ps(tmax);
-    for a in 0..3 {
-        let inv = _mm256_set1_ps(r.inv[a]);
-        let oinv = _mm256_set1_ps(r.oinv[a]);
-        let n = &node.bounds[r.near[a] & 7];
-        let f = &node.bounds[r.far[a] & 7];
-        // SAFETY: `n` and `f` are arrays of 8 f32, exactly the 32 bytes an unaligned load reads.
-        let (n, f) = unsafe { (_mm256_loadu_ps(n.as_ptr()), _mm256_loadu_ps(f.as_ptr())) };
-        tn = _mm256_max_ps(tn, _mm256_fmsub_ps(n, inv, oinv));
-        tf = _mm256_min_ps(tf, _mm256_fmsub_ps(f, inv, oinv));
-    }
+    let plane = |row: usize, a: usize| {
+        let b = &node.bounds[row & 7];
+        // SAFETY: `b` is an array of 8 f32, exactly the 32 bytes an unaligned load reads.
+        let b = unsafe { _mm256_loadu_ps(b.as_ptr()) };
+        let d = _mm256_fmsub_ps(b, _mm256_set1_ps(r.inv[a]), _mm256_set1_ps(r.oinv[a]));
+        _mm256_castps_si256(d)
+    };
+    let (n0, n1, n2) = (
+        plane(r.near[0], 0),
+        plane(r.near[1], 1),
+        plane(r.near[2], 2),
+    );
+    let (f0, f1, f2) = (plane(r.far[0], 0), plane(r.far[1], 1), plane(r.far[2], 2));
+    let tn = _mm256_max_epi32(
+        _mm256_max_epi32(n0, n1),
+        _mm256_max_epi32(n2, _mm256_setzero_si256()),
+    );
+    let tf = _mm256_min_epi32(
+        _mm256_min_epi32(f0, f1),
+        _mm256_min_epi32(f2, _mm256_set1_epi32(order_bits(tmax))),
+    );
     let mut out = [0.0f32; WIDTH];
     // SAFETY: `out` is 8 f32, the 32 bytes an unaligned store writes.
-    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), tn) };
-    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
-    (out, mask)
+    unsafe { _mm256_storeu_ps(out.as_mut_ptr(), _mm256_castsi256_ps(tn)) };
+    // entered: not tn > tf
+    let missed = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(tn, tf))) as u32;
+    (out, !missed & 0xff)
 }
 
-/// Whether the AVX node test can run here: the CPU has AVX and FMA (checked once by std, then
-/// cached flags). Elsewhere the SSE test computes the same fused products in software.
+/// Whether the AVX node test can run here: the CPU has AVX2 and FMA (checked once by std, then
+/// cached flags). Elsewhere the portable test computes the same fused products in software.
 #[inline(always)]
 pub(crate) fn has_avx_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("fma")
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -736,18 +763,18 @@ impl Bvh {
     ) -> f32 {
         #[cfg(target_arch = "x86_64")]
         if has_avx_fma() {
-            // SAFETY: the CPU has AVX and FMA (checked just above).
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.traverse_avx::<ORDERED>(ray, tmax, stack, work, visit) };
         }
         self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit)
     }
 
-    /// [`Bvh::traverse_loop`] compiled with AVX and FMA.
+    /// [`Bvh::traverse_loop`] compiled with AVX2 and FMA.
     ///
     /// # Safety
-    /// The CPU must have AVX and FMA.
+    /// The CPU must have AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,fma")]
+    #[target_feature(enable = "avx,avx2,fma")]
     unsafe fn traverse_avx<const ORDERED: bool>(
         &self,
         ray: &Ray,
@@ -1102,8 +1129,21 @@ mod tests {
             let tmax = if round % 2 == 0 { 3.0 } else { f32::INFINITY };
             let (t, m) = hit_sse(&node, &pre, tmax);
             hits += m.count_ones();
+            // the integer order against float maxima and minima: the same children entered
+            // (a negative exit, -0 included, is not entered) at the same distances
+            for (i, ti) in t.iter().enumerate() {
+                let d =
+                    |row: usize, a: usize| node.bounds[row][i].mul_add(pre.inv[a], -pre.oinv[a]);
+                let tn = (0..3).fold(0.0f32, |m, a| m.max(d(pre.near[a], a)));
+                let tf = (0..3).fold(tmax, |m, a| m.min(d(pre.far[a], a)));
+                let entered = tn <= tf && tf.is_sign_positive();
+                assert_eq!(m >> i & 1 == 1, entered, "round {round}, child {i}");
+                if entered {
+                    assert_eq!(ti.to_bits(), tn.to_bits(), "round {round}, child {i}");
+                }
+            }
             if has_avx_fma() {
-                // SAFETY: the CPU has AVX and FMA (checked on the line above).
+                // SAFETY: the CPU has AVX2 and FMA (checked on the line above).
                 let (ta, ma) = unsafe { hit_avx(&node, &pre, tmax) };
                 assert_eq!(m, ma);
                 assert_eq!(t.map(f32::to_bits), ta.map(f32::to_bits));
