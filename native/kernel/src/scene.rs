@@ -298,14 +298,16 @@ impl Scene {
         let best = self
             .bvh
             // inlined into the traversal: a call there would spill the ray's vectors per node
-            .traverse::<true>(
+            .traverse_prefetching::<true>(
                 ray,
                 tmax,
-                scratch,
+                &mut scratch.stack,
+                &mut scratch.work,
                 #[inline(always)]
                 |first, count, tm| {
                     self.leaf_closest(first, count, ray, &lanes, &mut mailbox, tm, &mut prim)
                 },
+                |first, count| self.tri_blocks.prefetch(first, count),
             );
         self.finish_closest(ray, best, prim, scratch)
     }
@@ -579,10 +581,11 @@ impl Scene {
         let blocks = &self.tri_blocks;
         // made at the first triangle leaf: most shadow rays of an analytic scene meet none
         let mut lanes = None;
-        let r = self.bvh.traverse::<false>(
+        let r = self.bvh.traverse_prefetching::<false>(
             ray,
             tmax,
-            scratch,
+            &mut scratch.stack,
+            &mut scratch.work,
             #[inline(always)]
             |first, count, tmax| {
                 if let Some(leaf) = blocks.leaf(first, count) {
@@ -615,6 +618,7 @@ impl Scene {
                 }
                 tmax
             },
+            |first, count| blocks.prefetch(first, count),
         );
         if r < 0.0 {
             self::set_cache(scratch, entry, found, 0);

@@ -181,6 +181,19 @@ impl TriBlocks {
         self.blocks.get(child..child + n.div_ceil(4))
     }
 
+    /// Asks early for the cache lines of the blocks of the leaf `(child, count)`, if it is a
+    /// leaf of blocks (a hint: nothing is read).
+    #[inline(always)]
+    pub fn prefetch(&self, child: usize, count: usize) {
+        if let Some(leaf) = self.leaf(child, count) {
+            let p = leaf.as_ptr().cast::<u8>();
+            let bytes = std::mem::size_of_val(leaf);
+            for at in (0..bytes).step_by(64) {
+                crate::bvh::prefetch_line(p.wrapping_add(at));
+            }
+        }
+    }
+
     /// The primitive range `(first, count)` of any leaf `(child, count)` handed to a visit.
     #[cfg(test)]
     pub fn prims(&self, child: usize, count: usize) -> (usize, usize) {
