@@ -3,7 +3,7 @@
 //! Build: a binary tree with binned SAH (32 bins on each axis, the three axes binned in one
 //! pass over primitive references kept in the order of their range, iterative, depth-capped)
 //! in 32-byte nodes (box + first/count packed in the w lanes, children adjacent). For
-//! triangles, which are met four at a time ([`crate::tri4`]), the SAH counts a leaf's cost in
+//! triangles, which are met four at a time (the `tri4` module), the SAH counts a leaf's cost in
 //! blocks of four. The binary tree is then collapsed into 8-wide nodes (`Node8`: the eight
 //! child boxes in SoA layout, 256 bytes, i.e. 32 bytes per child) by SAH: bottom-up, the least
 //! cost of each binary subtree as at most 1..8 children of a wide node (a leaf, a small
