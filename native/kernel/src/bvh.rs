@@ -21,18 +21,18 @@
 //! with portable code, the same operations on the same values either way (one fused
 //! multiply-subtract per plane, in software where the CPU has no FMA; the maxima, minima and
 //! the final comparison on the distances' bits as signed integers, which order non-negative
-//! floats as floats and cost a cycle each), so the same hits on every machine. Per ray, the reciprocal direction and the near/far
-//! plane rows are chosen once (no min/max per axis, no branch per node). Both loops keep leaves
-//! and inner nodes on one stack. For closest-hit queries the children that are hit are sorted
-//! by entry distance: the nearest, leaf or node, is handled next and the others are stacked far
-//! to near, each skipped when popped if a closer hit was found meanwhile. Shadow rays use the
-//! unordered any-hit loop, which stops at the first occluder: the last child entered is handled
-//! next and the first two others are stacked without a branch, so that an incoherent ray pays
-//! about one unpredictable branch per node. The stack lives in
-//! a reusable [`Scratch`], so no allocation happens per ray. Hierarchies too big for a core's
-//! L2 cache prefetch what a ray stacks, as it stacks it (a child node's four cache lines, a
-//! leaf's triangle blocks), so that the memory of the nodes it comes back to is on its way
-//! while it works on the nearest ones.
+//! floats as floats and cost a cycle each), so the same hits on every machine. Per ray, the
+//! reciprocal direction and the near/far plane rows are chosen once (no min/max per axis, no
+//! branch per node). Both loops keep leaves and inner nodes on one stack. For closest-hit
+//! queries the children that are hit are sorted by entry distance: the nearest, leaf or node,
+//! is handled next and the others are stacked far to near, each skipped when popped if a
+//! closer hit was found meanwhile. Shadow rays use the unordered any-hit loop, which stops at
+//! the first occluder: the last child entered is handled next and the first two others are
+//! stacked without a branch, so that an incoherent ray pays about one unpredictable branch per
+//! node. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
+//! Hierarchies too big for a core's L2 cache prefetch what a ray stacks, as it stacks it (a
+//! child node's four cache lines, a leaf's triangle blocks), so that the memory of the nodes
+//! it comes back to is on its way while it works on the nearest ones.
 
 use crate::geometry::Aabb;
 use crate::ray::Ray;
@@ -501,7 +501,7 @@ pub(crate) fn block_leaf_len(count: usize) -> Option<usize> {
 }
 
 /// An 8-wide node: the boxes of up to eight children in SoA layout, tested together with SIMD
-/// (one AVX vector per plane where the CPU has AVX, else two SSE vectors; same results).
+/// (one AVX vector per plane where the CPU has AVX2, else portable code; same results).
 /// `bounds[a]` holds the children's minima on axis `a`, `bounds[3 + a]` their maxima.
 /// `count[i] == 0`: child `i` is the node `child[i]`; `count[i] == EMPTY`: unused slot (its box
 /// is empty, so it is never hit); with [`LEAF_BLOCKS`] set, a leaf of `count[i] & !LEAF_BLOCKS`
@@ -540,7 +540,7 @@ impl RayPre {
     }
 }
 
-/// A traversal's test of `node`'s eight boxes (see [`hit_sse`]), with AVX when `AVX` is set,
+/// A traversal's test of `node`'s eight boxes (see [`hit_portable`]), with AVX when `AVX` is set,
 /// counted for the tests' probes.
 #[inline(always)]
 fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
@@ -551,10 +551,10 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
         // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
-        hit_sse(node, pre, tmax)
+        hit_portable(node, pre, tmax)
     };
     #[cfg(not(target_arch = "x86_64"))]
-    let hit = hit_sse(node, pre, tmax);
+    let hit = hit_portable(node, pre, tmax);
     #[cfg(test)]
     probe::shape(node, hit.1);
     hit
@@ -578,7 +578,7 @@ fn order_bits(x: f32) -> i32 {
 /// of those entered before `tmax`. Per lane, one fused multiply-subtract per plane, then the
 /// maxima and minima pairwise in [`order_bits`]'s order, as [`hit_avx`] does.
 #[inline(always)]
-fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
+fn hit_portable(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     let mut out = [0.0f32; WIDTH];
     let mut mask = 0u32;
     let plane = |row: usize, a: usize, i: usize| {
@@ -595,7 +595,7 @@ fn hit_sse(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     (out, mask)
 }
 
-/// [`hit_sse`] with one AVX vector per plane: the same operations on the same values (one
+/// [`hit_portable`] with one AVX vector per plane: the same operations on the same values (one
 /// fused multiply-subtract per plane, integer maxima and minima in the same pairs), so the
 /// same distances and mask.
 ///
@@ -1132,7 +1132,7 @@ impl Node8 {
     /// The single-ray node test: entry distances and the mask of children entered.
     #[cfg(test)]
     pub(crate) fn single_ray_test_for_tests(&self, ray: &Ray, tmax: f32) -> ([f32; WIDTH], u32) {
-        hit_sse(self, &RayPre::new(ray), tmax)
+        hit_portable(self, &RayPre::new(ray), tmax)
     }
 
     fn empty() -> Node8 {
@@ -1219,7 +1219,7 @@ mod tests {
             let ray = Ray::new(Vec3A::new(f(), f(), f()) * 0.25, d);
             let pre = RayPre::new(&ray);
             let tmax = if round % 2 == 0 { 3.0 } else { f32::INFINITY };
-            let (t, m) = hit_sse(&node, &pre, tmax);
+            let (t, m) = hit_portable(&node, &pre, tmax);
             hits += m.count_ones();
             // the integer order against float maxima and minima: the same children entered
             // (a negative exit, -0 included, is not entered) at the same distances
@@ -1313,7 +1313,7 @@ mod tests {
                     }
                 });
                 assert_eq!(any < 0.0, want.is_finite(), "round {round}");
-                // the SSE loop (what runs without AVX) gives the same answer and the same work
+                // the portable loop (what runs without AVX2): the same answer and the same work
                 let (mut w_sse, mut w) = (0u64, 0u64);
                 let leaf_any = |first: usize, count: usize, t: f32| {
                     let leaf = &order[first..first + count];
