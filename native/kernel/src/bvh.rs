@@ -641,7 +641,7 @@ unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
 /// Whether the AVX node test can run here: the CPU has AVX2 and FMA (checked once by std, then
 /// cached flags). Elsewhere the portable test computes the same fused products in software.
 #[inline(always)]
-pub(crate) fn has_avx_fma() -> bool {
+pub(crate) fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
@@ -824,7 +824,7 @@ impl Bvh {
         prefetch: impl Fn(usize, usize),
     ) -> f32 {
         #[cfg(target_arch = "x86_64")]
-        if has_avx_fma() {
+        if has_avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe {
                 self.traverse_avx::<ORDERED>(ray, tmax, stack, work, visit, prefetch)
@@ -1234,7 +1234,7 @@ mod tests {
                     assert_eq!(ti.to_bits(), tn.to_bits(), "round {round}, child {i}");
                 }
             }
-            if has_avx_fma() {
+            if has_avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked on the line above).
                 let (ta, ma) = unsafe { hit_avx(&node, &pre, tmax) };
                 assert_eq!(m, ma);

@@ -37,7 +37,7 @@
 //! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
 //! are taken row by row.
 
-use crate::bvh::{has_avx_fma, Node8, Scratch, EMPTY, WIDTH};
+use crate::bvh::{has_avx2_fma, Node8, Scratch, EMPTY, WIDTH};
 #[cfg(target_arch = "x86_64")]
 use crate::lanes::{Avx16, Avx8, Lanes};
 use crate::ray::Ray;
@@ -326,14 +326,15 @@ fn use_avx512() -> bool {
     }
 }
 
-/// Whether the AVX traversal runs (the CPU has AVX and FMA, and tests did not ask for SSE).
+/// Whether the AVX traversal runs (the CPU has AVX2 and FMA, as the single-ray traversal
+/// asks, and tests did not ask for SSE).
 #[inline(always)]
 fn use_avx() -> bool {
     #[cfg(test)]
     if FORCE_SSE.with(|f| f.get()) {
         return false;
     }
-    has_avx_fma()
+    has_avx2_fma()
 }
 
 /// The three direction-sign bits of a ray (bit `a` set: negative on axis `a`), as the
@@ -1284,7 +1285,7 @@ mod tests {
         assert!(hits > 5000, "{hits}");
         // both ways of meeting a leaf of blocks: across rays, and one ray at a time
         let c = probe::COUNTS.with(|c| c.get());
-        if has_avx_fma() {
+        if has_avx2_fma() {
             assert!(c[3] > 10_000 && c[6] > 1000, "{c:?}");
         }
     }
@@ -1457,7 +1458,7 @@ mod tests {
             }
             let (tn, mask) = node_sse(&node, &f, tmax);
             #[cfg(target_arch = "x86_64")]
-            if has_avx_fma() {
+            if has_avx2_fma() {
                 // SAFETY: the CPU has AVX and FMA (checked on the line above).
                 let (ta, ma) = unsafe { node_avx(&node, &f, tmax) };
                 assert_eq!(mask, ma);
@@ -1465,7 +1466,7 @@ mod tests {
             }
             // the leaves' test of the rays, lane by lane, against `enters`, at both widths
             #[cfg(target_arch = "x86_64")]
-            if has_avx_fma() {
+            if has_avx2_fma() {
                 // SAFETY: the CPU has AVX and FMA (checked above).
                 unsafe { rays_enter_agrees::<Avx8>(&node, &f, &soa, &lanes, tmax) };
                 if std::arch::is_x86_feature_detected!("avx512f") {
