@@ -6,8 +6,8 @@
 //! `--embree-isa` caps the instruction set of Embree's device (`best`, the default: the widest
 //! the CPU has; `sse4.2`, `avx`, `avx2`, `avx512`). On a CPU with AVX-512 Embree's packets of
 //! 16 then run its AVX-512 code, sixteen rays to a register, where ours use AVX-512 only in the
-//! leaves' tests across rays (AVX elsewhere); `--embree-isa avx2` shows how much of the gap is
-//! the width.
+//! leaves' tests across rays (AVX or AVX2 elsewhere); `--embree-isa avx2` shows how much of the
+//! gap is the width.
 //!
 //! For each mesh: both BVHs are built once, then R rounds (default 3) each time every
 //! measurement below, ours and Embree's alternating, and the table gives each one's range

@@ -654,7 +654,7 @@ pub(crate) fn has_avx2_fma() -> bool {
 
 /// Asks for the cache line at `p` ahead of its use (a hint: it never faults).
 #[inline(always)]
-pub(crate) fn prefetch_line<T>(p: *const T) {
+fn prefetch_line<T>(p: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch reads nothing and never faults, whatever the address.
     unsafe {
@@ -665,17 +665,25 @@ pub(crate) fn prefetch_line<T>(p: *const T) {
     let _ = p;
 }
 
-/// Asks early for the memory of a stacked child `(index, count)`: the four cache lines of an
-/// inner node, and whatever `leaf` asks for a leaf.
+/// Asks early for every cache line `v` occupies (a hint: nothing is read).
+#[inline(always)]
+pub(crate) fn prefetch_lines<T: ?Sized>(v: &T) {
+    let p = (v as *const T).cast::<u8>();
+    // from the start of the line `v` begins in
+    let skew = p as usize & 63;
+    for at in (0..skew + std::mem::size_of_val(v)).step_by(64) {
+        prefetch_line(p.wrapping_sub(skew).wrapping_add(at));
+    }
+}
+
+/// Asks early for the memory of a stacked child `(index, count)`: an inner node's four cache
+/// lines, and whatever `leaf` asks for a leaf.
 #[inline(always)]
 fn prefetch_child(nodes: &[Node8], child: u32, count: u32, leaf: &impl Fn(usize, usize)) {
     if count != 0 {
         leaf(child as usize, count as usize);
     } else if let Some(c) = nodes.get(child as usize) {
-        let p = (c as *const Node8).cast::<u8>();
-        for line in 0..4 {
-            prefetch_line(p.wrapping_add(64 * line));
-        }
+        prefetch_lines(c);
     }
 }
 

@@ -27,7 +27,8 @@
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
 //!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
 //!   polygons are ear-clipped into triangles, or kept whole with an edge BVH that answers the
-//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 8-wide SIMD nodes (AVX or SSE);
+//!   crossing rule in O(log n) per ray; [`bvh`]: binned-SAH BVH with 8-wide SIMD nodes (AVX2, else
+//!   portable code);
 //!   `packet` (private): coherent rays through it sixteen at a time
 //!   ([`Scene::intersect_packet`], [`Scene::occluded_packet`], the same answers as one ray at a
 //!   time), its leaf tests eight or sixteen rays to a vector (`lanes`, private);

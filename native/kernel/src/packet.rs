@@ -910,25 +910,10 @@ fn traverse<const AVX: bool, const WIDE: bool>(
     soa: &mut Soa,
     scratch: &mut Scratch,
 ) {
-    // kept in the scratch between calls (no allocation per packet); taken out here rather
-    // than reached through a closure, which would not be compiled for AVX and FMA
-    let mut entered = std::mem::take(&mut scratch.entered);
+    // (lane, entry distance, leaf size) of every leaf a ray tested, kept in the scratch
+    // between packets (no allocation per packet)
+    let entered = &mut scratch.entered;
     entered.clear();
-    traverse_with::<AVX, WIDE>(scene, rays, idx, f, soa, scratch, &mut entered);
-    scratch.entered = entered;
-}
-
-/// [`traverse`] with its list of (lane, entry distance, leaf size) of every leaf a ray tested.
-#[inline(always)]
-fn traverse_with<const AVX: bool, const WIDE: bool>(
-    scene: &Scene,
-    rays: &[Ray],
-    idx: &[usize],
-    f: &Frustum,
-    soa: &mut Soa,
-    scratch: &mut Scratch,
-    entered: &mut Vec<(usize, f32, u32)>,
-) {
     let nodes = &scene.bvh.nodes;
     let mut mailboxes = [Mailbox::default(); PACKET];
     let mut tmax = soa.max_tmax();

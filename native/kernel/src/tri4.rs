@@ -186,11 +186,7 @@ impl TriBlocks {
     #[inline(always)]
     pub fn prefetch(&self, child: usize, count: usize) {
         if let Some(leaf) = self.leaf(child, count) {
-            let p = leaf.as_ptr().cast::<u8>();
-            let bytes = std::mem::size_of_val(leaf);
-            for at in (0..bytes).step_by(64) {
-                crate::bvh::prefetch_line(p.wrapping_add(at));
-            }
+            crate::bvh::prefetch_lines(leaf);
         }
     }
 
