@@ -1406,13 +1406,17 @@ mod stats_report {
 
     /// Shape of the hierarchy and work per ray on a big mesh, for tuning:
     /// `RT_MESH=/tmp/knot600k.obj cargo test --release -p ring_tracer_kernel bvh_stats_report --
-    /// --ignored --nocapture`. Not a check.
+    /// --ignored --nocapture` (`RT_TCOST=C` builds with split cost `C`). Not a check.
     #[test]
     #[ignore]
     fn bvh_stats_report() {
         let Ok(path) = std::env::var("RT_MESH") else {
             return;
         };
+        // RT_TCOST: the binary build's cost of a split, for trying other trees
+        if let Some(c) = std::env::var("RT_TCOST").ok().and_then(|c| c.parse().ok()) {
+            probe::TCOST.with(|t| t.set(c));
+        }
         let t = std::time::Instant::now();
         let scene = Scene::load(std::path::Path::new(&path)).unwrap();
         println!("load + build {:.3} s", t.elapsed().as_secs_f64());
@@ -1448,6 +1452,31 @@ mod stats_report {
             prims,
             blocks,
             slots as f64 / bvh.nodes.len() as f64
+        );
+        // Embree's SAH figure (its `verbose=2` statistics): every inner node's area at cost 1
+        // and every leaf's times its blocks of four, over the root's area
+        let child = |n: &Node8, i: usize| Aabb {
+            min: Vec3A::from([0, 1, 2].map(|a| n.bounds[a][i])),
+            max: Vec3A::from([0, 1, 2].map(|a| n.bounds[3 + a][i])),
+        };
+        let mut sah = 0.0f64;
+        let mut root = Aabb::EMPTY;
+        for (k, n) in bvh.nodes.iter().enumerate() {
+            for i in (0..WIDTH).filter(|&i| n.count[i] != EMPTY) {
+                let cost = match n.count[i] {
+                    0 => 1,
+                    c => block_leaf_len(c as usize).unwrap_or(c as usize).div_ceil(4),
+                };
+                sah += child(n, i).half_area() as f64 * cost as f64;
+                if k == 0 {
+                    root = root.union(child(n, i));
+                }
+            }
+        }
+        let root = root.half_area() as f64;
+        println!(
+            "SAH as Embree counts it {:.3}",
+            (sah + root) / root.max(1e-30)
         );
         let mut hist = [0usize; 9];
         for l in &leaves {
