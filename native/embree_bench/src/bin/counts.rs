@@ -1,0 +1,175 @@
+//! Instructions, branches and cache misses per ray of RingTracer's kernel and of Embree, counted
+//! by Valgrind's callgrind (Debian `valgrind`) rather than timed:
+//! `cargo run --release -p ring_tracer_embree_bench --bin counts -- [--rays N] [--ll BYTES]
+//! [--embree-isa ISA] MESH.obj...` (ISA as for `embree_bench`, default `avx2`: Valgrind runs
+//! no AVX-512).
+//!
+//! On a shared virtual machine, rates move by 10-30% between runs, more than most kernel
+//! changes are worth; these counts are the same on every run. For each mesh and ray kind
+//! (primary rays in tiles, incoherent ones, the incoherent ones as any-hit queries, one ray at
+//! a time) this program runs itself under callgrind once per kernel, with the branch
+//! predictor and a two-level cache simulated (the last level `--ll` bytes, 16-way, default
+//! 32 MiB), and counts only the traced rays: a warm-up eighth of them first, then `N` inside
+//! [`counted`] (default 65,536, rounded down to the square of a multiple of 4: the primary
+//! rays are an image of that many pixels over the whole view, in tiles). Simulated
+//! mispredictions and misses are not the hardware's, but they compare two kernels on the same
+//! rays.
+
+use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
+use ring_tracer_embree_bench::{single_hits, RaySets};
+use ring_tracer_kernel::Scene;
+use std::path::Path;
+use std::process::Command;
+
+const KINDS: [&str; 3] = ["primary", "incoherent", "any"];
+
+/// The part callgrind counts (`--toggle-collect`): what `f` does, callees included.
+#[inline(never)]
+fn counted(f: impl FnOnce() -> u64) -> u64 {
+    f()
+}
+
+/// The side of the square image of about `n` primary rays (a multiple of 4, for the tiles):
+/// every kind traces `side(n)^2` rays.
+fn side(n: usize) -> u32 {
+    (((n as f64).sqrt() as u32) / 4 * 4).max(4)
+}
+
+/// The child's work: `n` rays of `kind` through one kernel, after a warm-up eighth.
+fn one_side(mesh: &str, kernel: &str, kind: &str, n: usize, isa: Isa) -> Result<u64, String> {
+    let scene = Scene::load(Path::new(mesh)).map_err(|e| e.to_string())?;
+    // primary rays over the whole view, in tiles: an image of `n` pixels
+    let RaySets { tiled, incoherent } = RaySets::new(scene.bounds(), side(n));
+    let rays = if kind == "primary" { tiled } else { incoherent };
+    let warm = &rays[..rays.len() / 8];
+    let any = kind == "any";
+    // the rays themselves are read once before the count (as Embree's copy of them is made)
+    std::hint::black_box(rays.iter().map(|r| r.origin.x).sum::<f32>());
+    if kernel == "embree" {
+        let e = Embree::new(&scene.triangles(), isa)?;
+        let call = if any {
+            Call::Occluded1
+        } else {
+            Call::Intersect1
+        };
+        e.trace(call, &flat(warm));
+        let f = flat(&rays);
+        Ok(counted(|| e.trace(call, &f)))
+    } else {
+        single_hits(&scene, warm, any);
+        Ok(counted(|| single_hits(&scene, &rays, any)))
+    }
+}
+
+/// Callgrind's totals for the counted part: (instructions, data reads, last-level read
+/// misses, conditional branches, of them mispredicted).
+fn measure(mesh: &str, kernel: &str, kind: &str, n: usize, ll: u64, isa: Isa) -> Option<[u64; 5]> {
+    let me = std::env::current_exe().ok()?;
+    let out = Command::new("valgrind")
+        .args([
+            "--tool=callgrind",
+            "--branch-sim=yes",
+            "--cache-sim=yes",
+            &format!("--LL={ll},16,64"),
+            "--toggle-collect=*counts::counted*",
+            "--callgrind-out-file=/dev/null",
+        ])
+        .arg(me)
+        .args(["--one", mesh, kernel, kind, &n.to_string(), isa.name()])
+        .output()
+        .ok()?;
+    let err = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        eprintln!(
+            "{mesh} {kernel} {kind}: {}",
+            err.lines().last().unwrap_or("")
+        );
+        return None;
+    }
+    // "==pid== Collected : Ir Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw Bc Bcm Bi Bim"
+    let line = err.lines().find(|l| l.contains("Collected :"))?;
+    let v: Vec<u64> = line
+        .split(':')
+        .nth(1)?
+        .split_whitespace()
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    Some([*v.first()?, *v.get(1)?, *v.get(7)?, *v.get(9)?, *v.get(10)?])
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--one") {
+        let [mesh, kernel, kind, n, isa] = [1, 2, 3, 4, 5].map(|i| args.get(i).cloned());
+        let n = n.and_then(|n| n.parse().ok()).unwrap_or(65_536);
+        let isa = Isa::from_arg(isa);
+        match one_side(
+            &mesh.unwrap_or_default(),
+            &kernel.unwrap_or_default(),
+            &kind.unwrap_or_default(),
+            n,
+            isa,
+        ) {
+            Ok(hits) => println!("{hits} hits"),
+            Err(e) => {
+                eprintln!("{e}");
+                std::process::exit(1);
+            }
+        }
+        return;
+    }
+    let (mut n, mut ll, mut isa, mut meshes) = (65_536usize, 32u64 << 20, Isa::Avx2, Vec::new());
+    let mut it = args.into_iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--rays" => n = it.next().and_then(|v| v.parse().ok()).unwrap_or(n),
+            "--ll" => ll = it.next().and_then(|v| v.parse().ok()).unwrap_or(ll),
+            "--embree-isa" => isa = Isa::from_arg(it.next()),
+            _ => meshes.push(a),
+        }
+    }
+    if meshes.is_empty() {
+        eprintln!("usage: counts [--rays N] [--ll BYTES] [--embree-isa ISA] MESH.obj...");
+        std::process::exit(2);
+    }
+    if Command::new("valgrind").arg("--version").output().is_err() {
+        eprintln!("counts needs Valgrind: apt-get install valgrind");
+        std::process::exit(2);
+    }
+    let kernels: &[&str] = match Embree::version() {
+        Ok(_) => &["ours", "embree"],
+        Err(e) => {
+            println!("{e}: only our kernel is counted");
+            &["ours"]
+        }
+    };
+    let n = (side(n) as usize).pow(2);
+    println!(
+        "{n} rays of each kind after a warm-up eighth, one at a time; callgrind: simulated branch predictor, last-level cache {} MiB 16-way; Embree at most {}",
+        ll >> 20,
+        isa.name()
+    );
+    println!("| mesh | rays | kernel | instructions/ray | data reads/ray | LL read misses/ray | branches/ray | mispredicted/ray |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for mesh in &meshes {
+        let name = Path::new(mesh)
+            .file_name()
+            .map_or(mesh.clone(), |f| f.to_string_lossy().into_owned());
+        for kind in KINDS {
+            for &kernel in kernels {
+                let Some(c) = measure(mesh, kernel, kind, n, ll, isa) else {
+                    continue;
+                };
+                let per = |x: u64| x as f64 / (side(n) as f64).powi(2);
+                println!(
+                    "| {name} | {kind} | {kernel} | {:.1} | {:.1} | {:.3} | {:.2} | {:.3} |",
+                    per(c[0]),
+                    per(c[1]),
+                    per(c[2]),
+                    per(c[3]),
+                    per(c[4])
+                );
+            }
+        }
+    }
+}
