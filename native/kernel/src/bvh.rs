@@ -44,8 +44,14 @@ const BINS: usize = 32;
 const MAX_LEAF: usize = 8;
 /// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
 pub(crate) const MAX_DEPTH: usize = 60;
-/// Cost of one traversal step relative to one primitive test.
-const TRAVERSAL_COST: f32 = 1.0;
+/// The binary build's cost of a split relative to one leaf test: none, so that the binary tree
+/// splits wherever the SAH split beats the leaf, down to the leaf size that is never split.
+/// Which of its subtrees become leaves, and how big, the collapse into 8-wide nodes decides
+/// ([`Collapse`], with its own cost of a wide node): a binary node left to the collapse costs
+/// nothing of itself, as most vanish into a wide node. (Charged a whole node visit, the binary
+/// build stops early, at leaves of up to two blocks that the collapse cannot split, and the
+/// trees cost more by the collapse's own measure.)
+pub(crate) const SPLIT_COST: f32 = 0.0;
 
 /// Test-only instrumentation: node visits, leaf visits, tuning overrides.
 #[cfg(test)]
@@ -53,7 +59,7 @@ pub(crate) mod probe {
     use std::cell::Cell;
     thread_local! {
         pub static NODES: Cell<u64> = const { Cell::new(0) };
-        pub static TCOST: Cell<f32> = const { Cell::new(super::TRAVERSAL_COST) };
+        pub static TCOST: Cell<f32> = const { Cell::new(super::SPLIT_COST) };
         pub static LEAF_MIN: Cell<usize> = const { Cell::new(0) };
         /// Node visits by (inner children hit, leaves hit).
         pub static SHAPE: std::cell::RefCell<[[u64; 9]; 9]> = const { std::cell::RefCell::new([[0; 9]; 9]) };
@@ -70,12 +76,12 @@ pub(crate) mod probe {
 }
 
 #[cfg(test)]
-fn traversal_cost() -> f32 {
+fn split_cost() -> f32 {
     probe::TCOST.with(|c| c.get())
 }
 #[cfg(not(test))]
-fn traversal_cost() -> f32 {
-    TRAVERSAL_COST
+fn split_cost() -> f32 {
+    SPLIT_COST
 }
 /// The tuning report's leaf size when it sets one (0: the builder's choice).
 #[cfg(test)]
@@ -258,7 +264,7 @@ fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>)
         }
         let best = best_split(rs, &cb, block);
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-        let split_cost = traversal_cost() + best.0 / parent_area;
+        let split_cost = split_cost() + best.0 / parent_area;
         let leaf_cost = blocks_of(count as u32, block);
         let mid;
         if best.0.is_finite() && (split_cost < leaf_cost || count > max_leaf) {
