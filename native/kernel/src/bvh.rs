@@ -59,7 +59,7 @@ pub(crate) mod probe {
     use std::cell::Cell;
     thread_local! {
         pub static NODES: Cell<u64> = const { Cell::new(0) };
-        pub static TCOST: Cell<f32> = const { Cell::new(super::SPLIT_COST) };
+        pub static SPLIT: Cell<f32> = const { Cell::new(super::SPLIT_COST) };
         pub static LEAF_MIN: Cell<usize> = const { Cell::new(0) };
         /// Node visits by (inner children hit, leaves hit).
         pub static SHAPE: std::cell::RefCell<[[u64; 9]; 9]> = const { std::cell::RefCell::new([[0; 9]; 9]) };
@@ -77,7 +77,7 @@ pub(crate) mod probe {
 
 #[cfg(test)]
 fn split_cost() -> f32 {
-    probe::TCOST.with(|c| c.get())
+    probe::SPLIT.with(|c| c.get())
 }
 #[cfg(not(test))]
 fn split_cost() -> f32 {
@@ -1412,16 +1412,19 @@ mod stats_report {
 
     /// Shape of the hierarchy and work per ray on a big mesh, for tuning:
     /// `RT_MESH=/tmp/knot600k.obj cargo test --release -p ring_tracer_kernel bvh_stats_report --
-    /// --ignored --nocapture` (`RT_TCOST=C` builds with split cost `C`). Not a check.
+    /// --ignored --nocapture` (`RT_SPLIT_COST=C` builds with split cost `C`). Not a check.
     #[test]
     #[ignore]
     fn bvh_stats_report() {
         let Ok(path) = std::env::var("RT_MESH") else {
             return;
         };
-        // RT_TCOST: the binary build's cost of a split, for trying other trees
-        if let Some(c) = std::env::var("RT_TCOST").ok().and_then(|c| c.parse().ok()) {
-            probe::TCOST.with(|t| t.set(c));
+        // RT_SPLIT_COST: the binary build's cost of a split, for trying other trees
+        if let Some(c) = std::env::var("RT_SPLIT_COST")
+            .ok()
+            .and_then(|c| c.parse().ok())
+        {
+            probe::SPLIT.with(|t| t.set(c));
         }
         let t = std::time::Instant::now();
         let scene = Scene::load(std::path::Path::new(&path)).unwrap();

@@ -1212,10 +1212,10 @@ mod tests {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut hits = 0;
         for round in 0..16 {
-            // the last rounds build with a split cost of a whole node visit: bigger leaves, of
-            // which a packet's rays often meet one with only a few of them
+            // the last rounds build with a split cost of a whole node visit: bigger leaves, more
+            // of them met by only a few of a packet's rays (the per-ray test at leaves)
             if round == 12 {
-                crate::bvh::probe::TCOST.with(|c| c.set(1.0));
+                crate::bvh::probe::SPLIT.with(|c| c.set(1.0));
             }
             let mut b = SceneBuilder::new();
             let m = b.material(Material::default());
@@ -1272,7 +1272,7 @@ mod tests {
                 .collect();
             hits += check(&scene, &rays, f32::INFINITY, false);
         }
-        crate::bvh::probe::TCOST.with(|c| c.set(crate::bvh::SPLIT_COST));
+        crate::bvh::probe::SPLIT.with(|c| c.set(crate::bvh::SPLIT_COST));
         assert!(hits > 5000, "{hits}");
         // both ways of meeting a leaf of blocks: across rays, and one ray at a time
         let c = probe::COUNTS.with(|c| c.get());

@@ -1222,16 +1222,16 @@ mod tuning {
 
     /// Deterministic traversal cost (node visits / primitive tests per ray) on the SPD scenes,
     /// for tuning the BVH build: `cargo test --release -p ring_tracer_kernel bvh_cost_report --
-    /// --ignored --nocapture`. Not a check; add (traversal cost, leaf size) variants to compare.
+    /// --ignored --nocapture`. Not a check; add (split cost, leaf size) variants to compare.
     #[test]
     #[ignore]
     fn bvh_cost_report() {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../priv/scenes/spd");
-        let variants: Vec<(f32, usize)> = vec![(1.0, 2)];
+        let variants: Vec<(f32, usize)> = vec![(crate::bvh::SPLIT_COST, 0), (1.0, 0)];
         for (tc, lm) in variants {
-            probe::TCOST.with(|c| c.set(tc));
+            probe::SPLIT.with(|c| c.set(tc));
             probe::LEAF_MIN.with(|c| c.set(lm));
-            let mut line = format!("tc {tc} leafmin {lm}:");
+            let mut line = format!("split cost {tc} leaf size {lm} (0: the build's):");
             for f in [
                 "balls_s4",
                 "gears_s4",
