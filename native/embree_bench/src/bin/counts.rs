@@ -160,7 +160,7 @@ fn main() {
                 let Some(c) = measure(mesh, kernel, kind, n, ll, isa) else {
                     continue;
                 };
-                let per = |x: u64| x as f64 / (side(n) as f64).powi(2);
+                let per = |x: u64| x as f64 / n as f64;
                 println!(
                     "| {name} | {kind} | {kernel} | {:.1} | {:.1} | {:.3} | {:.2} | {:.3} |",
                     per(c[0]),
