@@ -14,9 +14,17 @@ extern "C" fn handler(signal: libc::c_int) {
     let fd = WRITE_FD.load(Ordering::Relaxed);
     if fd >= 0 {
         // SAFETY: write(2) is async-signal-safe; `byte` outlives the call and
-        // the length is 1. A full pipe drops the byte, which is harmless.
+        // the length is 1. The write end is non-blocking, so a full pipe
+        // (bytes the reader has not taken yet) drops this byte with EAGAIN
+        // instead of blocking inside the handler, which is harmless: a byte
+        // waiting already wakes the reader. errno is the thread's own,
+        // saved before and restored after, so that the code the signal
+        // interrupted never sees write(2)'s.
         unsafe {
+            let errno = libc::__errno_location();
+            let saved = *errno;
             libc::write(fd, (&byte as *const u8).cast(), 1);
+            *errno = saved;
         }
     }
 }
@@ -26,8 +34,13 @@ extern "C" fn handler(signal: libc::c_int) {
 /// arrives. SIGINT is ignored: the launcher turns it into SIGUSR2.
 pub fn watch(mut on_signal: impl FnMut(u8) + Send + 'static) -> std::io::Result<()> {
     let mut fds = [0 as libc::c_int; 2];
-    // SAFETY: `fds` is a valid array of two ints for pipe(2) to fill.
-    if unsafe { libc::pipe(fds.as_mut_ptr()) } != 0 {
+    // SAFETY: `fds` is a valid array of two ints for pipe2(2) to fill.
+    if unsafe { libc::pipe2(fds.as_mut_ptr(), libc::O_CLOEXEC) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    // the handler's end never blocks (the reader's does, to wait for bytes)
+    // SAFETY: fds[1] was just made by pipe2(2); F_SETFL takes an int flag set.
+    if unsafe { libc::fcntl(fds[1], libc::F_SETFL, libc::O_NONBLOCK) } != 0 {
         return Err(std::io::Error::last_os_error());
     }
     WRITE_FD.store(fds[1], Ordering::Relaxed);
@@ -80,5 +93,13 @@ mod tests {
             libc::raise(libc::SIGTERM);
         }
         assert_eq!(rx.recv_timeout(Duration::from_secs(5)).unwrap(), b'K');
+        // the write end never blocks, and the read end still does
+        let fd = WRITE_FD.load(Ordering::Relaxed);
+        // SAFETY: F_GETFL on a descriptor this process owns reads its flags.
+        let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+        assert!(
+            flags >= 0 && flags & libc::O_NONBLOCK != 0,
+            "flags {flags:#x}"
+        );
     }
 }

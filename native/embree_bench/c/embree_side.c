@@ -16,6 +16,18 @@ struct eb_scene {
 };
 
 static struct eb_scene the_scenes[8];
+/* the_claimed[i] != 0: slot i belongs to one eb_new or to its handle until eb_free. A slot is
+ * claimed with one atomic exchange, so that two threads building scenes at once never get the
+ * same handle. */
+static int the_claimed[8];
+
+static int claim_slot(void) {
+  for (int i = 0; i < 8; i++)
+    if (__atomic_exchange_n(&the_claimed[i], 1, __ATOMIC_ACQ_REL) == 0) return i;
+  return -1;
+}
+
+static void release_slot(int h) { __atomic_store_n(&the_claimed[h], 0, __ATOMIC_RELEASE); }
 
 const char *eb_version(void) { return RTC_VERSION_STRING; }
 
@@ -24,13 +36,14 @@ const char *eb_version(void) { return RTC_VERSION_STRING; }
  * with ",isa=..."). */
 int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
            const char *config) {
-  int h = -1;
-  for (int i = 0; i < 8; i++)
-    if (the_scenes[i].device == NULL) { h = i; break; }
+  int h = claim_slot();
   if (h < 0) return -1;
   /* one build thread (in config): the machine is shared and the figures are per tracing thread */
   RTCDevice device = rtcNewDevice(config);
-  if (device == NULL) return -1;
+  if (device == NULL) {
+    release_slot(h);
+    return -1;
+  }
   RTCScene scene = rtcNewScene(device);
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   float *v = (float *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
@@ -41,6 +54,7 @@ int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
     rtcReleaseGeometry(geom);
     rtcReleaseScene(scene);
     rtcReleaseDevice(device);
+    release_slot(h);
     return -1;
   }
   memcpy(v, verts, nverts * 3 * sizeof(float));
@@ -52,6 +66,7 @@ int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
     rtcReleaseScene(scene);
     rtcReleaseDevice(device);
+    release_slot(h);
     return -1;
   }
   the_scenes[h].device = device;
@@ -65,6 +80,7 @@ void eb_free(int h) {
   rtcReleaseDevice(the_scenes[h].device);
   the_scenes[h].device = NULL;
   the_scenes[h].scene = NULL;
+  release_slot(h);
 }
 
 static void init_ray(struct RTCRay *r, const float *p) {
@@ -125,7 +141,8 @@ uint64_t eb_intersect16(int h, const float *rays, size_t n, int coherent) {
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   uint64_t hits = 0;
   struct RTCRayHit16 rh;
-  int valid[16];
+  /* Embree requires the mask 64-byte aligned (it is read as one vector) */
+  _Alignas(64) int valid[16];
   for (size_t i = 0; i < n; i += 16) {
     int live = fill16(&rh.ray, valid, rays, i, n);
     for (int k = 0; k < 16; k++) {
@@ -145,7 +162,7 @@ uint64_t eb_occluded16(int h, const float *rays, size_t n, int coherent) {
   if (coherent) ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   uint64_t hits = 0;
   struct RTCRay16 r;
-  int valid[16];
+  _Alignas(64) int valid[16];
   for (size_t i = 0; i < n; i += 16) {
     int live = fill16(&r, valid, rays, i, n);
     rtcOccluded16(valid, scene, &ctx, &r);

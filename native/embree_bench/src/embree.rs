@@ -163,7 +163,9 @@ impl Embree {
             // SAFETY: `verts` holds 3 floats per vertex for 3 * tris.len() vertices and `idx`
             // 3 indices per triangle, all below the vertex count; eb_new copies both before
             // returning and keeps no pointer to them; `config` is a NUL-terminated string that
-            // outlives the call.
+            // outlives the call. Calls on several threads at once are sound: each claims its
+            // slot of the C side's table with one atomic exchange, so no two live values share
+            // a handle (`scenes_built_on_several_threads_at_once_stay_apart`).
             let config = isa.config();
             let handle = unsafe {
                 ffi::eb_new(
@@ -194,8 +196,9 @@ impl Embree {
             let p = rays.as_ptr();
             let h = self.handle;
             // SAFETY: `p` points to `n` complete rays of 6 floats that stay borrowed for the
-            // call; `h` is a live handle (freed only in Drop); the harness only reads the rays,
-            // and Embree's scenes may be traced from several threads at once.
+            // call; `h` is a live handle (freed only in Drop) that no other value holds; the
+            // harness only reads the rays, its packet calls hand Embree the 64-byte aligned
+            // masks it requires, and Embree's scenes may be traced from several threads at once.
             unsafe {
                 match call {
                     Call::Intersect1 => ffi::eb_intersect1(h, p, n),
@@ -264,6 +267,55 @@ mod tests {
             for e in &devices {
                 assert_eq!(e.trace(call, &f), 5, "{call:?}");
             }
+        }
+    }
+
+    /// Three scenes built at once on three threads, each a square of its own size: every one
+    /// answers for its own square, so no two share a slot. (Three: the test beside it may hold
+    /// five of the C side's eight slots meanwhile.)
+    #[test]
+    fn scenes_built_on_several_threads_at_once_stay_apart() {
+        let rays: Vec<Ray> = (0..64)
+            .map(|i| {
+                let x = (i % 8) as f32 + 0.5;
+                let y = (i / 8) as f32 + 0.5;
+                Ray::new(Vec3A::new(x, y, 1.0), -Vec3A::Z)
+            })
+            .collect();
+        let f = flat(&rays);
+        for _round in 0..5 {
+            let start = std::sync::Barrier::new(3);
+            let built = std::sync::Barrier::new(3);
+            std::thread::scope(|s| {
+                let handles: Vec<_> = (1..=3u32)
+                    .map(|k| {
+                        let (start, built, f) = (&start, &built, &f);
+                        s.spawn(move || {
+                            // a k x k square from the origin: k * k of the 8 x 8 rays hit it
+                            let side = k as f32;
+                            let q = [
+                                Vec3A::ZERO,
+                                Vec3A::new(side, 0.0, 0.0),
+                                Vec3A::new(side, side, 0.0),
+                                Vec3A::new(0.0, side, 0.0),
+                            ];
+                            let tris = [[q[0], q[1], q[2]], [q[0], q[2], q[3]]];
+                            start.wait();
+                            let e = Embree::new(&tris, Isa::Best);
+                            // every scene lives until all are built
+                            built.wait();
+                            let e = e.expect("a free slot for each scene");
+                            (k, e.handle, e.trace(Call::Intersect1, f))
+                        })
+                    })
+                    .collect();
+                let mut seen = std::collections::HashSet::new();
+                for h in handles {
+                    let (k, handle, hits) = h.join().unwrap();
+                    assert_eq!(hits, (k * k) as u64, "scene {k}");
+                    assert!(seen.insert(handle), "handle {handle} twice");
+                }
+            });
         }
     }
 

@@ -24,9 +24,11 @@ fn fnv(pixels: &[f32]) -> u64 {
 /// CPU seconds (user + system) the process has used, all threads: on a busy machine a steadier
 /// figure than the wall clock.
 fn cpu_seconds() -> f64 {
-    // SAFETY: getrusage only writes the struct it is given, which lives on this stack.
+    // SAFETY: `rusage` is a C struct of plain integers (two timevals and longs), for which all
+    // zeros is a valid value.
     let mut u: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: as above; RUSAGE_SELF is a valid `who`.
+    // SAFETY: getrusage only writes the struct it is given, which lives on this stack and is
+    // of the type it expects; RUSAGE_SELF is a valid `who`.
     if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
         return 0.0;
     }
@@ -93,5 +95,28 @@ fn main() {
     if failed {
         eprintln!("a scene's runs gave different pixels");
         std::process::exit(1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cpu_seconds;
+
+    #[test]
+    fn cpu_seconds_count_this_process_work() {
+        let before = cpu_seconds();
+        assert!(before > 0.0, "{before} s");
+        let t = std::time::Instant::now();
+        let mut x = 1u64;
+        // busy until 20 ms of CPU time show, within 20 s of the wall clock even on busy cores
+        while cpu_seconds() - before < 0.02 {
+            assert!(t.elapsed().as_secs() < 20, "no CPU time counted");
+            for _ in 0..10_000 {
+                x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1));
+            }
+        }
+        // no more CPU than wall time on this thread (the test harness's other threads idle or
+        // on the other core)
+        assert!(cpu_seconds() - before <= 2.0 * t.elapsed().as_secs_f64() + 0.02);
     }
 }

@@ -926,7 +926,8 @@ fn traverse<const AVX: bool, const WIDE: bool>(
             probe::add(0, 1);
             #[cfg(target_arch = "x86_64")]
             let (tn, mut mask) = if AVX {
-                // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has it.
+                // SAFETY: AVX is only set by traverse_avx and traverse_avx512, which run only
+                // where the CPU has AVX2 and FMA (use_avx, use_avx512).
                 unsafe { node_avx(node, f, tmax) }
             } else {
                 node_sse(node, f, tmax)
