@@ -72,14 +72,53 @@ defmodule RingTracer.Cluster do
     end
   end
 
+  @doc """
+  Why a call to `node` failed, in words, from what `:erpc` raised (`reason`)
+  or the exit of a call to a process there; `ms` is the call's timeout.
+
+      iex> RingTracer.Cluster.call_failure(:w1@host, {:erpc, :timeout}, 5_000)
+      "node w1@host did not answer within 5000 ms (frozen or overloaded)"
+      iex> RingTracer.Cluster.call_failure(:w1@host, {:erpc, :noconnection}, 5_000)
+      "lost the connection to node w1@host (it went down, or stopped answering for longer than the liveness timeout)"
+  """
+  @spec call_failure(node(), term(), timeout()) :: String.t()
+  def call_failure(node, reason, ms) do
+    case reason do
+      {:erpc, :timeout} ->
+        "node #{node} did not answer within #{ms} ms (frozen or overloaded)"
+
+      lost when lost in [{:erpc, :noconnection}, :noconnection] ->
+        lost_connection(node)
+
+      {:nodedown, _} ->
+        lost_connection(node)
+
+      {:noconnection, {GenServer, :call, _}} ->
+        lost_connection(node)
+
+      {{:nodedown, _}, {GenServer, :call, _}} ->
+        lost_connection(node)
+
+      other ->
+        "node #{node}: #{inspect(other)}"
+    end
+  end
+
+  defp lost_connection(node) do
+    "lost the connection to node #{node} (it went down, or stopped answering for longer " <>
+      "than the liveness timeout)"
+  end
+
+  @check_ms 5_000
+
   defp remote_check(n) do
-    apps = :erpc.call(n, Application, :started_applications, [], 5_000)
+    apps = :erpc.call(n, Application, :started_applications, [], @check_ms)
 
     cond do
       not Enum.any?(apps, &(elem(&1, 0) == :ring_tracer)) ->
         {:error, "node #{n} does not run :ring_tracer; start it with mix ring_tracer.worker"}
 
-      not is_integer(:erpc.call(n, RingTracer.Native, :scene_live_count, [], 5_000)) ->
+      not is_integer(:erpc.call(n, RingTracer.Native, :scene_live_count, [], @check_ms)) ->
         {:error, "node #{n} has not loaded RingTracer's NIF"}
 
       true ->
@@ -87,7 +126,13 @@ defmodule RingTracer.Cluster do
     end
   rescue
     e in ErlangError ->
-      {:error, "node #{n} lacks RingTracer's code or NIF: #{Exception.message(e)}"}
+      case e.original do
+        {:erpc, reason} when reason in [:timeout, :noconnection] ->
+          {:error, call_failure(n, e.original, @check_ms)}
+
+        _ ->
+          {:error, "node #{n} lacks RingTracer's code or NIF: #{Exception.message(e)}"}
+      end
   end
 
   @impl GenServer

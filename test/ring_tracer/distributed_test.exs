@@ -122,6 +122,50 @@ defmodule RingTracer.DistributedTest do
     end
   end
 
+  test "a node that freezes while the job starts fails it after the liveness timeout" do
+    {peer, frozen} = Peers.start("frozen_at_start")
+    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
+
+    try do
+      t0 = System.monotonic_time(:millisecond)
+
+      assert {:error, %RingTracer.Error{message: message}} =
+               RingTracer.render(
+                 TestScenes.path(@scene),
+                 [
+                   nodes: [frozen],
+                   children: 4,
+                   atoms: 8,
+                   liveness: 1_000,
+                   kernel: {RingTracer.Test.FaultyKernel, freeze: {frozen, os_pid}}
+                 ] ++ @size
+               )
+
+      assert message =~ "lost the connection to node #{frozen}"
+      # The liveness watch's second, not the minute a scene may take to parse there.
+      assert System.monotonic_time(:millisecond) - t0 < 20_000
+    after
+      System.cmd("kill", ["-CONT", os_pid])
+      Peers.stop(peer)
+    end
+  end
+
+  test "a frozen node is a clear error before any work starts" do
+    {peer, frozen} = Peers.start("frozen_before")
+    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
+    {_, 0} = System.cmd("kill", ["-STOP", os_pid])
+
+    try do
+      assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
+               RingTracer.render(TestScenes.path(@scene), nodes: [frozen])
+
+      assert message =~ "node #{frozen} did not answer within 5000 ms"
+    after
+      System.cmd("kill", ["-CONT", os_pid])
+      Peers.stop(peer)
+    end
+  end
+
   test "an unreachable node is a clear error before any work starts" do
     assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
              RingTracer.render(TestScenes.path(@scene), nodes: [:nobody@nowhere])

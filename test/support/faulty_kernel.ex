@@ -4,7 +4,9 @@ defmodule RingTracer.Test.FaultyKernel do
   `:fail_pixel` fails as a kernel panic does (`RingTracer.Kernel.Native`
   turns a panic into `{:error, "kernel raised: ..."}`), every time it is
   traced; and, with `:jitter`, each atom's result waits up to that many
-  milliseconds more, drawn at random, before it goes to its child.
+  milliseconds more, drawn at random, before it goes to its child; and, with
+  `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) just
+  before the parent prepares it, as a node that hangs while a job starts.
   """
   @behaviour RingTracer.Kernel
 
@@ -16,7 +18,14 @@ defmodule RingTracer.Test.FaultyKernel do
   end
 
   @impl true
-  def prepare_node(spec, _opts, node), do: Native.prepare_node(spec, [], node)
+  def prepare_node(spec, opts, node) do
+    case opts[:freeze] do
+      {^node, os_pid} -> {_, 0} = System.cmd("kill", ["-STOP", os_pid])
+      _ -> :ok
+    end
+
+    Native.prepare_node(spec, [], node)
+  end
 
   @impl true
   def atom_work(spec, _opts), do: Native.atom_work(spec, [])

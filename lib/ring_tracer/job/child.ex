@@ -133,6 +133,9 @@ defmodule RingTracer.Job.Child do
       RingTracer.Names.children(node),
       {__MODULE__, {spec, index, parent}}
     )
+  catch
+    # the node dropped, or was disconnected by the job's liveness watch
+    :exit, reason -> {:error, {:exit, reason}}
   end
 
   @doc false

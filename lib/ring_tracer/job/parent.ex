@@ -236,6 +236,12 @@ defmodule RingTracer.Job.Parent do
 
     speeds = List.to_tuple(state.spec.speeds)
 
+    # The watch starts before the nodes are asked for anything: a node that
+    # freezes while the job starts is disconnected after the liveness
+    # timeout, so that preparing it or starting a child there fails then,
+    # not after distribution's minute.
+    _ = RingTracer.Cluster.Liveness.start(placement, state.spec.liveness)
+
     prepared =
       placement
       |> Enum.uniq()
@@ -256,6 +262,10 @@ defmodule RingTracer.Job.Parent do
               {:ok, pid} ->
                 {:cont, {:ok, [{i, pid} | acc]}}
 
+              {:error, {:exit, reason}} ->
+                why = RingTracer.Cluster.call_failure(node, reason, :infinity)
+                {:halt, {:error, "could not start child #{i}: #{why}", acc}}
+
               other ->
                 {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}", acc}}
             end
@@ -269,7 +279,6 @@ defmodule RingTracer.Job.Parent do
 
     case started do
       {:ok, list} ->
-        _ = RingTracer.Cluster.Liveness.start(placement, state.spec.liveness)
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
         state = %{state | children: children, monitors: monitors}

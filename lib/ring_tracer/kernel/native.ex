@@ -12,6 +12,9 @@ defmodule RingTracer.Kernel.Native do
   # Pixels of the preview that `atom_work/2` traces (about 0.1% of a
   # 1024x1024 image), and at most this share of a small image's.
   @preview_pixels 1024
+  # How long a node may take to parse and pin a job's scene (a node that
+  # freezes meanwhile is disconnected sooner, by the job's liveness watch).
+  @prepare_ms 60_000
   @preview_share 1 / 64
 
   @impl RingTracer.Kernel
@@ -30,12 +33,16 @@ defmodule RingTracer.Kernel.Native do
   end
 
   def prepare_node(spec, _opts, node) do
-    case :erpc.call(node, SceneCache, :pin, [spec.source, self()], 60_000) do
+    case :erpc.call(node, SceneCache, :pin, [spec.source, self()], @prepare_ms) do
       :ok -> {:ok, RingTracer.Scene.Source.size(spec.source)}
       {:error, message} -> {:error, "#{node}: #{message}"}
     end
   rescue
-    e in ErlangError -> {:error, "#{node}: #{Exception.message(e)}"}
+    e in ErlangError ->
+      case e.original do
+        {:erpc, _} -> {:error, RingTracer.Cluster.call_failure(node, e.original, @prepare_ms)}
+        _ -> {:error, "#{node}: #{Exception.message(e)}"}
+      end
   end
 
   @doc """
