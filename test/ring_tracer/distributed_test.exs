@@ -91,10 +91,7 @@ defmodule RingTracer.DistributedTest do
 
   test "a frozen node is declared dead after the liveness timeout and its atoms traced elsewhere",
        %{reference: reference} do
-    {peer, frozen} = Peers.start("frozen")
-    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
-
-    try do
+    with_peer("frozen", fn frozen, os_pid ->
       {:ok, job} =
         RingTracer.render_async(
           TestScenes.path(@scene),
@@ -116,17 +113,11 @@ defmodule RingTracer.DistributedTest do
       assert Enum.any?(result.failures, &(&1.reason =~ "noconnection"))
       # Declared dead after about a second, not after distribution's minute.
       assert System.monotonic_time(:millisecond) - t0 < 20_000
-    after
-      System.cmd("kill", ["-CONT", os_pid])
-      Peers.stop(peer)
-    end
+    end)
   end
 
   test "a node that freezes while the job starts fails it after the liveness timeout" do
-    {peer, frozen} = Peers.start("frozen_at_start")
-    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
-
-    try do
+    with_peer("frozen_at_start", fn frozen, os_pid ->
       t0 = System.monotonic_time(:millisecond)
 
       assert {:error, %RingTracer.Error{message: message}} =
@@ -144,26 +135,18 @@ defmodule RingTracer.DistributedTest do
       assert message =~ "lost the connection to node #{frozen}"
       # The liveness watch's second, not the minute a scene may take to parse there.
       assert System.monotonic_time(:millisecond) - t0 < 20_000
-    after
-      System.cmd("kill", ["-CONT", os_pid])
-      Peers.stop(peer)
-    end
+    end)
   end
 
   test "a frozen node is a clear error before any work starts" do
-    {peer, frozen} = Peers.start("frozen_before")
-    os_pid = :erpc.call(frozen, :os, :getpid, []) |> List.to_string()
-    {_, 0} = System.cmd("kill", ["-STOP", os_pid])
+    with_peer("frozen_before", fn frozen, os_pid ->
+      {_, 0} = System.cmd("kill", ["-STOP", os_pid])
 
-    try do
       assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
                RingTracer.render(TestScenes.path(@scene), nodes: [frozen])
 
       assert message =~ "node #{frozen} did not answer within 5000 ms"
-    after
-      System.cmd("kill", ["-CONT", os_pid])
-      Peers.stop(peer)
-    end
+    end)
   end
 
   test "an unreachable node is a clear error before any work starts" do
@@ -181,6 +164,20 @@ defmodule RingTracer.DistributedTest do
 
     assert message =~ Atom.to_string(bare)
     Peers.stop(peer)
+  end
+
+  # Runs `fun.(node, os_pid)` on a peer of its own, which is then continued
+  # (should `fun` have stopped it with SIGSTOP) and stopped, whatever happened.
+  defp with_peer(prefix, fun) do
+    {peer, node} = Peers.start(prefix)
+    os_pid = :erpc.call(node, :os, :getpid, []) |> List.to_string()
+
+    try do
+      fun.(node, os_pid)
+    after
+      System.cmd("kill", ["-CONT", os_pid])
+      Peers.stop(peer)
+    end
   end
 
   # Renders on `nodes` (and this node), every child slowed down 20x. At the
