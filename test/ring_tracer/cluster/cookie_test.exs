@@ -18,6 +18,45 @@ defmodule RingTracer.Cluster.CookieTest do
     assert File.read!(path) == before
   end
 
+  test "the cookie's name only ever holds the whole secret, mode 0600", %{tmp_dir: dir} do
+    # A watcher stats each new cookie's name as fast as it can while it is
+    # made: it must never see the file unfinished (empty, or readable by
+    # others), as a reader who opened it then would keep reading it.
+    paths = for i <- 1..200, do: Path.join(dir, "c#{i}")
+    parent = self()
+
+    watcher =
+      spawn_link(fn ->
+        seen =
+          Enum.flat_map(paths, fn path ->
+            send(parent, {:watching, path})
+            watch(path, [])
+          end)
+
+        send(parent, {:seen, seen})
+      end)
+
+    for path <- paths do
+      assert_receive {:watching, ^path}, 5_000
+      assert {:ok, ^path} = Cookie.create(path)
+    end
+
+    assert_receive {:seen, seen}, 10_000
+    refute Process.alive?(watcher)
+    assert Enum.uniq(seen) == [{0o600, 44}]
+    # nothing else is left in the folder: no staged copy, no second name
+    assert File.ls!(dir) |> Enum.sort() == Enum.sort(Enum.map(paths, &Path.basename/1))
+    assert Enum.all?(paths, &(File.stat!(&1).links == 1))
+  end
+
+  # Stats `path` until it exists; returns what it saw of it then.
+  defp watch(path, acc) do
+    case File.stat(path) do
+      {:ok, stat} -> [{Bitwise.band(stat.mode, 0o777), stat.size} | acc]
+      {:error, :enoent} -> watch(path, acc)
+    end
+  end
+
   test "a missing or empty cookie file says how to make one", %{tmp_dir: dir} do
     assert {:error, error} = Cookie.read(Path.join(dir, "none"))
     assert error.message =~ "ringtracer cookie"
