@@ -19,6 +19,10 @@ defmodule RingTracer.Error do
   | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |
   | `:distribution` | this node could not become distributed (name in use, epmd, TLS set-up) |
   | `:preview` | a preview could not start (port in use) or its job is not running |
+
+  A message never holds a control character but newlines and tabs (see
+  `escape/2`): a file name from an untrusted folder cannot drive the
+  terminal that shows the error.
   """
   defexception [:reason, :message]
 
@@ -27,7 +31,39 @@ defmodule RingTracer.Error do
   @doc false
   @spec new(atom(), String.t()) :: t()
   def new(reason, message) when is_atom(reason) and is_binary(message),
-    do: %__MODULE__{reason: reason, message: message}
+    do: %__MODULE__{reason: reason, message: escape(message, ["\n", "\t"])}
+
+  @doc ~S"""
+  `text` with its control characters (C0, DEL and C1), but those in `keep`,
+  written as escapes the way the kernel writes them in its messages (Rust's
+  `escape_debug`): `\n`, `\t`, `\r`, `\u{1b}`. Bytes that are not UTF-8
+  stay as they are.
+
+      iex> RingTracer.Error.escape("a\e[31mred\n.nff")
+      "a\\u{1b}[31mred\\n.nff"
+      iex> RingTracer.Error.escape("two\nlines\u0085", ["\n"])
+      "two\nlines\\u{85}"
+  """
+  @spec escape(String.t(), [String.t()]) :: String.t()
+  def escape(text, keep \\ []) when is_binary(text) do
+    if String.match?(text, ~r/[\x00-\x1f\x7f]|\xc2[\x80-\x9f]/) do
+      text |> String.codepoints() |> Enum.map_join(&escape_char(&1, keep))
+    else
+      text
+    end
+  end
+
+  defp escape_char(<<c::utf8>> = char, keep) when c < 0x20 or c in 0x7F..0x9F do
+    cond do
+      char in keep -> char
+      char == "\n" -> "\\n"
+      char == "\t" -> "\\t"
+      char == "\r" -> "\\r"
+      true -> "\\u{" <> String.downcase(Integer.to_string(c, 16)) <> "}"
+    end
+  end
+
+  defp escape_char(char, _keep), do: char
 
   @doc """
   A file operation on `path` that failed with `posix` (`:enoent`,

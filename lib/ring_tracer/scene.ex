@@ -93,7 +93,14 @@ defmodule RingTracer.Scene do
          :ok <- check_dirs(allow),
          {:ok, bytes, real} <- read(path) do
       with {:ok, scene} <-
-             parse(bytes, format, Path.basename(path), Path.dirname(real), allow, %{}),
+             parse(
+               bytes,
+               format,
+               Error.escape(Path.basename(path)),
+               Path.dirname(real),
+               allow,
+               %{}
+             ),
            do: {:ok, %{scene | path: real}}
     end
   end
