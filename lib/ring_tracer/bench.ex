@@ -107,4 +107,25 @@ defmodule RingTracer.Bench do
   @doc "Prints a line through the Mix shell."
   @spec info(String.t()) :: :ok
   def info(line), do: Mix.shell().info(line)
+
+  @doc """
+  A new folder of this run's own under the system's temporary folder, that
+  only this user can enter: a random name that `mkdir` must create (never a
+  folder someone else made there first, nor a symlink planted in its
+  place), closed to others before anything is put in it.
+
+      iex> dir = RingTracer.Bench.private_tmp_dir!("ringtracer-doc")
+      iex> Bitwise.band(File.stat!(dir).mode, 0o777)
+      0o700
+      iex> File.rmdir(dir)
+      :ok
+  """
+  @spec private_tmp_dir!(String.t()) :: Path.t()
+  def private_tmp_dir!(prefix) do
+    name = prefix <> "-" <> Base.url_encode64(:crypto.strong_rand_bytes(9), padding: false)
+    dir = Path.join(System.tmp_dir!(), name)
+    File.mkdir!(dir)
+    File.chmod!(dir, 0o700)
+    dir
+  end
 end

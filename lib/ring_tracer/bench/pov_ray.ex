@@ -29,10 +29,11 @@ defmodule RingTracer.Bench.PovRay do
 
   def times(povray, file, size, threads, runs) do
     if File.exists?(file) do
+      dir = RingTracer.Bench.private_tmp_dir!("ringtracer-bench-pov")
+      out = Path.join(dir, "pov.png")
+
       samples =
         for _ <- 1..runs do
-          out = Path.join(System.tmp_dir!(), "ring_tracer_bench_pov.png")
-
           {text, _} =
             System.cmd(
               povray,
@@ -50,6 +51,8 @@ defmodule RingTracer.Bench.PovRay do
 
           parse(text)
         end
+
+      File.rm_rf(dir)
 
       %{
         parse_us: median(Enum.map(samples, & &1.parse_us)),

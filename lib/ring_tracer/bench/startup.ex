@@ -39,8 +39,7 @@ defmodule RingTracer.Bench.Startup do
     size = opts[:size] || 512
     povray = PovRay.executable()
     launcher = Path.expand("bin/ringtracer")
-    tmp = Path.join(System.tmp_dir!(), "ring_tracer_bench_startup")
-    File.mkdir_p!(tmp)
+    tmp = RingTracer.Bench.private_tmp_dir!("ringtracer-bench-startup")
     # The launcher builds itself first if it is stale: not part of any run.
     {_, 0} = System.cmd(launcher, ["render", "--help"], stderr_to_stdout: true)
 
@@ -112,6 +111,7 @@ defmodule RingTracer.Bench.Startup do
         end
       after
         stop_server(server)
+        File.rm_rf(tmp)
       end
 
     print_table(header, rows)

@@ -213,9 +213,7 @@ defmodule RingTracer.Bench.Network.Lab do
 
     lab = remember(%{lab | relay: relay})
 
-    dir = Path.join(System.tmp_dir!(), "ringtracer-net-#{lab.id}")
-    File.mkdir_p!(dir)
-    File.chmod!(dir, 0o700)
+    dir = RingTracer.Bench.private_tmp_dir!("ringtracer-net-#{lab.id}")
     lab = remember(%{lab | dir: dir})
     cookie = Path.join(dir, ".erlang.cookie")
     {:ok, _} = Cookie.create(cookie)
