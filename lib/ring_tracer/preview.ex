@@ -28,9 +28,11 @@ defmodule RingTracer.Preview do
   Server-Sent Events stream (`/events`, see `RingTracer.Preview.Log` for its
   frames); several browsers can watch one job, and one that joins late gets
   everything so far. The server (OTP's `:httpd`, one per preview, see
-  `RingTracer.Preview.HTTP`) answers GET for those four paths only: it
-  serves that job's picture and figures and nothing else, and nothing it
-  receives can start or change anything.
+  `RingTracer.Preview.HTTP`) answers GET for those four paths only, under
+  a random first segment that only the printed address holds (loopback is
+  open to every local user), and only to requests whose `Host` is its own
+  address: it serves that job's picture and figures and nothing else, and
+  nothing it receives can start or change anything.
 
   Cost: the job's parent sends the preview one message per atom and per
   hand-over, children one per protocol event; the preview converts an
@@ -62,8 +64,8 @@ defmodule RingTracer.Preview do
     with {:ok, addr} <- address(Keyword.get(opts, :listen, {127, 0, 0, 1})),
          {:ok, _} <- inets(),
          {:ok, pid} <- server(Keyword.put(opts, :listen, addr)) do
-      {addr, port} = GenServer.call(pid, :address)
-      {:ok, %__MODULE__{pid: pid, port: port, url: "http://#{host(addr)}:#{port}/"}}
+      {addr, port, token} = GenServer.call(pid, :address)
+      {:ok, %__MODULE__{pid: pid, port: port, url: "http://#{host(addr)}:#{port}/#{token}/"}}
     end
   end
 

@@ -3,8 +3,11 @@ defmodule RingTracer.Preview.HTTP do
   The only module of a preview's `:httpd` server (so no directory listing,
   no file serving by path, no CGI): it answers `GET` for the page's three
   files, by fixed name from `priv/preview`, and `GET /events`, the job's
-  Server-Sent Events stream. Anything else is 404 (an unknown path) or 405
-  (a method other than GET).
+  Server-Sent Events stream, all under `/TOKEN/`, the preview's random
+  first segment. Anything else is 404 (an unknown path, or one outside the
+  token) or 405 (a method other than GET); a request whose `Host` header
+  names another host than the preview's address (`hosts/1`: a page that
+  rebound its own name to 127.0.0.1) is 421.
 
   `/events` streams the log of `RingTracer.Preview.Server` from its first
   frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
@@ -32,16 +35,54 @@ defmodule RingTracer.Preview.HTTP do
   @spec root() :: String.t()
   def root, do: Application.app_dir(:ring_tracer, "priv/preview")
 
+  @doc """
+  The names a request's `Host` may give for a preview listening on `addr`:
+  the loopback names on loopback, that address's own elsewhere, and any
+  name on a wildcard address (`--listen 0.0.0.0`: reached by whatever name
+  the network gives the machine).
+
+      iex> RingTracer.Preview.HTTP.hosts({127, 0, 0, 1})
+      ["127.0.0.1", "localhost", "[::1]"]
+      iex> RingTracer.Preview.HTTP.hosts({10, 0, 0, 5})
+      ["10.0.0.5"]
+      iex> RingTracer.Preview.HTTP.hosts({0, 0, 0, 0})
+      :any
+  """
+  @spec hosts(:inet.ip_address()) :: [String.t()] | :any
+  def hosts(addr) do
+    case addr do
+      {0, 0, 0, 0} -> :any
+      {0, 0, 0, 0, 0, 0, 0, 0} -> :any
+      {127, _, _, _} -> Enum.uniq([to_string(:inet.ntoa(addr)), "localhost", "[::1]"])
+      {0, 0, 0, 0, 0, 0, 0, 1} -> ["[::1]", "localhost", "127.0.0.1"]
+      {_, _, _, _} -> [to_string(:inet.ntoa(addr))]
+      _ -> ["[#{:inet.ntoa(addr)}]"]
+    end
+  end
+
   @doc false
   def unquote(:do)(m) do
-    path = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
+    {server, table, token, hosts} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+
+    full = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
+
+    path =
+      case String.split(full, "/", parts: 3) do
+        ["", ^token, rest] -> "/" <> rest
+        _ -> nil
+      end
 
     cond do
+      not host_allowed?(m, hosts) ->
+        {:proceed, [{:response, {421, ~c"the preview answers on its own address only"}}]}
+
+      path == nil ->
+        {:proceed, [{:response, {404, ~c"not found"}}]}
+
       mod(m, :method) != ~c"GET" ->
         {:proceed, [{:response, {405, ~c"only GET"}}]}
 
       path == "/events" ->
-        {server, table} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
         stream(m, server, table)
 
       Map.has_key?(@files, path) ->
@@ -61,6 +102,21 @@ defmodule RingTracer.Preview.HTTP do
 
       true ->
         {:proceed, [{:response, {404, ~c"not found"}}]}
+    end
+  end
+
+  defp host_allowed?(_m, :any), do: true
+
+  defp host_allowed?(m, hosts) do
+    case List.keyfind(mod(m, :parsed_header), ~c"host", 0) do
+      {_, value} ->
+        host = value |> to_string() |> String.downcase()
+        # the name without its port ("[::1]:8080" -> "[::1]")
+        name = String.replace(host, ~r/:\d+\z/, "")
+        name in hosts
+
+      nil ->
+        false
     end
   end
 

@@ -34,6 +34,10 @@ defmodule RingTracer.Preview.Server do
     Process.flag(:priority, :low)
     table = :ets.new(__MODULE__, [:ordered_set, :protected, read_concurrency: true])
     addr = Keyword.get(opts, :listen, {127, 0, 0, 1})
+    # The page's address holds a random path: another local user (anyone
+    # can reach loopback) or a web page that rebinds a name of its own to
+    # 127.0.0.1 cannot guess it, and only sees 404s.
+    token = Base.url_encode64(:crypto.strong_rand_bytes(16), padding: false)
 
     config = [
       port: Keyword.get(opts, :port, 0),
@@ -45,7 +49,7 @@ defmodule RingTracer.Preview.Server do
       modules: [RingTracer.Preview.HTTP],
       max_clients: Keyword.get(opts, :max_viewers, 32),
       keep_alive_timeout: 60,
-      ring_tracer_preview: {self(), table}
+      ring_tracer_preview: {self(), table, token, RingTracer.Preview.HTTP.hosts(addr)}
     ]
 
     case :inets.start(:httpd, config, :stand_alone) do
@@ -58,6 +62,7 @@ defmodule RingTracer.Preview.Server do
           listener: listener(addr, port),
           port: port,
           addr: addr,
+          token: token,
           log: Log.new(Keyword.take(opts, [:max_events])),
           parent: nil,
           handlers: [],
@@ -80,7 +85,9 @@ defmodule RingTracer.Preview.Server do
   end
 
   @impl GenServer
-  def handle_call(:address, _from, state), do: {:reply, {state.addr, state.port}, state}
+  def handle_call(:address, _from, state),
+    do: {:reply, {state.addr, state.port, state.token}, state}
+
   def handle_call(:viewers, _from, state), do: {:reply, map_size(state.viewers), state}
 
   def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,

@@ -1,6 +1,7 @@
 defmodule RingTracer.Preview.HTTPTest do
   use ExUnit.Case, async: false
   doctest RingTracer.Preview
+  doctest RingTracer.Preview.HTTP
 
   import ExUnit.CaptureIO
 
@@ -45,11 +46,11 @@ defmodule RingTracer.Preview.HTTPTest do
         do: {p, :erlang.port_info(p, :connected)}
   end
 
-  # Whether an HTTP GET of 127.0.0.1:`port` gets a preview's page.
-  defp serves_page?(port) do
+  # Whether an HTTP GET of `url` gets a preview's page.
+  defp serves_page?(url) do
     case :httpc.request(
            :get,
-           {~c"http://127.0.0.1:#{port}/", []},
+           {String.to_charlist(url), []},
            [timeout: 2_000, connect_timeout: 1_000, autoredirect: false],
            []
          ) do
@@ -59,7 +60,7 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "serves the page's files and nothing else, on loopback", %{preview: p} do
-    assert p.url =~ ~r{\Ahttp://127\.0\.0\.1:\d+/\z}
+    assert p.url =~ ~r|\Ahttp://127\.0\.0\.1:\d+/[\w-]{22}/\z|
 
     assert {200, h, body} = get(p.url)
     assert h["content-type"] =~ "text/html"
@@ -74,6 +75,29 @@ defmodule RingTracer.Preview.HTTPTest do
     assert {405, _, _} = get(p.url, :delete)
     assert {405, _, _} = get(p.url <> "events", :head)
 
+    # Outside its random first segment there is nothing, whatever the method.
+    root = "http://127.0.0.1:#{p.port}/"
+    other = String.replace(p.url, ~r|/[\w-]{22}/\z|, "/#{String.duplicate("A", 22)}/")
+
+    for url <- [root, root <> "events", root <> "preview.js", other, other <> "events"],
+        method <- [:get, :delete],
+        do: assert({404, _, _} = get(url, method), "#{method} #{url}")
+
+    # A page that rebinds a name of its own to 127.0.0.1 is not answered.
+    for host <- ["evil.example", "evil.example:#{p.port}", "127.0.0.1.evil.example"] do
+      {:ok, {{_, code, _}, _, _}} =
+        :httpc.request(:get, {String.to_charlist(p.url), [{~c"host", ~c"#{host}"}]}, [], [])
+
+      assert code == 421, host
+    end
+
+    for host <- ["localhost:#{p.port}", "LOCALHOST", "127.0.0.1"] do
+      {:ok, {{_, code, _}, _, _}} =
+        :httpc.request(:get, {String.to_charlist(p.url), [{~c"host", ~c"#{host}"}]}, [], [])
+
+      assert code == 200, host
+    end
+
     # Nothing answers on this machine's other addresses.
     {:ok, ifs} = :inet.getifaddrs()
 
@@ -87,7 +111,7 @@ defmodule RingTracer.Preview.HTTPTest do
   test "--listen widens: the page answers on the address given" do
     {:ok, p} = Preview.start(listen: "0.0.0.0")
     assert p.url =~ "http://0.0.0.0:"
-    assert {200, _, _} = get("http://127.0.0.1:#{p.port}/")
+    assert {200, _, _} = get(String.replace(p.url, "0.0.0.0", "127.0.0.1"))
     Preview.stop(p, 0)
   end
 
@@ -158,7 +182,12 @@ defmodule RingTracer.Preview.HTTPTest do
   test "a stalled viewer does not hold up the job", %{preview: p} do
     # A client that asks for the stream and never reads it.
     {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, p.port, [:binary, active: false, recbuf: 1024])
-    :ok = :gen_tcp.send(sock, "GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+
+    :ok =
+      :gen_tcp.send(
+        sock,
+        "GET #{URI.parse(p.url).path}events HTTP/1.1\r\nHost: localhost\r\n\r\n"
+      )
 
     {:ok, result} =
       RingTracer.render(@scene, width: 160, height: 120, children: 2, atoms: 64, preview: p)
@@ -212,13 +241,13 @@ defmodule RingTracer.Preview.HTTPTest do
                  )
       end)
 
-    assert [_, port] = Regex.run(~r{preview: http://127\.0\.0\.1:(\d+)/}, err)
+    assert [_, url, port] = Regex.run(~r|preview: (http://127\.0\.0\.1:(\d+)/[\w-]{22}/)|, err)
     # Stopped when render/2 returns: no socket of this VM listens on the
     # port any more, and nothing there serves the page (the port is free
     # again: another program on this machine may have bound it since).
     port = String.to_integer(port)
     assert listeners(port) == []
-    refute serves_page?(port)
+    refute serves_page?(url)
   end
 
   test "stop/1 returns once the listening socket is closed, however late httpd's socket owner runs",
@@ -232,7 +261,7 @@ defmodule RingTracer.Preview.HTTPTest do
     try do
       Preview.stop(p, 0)
       assert listeners(p.port) == []
-      refute serves_page?(p.port)
+      refute serves_page?(p.url)
     after
       :erlang.resume_process(owner)
     end
@@ -305,7 +334,7 @@ defmodule RingTracer.Preview.HTTPTest do
           end)
         end)
 
-      assert err =~ ~r{preview: http://127\.0\.0\.1:\d+/}, inspect(args)
+      assert err =~ ~r|preview: http://127\.0\.0\.1:\d+/[\w-]{22}/|, inspect(args)
     end
 
     assert {:error, 2, message} =
@@ -329,10 +358,10 @@ defmodule RingTracer.Preview.HTTPTest do
                  )
       end)
 
-    [_, port] = Regex.run(~r{preview: http://127\.0\.0\.1:(\d+)/}, err)
+    [_, url, port] = Regex.run(~r|preview: (http://127\.0\.0\.1:(\d+)/[\w-]{22}/)|, err)
     port = String.to_integer(port)
     assert RingTracer.Test.Wait.eventually(fn -> listeners(port) == [] end)
-    refute serves_page?(port)
+    refute serves_page?(url)
   end
 
   test "the :preview option is checked" do
