@@ -7,9 +7,11 @@
 //! and SIGTERM are passed on as interrupts; SIGINT itself is the launcher's
 //! to handle. Exit status 200, with nothing written: no server answers, or
 //! the server says the command needs a VM of its own (the launcher then
-//! boots one).
+//! boots one), or the server runs as another user (said on stderr; the
+//! command then runs in a VM of its own too).
 
 mod frame;
+mod peer;
 mod session;
 mod signals;
 

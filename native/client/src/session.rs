@@ -13,6 +13,10 @@ pub fn run(socket: &Path, cwd: &OsString, args: Vec<OsString>) -> u8 {
     let Ok(mut stream) = UnixStream::connect(socket) else {
         return FALLBACK;
     };
+    if let Some(why) = crate::peer::refusal(&stream) {
+        eprintln!("ringtracer: {}: {why}", socket.display());
+        return FALLBACK;
+    }
     if request(&mut stream, cwd, &args).is_err() {
         return FALLBACK;
     }
