@@ -21,6 +21,9 @@ defmodule RingTracer.CLI do
     args = Enum.map(:init.get_plain_arguments(), &List.to_string/1)
     # What Mix's config would set (config/config.exs): booted from erl, no config is read.
     Application.put_env(:logger, :level, :info)
+    # Interrupts are this process's from the start: one that comes while a
+    # scene parses waits in the mailbox instead of stopping the VM with 0.
+    RingTracer.CLI.Signals.forward_to(self())
     # halt/1 flushes stdout and stderr before the VM goes.
     System.halt(run(args, true))
   end

@@ -114,4 +114,27 @@ defmodule RingTracer.CLITest do
       assert String.trim(ps) == ""
     end
   end
+
+  for {signal, status} <- [{"INT", 130}, {"TERM", 143}] do
+    test "SIG#{signal} while the VM boots still cancels: status #{status}, no file", ctx do
+      {port, pid} = start(ctx, ~w(render mine.nff -o early.png --width 64))
+      # The launcher's VM has just been started: the signal comes while it
+      # boots, or while the scene parses (the launcher holds it until the VM
+      # takes it), never after the image is written.
+      assert RingTracer.Test.Wait.eventually(fn -> vm_started?(pid) end, 1_000)
+      {_, 0} = System.cmd("kill", ["-#{unquote(signal)}", "#{pid}"])
+      {status, out} = collect(port)
+
+      assert status == unquote(status), out
+      assert out =~ ~r/(interrupted|terminated); nothing written/, out
+      refute File.exists?(Path.join(ctx.scenes, "early.png"))
+    end
+  end
+
+  # Whether the launcher `pid` has started its VM (erl has exec'd the
+  # emulator; it has not necessarily booted).
+  defp vm_started?(pid) do
+    {ps, _} = System.cmd("ps", ["-o", "comm=", "--ppid", "#{pid}"])
+    "beam.smp" in String.split(ps)
+  end
 end

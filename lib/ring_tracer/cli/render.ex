@@ -410,9 +410,12 @@ defmodule RingTracer.CLI.Render do
 
     with {:ok, scene} <- error_text(RingTracer.Scene.load(job.scene, allow_dirs: job.allow_dirs)),
          load_us = System.monotonic_time(:microsecond) - t_load,
+         :ok <- not_interrupted(),
          :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
          :ok <- warn(scene),
          {:ok, result} <- render(scene, job, signals?),
+         # an interrupt while the job ended: nothing is written yet, so nothing is
+         :ok <- not_interrupted(),
          :ok <- write_all(result, job) do
       if !job.opts[:quiet], do: IO.write(report(job, result, load_us))
       :ok
@@ -436,6 +439,13 @@ defmodule RingTracer.CLI.Render do
 
   defp usage_text({:error, %RingTracer.Error{message: message}}), do: {:usage, message}
   defp usage_text(ok), do: ok
+
+  defp not_interrupted do
+    case RingTracer.CLI.Signals.pending() do
+      nil -> :ok
+      signal -> {:interrupted, signal}
+    end
+  end
 
   defp interrupted(signal) do
     what = if signal == :sigint, do: "interrupted", else: "terminated"

@@ -13,20 +13,47 @@ defmodule RingTracer.CLI.Signals do
   """
   @behaviour :gen_event
 
-  @doc "From now on, SIGUSR2 (the launcher's SIGINT) and SIGTERM go to `pid` as messages."
+  @doc """
+  From now on, SIGUSR2 (the launcher's SIGINT) and SIGTERM go to `pid` as
+  messages. Called again, it only changes the process they go to.
+
+  The launcher forwards an interrupt only once the VM catches SIGUSR2 (it
+  reads the VM's caught signals in `/proc`): until then it keeps it, so
+  that a Ctrl-C or SIGTERM during the VM's boot is not lost, nor kills the
+  VM, but reaches the command as soon as this handler is in place.
+  """
   @spec forward_to(pid()) :: :ok
   def forward_to(pid) do
-    # OTP's own handler would stop the VM on SIGTERM: ours replaces it.
-    :ok =
-      :gen_event.swap_handler(
-        :erl_signal_server,
-        {:erl_signal_handler, :swap},
-        {__MODULE__, pid}
-      )
+    if __MODULE__ in :gen_event.which_handlers(:erl_signal_server) do
+      :ok = :gen_event.call(:erl_signal_server, __MODULE__, {:forward_to, pid})
+    else
+      # OTP's own handler would stop the VM on SIGTERM: ours replaces it.
+      :ok =
+        :gen_event.swap_handler(
+          :erl_signal_server,
+          {:erl_signal_handler, :swap},
+          {__MODULE__, pid}
+        )
+    end
 
-    :os.set_signal(:sigusr2, :handle)
+    # SIGUSR2 last: the launcher takes it as the sign that this is in place.
     :os.set_signal(:sigterm, :handle)
+    :os.set_signal(:sigusr2, :handle)
     :ok
+  end
+
+  @doc """
+  The interrupt already waiting in this process's mailbox, if any: for a
+  command to check between steps that no signal can cut short (a scene's
+  parse), so that it stops before the next one.
+  """
+  @spec pending() :: :sigint | :sigterm | nil
+  def pending do
+    receive do
+      {__MODULE__, signal} -> signal
+    after
+      0 -> nil
+    end
   end
 
   @doc "The exit status for an interrupt: 128 plus the signal's number."
@@ -43,6 +70,7 @@ defmodule RingTracer.CLI.Signals do
   def handle_event(_other, pid), do: {:ok, pid}
 
   @impl :gen_event
+  def handle_call({:forward_to, new}, _pid) when is_pid(new), do: {:ok, :ok, new}
   def handle_call(_request, pid), do: {:ok, :ok, pid}
 
   @impl :gen_event
