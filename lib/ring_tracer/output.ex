@@ -113,6 +113,82 @@ defmodule RingTracer.Output do
     end
   end
 
+  @doc """
+  Writes several outputs as one: runs each `{path, write}` in turn, where
+  `write` writes `path` (atomically, as `write/2` and
+  `RingTracer.Image.write/2` do) and returns `:ok` or an error. When one
+  fails, the files the others replaced are put back as they were (a new
+  one removed) and its error is returned: a failed render never leaves
+  its outputs half old, half new. Each target is kept as a hard link
+  beside it while the set is written, so putting it back copies nothing.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_write_all_doc_#{System.unique_integer([:positive])}")
+      iex> File.mkdir_p!(dir)
+      iex> [a, b] = [Path.join(dir, "a.json"), Path.join(dir, "b.svg")]
+      iex> File.write!(a, "old")
+      iex> failing = {:error, RingTracer.Error.new(:file, "b.svg: no space left on device")}
+      iex> {:error, _} = RingTracer.Output.write_all([{a, fn -> RingTracer.Output.write(a, "new") end}, {b, fn -> failing end}])
+      iex> {File.read!(a), File.ls!(dir)}
+      {"old", ["a.json"]}
+      iex> :ok = RingTracer.Output.write_all([{a, fn -> RingTracer.Output.write(a, "new") end}])
+      iex> {File.read!(a), File.ls!(dir)}
+      {"new", ["a.json"]}
+      iex> File.rm_rf!(dir) |> length()
+      2
+  """
+  @spec write_all([{Path.t(), (() -> :ok | {:error, Error.t()})}]) :: :ok | {:error, Error.t()}
+  def write_all(writes) do
+    result =
+      Enum.reduce_while(writes, {:ok, []}, fn {path, write}, {:ok, done} ->
+        case keep(path) do
+          {:ok, kept} ->
+            case write.() do
+              :ok -> {:cont, {:ok, [{path, kept} | done]}}
+              {:error, _} = error -> {:halt, {error, [{path, kept} | done]}}
+            end
+
+          {:error, _} = error ->
+            {:halt, {error, done}}
+        end
+      end)
+
+    case result do
+      {:ok, done} ->
+        for {_path, kept} <- done, kept != :none, do: File.rm(kept)
+        :ok
+
+      {error, done} ->
+        Enum.each(done, &put_back/1)
+        error
+    end
+  end
+
+  # What is at `path` now, as a hard link beside it (or a copy where links
+  # cannot be made), or :none when there is nothing there.
+  defp keep(path) do
+    kept = temporary(path) <> ".kept"
+
+    case File.lstat(path) do
+      {:ok, %File.Stat{type: :regular}} ->
+        case File.ln(path, kept) do
+          :ok ->
+            {:ok, kept}
+
+          {:error, _} ->
+            case File.cp(path, kept) do
+              :ok -> {:ok, kept}
+              {:error, reason} -> {:error, Error.file(:file, path, reason)}
+            end
+        end
+
+      _ ->
+        {:ok, :none}
+    end
+  end
+
+  defp put_back({path, :none}), do: File.rm(path)
+  defp put_back({path, kept}), do: File.rename(kept, path)
+
   @doc "A fresh temporary name beside `path` (hidden, unique)."
   @spec temporary(Path.t()) :: Path.t()
   def temporary(path) do

@@ -452,21 +452,26 @@ defmodule RingTracer.CLI.Render do
     {:error, RingTracer.CLI.Signals.exit_status(signal), "#{what}; nothing written"}
   end
 
+  # Every output or none: one that cannot be written puts back those
+  # written before it.
   defp write_all(result, job) do
     o = job.opts
 
-    with :ok <- RingTracer.Image.write(result, job.out),
-         :ok <- maybe(o[:stats], &RingTracer.Report.Stats.write(result, &1)),
-         :ok <- maybe(o[:timeline], &RingTracer.Report.Timeline.write(result, &1)),
-         :ok <- maybe(o[:ownership], &RingTracer.Report.Ownership.write(result, &1)) do
-      :ok
-    else
-      {:error, %RingTracer.Error{message: message}} -> {:error, message}
+    writes =
+      [
+        {job.out, &RingTracer.Image.write(result, &1)},
+        {o[:stats], &RingTracer.Report.Stats.write(result, &1)},
+        {o[:timeline], &RingTracer.Report.Timeline.write(result, &1)},
+        {o[:ownership], &RingTracer.Report.Ownership.write(result, &1)}
+      ]
+      |> Enum.reject(fn {path, _} -> path == nil end)
+      |> Enum.map(fn {path, write} -> {path, fn -> write.(path) end} end)
+
+    case RingTracer.Output.write_all(writes) do
+      :ok -> :ok
+      {:error, %RingTracer.Error{message: message}} -> {:error, message <> "; nothing written"}
     end
   end
-
-  defp maybe(nil, _fun), do: :ok
-  defp maybe(path, fun), do: fun.(path)
 
   # The job runs asynchronously: atoms feed the progress display (through
   # the job's telemetry events), ticks redraw it, and an interrupt cancels
