@@ -18,13 +18,20 @@ defmodule RingTracer.Image do
 
   Returns `{:error, %RingTracer.Error{reason: :file}}` for an unknown
   extension or a file that cannot be written.
-  """
-  @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
-  def write(%Result{width: w, height: h, pixels: pixels}, path), do: write(path, w, h, pixels)
 
-  @doc "Writes `width` x `height` linear RGB float `pixels` to `path`."
-  @spec write(Path.t(), pos_integer(), pos_integer(), binary()) :: :ok | {:error, Error.t()}
-  def write(path, width, height, pixels) when is_binary(path) do
+  ## Options
+
+    * `:mode` — the permissions of a new file (default: `0o666` less the
+      umask); a file replaced keeps its own
+  """
+  @spec write(Result.t(), Path.t(), keyword()) :: :ok | {:error, Error.t()}
+  def write(%Result{width: w, height: h, pixels: pixels}, path, opts \\ []),
+    do: write(path, w, h, pixels, opts)
+
+  @doc "Writes `width` x `height` linear RGB float `pixels` to `path` (options as `write/3`)."
+  @spec write(Path.t(), pos_integer(), pos_integer(), binary(), keyword()) ::
+          :ok | {:error, Error.t()}
+  def write(path, width, height, pixels, opts \\ []) when is_binary(path) do
     ext = String.downcase(Path.extname(path))
 
     cond do
@@ -33,7 +40,7 @@ defmodule RingTracer.Image do
          Error.new(:file, "#{path}: unknown image format #{inspect(ext)}; use .png or .exr")}
 
       true ->
-        case Native.write_image(Path.expand(path), width, height, pixels) do
+        case Native.write_image(Path.expand(path), width, height, pixels, opts[:mode] || -1) do
           {:ok, _} -> :ok
           {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
         end

@@ -30,7 +30,7 @@ defmodule RingTracer.Native do
   def render_image(_scene, _settings, _threads), do: err()
   def row_work(_scene, _settings), do: err()
   def validate_settings(_settings), do: err()
-  def write_image(_path, _width, _height, _pixels), do: err()
+  def write_image(_path, _width, _height, _pixels, _mode), do: err()
   def encode_png(_width, _height, _pixels), do: err()
   def to_srgb8_binary(_pixels), do: err()
   def to_srgb8_base64(_pixels), do: err()

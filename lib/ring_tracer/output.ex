@@ -97,19 +97,46 @@ defmodule RingTracer.Output do
 
   @doc """
   Writes `data` to `path` atomically: into a temporary file in the same
-  folder, then renamed over `path`.
-  """
-  @spec write(Path.t(), iodata()) :: :ok | {:error, Error.t()}
-  def write(path, data) do
-    tmp = temporary(path)
+  folder, then renamed over `path`. A file replaced keeps its permissions.
+  The temporary file is made in a folder of its own that only this user can
+  enter, and gets its final permissions there, so that nobody can open it
+  on the way (and keep reading it) that the final ones would refuse.
 
-    with :ok <- File.write(tmp, data, [:exclusive]),
-         :ok <- File.rename(tmp, path) do
-      :ok
-    else
-      {:error, reason} ->
-        File.rm(tmp)
-        {:error, Error.file(:file, path, reason)}
+  ## Options
+
+    * `:mode` — the permissions of a new file (default: `0o666` less the
+      umask)
+  """
+  @spec write(Path.t(), iodata(), keyword()) :: :ok | {:error, Error.t()}
+  def write(path, data, opts \\ []) do
+    private = temporary(path) <> ".d"
+    staged = Path.join(private, "staged")
+
+    try do
+      with :ok <- File.mkdir(private),
+           :ok <- File.chmod(private, 0o700),
+           :ok <- File.write(staged, data, [:exclusive]),
+           :ok <- final_mode(staged, path, opts[:mode]),
+           :ok <- File.rename(staged, path) do
+        :ok
+      else
+        {:error, reason} -> {:error, Error.file(:file, path, reason)}
+      end
+    after
+      File.rm_rf(private)
+    end
+  end
+
+  defp final_mode(staged, path, mode) do
+    case File.stat(path) do
+      {:ok, %File.Stat{type: :regular, mode: old}} ->
+        File.chmod(staged, Bitwise.band(old, 0o7777))
+
+      _ when is_integer(mode) ->
+        File.chmod(staged, mode)
+
+      _ ->
+        :ok
     end
   end
 

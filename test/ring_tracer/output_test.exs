@@ -18,4 +18,21 @@ defmodule RingTracer.OutputTest do
     assert {:error, error} = RingTracer.Output.check([image: Path.join(dir, "a.png")], [])
     assert error.message =~ "is a directory"
   end
+
+  test "a file replaced keeps its permissions; a new one gets :mode or the umask's",
+       %{tmp_dir: dir} do
+    mode = fn name -> Bitwise.band(File.stat!(Path.join(dir, name)).mode, 0o7777) end
+    File.write!(Path.join(dir, "plain"), "")
+
+    :ok = RingTracer.Output.write(Path.join(dir, "fresh.json"), "{}")
+    assert mode.("fresh.json") == mode.("plain")
+    :ok = RingTracer.Output.write(Path.join(dir, "asked.json"), "{}", mode: 0o640)
+    assert mode.("asked.json") == 0o640
+
+    File.chmod!(Path.join(dir, "fresh.json"), 0o600)
+    :ok = RingTracer.Output.write(Path.join(dir, "fresh.json"), "[]", mode: 0o666)
+    assert {mode.("fresh.json"), File.read!(Path.join(dir, "fresh.json"))} == {0o600, "[]"}
+    # nothing is left beside them
+    assert Enum.sort(File.ls!(dir)) == ["asked.json", "fresh.json", "plain"]
+  end
 end

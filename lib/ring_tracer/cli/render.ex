@@ -456,13 +456,15 @@ defmodule RingTracer.CLI.Render do
   # written before it.
   defp write_all(result, job) do
     o = job.opts
+    # new files as the caller's umask makes them, also through the server
+    mode = [mode: Console.new_file_mode()]
 
     writes =
       [
-        {job.out, &RingTracer.Image.write(result, &1)},
-        {o[:stats], &RingTracer.Report.Stats.write(result, &1)},
-        {o[:timeline], &RingTracer.Report.Timeline.write(result, &1)},
-        {o[:ownership], &RingTracer.Report.Ownership.write(result, &1)}
+        {job.out, &RingTracer.Image.write(result, &1, mode)},
+        {o[:stats], &RingTracer.Report.Stats.write(result, &1, mode)},
+        {o[:timeline], &RingTracer.Report.Timeline.write(result, &1, mode)},
+        {o[:ownership], &RingTracer.Report.Ownership.write(result, &1, mode)}
       ]
       |> Enum.reject(fn {path, _} -> path == nil end)
       |> Enum.map(fn {path, write} -> {path, fn -> write.(path) end} end)

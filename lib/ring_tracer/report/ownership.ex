@@ -45,12 +45,12 @@ defmodule RingTracer.Report.Ownership do
   def pixels(%Result{pixels: pixels}), do: pixels
 
   @doc """
-  Writes the tinted image of `result` to `path` with `RingTracer.Image.write/4`
-  (`.png`; `.exr` works too).
+  Writes the tinted image of `result` to `path` with `RingTracer.Image.write/5`
+  (`.png`; `.exr` works too), whose options it takes.
   """
-  @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
-  def write(%Result{} = result, path) when is_binary(path) do
-    Image.write(path, result.width, result.height, pixels(result))
+  @spec write(Result.t(), Path.t(), keyword()) :: :ok | {:error, Error.t()}
+  def write(%Result{} = result, path, opts \\ []) when is_binary(path) do
+    Image.write(path, result.width, result.height, pixels(result), opts)
   end
 
   defp tint(chunk, {cr, cg, cb}) do

@@ -94,16 +94,18 @@ defmodule RingTracer.Report.Stats do
   as `rays_<kind>` columns).
 
   Returns `{:error, %RingTracer.Error{reason: :file}}` for any other
-  extension or when the file cannot be written.
+  extension or when the file cannot be written. Options as
+  `RingTracer.Output.write/3`'s.
   """
-  @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
-  def write(%Result{} = result, path) when is_binary(path) do
+  @spec write(Result.t(), Path.t(), keyword()) :: :ok | {:error, Error.t()}
+  def write(%Result{} = result, path, opts \\ []) when is_binary(path) do
     case String.downcase(Path.extname(path)) do
       ".json" ->
-        with {:ok, json} <- encode_json(summary(result), path), do: write_file(path, [json, "\n"])
+        with {:ok, json} <- encode_json(summary(result), path),
+             do: RingTracer.Output.write(path, [json, "\n"], opts)
 
       ".csv" ->
-        write_file(path, csv(result))
+        RingTracer.Output.write(path, csv(result), opts)
 
       ext ->
         {:error,
@@ -167,6 +169,4 @@ defmodule RingTracer.Report.Stats do
   defp key(k) when is_binary(k), do: k
   defp key(k) when is_atom(k) or is_number(k), do: to_string(k)
   defp key(k), do: inspect(k)
-
-  defp write_file(path, data), do: RingTracer.Output.write(path, data)
 end

@@ -80,15 +80,15 @@ defmodule RingTracer.Report.Timeline do
 
   @doc """
   Writes the timeline of `result` to `path` (an `.svg`), atomically
-  (`RingTracer.Output.write/2`).
+  (`RingTracer.Output.write/3`, whose options it takes).
 
   Returns `{:error, %RingTracer.Error{reason: :file}}` for another
   extension or when the file cannot be written.
   """
-  @spec write(Result.t(), Path.t()) :: :ok | {:error, Error.t()}
-  def write(%Result{} = result, path) when is_binary(path) do
+  @spec write(Result.t(), Path.t(), keyword()) :: :ok | {:error, Error.t()}
+  def write(%Result{} = result, path, opts \\ []) when is_binary(path) do
     with :ok <- RingTracer.Output.check_extension(:timeline, path),
-         do: RingTracer.Output.write(path, svg(result))
+         do: RingTracer.Output.write(path, svg(result), opts)
   end
 
   ## Parts

@@ -41,7 +41,20 @@ fn request(stream: &mut UnixStream, cwd: &OsString, args: &[OsString]) -> std::i
         b"0"
     };
     frame::write(stream, b'T', tty)?;
+    if let Some(umask) = umask() {
+        frame::write(stream, b'U', format!("{umask:o}").as_bytes())?;
+    }
     frame::write(stream, b'G', b"")
+}
+
+/// This process's umask, from `/proc/self/status` (the server gives the files it creates for
+/// this command the permissions it would give them); `None` where it cannot be read.
+fn umask() -> Option<u32> {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("Umask:"))
+        .and_then(|v| u32::from_str_radix(v.trim(), 8).ok())
 }
 
 fn relay(stream: &mut UnixStream) -> u8 {

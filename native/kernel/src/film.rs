@@ -134,6 +134,20 @@ pub fn encode_png(width: u32, height: u32, rgb: &[f32]) -> Result<Vec<u8>, Error
 /// image, and removes the temporary file. A file replaced keeps its permissions; a new one
 /// gets `0o666` less the umask, as a plain create would.
 pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<(), Error> {
+    write_image_mode(path, width, height, rgb, None)
+}
+
+/// [`write_image`], with `new_mode` the permissions of a new file (`None`: `0o666` less this
+/// process's umask), e.g. those a client of a render server would have given it. The temporary
+/// file is only its owner's until it has the image and its final permissions, so that nobody
+/// can open it on the way and read what its final mode would refuse them.
+pub fn write_image_mode(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[f32],
+    new_mode: Option<u32>,
+) -> Result<(), Error> {
     check_len(width, height, rgb)?;
     let file = path.display().to_string();
     let ext = path
@@ -160,7 +174,7 @@ pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<
     let mut tmp = tempfile::Builder::new()
         .prefix(".ring_tracer_")
         .suffix(".tmp")
-        .permissions(std::fs::Permissions::from_mode(0o666))
+        .permissions(std::fs::Permissions::from_mode(0o600))
         .tempfile_in(dir)
         .map_err(io)?;
     // dropping `tmp` on any error below removes the temporary file
@@ -182,15 +196,29 @@ pub fn write_image(path: &Path, width: u32, height: u32, rgb: &[f32]) -> Result<
         }
     }
     tmp.as_file().sync_all().map_err(io)?;
-    if let Ok(old) = std::fs::metadata(path) {
-        if old.is_file() {
-            tmp.as_file()
-                .set_permissions(old.permissions())
-                .map_err(io)?;
-        }
-    }
+    let mode = match std::fs::metadata(path) {
+        Ok(old) if old.is_file() => old.permissions().mode() & 0o7777,
+        _ => new_mode.unwrap_or(0o666 & !umask()) & 0o7777,
+    };
+    tmp.as_file()
+        .set_permissions(std::fs::Permissions::from_mode(mode))
+        .map_err(io)?;
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
+}
+
+/// This process's umask, read from `/proc/self/status` (setting it to read it back would change
+/// it for every thread meanwhile); `0o077` where it cannot be read, so that a file is then
+/// never more open than its owner's.
+pub(crate) fn umask() -> u32 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("Umask:"))
+                .and_then(|v| u32::from_str_radix(v.trim(), 8).ok())
+        })
+        .unwrap_or(0o077)
 }
 
 #[cfg(test)]
@@ -261,6 +289,21 @@ mod tests {
         ));
         assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
         assert_eq!(names(&dir_out), ["keep"]);
+        // a new file: as a plain create makes one, or as asked
+        let t2 = tempfile::tempdir().unwrap();
+        let plain = t2.path().join("plain");
+        std::fs::File::create(&plain).unwrap();
+        let mode_of = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        let fresh = t2.path().join("fresh.png");
+        write_image(&fresh, 2, 2, &rgb).unwrap();
+        assert_eq!(mode_of(&fresh), mode_of(&plain));
+        let asked = t2.path().join("asked.png");
+        write_image_mode(&asked, 2, 2, &rgb, Some(0o640)).unwrap();
+        assert_eq!(mode_of(&asked), 0o640);
+        // ... but a file replaced keeps its own
+        write_image_mode(&asked, 2, 2, &rgb, Some(0o666)).unwrap();
+        assert_eq!(mode_of(&asked), 0o640);
+        assert_eq!(names(t2.path()), ["asked.png", "fresh.png", "plain"]);
         // permissions of a replaced file are kept
         let out = t.path().join("a.png");
         std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o640)).unwrap();

@@ -79,7 +79,7 @@ pub mod warning;
 pub use bvh::Scratch;
 pub use camera::Camera;
 pub use error::Error;
-pub use film::{encode_png, to_srgb8, write_image};
+pub use film::{encode_png, to_srgb8, write_image, write_image_mode};
 pub use geometry::Aabb;
 pub use glam;
 pub use integrator::{Integrator, Whitted};

@@ -2,7 +2,9 @@
 
 use std::path::Path;
 
-use ring_tracer_kernel::{encode_png as kernel_encode_png, to_srgb8, write_image as kernel_write};
+use ring_tracer_kernel::{
+    encode_png as kernel_encode_png, to_srgb8, write_image_mode as kernel_write,
+};
 use rustler::{Atom, Binary, Env, OwnedBinary};
 
 use crate::convert::{binary_to_floats, message};
@@ -20,12 +22,20 @@ fn check_size(width: u32, height: u32, rgb: &[f32]) -> Result<(), String> {
     Ok(())
 }
 
-/// Writes linear RGB pixels to `path`; the extension picks the format.
+/// Writes linear RGB pixels to `path`; the extension picks the format. `mode`: the permissions
+/// of a new file, or a negative number for the umask's.
 #[rustler::nif(schedule = "DirtyIo")]
-fn write_image(path: String, width: u32, height: u32, pixels: Binary) -> Result<Atom, String> {
+fn write_image(
+    path: String,
+    width: u32,
+    height: u32,
+    pixels: Binary,
+    mode: i64,
+) -> Result<Atom, String> {
     let rgb = binary_to_floats(&pixels)?;
     check_size(width, height, &rgb)?;
-    kernel_write(Path::new(&path), width, height, &rgb).map_err(message)?;
+    let new_mode = u32::try_from(mode).ok().map(|m| m & 0o7777);
+    kernel_write(Path::new(&path), width, height, &rgb, new_mode).map_err(message)?;
     Ok(ok())
 }
 

@@ -46,9 +46,15 @@ defmodule RingTracer.CLI.ServerTest do
     {:ok, dir: dir, scenes: scenes, socket: socket, server: server}
   end
 
-  defp open(args, cd, env) do
+  # `umask`: the launcher runs under that umask (through sh), else the test VM's.
+  defp open(args, cd, env, umask \\ nil) do
+    {exe, args} =
+      if umask,
+        do: {"/bin/sh", ["-c", "umask #{umask} && exec \"$0\" \"$@\"", @launcher | args]},
+        else: {@launcher, args}
+
     port =
-      Port.open({:spawn_executable, @launcher}, [
+      Port.open({:spawn_executable, exe}, [
         :binary,
         :exit_status,
         :stderr_to_stdout,
@@ -101,6 +107,31 @@ defmodule RingTracer.CLI.ServerTest do
 
     assert File.read!(Path.join(ctx.scenes, "served.png")) ==
              File.read!(Path.join(ctx.scenes, "own.png"))
+  end
+
+  test "a served render's new files get the caller's umask, as in a VM of its own", ctx do
+    args = ~w(render mine.nff --width 32 --atoms 4)
+    env = [{"RINGTRACER_SOCKET", ctx.socket}, {"RINGTRACER_SERVER", "only"}]
+    mode = fn name -> Bitwise.band(File.stat!(Path.join(ctx.scenes, name)).mode, 0o777) end
+
+    for {umask, want} <- [{"077", 0o600}, {"002", 0o664}] do
+      outs = ~w(-o u#{umask}.png --stats u#{umask}.json --timeline u#{umask}.svg)
+      {0, out} = run(open(args ++ outs, ctx.scenes, env, umask))
+      assert out =~ "wrote"
+
+      {0, _} =
+        run(
+          open(args ++ ~w(-o own#{umask}.png), ctx.scenes, [{"RINGTRACER_SERVER", "off"}], umask)
+        )
+
+      for name <- ~w(u#{umask}.png u#{umask}.json u#{umask}.svg own#{umask}.png),
+          do: assert(mode.(name) == want, "#{name}: #{Integer.to_string(mode.(name), 8)}")
+    end
+
+    # a file replaced keeps its permissions, whoever's umask
+    File.chmod!(Path.join(ctx.scenes, "u077.json"), 0o640)
+    {0, _} = run(open(args ++ ~w(-o u077.png --stats u077.json), ctx.scenes, env, "000"))
+    assert {mode.("u077.png"), mode.("u077.json")} == {0o600, 0o640}
   end
 
   test "help, usage errors and failures: the same text and status as a VM of its own", ctx do

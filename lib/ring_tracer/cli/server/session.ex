@@ -6,8 +6,9 @@ defmodule RingTracer.CLI.Server.Session do
 
   The frames (each a 4-byte big-endian length, then a tag byte and the
   data), client to server: `C` the caller's folder, `A` an argument (one
-  each, in order), `T` `1` if the client's stderr is a terminal, `G` run
-  it; later `I` interrupt (Ctrl-C) and `K` terminate. Server to client:
+  each, in order), `T` `1` if the client's stderr is a terminal, `U` its
+  umask in octal (the files the command creates get the permissions the
+  client's own would give them), `G` run it; later `I` interrupt (Ctrl-C) and `K` terminate. Server to client:
   `O` bytes for stdout, `E` bytes for stderr, `X` the exit status (one
   byte), or `F` alone: boot a VM of your own for this command (a render on
   other nodes, or a command other than `render`).
@@ -22,10 +23,11 @@ defmodule RingTracer.CLI.Server.Session do
           cwd: Path.t() | nil,
           args: [String.t()],
           tty?: boolean(),
+          umask: non_neg_integer() | nil,
           command: {pid(), reference()} | nil,
           runner: RingTracer.CLI.Server.runner()
         }
-  defstruct [:socket, :cwd, :runner, args: [], tty?: false, command: nil]
+  defstruct [:socket, :cwd, :runner, args: [], tty?: false, umask: nil, command: nil]
 
   # How long a command may take to stop once its client has gone.
   @stop_ms 2_000
@@ -71,6 +73,12 @@ defmodule RingTracer.CLI.Server.Session do
       {:tcp, _, <<"T", flag::binary>>} ->
         loop(%{state | tty?: flag == "1"})
 
+      {:tcp, _, <<"U", umask::binary>>} ->
+        case Integer.parse(umask, 8) do
+          {mask, ""} when mask in 0..0o777 -> loop(%{state | umask: mask})
+          _ -> finish(state, 2)
+        end
+
       {:tcp, _, "G"} ->
         run(%{state | args: Enum.reverse(state.args)})
 
@@ -110,7 +118,7 @@ defmodule RingTracer.CLI.Server.Session do
       me = self()
       out = Device.start(state.socket, "O", state.tty?, me)
       err = Device.start(state.socket, "E", state.tty?, me)
-      console = %Console{err: err, cwd: state.cwd, tty?: state.tty?}
+      console = %Console{err: err, cwd: state.cwd, tty?: state.tty?, umask: state.umask}
       {args, runner} = {state.args, state.runner}
 
       {pid, ref} =
