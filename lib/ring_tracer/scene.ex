@@ -170,7 +170,8 @@ defmodule RingTracer.Scene do
   defp read(path) do
     case Native.read_scene_file(Path.expand(path)) do
       {:ok, {bytes, real}} -> {:ok, bytes, real}
-      {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
+      # the kernel's message names the file
+      {:error, message} -> {:error, Error.new(:file, message)}
     end
   end
 end

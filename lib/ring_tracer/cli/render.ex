@@ -391,7 +391,7 @@ defmodule RingTracer.CLI.Render do
 
       text ->
         parsed =
-          for part <- String.split(text, ",", trim: true) do
+          for part <- String.split(text, ",") do
             case Float.parse(String.trim(part)) do
               {f, ""} when f >= 1 and f <= 1000 -> if f == trunc(f), do: trunc(f), else: f
               _ -> nil
@@ -539,10 +539,24 @@ defmodule RingTracer.CLI.Render do
         IO.write(Console.err(), Progress.finish(progress))
 
         case result do
-          {:ok, r} -> {:ok, r}
-          {:error, %RingTracer.Error{message: message}} -> {:error, message}
+          {:ok, r} ->
+            {:ok, r}
+
+          # an option the render refused before any work: a usage error, in the CLI's words
+          {:error, %RingTracer.Error{reason: :invalid_option, message: message}} ->
+            {:usage, cli_names(message)}
+
+          {:error, %RingTracer.Error{message: message}} ->
+            {:error, message}
         end
     end
+  end
+
+  # `:children` as the command line spells it: `--children`.
+  defp cli_names(message) do
+    Regex.replace(~r/(?<![\w:]):([a-z][a-z_]*)\b/, message, fn _, name ->
+      "--" <> String.replace(name, "_", "-")
+    end)
   end
 
   defp flush(id) do

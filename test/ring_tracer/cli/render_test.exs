@@ -45,6 +45,10 @@ defmodule RingTracer.CLI.RenderTest do
           {~w(--samples 17), "--samples takes an integer from 1 to 16, got: 17"},
           {~w(--strategy ringg), "--strategy takes one of"},
           {~w(--speeds 1,0.5), "--speeds takes numbers from 1 to 1000"},
+          {~w(--speeds 1,,1), "--speeds takes numbers from 1 to 1000"},
+          # refused by the render itself, before any work: still usage errors, in the CLI's words
+          {~w(--children 2 --atoms 1048576), "--children x --atoms must be at most 1048576"},
+          {~w(--region 10,10,5000,5000), "is not inside the"},
           {~w(--cutoff -1), "--cutoff takes a number from 0"},
           {~w(--progress loud), "--progress takes bar, log or none"}
         ] do
