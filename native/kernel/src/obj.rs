@@ -60,6 +60,7 @@ pub(crate) fn load_mesh(
     )?;
     // before the OBJ reader copies any line
     limits::check_tokens(bytes, limits::Tokens::Words, name)?;
+    check_numbers(bytes, name)?;
     check_face_indices(bytes, name)?;
     let opts = tobj::LoadOptions {
         triangulate: true,
@@ -212,6 +213,72 @@ pub(crate) fn load_mesh(
         });
     }
     Ok(bounds)
+}
+
+/// Checks what the OBJ reader would refuse without saying where, so that the error names the
+/// line: text that is not UTF-8, a vertex or normal line without three numbers, a texture
+/// coordinate line without two, a number that is not finite as a 32-bit float (`nan`, `inf`,
+/// `1e39`), and an index of an `f` or `l` line that is not an integer.
+fn check_numbers(bytes: &[u8], name: &str) -> Result<(), Error> {
+    for (i, raw) in bytes.split(|&c| c == b'\n').enumerate() {
+        let Ok(line) = std::str::from_utf8(raw) else {
+            return Err(Error::parse(name, i + 1, "the line is not UTF-8 text"));
+        };
+        let mut words = line.split_ascii_whitespace();
+        let (what, needed) = match words.next() {
+            Some("v") => ("vertex", 3),
+            Some("vn") => ("normal", 3),
+            // the OBJ reader wants both u and v
+            Some("vt") => ("texture coordinate", 2),
+            Some("f") | Some("l") => {
+                for word in words {
+                    for part in word.split('/').take(3).filter(|p| !p.is_empty()) {
+                        if part.parse::<i64>().is_err() {
+                            return Err(Error::parse(
+                                name,
+                                i + 1,
+                                format!("index '{}' is not an integer", snippet(part)),
+                            ));
+                        }
+                    }
+                }
+                continue;
+            }
+            _ => continue,
+        };
+        let values: Vec<&str> = words.collect();
+        if values.len() < needed {
+            return Err(Error::parse(
+                name,
+                i + 1,
+                format!("a {what} line needs {needed} numbers, got {}", values.len()),
+            ));
+        }
+        for (k, word) in values.iter().enumerate().take(needed) {
+            match word.parse::<f32>() {
+                Ok(x) if x.is_finite() => {}
+                Ok(_) => {
+                    return Err(Error::parse(
+                        name,
+                        i + 1,
+                        format!(
+                            "{what} value '{}' is not a finite number (32-bit floats reach \
+                             about 3.4e38)",
+                            snippet(word)
+                        ),
+                    ))
+                }
+                Err(_) => {
+                    return Err(Error::parse(
+                        name,
+                        i + 1,
+                        format!("{what} value {} '{}' is not a number", k + 1, snippet(word)),
+                    ))
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks every index of the `f` and `l` lines before the OBJ reader sees them: OBJ indices

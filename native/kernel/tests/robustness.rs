@@ -519,6 +519,41 @@ fn a_refused_mtllib_stops_the_load_and_a_missing_one_falls_back_to_grey() {
     assert!(Scene::parse(obj, Format::Obj, "m.obj", &missing).is_ok());
 }
 
+/// What the OBJ reader refuses without a line (bad numbers, non-UTF-8 text) is found first, and
+/// named with its line.
+#[test]
+fn obj_numbers_the_reader_would_refuse_name_their_line() {
+    let tri = "v 0 0 0\nv 1 0 0\nv 1 1 0\n";
+    for (line, message) in [
+        (
+            "v nan 0 0",
+            "vertex value 'nan' is not a finite number (32-bit floats reach about 3.4e38)",
+        ),
+        (
+            "v 0 1e39 0",
+            "vertex value '1e39' is not a finite number (32-bit floats reach about 3.4e38)",
+        ),
+        ("vn 0 0", "a normal line needs 3 numbers, got 2"),
+        ("vt 0.5 x", "texture coordinate value 2 'x' is not a number"),
+        ("vt 0.5", "a texture coordinate line needs 2 numbers, got 1"),
+        (
+            "f 1 2 99999999999999999999",
+            "index '99999999999999999999' is not an integer",
+        ),
+        ("l 1 two", "index 'two' is not an integer"),
+    ] {
+        let src = format!("{tri}{line}\nf 1 2 3\n");
+        let e = parse_err(src.as_bytes(), Format::Obj, "n.obj").to_string();
+        assert_eq!(e, format!("n.obj:4: {message}"));
+    }
+    let latin1 = [tri.as_bytes(), b"# caf\xe9\nf 1 2 3\n"].concat();
+    let e = parse_err(&latin1, Format::Obj, "n.obj").to_string();
+    assert_eq!(e, "n.obj:4: the line is not UTF-8 text");
+    // numbers past the third, colours say, and CR line ends are the reader's business
+    let ok = "v 0 0 0 1 0 0\r\nv 1 0 0 0 1 0\r\nv 1 1 0 0 0 1\r\nvt 0.5 0.5\r\nf 1 2 3\r\n";
+    assert!(Scene::parse(ok.as_bytes(), Format::Obj, "ok.obj", &resolve).is_ok());
+}
+
 /// Found by the obj fuzz target: a relative normal index reaching back before the first normal
 /// made the OBJ reader's index arithmetic overflow. Face indices are checked before it runs.
 #[test]
