@@ -69,6 +69,12 @@ const PATH_CHARS: usize = 1024;
 /// says (some sandboxes, gVisor among them, may report another filesystem type).
 const PSEUDO_DIRS: [&str; 2] = ["/proc", "/sys"];
 
+/// `bytes` without the UTF-8 byte order mark some editors put first: a scene or mesh is read
+/// the same with it or without.
+pub(crate) fn without_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes)
+}
+
 /// A path or reference as messages show it: escaped, bounded.
 fn shown(path: &Path) -> String {
     escape_bounded(&path.to_string_lossy(), PATH_CHARS)

@@ -51,6 +51,7 @@ pub(crate) fn load_mesh(
     b: &mut SceneBuilder,
 ) -> Result<Aabb, Error> {
     limits::check_file_size(format!("the size of mesh {name}"), bytes.len() as u64)?;
+    let bytes = crate::files::without_bom(bytes);
     // an upper bound from the face lines, before the OBJ reader allocates anything
     limits::check(
         format!("the triangle count of mesh {name} (from its face lines)"),

@@ -161,6 +161,7 @@ impl Scene {
         resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
     ) -> Result<Scene, Error> {
         limits::check_file_size(format!("the size of {name}"), bytes.len() as u64)?;
+        let bytes = crate::files::without_bom(bytes);
         match format {
             Format::Nff => crate::nff::parse(bytes, name),
             Format::Toml => crate::toml_scene::parse(bytes, name, resolve),

@@ -519,6 +519,24 @@ fn a_refused_mtllib_stops_the_load_and_a_missing_one_falls_back_to_grey() {
     assert!(Scene::parse(obj, Format::Obj, "m.obj", &missing).is_ok());
 }
 
+/// A UTF-8 byte order mark before a scene or a mesh changes nothing.
+#[test]
+fn a_byte_order_mark_is_skipped() {
+    let nff = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 1\nresolution 4 4\n\
+               l 0 5 5\nf 1 0 0 1 0 0 0 0\ns 0 0 0 1\n";
+    let obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n";
+    for (text, format, name) in [(nff, Format::Nff, "b.nff"), (obj, Format::Obj, "b.obj")] {
+        let plain = Scene::parse(text.as_bytes(), format, name, &resolve).unwrap();
+        let marked = [b"\xEF\xBB\xBF".as_slice(), text.as_bytes()].concat();
+        let marked = Scene::parse(&marked, format, name, &resolve).unwrap();
+        assert_eq!(
+            (plain.primitive_count(), plain.resolution()),
+            (marked.primitive_count(), marked.resolution()),
+            "{name}"
+        );
+    }
+}
+
 /// What the OBJ reader refuses without a line (bad numbers, non-UTF-8 text) is found first, and
 /// named with its line.
 #[test]
