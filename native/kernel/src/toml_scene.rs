@@ -304,7 +304,10 @@ impl Ctx<'_> {
         if vals.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
-            Err(self.err(span.clone(), format!("{what} must be finite numbers")))
+            Err(self.err(
+                span.clone(),
+                format!("{what} must be finite numbers (32-bit floats reach about 3.4e38)"),
+            ))
         }
     }
 
@@ -772,7 +775,10 @@ mod tests {
         let e = err(&format!(
             "{CAM}\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, nan]\nradius = 1\n"
         ));
-        assert_eq!(e, "s.toml:5: sphere 'center' must be finite numbers");
+        assert_eq!(
+            e,
+            "s.toml:5: sphere 'center' must be finite numbers (32-bit floats reach about 3.4e38)"
+        );
         let e = err("[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\nwidth = 100000\n");
         assert!(
             e.starts_with("s.toml:1: camera resolution: image width is 100000"),
