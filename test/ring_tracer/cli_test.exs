@@ -117,11 +117,13 @@ defmodule RingTracer.CLITest do
 
   for {signal, status} <- [{"INT", 130}, {"TERM", 143}] do
     test "SIG#{signal} while the VM boots still cancels: status #{status}, no file", ctx do
-      {port, pid} = start(ctx, ~w(render mine.nff -o early.png --width 64))
+      # Slowed down, so that however late a loaded machine lets the signal
+      # through, the render has not ended by then.
+      {port, pid} = start(ctx, ~w(render mine.nff -o early.png --width 64 --speeds 400))
       # The launcher's VM has just been started: the signal comes while it
       # boots, or while the scene parses (the launcher holds it until the VM
-      # takes it), never after the image is written.
-      assert RingTracer.Test.Wait.eventually(fn -> vm_started?(pid) end, 1_000)
+      # takes it).
+      assert RingTracer.Test.Wait.eventually(fn -> vm_started?(pid) end, 3_000)
       {_, 0} = System.cmd("kill", ["-#{unquote(signal)}", "#{pid}"])
       {status, out} = collect(port)
 
