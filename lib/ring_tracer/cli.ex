@@ -25,19 +25,20 @@ defmodule RingTracer.CLI do
     # scene parses waits in the mailbox instead of stopping the VM with 0.
     RingTracer.CLI.Signals.forward_to(self())
     # halt/1 flushes stdout and stderr before the VM goes.
-    System.halt(run(args, true))
+    System.halt(run(args))
   end
 
   @doc """
   Runs a command and returns its exit status (the worker runs until the
-  VM stops). `signals?`: whether interrupts reach this process.
+  VM stops). Interrupts reach it as `RingTracer.CLI.Signals` messages:
+  from the VM's signals in a VM of its own (`main/0`), from its client's
+  frames when the server runs it.
   """
-  @spec run([String.t()], boolean()) :: non_neg_integer()
-  def run(args, signals? \\ false)
+  @spec run([String.t()]) :: non_neg_integer()
 
-  def run(["render" | argv], signals?), do: RingTracer.CLI.Render.run(argv, signals?)
+  def run(["render" | argv]), do: RingTracer.CLI.Render.run(argv)
 
-  def run(["worker" | argv], signals?) do
+  def run(["worker" | argv]) do
     if help?(argv) do
       IO.write(worker_help())
       0
@@ -45,7 +46,6 @@ defmodule RingTracer.CLI do
       case RingTracer.CLI.Worker.start(argv) do
         {:ok, _node, line} ->
           IO.puts(line)
-          if signals?, do: RingTracer.CLI.Signals.forward_to(self())
 
           # Until Ctrl-C or SIGTERM: the children it hosts die with it, and
           # their parents trace their atoms elsewhere.
@@ -59,17 +59,17 @@ defmodule RingTracer.CLI do
     end
   end
 
-  def run(["serve" | argv], signals?) do
+  def run(["serve" | argv]) do
     case OptionParser.parse(argv, strict: [socket: :string, help: :boolean], aliases: [h: :help]) do
       {opts, [], []} ->
-        if opts[:help], do: serve_help_status(), else: serve(opts, signals?)
+        if opts[:help], do: serve_help_status(), else: serve(opts)
 
       {_opts, _args, _invalid} ->
         error("serve", "usage: ringtracer serve [--socket PATH]", 2)
     end
   end
 
-  def run(["cookie" | argv], _signals?) do
+  def run(["cookie" | argv]) do
     cond do
       help?(argv) ->
         IO.write(cookie_help())
@@ -95,22 +95,22 @@ defmodule RingTracer.CLI do
     end
   end
 
-  def run(["tls-args", dir], _signals?) do
+  def run(["tls-args", dir]) do
     IO.puts(Enum.join(RingTracer.Cluster.TLS.vm_args(Paths.expand(dir)), " "))
     0
   end
 
-  def run([help], _signals?) when help in ["help", "--help", "-h"] do
+  def run([help]) when help in ["help", "--help", "-h"] do
     IO.write(help())
     0
   end
 
-  def run([], _signals?) do
+  def run([]) do
     IO.write(Console.err(), help())
     2
   end
 
-  def run([other | _], _signals?) do
+  def run([other | _]) do
     hint =
       case Args.suggest(other, Enum.map(@commands, &{String.to_atom(&1), nil})) do
         nil -> ""
@@ -129,14 +129,13 @@ defmodule RingTracer.CLI do
     0
   end
 
-  defp serve(opts, signals?) do
+  defp serve(opts) do
     path = Paths.expand(opts[:socket] || System.get_env("RINGTRACER_SOCKET") || default_socket())
 
     with {:ok, _} <- Application.ensure_all_started(:ring_tracer),
          :ok <- warm_up(),
-         {:ok, pid} <- RingTracer.CLI.Server.start_link(path, &run/2) do
+         {:ok, pid} <- RingTracer.CLI.Server.start_link(path, &run/1) do
       IO.puts("ringtracer serve: rendering for this user's commands on #{path} (Ctrl-C stops)")
-      if signals?, do: RingTracer.CLI.Signals.forward_to(self())
 
       receive do
         {RingTracer.CLI.Signals, signal} ->

@@ -146,12 +146,11 @@ defmodule RingTracer.CLI.Render do
 
   @doc """
   Runs the command with `argv`, printing its errors, and returns the exit
-  status (see the moduledoc). `signals?`: whether interrupts reach this
-  process (`RingTracer.CLI.Signals`).
+  status (see the moduledoc).
   """
-  @spec run([String.t()], boolean()) :: non_neg_integer()
-  def run(argv, signals? \\ false) do
-    case execute(argv, signals?) do
+  @spec run([String.t()]) :: non_neg_integer()
+  def run(argv) do
+    case execute(argv) do
       :ok ->
         0
 
@@ -166,8 +165,8 @@ defmodule RingTracer.CLI.Render do
   to show. Writes what was written and the statistics to stdout, progress
   to stderr.
   """
-  @spec execute([String.t()], boolean()) :: :ok | {:error, pos_integer(), String.t()}
-  def execute(argv, signals? \\ false) do
+  @spec execute([String.t()]) :: :ok | {:error, pos_integer(), String.t()}
+  def execute(argv) do
     case Args.parse(preview_port(argv), @switches, @accepted, @aliases) do
       :help ->
         IO.write(help())
@@ -178,7 +177,7 @@ defmodule RingTracer.CLI.Render do
 
       {:ok, opts, [scene]} ->
         case prepare(scene, opts) do
-          {:ok, job} -> go(job, signals?)
+          {:ok, job} -> go(job)
           {:usage, message} -> usage(message)
           {:error, message} -> failed(message)
         end
@@ -405,7 +404,7 @@ defmodule RingTracer.CLI.Render do
     end
   end
 
-  defp go(job, signals?) do
+  defp go(job) do
     t_load = System.monotonic_time(:microsecond)
 
     with {:ok, scene} <- error_text(RingTracer.Scene.load(job.scene, allow_dirs: job.allow_dirs)),
@@ -413,7 +412,7 @@ defmodule RingTracer.CLI.Render do
          :ok <- not_interrupted(),
          :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
          :ok <- warn(scene),
-         {:ok, result} <- render(scene, job, signals?),
+         {:ok, result} <- render(scene, job),
          # an interrupt while the job ended: nothing is written yet, so nothing is
          :ok <- not_interrupted(),
          :ok <- write_all(result, job) do
@@ -478,7 +477,7 @@ defmodule RingTracer.CLI.Render do
   # The job runs asynchronously: atoms feed the progress display (through
   # the job's telemetry events), ticks redraw it, and an interrupt cancels
   # the job and ends the command.
-  defp render(scene, job, signals?) do
+  defp render(scene, job) do
     me = self()
     handler = {__MODULE__, make_ref()}
     total = job.render_opts |> Keyword.get(:children, :erlang.system_info(:schedulers_online))
@@ -490,8 +489,6 @@ defmodule RingTracer.CLI.Render do
         fn _e, m, md, _ -> send(me, {handler, md.job, m.rays, md.total}) end,
         nil
       )
-
-    if signals?, do: RingTracer.CLI.Signals.forward_to(me)
 
     try do
       {:ok, handle} = RingTracer.render_async(scene, job.render_opts)

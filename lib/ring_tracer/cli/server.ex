@@ -29,7 +29,7 @@ defmodule RingTracer.CLI.Server do
   defstruct [:socket, :path, :acceptor]
 
   @typedoc "What runs a command: its arguments, whether signals reach it; its exit status."
-  @type runner :: ([String.t()], boolean() -> non_neg_integer())
+  @type runner :: ([String.t()] -> non_neg_integer())
 
   @doc """
   Listens on the Unix socket `path` (its folder is made, mode 0700, if

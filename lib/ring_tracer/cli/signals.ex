@@ -15,7 +15,7 @@ defmodule RingTracer.CLI.Signals do
 
   @doc """
   From now on, SIGUSR2 (the launcher's SIGINT) and SIGTERM go to `pid` as
-  messages. Called again, it only changes the process they go to.
+  messages (the CLI calls it once, first thing).
 
   The launcher forwards an interrupt only once the VM catches SIGUSR2 (it
   reads the VM's caught signals in `/proc`): until then it keeps it, so
@@ -24,17 +24,13 @@ defmodule RingTracer.CLI.Signals do
   """
   @spec forward_to(pid()) :: :ok
   def forward_to(pid) do
-    if __MODULE__ in :gen_event.which_handlers(:erl_signal_server) do
-      :ok = :gen_event.call(:erl_signal_server, __MODULE__, {:forward_to, pid})
-    else
-      # OTP's own handler would stop the VM on SIGTERM: ours replaces it.
-      :ok =
-        :gen_event.swap_handler(
-          :erl_signal_server,
-          {:erl_signal_handler, :swap},
-          {__MODULE__, pid}
-        )
-    end
+    # OTP's own handler would stop the VM on SIGTERM: ours replaces it.
+    :ok =
+      :gen_event.swap_handler(
+        :erl_signal_server,
+        {:erl_signal_handler, :swap},
+        {__MODULE__, pid}
+      )
 
     # SIGUSR2 last: the launcher takes it as the sign that this is in place.
     :os.set_signal(:sigterm, :handle)
@@ -70,7 +66,6 @@ defmodule RingTracer.CLI.Signals do
   def handle_event(_other, pid), do: {:ok, pid}
 
   @impl :gen_event
-  def handle_call({:forward_to, new}, _pid) when is_pid(new), do: {:ok, :ok, new}
   def handle_call(_request, pid), do: {:ok, :ok, pid}
 
   @impl :gen_event

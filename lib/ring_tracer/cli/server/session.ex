@@ -126,7 +126,7 @@ defmodule RingTracer.CLI.Server.Session do
           Process.group_leader(self(), out)
           Console.put(console)
           ref = receive do: ({:ref, ref} -> ref)
-          send(me, {:status, ref, runner.(args, false)})
+          send(me, {:status, ref, runner.(args)})
         end)
 
       send(pid, {:ref, ref})
