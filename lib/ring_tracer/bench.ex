@@ -124,8 +124,7 @@ defmodule RingTracer.Bench do
   def private_tmp_dir!(prefix) do
     name = prefix <> "-" <> Base.url_encode64(:crypto.strong_rand_bytes(9), padding: false)
     dir = Path.join(System.tmp_dir!(), name)
-    File.mkdir!(dir)
-    File.chmod!(dir, 0o700)
+    :ok = RingTracer.Output.private_dir(dir)
     dir
   end
 end

@@ -109,35 +109,56 @@ defmodule RingTracer.Output do
   """
   @spec write(Path.t(), iodata(), keyword()) :: :ok | {:error, Error.t()}
   def write(path, data, opts \\ []) do
+    mode =
+      case File.stat(path) do
+        {:ok, %File.Stat{type: :regular, mode: old}} -> Bitwise.band(old, 0o7777)
+        _ -> opts[:mode]
+      end
+
+    case place_privately(path, data, mode, &File.rename/2) do
+      :ok -> :ok
+      {:error, reason} -> {:error, Error.file(:file, path, reason)}
+    end
+  end
+
+  @doc """
+  Puts `data` at `path` through a copy that only this user can reach until
+  it is finished: written in a new folder beside `path` that is closed to
+  others before anything is in it (`private_dir/1`), given `mode` (`nil`:
+  the umask's), then moved into place by `place.(staged, path)`
+  (`File.rename/2`, or a hard link that refuses an existing file); the
+  folder is removed whatever happens. Returns what failed, as `place` or
+  `File` say it.
+  """
+  @spec place_privately(
+          Path.t(),
+          iodata(),
+          non_neg_integer() | nil,
+          (Path.t(), Path.t() -> :ok | {:error, term()})
+        ) :: :ok | {:error, term()}
+  def place_privately(path, data, mode, place) do
     private = temporary(path) <> ".d"
     staged = Path.join(private, "staged")
 
     try do
-      with :ok <- File.mkdir(private),
-           :ok <- File.chmod(private, 0o700),
+      with :ok <- private_dir(private),
            :ok <- File.write(staged, data, [:exclusive]),
-           :ok <- final_mode(staged, path, opts[:mode]),
-           :ok <- File.rename(staged, path) do
-        :ok
-      else
-        {:error, reason} -> {:error, Error.file(:file, path, reason)}
+           :ok <- if(mode, do: File.chmod(staged, mode), else: :ok) do
+        place.(staged, path)
       end
     after
       File.rm_rf(private)
     end
   end
 
-  defp final_mode(staged, path, mode) do
-    case File.stat(path) do
-      {:ok, %File.Stat{type: :regular, mode: old}} ->
-        File.chmod(staged, Bitwise.band(old, 0o7777))
-
-      _ when is_integer(mode) ->
-        File.chmod(staged, mode)
-
-      _ ->
-        :ok
-    end
+  @doc """
+  Makes the folder `dir`, which must not exist yet (so it is this caller's
+  own, not one someone made there first), and closes it to others before
+  anything is put in it.
+  """
+  @spec private_dir(Path.t()) :: :ok | {:error, File.posix()}
+  def private_dir(dir) do
+    with :ok <- File.mkdir(dir), do: File.chmod(dir, 0o700)
   end
 
   @doc """

@@ -64,36 +64,16 @@ defmodule RingTracer.Cluster.Cookie do
   @spec create(Path.t()) :: {:ok, Path.t()} | {:error, Error.t()}
   def create(path) do
     cookie = 32 |> :crypto.strong_rand_bytes() |> Base.url_encode64(padding: false)
-    # The secret is written in a folder of its own that only this user can
-    # enter, made so before anything is in it, and the finished file (mode
-    # 0600) is then hard-linked into place, which refuses an existing file.
-    # A file created in place and chmodded afterwards is readable by others
-    # for a moment (its mode comes from the umask), and whoever opens it
-    # then keeps reading it after the chmod.
-    private = Path.join(Path.dirname(path), ".ringtracer-cookie-" <> random_name())
-    staged = Path.join(private, "cookie")
-
-    try do
-      with :ok <- private_dir(private),
-           :ok <- File.write(staged, cookie <> "\n", [:exclusive]),
-           :ok <- File.chmod(staged, 0o600),
-           :ok <- link(staged, path) do
-        {:ok, path}
-      else
-        {:error, %Error{} = error} -> {:error, error}
-        {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
-      end
-    after
-      File.rm_rf(private)
+    # Finished (mode 0600) where only this user can reach it, then
+    # hard-linked into place, which refuses an existing file. A file created
+    # in place and chmodded afterwards is readable by others for a moment
+    # (its mode comes from the umask), and whoever opens it then keeps
+    # reading it after the chmod.
+    case RingTracer.Output.place_privately(path, cookie <> "\n", 0o600, &link/2) do
+      :ok -> {:ok, path}
+      {:error, %Error{} = error} -> {:error, error}
+      {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
     end
-  end
-
-  defp random_name, do: Base.url_encode64(:crypto.strong_rand_bytes(12), padding: false)
-
-  # mkdir refuses an existing name, so the folder is this call's own; it is
-  # closed to others before any file is put in it.
-  defp private_dir(dir) do
-    with :ok <- File.mkdir(dir), do: File.chmod(dir, 0o700)
   end
 
   defp link(staged, path) do
