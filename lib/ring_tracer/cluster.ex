@@ -83,31 +83,26 @@ defmodule RingTracer.Cluster do
   """
   @spec call_failure(node(), term(), timeout()) :: String.t()
   def call_failure(node, reason, ms) do
-    case reason do
-      {:erpc, :timeout} ->
+    cond do
+      reason == {:erpc, :timeout} ->
         "node #{node} did not answer within #{ms} ms (frozen or overloaded)"
 
-      lost when lost in [{:erpc, :noconnection}, :noconnection] ->
-        lost_connection(node)
+      lost?(reason) ->
+        "lost the connection to node #{node} (it went down, or stopped answering for longer " <>
+          "than the liveness timeout)"
 
-      {:nodedown, _} ->
-        lost_connection(node)
-
-      {:noconnection, {GenServer, :call, _}} ->
-        lost_connection(node)
-
-      {{:nodedown, _}, {GenServer, :call, _}} ->
-        lost_connection(node)
-
-      other ->
-        "node #{node}: #{inspect(other)}"
+      true ->
+        "node #{node}: #{inspect(reason)}"
     end
   end
 
-  defp lost_connection(node) do
-    "lost the connection to node #{node} (it went down, or stopped answering for longer " <>
-      "than the liveness timeout)"
-  end
+  # A dropped connection, as :erpc raises it or as the exit of a call
+  # (GenServer's wraps the reason with the call).
+  defp lost?(:noconnection), do: true
+  defp lost?({:erpc, :noconnection}), do: true
+  defp lost?({:nodedown, _}), do: true
+  defp lost?({reason, {GenServer, :call, _}}), do: lost?(reason)
+  defp lost?(_), do: false
 
   @check_ms 5_000
 
