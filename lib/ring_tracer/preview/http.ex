@@ -53,7 +53,7 @@ defmodule RingTracer.Preview.HTTP do
     case addr do
       {0, 0, 0, 0} -> :any
       {0, 0, 0, 0, 0, 0, 0, 0} -> :any
-      {127, _, _, _} -> Enum.uniq([to_string(:inet.ntoa(addr)), "localhost", "[::1]"])
+      {127, _, _, _} -> [to_string(:inet.ntoa(addr)), "localhost", "[::1]"]
       {0, 0, 0, 0, 0, 0, 0, 1} -> ["[::1]", "localhost", "127.0.0.1"]
       {_, _, _, _} -> [to_string(:inet.ntoa(addr))]
       _ -> ["[#{:inet.ntoa(addr)}]"]
