@@ -1,6 +1,6 @@
 defmodule Mix.Tasks.RingTracer.Chaos do
   @shortdoc "Chaos soak: concurrent jobs across peer nodes while processes and nodes die"
-  @moduledoc """
+  @help """
   Runs concurrent jobs of several scenes across peer nodes on this machine
   and, by a plan fixed by the seed, kills grandchildren, children and whole
   nodes and freezes nodes at random moments; then prints jobs run, faults
@@ -29,7 +29,9 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   line per job as it ends and lets this node and the peers log warnings
   (the soak makes nodes drop on purpose, so they log a lot); otherwise they
   log errors only. What each figure means is in `RingTracer.Chaos`.
+  `--help` (or `-h`) prints this text and starts nothing.
   """
+  @moduledoc @help
   use Mix.Task
 
   alias RingTracer.Chaos
@@ -58,6 +60,12 @@ defmodule Mix.Tasks.RingTracer.Chaos do
 
   @impl Mix.Task
   def run(argv) do
+    if Enum.any?(argv, &(&1 in ["--help", "-h"])),
+      do: Mix.shell().info(@help),
+      else: soak(argv)
+  end
+
+  defp soak(argv) do
     opts = parse(argv)
     {verbose, opts} = Keyword.pop(opts, :verbose, false)
     Mix.Task.run("app.start")

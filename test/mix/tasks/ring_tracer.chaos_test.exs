@@ -44,6 +44,15 @@ defmodule Mix.Tasks.RingTracer.ChaosTest do
     assert kinds == Enum.sort(RingTracer.Chaos.Plan.kinds())
   end
 
+  test "--help prints the usage and starts nothing" do
+    for flag <- ["--help", "-h"] do
+      output = capture_io(fn -> assert Task.run([flag, "--jobs", "0"]) == :ok end)
+      assert output =~ "mix ring_tracer.chaos [--seed 1]"
+      assert output =~ "--faults-per-job"
+      refute output =~ ~r/jobs run\s+\d/
+    end
+  end
+
   test "options are checked before anything starts" do
     assert_raise Mix.Error, ~r/unknown strategy spiral/, fn ->
       Task.parse(~w(--strategies ring,spiral))
