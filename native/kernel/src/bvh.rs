@@ -1179,6 +1179,38 @@ mod tests {
             .collect()
     }
 
+    /// `limits::BVH_BYTES_PER_BOX`, checked against the memory left before a build, covers the
+    /// build's peak: the caller's boxes and owners, then the larger of the binary build's
+    /// arrays and the collapse's, as allocated (capacities), for coincident boxes (the worst
+    /// leaves) and for a grid, of either leaf size.
+    #[test]
+    fn bvh_bytes_per_box_covers_the_build() {
+        let size = std::mem::size_of::<Aabb>() + 4;
+        let same = vec![grid()[0]; 1000];
+        for boxes in [grid(), same] {
+            for leaf in [LEAF_MIN, LEAF_MIN_TRIANGLES] {
+                let n = boxes.len();
+                let (bin, order) = build_binary(&boxes, leaf);
+                let block = block_size(leaf);
+                let plan = Collapse::plan(&bin, block, max_leaf(block));
+                let (bvh, _) = Bvh::build_with(&boxes, leaf);
+                let binary = order.capacity() * 4 + bin.capacity() * std::mem::size_of::<Node>();
+                let refs = n * std::mem::size_of::<BuildRef>();
+                let collapse = plan.cost.capacity() * 4
+                    + plan.choice.capacity() * std::mem::size_of::<Choice>()
+                    + plan.node_split.capacity()
+                    + plan.ranges.capacity() * 8
+                    + bvh.nodes.capacity() * std::mem::size_of::<Node8>();
+                let peak = n * size + binary + refs.max(collapse);
+                assert!(
+                    peak as u64 <= crate::limits::BVH_BYTES_PER_BOX * n as u64,
+                    "{} bytes a box",
+                    peak / n
+                );
+            }
+        }
+    }
+
     #[test]
     fn build_covers_all_primitives_once() {
         let boxes = grid();

@@ -50,6 +50,20 @@ pub enum Error {
         /// How to get past the bound.
         hint: &'static str,
     },
+    /// The memory the input needs is not there: what is left of the process's address space
+    /// (its `RLIMIT_AS`) is too small, or the system refused the allocation (see
+    /// [`crate::memory`]); checked before the big arrays are made, so nothing aborts. Reads e.g.
+    /// `balls.nff: the BVH of 20971510 boxes needs 6710883200 bytes of memory, more than the
+    /// ... bytes of address space ...; load a smaller scene or give the process more memory`.
+    #[error("{what} needs {needed} bytes of memory, {why}; load a smaller scene or give the process more memory (ulimit -v)")]
+    Memory {
+        /// What needs it, with the file when known.
+        what: String,
+        /// Bytes needed.
+        needed: u64,
+        /// Why they are not there.
+        why: String,
+    },
     /// A valid request the kernel does not implement (e.g. an unknown file extension).
     #[error("unsupported: {0}")]
     Unsupported(String),

@@ -442,7 +442,7 @@ pub(crate) mod tests {
                 m,
             )?;
         }
-        Ok(b.add_mesh(mb))
+        b.add_mesh(mb, "mesh")
     }
 
     /// The primitive bound counts a shared mesh's triangles once, however many instances; the
@@ -477,7 +477,7 @@ pub(crate) mod tests {
              raise the constant in native/kernel/src/limits.rs and rebuild"
         );
         assert_eq!(b.primitive_count(), 2 + 800);
-        let s = b.build();
+        let s = b.build("scene").unwrap();
         assert_eq!((s.stored_primitive_count(), s.instance_count()), (10, 100));
         // a singular transform makes no instance
         let mut b = SceneBuilder::new();

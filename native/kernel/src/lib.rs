@@ -20,7 +20,8 @@
 //! ## Map of the crate
 //! - [`nff`], [`toml_scene`], [`obj`]: scene formats (all errors are `file:line: problem`;
 //!   text of the file is echoed only escaped and cut short); [`limits`]: bounds checked before
-//!   allocating; [`warning`]: what parses but may not render as meant
+//!   allocating; [`memory`]: input-sized arrays allocated fallibly, checked against the
+//!   address space left; [`warning`]: what parses but may not render as meant
 //!   ([`Scene::warnings`]); [`files`]: the files a scene may read (regular files only, size-checked, and
 //!   referenced files confined to the scene's folder by [`files::Confinement`]).
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
@@ -61,6 +62,7 @@ mod lanes;
 pub mod light;
 pub mod limits;
 pub mod material;
+pub mod memory;
 pub mod nff;
 pub mod obj;
 mod packet;

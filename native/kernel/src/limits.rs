@@ -78,6 +78,17 @@ pub const MAX_TOKEN_BYTES: usize = 4096;
 /// Warnings kept per parsed scene; more are counted, not stored ([`crate::warning::Warnings`]).
 pub const MAX_WARNINGS: usize = 100;
 
+/// Address space kept free when an array whose size the input decides is checked against
+/// what the process has left under its `RLIMIT_AS` ([`crate::memory`]): room for the small
+/// allocations made on the way, which cannot fail gracefully.
+pub const MEMORY_HEADROOM: u64 = 256 << 20;
+/// Bytes a BVH build needs at its peak per box (a primitive's box; an oblique cone has up to
+/// 16): the boxes and their owners (36), the primitive order (4), the build references (48),
+/// up to two binary nodes (64), the 8-wide collapse's tables for them (2 x 57) and the 8-wide
+/// nodes (up to 2 x 64), rounded up. Checked against the memory left before the build
+/// ([`crate::memory`]); `bvh_bytes_per_box_covers_the_build` in bvh.rs keeps it honest.
+pub const BVH_BYTES_PER_BOX: u64 = 384;
+
 /// How to raise a bound (the usual case).
 pub(crate) const RAISE: &str = "raise the constant in native/kernel/src/limits.rs and rebuild";
 /// How to get past the TOML size bound.
@@ -169,12 +180,15 @@ pub fn check_resolution(width: impl Into<u64>, height: impl Into<u64>) -> Result
     )
 }
 
-/// An upper bound on the triangles an OBJ file can produce, from a scan of its `f` lines (a
-/// face of n vertices gives n - 2 triangles; this counts n), so [`MAX_MESH_TRIANGLES`] is checked before the
-/// OBJ reader allocates anything.
+/// The triangles an OBJ file can produce, from a scan of its `f` lines (a face of n vertices
+/// gives n - 2 triangles, a face continued with `\` counted whole), so [`MAX_MESH_TRIANGLES`]
+/// is checked before the OBJ reader allocates anything. Each triangle counts once, as the
+/// check after the reader counts it.
 pub(crate) fn obj_triangle_bound(bytes: &[u8]) -> u64 {
     let mut total = 0u64;
     let mut continued_face = false;
+    // vertices of the face being read, over its continued lines
+    let mut face = 0u64;
     for line in bytes.split(|&c| c == b'\n') {
         let line = line.strip_suffix(b"\r").unwrap_or(line);
         let mut tokens = line
@@ -191,11 +205,14 @@ pub(crate) fn obj_triangle_bound(bytes: &[u8]) -> u64 {
         };
         continued_face = is_face && line.ends_with(b"\\");
         if is_face {
-            // vertices on this line (an over-count of 2 per face)
-            total = total.saturating_add(tokens.count() as u64);
+            face = face.saturating_add(tokens.count() as u64);
+            if !continued_face {
+                total = total.saturating_add(face.saturating_sub(2));
+                face = 0;
+            }
         }
     }
-    total
+    total.saturating_add(face.saturating_sub(2))
 }
 
 /// How a file is split into tokens for [`first_long_token`].
@@ -325,9 +342,18 @@ mod tests {
 
     #[test]
     fn obj_bound_counts_face_vertices() {
-        assert_eq!(obj_triangle_bound(b"v 0 0 0\nf 1 2 3\nf 1 2 3 4\n"), 7);
-        assert_eq!(obj_triangle_bound(b"f 1 2 \\\n 3 4\r\nvn 0 0 1\n"), 4);
+        // once per triangle: a triangle and a quad (1 + 2); a quad over two lines and a pentagon (2 + 3)
+        assert_eq!(obj_triangle_bound(b"v 0 0 0\nf 1 2 3\nf 1 2 3 4\n"), 3);
+        assert_eq!(obj_triangle_bound(b"f 1 2 \\\n 3 4\r\nf 1 2 3 4 5\n"), 5);
+        assert_eq!(obj_triangle_bound(b"f 1 2 \\\n 3 4 \\"), 2);
+        // a face of fewer than three vertices makes none
+        assert_eq!(obj_triangle_bound(b"f 1 2\nf 1\nf\n"), 0);
         assert_eq!(obj_triangle_bound(b"fo 1 2 3\n# f 1 2 3\n"), 0);
+        let n = 1000;
+        assert_eq!(
+            obj_triangle_bound("f 1 2 3\n".repeat(n).as_bytes()),
+            n as u64
+        );
     }
 
     #[test]

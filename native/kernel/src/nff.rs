@@ -394,7 +394,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
             l.color = Vec3A::splat(intensity);
         }
     }
-    Ok(b.build())
+    b.build(file)
 }
 
 /// A cone's radii must not have opposite signs: NFF.TXT makes a cone with negative radii an

@@ -56,7 +56,7 @@ pub(crate) fn load_mesh(
     limits::check(
         format!("the triangle count of mesh {name} (from its face lines)"),
         limits::obj_triangle_bound(bytes),
-        limits::MAX_MESH_TRIANGLES as u64,
+        b.max_mesh_triangles as u64,
         "MAX_MESH_TRIANGLES",
     )?;
     // before the OBJ reader copies any line
@@ -104,7 +104,7 @@ pub(crate) fn load_mesh(
     limits::check(
         format!("the triangle count of mesh {name}"),
         total as u64,
-        limits::MAX_MESH_TRIANGLES as u64,
+        b.max_mesh_triangles as u64,
         "MAX_MESH_TRIANGLES",
     )?;
     let default_mat = match material {
@@ -474,5 +474,50 @@ pub(crate) fn parse_scene(
     b.background = Vec3A::new(0.05, 0.06, 0.08);
     b.camera = Some(cam);
     b.resolution = (640, 480);
-    Ok(b.build())
+    b.build(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(obj: &str, max: usize) -> Result<usize, Error> {
+        let mut b = SceneBuilder::new();
+        b.max_mesh_triangles = max;
+        let none = |_: &str| -> Result<Vec<u8>, Unreadable> {
+            Err(Unreadable::Missing("no files".into()))
+        };
+        load_mesh(
+            obj.as_bytes(),
+            "m.obj",
+            &none,
+            Affine3A::IDENTITY,
+            None,
+            true,
+            &mut b,
+        )?;
+        Ok(b.primitive_count())
+    }
+
+    /// Each triangle counts once against the bound, by the scan of the face lines and by the
+    /// count after the reader alike: a mesh of exactly the bound loads, one more is refused.
+    #[test]
+    fn triangles_count_once_against_the_bound() {
+        let verts = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 2 0.5 0\n";
+        // 2 triangles of a quad, 3 of a pentagon, 1 triangle: 6
+        let obj = format!("{verts}f 1 2 4 3\nf 1 2 5 4 3\nf 1 2 3\n");
+        assert_eq!(limits::obj_triangle_bound(obj.as_bytes()), 6);
+        assert_eq!(load(&obj, 6).unwrap(), 6);
+        let e = load(&obj, 5).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "the triangle count of mesh m.obj (from its face lines) is 6, more than the limit \
+             of 5 (limits::MAX_MESH_TRIANGLES); raise the constant in native/kernel/src/limits.rs \
+             and rebuild"
+        );
+        // many triangle faces: n of them fit a bound of n
+        let many = format!("{verts}{}", "f 1 2 3\n".repeat(3000));
+        assert_eq!(load(&many, 3000).unwrap(), 3000);
+        assert!(load(&many, 2999).is_err());
+    }
 }

@@ -1256,7 +1256,7 @@ mod tests {
                     .unwrap();
                 }
             }
-            let scene = b.build();
+            let scene = b.build("test").unwrap();
             let rays = bundles(&mut seed, Vec3A::ZERO, 3.0, 100);
             let tmax = if round % 5 == 4 { 4.0 } else { f32::INFINITY };
             hits += check(&scene, &rays, tmax, round < 3);

@@ -10,6 +10,7 @@ use crate::instance::{Instance, Mesh, Tri, OWN_MATERIAL};
 use crate::light::Light;
 use crate::limits;
 use crate::material::Material;
+use crate::memory;
 use crate::polygon::{self, ear_clip};
 use crate::ray::Ray;
 use crate::tri4::{RayLanes, TriBlocks};
@@ -831,6 +832,8 @@ pub(crate) struct SceneBuilder {
     pub(crate) max_primitives: usize,
     /// [`limits::MAX_MESH_REFERENCES`], likewise.
     pub(crate) max_instances: usize,
+    /// [`limits::MAX_MESH_TRIANGLES`], likewise (checked by [`crate::obj::load_mesh`]).
+    pub(crate) max_mesh_triangles: usize,
     pub display_referred: bool,
     /// Warnings found so far (the parsers add them; [`Scene::warnings`]).
     pub warnings: Warnings,
@@ -838,24 +841,37 @@ pub(crate) struct SceneBuilder {
 
 /// A BVH over a geometry's shapes, with the shapes and their data put in its order, and the
 /// bounds of it all. `blocks`: the leaves' triangles will be met four at a time
-/// ([`TriBlocks`]), so an all-triangle geometry gets leaves of up to four.
+/// ([`TriBlocks`]), so an all-triangle geometry gets leaves of up to four. Every array whose
+/// size the scene decides is checked against the memory left and allocated fallibly
+/// ([`memory`]); `name` (the scene's file) is in the error.
 fn ordered_bvh(
     geom: &Geometry,
     info: &[PrimInfo],
     poly_bounds: &[Aabb],
     blocks: bool,
-) -> (Bvh, Vec<Shape>, Vec<PrimInfo>, Aabb) {
+    name: &str,
+) -> Result<(Bvh, Vec<Shape>, Vec<PrimInfo>, Aabb), Error> {
+    let n = geom.shapes.len();
     // BVH references: (shape index, box); oblique cones get several tight boxes
-    let mut boxes: Vec<Aabb> = Vec::with_capacity(geom.shapes.len());
-    let mut owner: Vec<u32> = Vec::with_capacity(geom.shapes.len());
+    let what =
+        |array: &'static str| move || format!("{name}: the BVH's {array} for {n} primitives");
+    let mut boxes: Vec<Aabb> = memory::try_with_capacity(n, what("boxes"))?;
+    let mut owner: Vec<u32> = memory::try_with_capacity(n, what("box owners"))?;
     let mut tmp = Vec::new();
     for (i, s) in geom.shapes.iter().enumerate() {
         geom.split_bounds(s, poly_bounds, &mut tmp);
+        memory::try_reserve(&mut boxes, tmp.len(), what("boxes"))?;
+        memory::try_reserve(&mut owner, tmp.len(), what("box owners"))?;
         for b in &tmp {
             boxes.push(*b);
             owner.push(i as u32);
         }
     }
+    // the whole build's need, before any of it is made
+    memory::check(
+        || format!("{name}: the BVH of {} boxes", boxes.len()),
+        (boxes.len() as u64).saturating_mul(limits::BVH_BYTES_PER_BOX),
+    )?;
     // triangles are met four at a time: leaves of up to four are as cheap as one
     let all_triangles = blocks
         && geom
@@ -872,15 +888,21 @@ fn ordered_bvh(
     // the boxes go before the ordered arrays are made: a parse's peak memory
     drop(boxes);
     let src = |r: &u32| owner.get(*r as usize).copied();
-    let shapes: Vec<Shape> = order
-        .iter()
-        .filter_map(|r| src(r).and_then(|i| geom.shapes.get(i as usize).copied()))
-        .collect();
-    let info: Vec<PrimInfo> = order
-        .iter()
-        .filter_map(|r| src(r).and_then(|i| info.get(i as usize).copied()))
-        .collect();
-    (bvh, shapes, info, bounds)
+    // exactly sized: collected from a filter they would grow by doubling
+    let mut shapes: Vec<Shape> = memory::try_with_capacity(order.len(), what("ordered shapes"))?;
+    shapes.extend(
+        order
+            .iter()
+            .filter_map(|r| src(r).and_then(|i| geom.shapes.get(i as usize).copied())),
+    );
+    let mut ordered_info: Vec<PrimInfo> =
+        memory::try_with_capacity(order.len(), what("ordered shading data"))?;
+    ordered_info.extend(
+        order
+            .iter()
+            .filter_map(|r| src(r).and_then(|i| info.get(i as usize).copied())),
+    );
+    Ok((bvh, shapes, ordered_info, bounds))
 }
 
 impl SceneBuilder {
@@ -905,6 +927,7 @@ impl SceneBuilder {
             stored_elsewhere: 0,
             max_primitives: limits::MAX_PRIMITIVES,
             max_instances: limits::MAX_MESH_REFERENCES,
+            max_mesh_triangles: limits::MAX_MESH_TRIANGLES,
             warnings: Warnings::default(),
         }
     }
@@ -921,26 +944,32 @@ impl SceneBuilder {
     pub fn for_mesh(&self) -> SceneBuilder {
         let mut b = SceneBuilder::new();
         b.max_primitives = self.max_primitives;
+        b.max_mesh_triangles = self.max_mesh_triangles;
         b.stored_elsewhere = self.stored();
         b
     }
 
     /// Adds a shared mesh from a builder made by [`SceneBuilder::for_mesh`] holding only
     /// triangles (others are ignored): builds its BVH and takes over its materials. Returns
-    /// the mesh's index for [`SceneBuilder::instance`].
-    pub fn add_mesh(&mut self, mut mesh: SceneBuilder) -> u32 {
+    /// the mesh's index for [`SceneBuilder::instance`]. `name` (the mesh's file) is named in
+    /// an [`Error::Memory`].
+    pub fn add_mesh(&mut self, mut mesh: SceneBuilder, name: &str) -> Result<u32, Error> {
         // the mesh file's warnings are the scene's (read once, they are said once)
         self.warnings.absorb(std::mem::take(&mut mesh.warnings));
         let base = self.materials.len() as u32;
         self.materials.extend(mesh.materials.iter().copied());
-        let (bvh, shapes, info, _) = ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds, false);
-        let mut tris: Vec<Tri> = Vec::with_capacity(shapes.len());
-        let mut infos = Vec::with_capacity(shapes.len());
+        let (bvh, shapes, info, _) =
+            ordered_bvh(&mesh.geom, &mesh.info, &mesh.poly_bounds, false, name)?;
+        let n = shapes.len();
+        let mut tris: Vec<Tri> =
+            memory::try_with_capacity(n, || format!("{name}: the {n} triangles of the mesh"))?;
+        let mut infos =
+            memory::try_with_capacity(n, || format!("{name}: the shading data of {n} triangles"))?;
         for (s, i) in shapes.iter().zip(&info) {
             // only triangles are expected; anything else would break the BVH order, so the
             // mesh is then dropped whole rather than drawn wrong
             let Shape::Triangle { v0, e1, e2 } = *s else {
-                return self.add_empty_mesh();
+                return Ok(self.add_empty_mesh());
             };
             tris.push([v0, e1, e2]);
             infos.push(PrimInfo {
@@ -951,7 +980,7 @@ impl SceneBuilder {
         self.stored_elsewhere += tris.len();
         self.meshes
             .push(Mesh::new(tris, infos, mesh.patch_normals, bvh));
-        (self.meshes.len() - 1) as u32
+        Ok((self.meshes.len() - 1) as u32)
     }
 
     fn add_empty_mesh(&mut self) -> u32 {
@@ -1012,13 +1041,20 @@ impl SceneBuilder {
         self.source_count
     }
 
-    fn room(&self) -> Result<(), Error> {
+    /// Room for one more primitive: under [`limits::MAX_PRIMITIVES`], and in the primitive
+    /// arrays, reserved fallibly ([`memory::try_reserve`]) so that [`SceneBuilder::push`]
+    /// never allocates.
+    fn room(&mut self) -> Result<(), Error> {
         limits::check(
             "primitive count",
             self.stored() as u64 + 1,
             self.max_primitives as u64,
             "MAX_PRIMITIVES",
-        )
+        )?;
+        let n = self.geom.shapes.len();
+        let what = || format!("growing the array of {n} primitives");
+        memory::try_reserve(&mut self.geom.shapes, 1, what)?;
+        memory::try_reserve(&mut self.info, 1, what)
     }
 
     fn push(&mut self, s: Shape, material: u32, normals: u32) {
@@ -1072,6 +1108,10 @@ impl SceneBuilder {
         }
         let ni = match normals {
             Some(n) => {
+                let k = self.patch_normals.len();
+                memory::try_reserve(&mut self.patch_normals, 1, || {
+                    format!("growing the array of {k} vertex normals")
+                })?;
                 self.patch_normals.push(n);
                 (self.patch_normals.len() - 1) as u32
             }
@@ -1128,6 +1168,9 @@ impl SceneBuilder {
             // inside-only when a radius is negative and none positive (`0` and `-1` too)
             c.inside = (r0 < 0.0 || r1 < 0.0) && r0 <= 0.0 && r1 <= 0.0;
             let k = self.geom.cones.len() as u32;
+            memory::try_reserve(&mut self.geom.cones, 1, || {
+                format!("growing the array of {k} cones")
+            })?;
             self.geom.cones.push(c);
             self.push(Shape::Cone(k), material, NO_NORMALS);
             self.source_count += 1;
@@ -1146,6 +1189,10 @@ impl SceneBuilder {
         let Some(n) = normal.try_normalize() else {
             return Ok(None);
         };
+        let k = self.planes.len();
+        memory::try_reserve(&mut self.planes, 1, || {
+            format!("growing the array of {k} planes")
+        })?;
         self.planes.push(Plane {
             normal: n,
             d: n.dot(point),
@@ -1155,19 +1202,31 @@ impl SceneBuilder {
         Ok(Some(()))
     }
 
-    /// Builds the BVH and the final scene. `camera` must be set.
-    pub fn build(mut self) -> Scene {
+    /// Builds the BVH and the final scene. `camera` must be set. `name` (the scene's file) is
+    /// named in an [`Error::Memory`], the one error: the memory the build needs is checked
+    /// before it is allocated ([`memory`]).
+    pub fn build(mut self, name: &str) -> Result<Scene, Error> {
         // the growth slack of the primitive arrays goes before the BVH's arrays are made
         self.geom.shapes.shrink_to_fit();
         self.info.shrink_to_fit();
         self.patch_normals.shrink_to_fit();
         let (bvh, shapes, info, bounds) =
-            ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true);
+            ordered_bvh(&self.geom, &self.info, &self.poly_bounds, true, name)?;
         self.geom.shapes = shapes;
         self.geom.cones_in_shape_order();
         self.geom.polygons.shrink_to_fit();
         let mut bvh = bvh;
+        // at most a block per triangle (leaves of one), and its growth's slack
+        memory::check(
+            || format!("{name}: the triangle blocks of the BVH's leaves"),
+            (self.geom.shapes.len() as u64)
+                .saturating_mul(std::mem::size_of::<crate::tri4::Tri4>() as u64),
+        )?;
         let tri_blocks = TriBlocks::build(&mut bvh, &self.geom.shapes);
+        memory::check(
+            || format!("{name}: the BVH of {} mesh instances", self.instances.len()),
+            (self.instance_bounds.len() as u64).saturating_mul(limits::BVH_BYTES_PER_BOX),
+        )?;
         let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
         let instances: Vec<Instance> = order
             .iter()
@@ -1191,7 +1250,7 @@ impl SceneBuilder {
         if self.materials.is_empty() {
             self.materials.push(Material::default());
         }
-        Scene {
+        Ok(Scene {
             camera,
             resolution: self.resolution,
             background: self.background,
@@ -1212,7 +1271,7 @@ impl SceneBuilder {
             source_count: self.source_count,
             display_referred: self.display_referred,
             warnings: self.warnings,
-        }
+        })
     }
 }
 
@@ -1386,7 +1445,7 @@ mod shadow_cache_tests {
             }
         }
         b.plane(Vec3A::new(0.0, 0.0, -3.0), Vec3A::Z, m).unwrap();
-        b.build()
+        b.build("test").unwrap()
     }
 
     /// Every primitive tested, no cache, no BVH.

@@ -639,7 +639,9 @@ pub fn parse(
                         None => {
                             let mut mb = b.for_mesh();
                             load(Affine3A::IDENTITY, None, &mut mb)?;
-                            let m = b.add_mesh(mb);
+                            let m = b
+                                .add_mesh(mb, &shown)
+                                .map_err(|e| cx.err(span.clone(), e.to_string()))?;
                             shared.insert(key, m);
                             m
                         }
@@ -655,7 +657,7 @@ pub fn parse(
         }
     }
     crate::warning::scene_warnings(&mut b, file);
-    Ok(b.build())
+    b.build(file)
 }
 
 /// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the
