@@ -32,7 +32,7 @@ defmodule RingTracer.Job.Child do
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Directory, Grandchild, Pipe, Spec}
+  alias RingTracer.Job.{Directory, Grandchild, Pipe, Queue, Spec}
   alias RingTracer.Layout
   alias RingTracer.Strategy.View
 
@@ -52,7 +52,7 @@ defmodule RingTracer.Job.Child do
     ring_size: 0,
     t0: 0,
     grandchild: nil,
-    queue: [],
+    queue: Queue.new(),
     in_flight: [],
     parts: %{},
     current_since: 0,
@@ -88,7 +88,7 @@ defmodule RingTracer.Job.Child do
           ring_size: non_neg_integer(),
           t0: integer(),
           grandchild: pid() | nil,
-          queue: [Layout.atom_id()],
+          queue: Queue.t(),
           in_flight: [Layout.atom_id()],
           parts: %{Layout.atom_id() => pos_integer() | :cut},
           current_since: integer(),
@@ -182,7 +182,7 @@ defmodule RingTracer.Job.Child do
   # traced.
   defp giveable(state) do
     waiting = if waiting(state), do: 1, else: 0
-    {length(state.queue) + waiting, length(state.in_flight) - waiting}
+    {Queue.size(state.queue) + waiting, length(state.in_flight) - waiting}
   end
 
   # The atom queued in the grandchild's pipe behind the one being traced.
@@ -203,16 +203,16 @@ defmodule RingTracer.Job.Child do
       length(whole) < g ->
         {whole, state}
 
-      state.queue != [] ->
-        {head, tail} = Layout.split(List.last(state.queue), n - k, n)
-        state = bump(%{state | queue: List.replace_at(state.queue, -1, head)}, :splits)
+      Queue.size(state.queue) > 0 ->
+        {head, tail} = Layout.split(Queue.last(state.queue), n - k, n)
+        state = bump(%{state | queue: Queue.replace_last(state.queue, head)}, :splits)
         {[tail | whole], state}
 
       true ->
         case take_last(state, 1) do
           {[atom], state} ->
             {head, tail} = Layout.split(atom, n - k, n)
-            {[tail | whole], fill_pipe(bump(%{state | queue: [head]}, :splits))}
+            {[tail | whole], fill_pipe(bump(%{state | queue: Queue.new([head])}, :splits))}
 
           {[], state} ->
             {whole, state}
@@ -224,7 +224,7 @@ defmodule RingTracer.Job.Child do
   # last queued ones and then, if `g` asks for more, the atom waiting in the
   # grandchild's pipe, if the grandchild has not started it (`Pipe.revoke/2`).
   defp take_last(state, g) do
-    {keep, give} = Enum.split(state.queue, length(state.queue) - min(g, length(state.queue)))
+    {give, keep} = Queue.take_last(state.queue, g)
     state = %{state | queue: keep}
 
     waiting = waiting(state)
@@ -254,7 +254,7 @@ defmodule RingTracer.Job.Child do
 
       queue =
         if kept > started,
-          do: [Layout.parts(atom, started, kept, n) | state.queue],
+          do: Queue.push_front(state.queue, Layout.parts(atom, started, kept, n)),
           else: state.queue
 
       state = %{state | in_flight: [head | later], parts: parts, queue: queue}
@@ -300,7 +300,7 @@ defmodule RingTracer.Job.Child do
   """
   @spec receive_atoms(t(), [Layout.atom_id()]) :: t()
   def receive_atoms(state, atoms) do
-    atoms = Enum.reject(atoms, &(&1 in state.in_flight or &1 in state.queue))
+    {queue, atoms} = Queue.append(state.queue, atoms, MapSet.new(state.in_flight))
 
     stats = %{
       state.stats
@@ -308,7 +308,7 @@ defmodule RingTracer.Job.Child do
         handovers: state.stats.handovers + 1
     }
 
-    %{state | queue: state.queue ++ atoms, status: :working, stats: stats}
+    %{state | queue: queue, status: :working, stats: stats}
     |> fill_pipe()
     |> maybe_idle()
   end
@@ -359,8 +359,8 @@ defmodule RingTracer.Job.Child do
       left_index: state.left_index,
       dead: state.dead,
       status: view_status(state.status),
-      queued: length(state.queue),
-      last_share: share(List.last(state.queue) || waiting(state)),
+      queued: Queue.size(state.queue),
+      last_share: share(Queue.last(state.queue) || waiting(state)),
       remaining: remaining,
       in_flight: in_flight,
       done: state.done,
@@ -468,7 +468,7 @@ defmodule RingTracer.Job.Child do
       parent: parent,
       strategy: strategy,
       strategy_state: strategy.init(options),
-      queue: queue,
+      queue: Queue.new(queue),
       stats:
         new_stats(index, node(), Spec.speed(List.to_tuple(spec.speeds), index), length(queue))
     }
@@ -657,10 +657,16 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  defp fill_pipe(%{queue: [atom | rest], in_flight: in_flight} = state)
-       when length(in_flight) < @pipe_depth do
-    state = %{state | queue: rest}
+  defp fill_pipe(%{in_flight: in_flight} = state) when length(in_flight) < @pipe_depth do
+    case Queue.next(state.queue) do
+      {atom, rest} -> fill_pipe(%{state | queue: rest}, atom, in_flight)
+      :empty -> state
+    end
+  end
 
+  defp fill_pipe(state), do: state
+
+  defp fill_pipe(state, atom, in_flight) do
     state =
       case parts_of(state, atom) do
         1 ->
@@ -676,8 +682,6 @@ defmodule RingTracer.Job.Child do
     fill_pipe(%{state | in_flight: in_flight ++ [atom]})
   end
 
-  defp fill_pipe(state), do: state
-
   # In how many parts the grandchild traces `atom` (the strategy's
   # `parts/2`, which sees the atom's rows).
   defp parts_of(state, atom) do
@@ -687,7 +691,8 @@ defmodule RingTracer.Job.Child do
     max(state.strategy.parts(view, state.strategy_state), 1)
   end
 
-  defp maybe_idle(%{queue: [], in_flight: [], status: :working} = state), do: idle(state)
+  defp maybe_idle(%{queue: %Queue{size: 0}, in_flight: [], status: :working} = state),
+    do: idle(state)
 
   defp maybe_idle(state), do: state
 

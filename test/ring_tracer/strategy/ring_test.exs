@@ -5,7 +5,7 @@ defmodule RingTracer.Strategy.RingTest do
   # what the child sends in its mailbox.
   use ExUnit.Case, async: true
 
-  alias RingTracer.Job.{Child, Directory, Spec}
+  alias RingTracer.Job.{Child, Directory, Queue, Spec}
   alias RingTracer.Strategy.Ring.HelpOffer
   alias RingTracer.Strategy.Ring
 
@@ -25,6 +25,8 @@ defmodule RingTracer.Strategy.RingTest do
     # as this test's process lives.
     {siblings, fields} = Keyword.pop(fields, :siblings, {me, me, me, me})
     fields = Keyword.delete(fields, :options)
+    # the child keeps its queue as a RingTracer.Job.Queue; tests write lists
+    fields = Keyword.update(fields, :queue, Queue.new(), &Queue.new/1)
     :ok = Directory.publish(node(), spec.id, me, siblings, 5_000)
 
     base = %Child{
@@ -37,7 +39,7 @@ defmodule RingTracer.Strategy.RingTest do
       ring_size: tuple_size(siblings),
       t0: 0,
       grandchild: me,
-      queue: [],
+      queue: Queue.new(),
       in_flight: [],
       current_since: 0,
       done: 4,
@@ -77,7 +79,7 @@ defmodule RingTracer.Strategy.RingTest do
     # five we could give, two, as much as the third helper we plan for.
     helped = handle(parked, {:handover, 0, [10, 11, 12, 13, 14, 15]})
     assert_received {:handover, 1, [14, 15]}
-    assert helped.queue == [12, 13]
+    assert Queue.to_list(helped.queue) == [12, 13]
     refute Map.has_key?(helped.strategy_state, :parked)
   end
 
@@ -271,7 +273,7 @@ defmodule RingTracer.Strategy.RingTest do
     busy = child(in_flight: [19], queue: [7])
     again = Child.receive_atoms(busy, [19, 7, 8])
 
-    assert (again.in_flight ++ again.queue) |> Enum.sort() == [7, 8, 19]
+    assert (again.in_flight ++ Queue.to_list(again.queue)) |> Enum.sort() == [7, 8, 19]
     # Nobody faster heard of: whole.
     assert_received {:trace, 7}
     refute_received {:trace, 19, _}
@@ -419,7 +421,7 @@ defmodule RingTracer.Strategy.RingTest do
       gave = handle(busy, {:help_offer, offer(2)})
 
       assert_received {:handover, 1, atoms, [{1, _end, _at, queued} | _]}
-      assert queued == length(gave.queue)
+      assert queued == Queue.size(gave.queue)
       assert length(atoms) + queued == 6
     end
   end
