@@ -36,6 +36,7 @@
 
 use crate::geometry::Aabb;
 use crate::ray::Ray;
+use crate::{limits, Error};
 use glam::{Vec3A, Vec4};
 
 /// Number of SAH bins per axis.
@@ -746,15 +747,43 @@ pub(crate) struct Bvh {
 impl Bvh {
     /// Builds over primitive boxes; returns the hierarchy and the primitive order (new position ->
     /// old index).
+    #[cfg(test)]
     pub fn build(boxes: &[Aabb]) -> (Bvh, Vec<u32>) {
         Bvh::build_with(boxes, LEAF_MIN)
     }
 
     /// [`Bvh::build`] never splitting leaves of up to `leaf_min` primitives.
+    #[cfg(test)]
     pub fn build_with(boxes: &[Aabb], leaf_min: usize) -> (Bvh, Vec<u32>) {
         let (bin, order) = build_binary(boxes, leaf_min);
+        Bvh::collapse(&bin, order, leaf_min)
+    }
+
+    /// [`Bvh::build_with`], each of its two stages checked first against the memory left
+    /// ([`crate::memory::check`]): the binary build at [`limits::BVH_BYTES_PER_BOX`] a box,
+    /// then the 8-wide collapse at [`limits::BVH_BYTES_PER_NODE`] a binary node. `what` names
+    /// the BVH (and its file) in the error.
+    pub(crate) fn try_build_with(
+        boxes: &[Aabb],
+        leaf_min: usize,
+        what: &dyn Fn() -> String,
+    ) -> Result<(Bvh, Vec<u32>), Error> {
+        crate::memory::check(
+            || format!("{} ({} boxes)", what(), boxes.len()),
+            (boxes.len() as u64).saturating_mul(limits::BVH_BYTES_PER_BOX),
+        )?;
+        let (bin, order) = build_binary(boxes, leaf_min);
+        crate::memory::check(
+            || format!("{} ({} binary nodes)", what(), bin.len()),
+            (bin.len() as u64).saturating_mul(limits::BVH_BYTES_PER_NODE),
+        )?;
+        Ok(Bvh::collapse(&bin, order, leaf_min))
+    }
+
+    /// The binary tree `bin` collapsed into 8-wide nodes.
+    fn collapse(bin: &[Node], order: Vec<u32>, leaf_min: usize) -> (Bvh, Vec<u32>) {
         let block = block_size(leaf_min);
-        let plan = Collapse::plan(&bin, block, max_leaf(block));
+        let plan = Collapse::plan(bin, block, max_leaf(block));
         let mut nodes = Vec::with_capacity(bin.len() / 4 + 1);
         if !bin.is_empty() {
             // (binary node, Node8 slot to fill)
@@ -763,7 +792,7 @@ impl Bvh {
             let mut kids: Vec<(usize, bool)> = Vec::with_capacity(WIDTH);
             while let Some((bi, slot)) = work.pop() {
                 kids.clear();
-                plan.node_children(&bin, bi, &mut kids);
+                plan.node_children(bin, bi, &mut kids);
                 let mut n8 = Node8::empty();
                 for (i, &(k, leaf)) in kids.iter().enumerate().take(WIDTH) {
                     let Some(n) = bin.get(k) else { continue };
@@ -1179,13 +1208,12 @@ mod tests {
             .collect()
     }
 
-    /// `limits::BVH_BYTES_PER_BOX`, checked against the memory left before a build, covers the
-    /// build's peak: the caller's boxes and owners, then the larger of the binary build's
-    /// arrays and the collapse's, as allocated (capacities), for coincident boxes (the worst
-    /// leaves) and for a grid, of either leaf size.
+    /// `limits::BVH_BYTES_PER_BOX` and `BVH_BYTES_PER_NODE`, checked against the memory left
+    /// before the binary build and before the collapse, cover the arrays each stage makes, as
+    /// allocated (capacities), for coincident boxes (the worst leaves) and for a grid, of
+    /// either leaf size.
     #[test]
     fn bvh_bytes_per_box_covers_the_build() {
-        let size = std::mem::size_of::<Aabb>() + 4;
         let same = vec![grid()[0]; 1000];
         for boxes in [grid(), same] {
             for leaf in [LEAF_MIN, LEAF_MIN_TRIANGLES] {
@@ -1194,18 +1222,23 @@ mod tests {
                 let block = block_size(leaf);
                 let plan = Collapse::plan(&bin, block, max_leaf(block));
                 let (bvh, _) = Bvh::build_with(&boxes, leaf);
-                let binary = order.capacity() * 4 + bin.capacity() * std::mem::size_of::<Node>();
-                let refs = n * std::mem::size_of::<BuildRef>();
+                let binary = order.capacity() * 4
+                    + bin.capacity() * std::mem::size_of::<Node>()
+                    + n * std::mem::size_of::<BuildRef>();
+                assert!(
+                    binary as u64 <= crate::limits::BVH_BYTES_PER_BOX * n as u64,
+                    "{} bytes a box",
+                    binary / n
+                );
                 let collapse = plan.cost.capacity() * 4
                     + plan.choice.capacity() * std::mem::size_of::<Choice>()
                     + plan.node_split.capacity()
                     + plan.ranges.capacity() * 8
                     + bvh.nodes.capacity() * std::mem::size_of::<Node8>();
-                let peak = n * size + binary + refs.max(collapse);
                 assert!(
-                    peak as u64 <= crate::limits::BVH_BYTES_PER_BOX * n as u64,
-                    "{} bytes a box",
-                    peak / n
+                    collapse as u64 <= crate::limits::BVH_BYTES_PER_NODE * bin.len() as u64,
+                    "{} bytes a node",
+                    collapse / bin.len()
                 );
             }
         }

@@ -82,12 +82,15 @@ pub const MAX_WARNINGS: usize = 100;
 /// what the process has left under its `RLIMIT_AS` ([`crate::memory`]): room for the small
 /// allocations made on the way, which cannot fail gracefully.
 pub const MEMORY_HEADROOM: u64 = 256 << 20;
-/// Bytes a BVH build needs at its peak per box (a primitive's box; an oblique cone has up to
-/// 16): the boxes and their owners (36), the primitive order (4), the build references (48),
-/// up to two binary nodes (64), the 8-wide collapse's tables for them (2 x 57) and the 8-wide
-/// nodes (up to 2 x 64), rounded up. Checked against the memory left before the build
-/// ([`crate::memory`]); `bvh_bytes_per_box_covers_the_build` in bvh.rs keeps it honest.
-pub const BVH_BYTES_PER_BOX: u64 = 384;
+/// Bytes a BVH's binary build makes per box (a primitive's box; an oblique cone has up to 16):
+/// the primitive order (4), the build references (48) and up to two binary nodes (64), rounded
+/// up. Checked against the memory left before the build ([`crate::memory`]);
+/// `bvh_bytes_per_box_covers_the_build` in bvh.rs keeps it honest.
+pub const BVH_BYTES_PER_BOX: u64 = 128;
+/// Bytes the collapse of a binary BVH into 8-wide nodes makes per binary node: its cost and
+/// choice tables (57) and its share of the 8-wide nodes (64), rounded up; checked likewise
+/// before the collapse.
+pub const BVH_BYTES_PER_NODE: u64 = 128;
 
 /// How to raise a bound (the usual case).
 pub(crate) const RAISE: &str = "raise the constant in native/kernel/src/limits.rs and rebuild";

@@ -8,8 +8,8 @@
 //! - the arrays of primitives, their shading data and the BVH's build arrays are reserved
 //!   with `try_reserve` ([`try_reserve`], [`try_with_capacity`]), after a check that they fit
 //!   in the address space left ([`check`]);
-//! - before a BVH is built, the whole build's need ([`limits::BVH_BYTES_PER_BOX`] per box) is
-//!   checked the same way;
+//! - before each stage of a BVH build, its need ([`limits::BVH_BYTES_PER_BOX`] per box, then
+//!   [`limits::BVH_BYTES_PER_NODE`] per binary node) is checked the same way;
 //! - the rest is bounded by the documented limits ([`crate::limits`]).
 //!
 //! "Left" is the process's `RLIMIT_AS` soft limit (`ulimit -v`, `prlimit --as`) less what it
@@ -19,6 +19,7 @@
 //! is then refused only by the documented limits, or ends with the out-of-memory killer.
 //!
 //! [`limits::BVH_BYTES_PER_BOX`]: crate::limits::BVH_BYTES_PER_BOX
+//! [`limits::BVH_BYTES_PER_NODE`]: crate::limits::BVH_BYTES_PER_NODE
 //! [`limits::MEMORY_HEADROOM`]: crate::limits::MEMORY_HEADROOM
 
 use crate::limits::MEMORY_HEADROOM;

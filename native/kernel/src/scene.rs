@@ -867,11 +867,6 @@ fn ordered_bvh(
             owner.push(i as u32);
         }
     }
-    // the whole build's need, before any of it is made
-    memory::check(
-        || format!("{name}: the BVH of {} boxes", boxes.len()),
-        (boxes.len() as u64).saturating_mul(limits::BVH_BYTES_PER_BOX),
-    )?;
     // triangles are met four at a time: leaves of up to four are as cheap as one
     let all_triangles = blocks
         && geom
@@ -883,7 +878,7 @@ fn ordered_bvh(
     } else {
         crate::bvh::LEAF_MIN
     };
-    let (bvh, order) = Bvh::build_with(&boxes, leaf_min);
+    let (bvh, order) = Bvh::try_build_with(&boxes, leaf_min, &|| format!("{name}: the BVH"))?;
     let bounds = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(*b));
     // the boxes go before the ordered arrays are made: a parse's peak memory
     drop(boxes);
@@ -1217,17 +1212,18 @@ impl SceneBuilder {
         self.geom.polygons.shrink_to_fit();
         let mut bvh = bvh;
         // at most a block per triangle (leaves of one), and its growth's slack
+        let triangles = (self.geom.shapes.iter())
+            .filter(|s| matches!(s, Shape::Triangle { .. }))
+            .count();
         memory::check(
-            || format!("{name}: the triangle blocks of the BVH's leaves"),
-            (self.geom.shapes.len() as u64)
-                .saturating_mul(std::mem::size_of::<crate::tri4::Tri4>() as u64),
+            || format!("{name}: the BVH's table of blocks for {triangles} triangles"),
+            (triangles as u64).saturating_mul(std::mem::size_of::<crate::tri4::Tri4>() as u64),
         )?;
         let tri_blocks = TriBlocks::build(&mut bvh, &self.geom.shapes);
-        memory::check(
-            || format!("{name}: the BVH of {} mesh instances", self.instances.len()),
-            (self.instance_bounds.len() as u64).saturating_mul(limits::BVH_BYTES_PER_BOX),
-        )?;
-        let (instance_bvh, order) = Bvh::build(&self.instance_bounds);
+        let (instance_bvh, order) =
+            Bvh::try_build_with(&self.instance_bounds, crate::bvh::LEAF_MIN, &|| {
+                format!("{name}: the BVH of the mesh instances")
+            })?;
         let instances: Vec<Instance> = order
             .iter()
             .filter_map(|&i| self.instances.get(i as usize).copied())
