@@ -6,7 +6,8 @@ defmodule RingTracer.Bench.Limits do
 
   Runs each documented maximum of `RingTracer.Options` and the kernel's
   image size at full size (`--quick`: a sixteenth): 16,384 children,
-  1,048,576 atoms (simulated, and real on 64 children), and a 64 Mpixel
+  1,048,576 atoms (simulated on one child, and real on one child and on 64
+  children: a child's cost per atom does not grow with its queue), and a 64 Mpixel
   image, printing time, the VM's memory growth and the outcome.
   """
   @moduledoc @help
@@ -46,6 +47,10 @@ defmodule RingTracer.Bench.Limits do
        end},
       {"atoms", "1 child x #{div(max.atoms, q)} atoms (simulated, 1 us each)",
        fn -> RingTracer.simulate(children: 1, atoms: div(max.atoms, q), costs: 1) end},
+      {"atoms", "1 child x #{div(max.atoms, q)} atoms, 1024x1024",
+       fn ->
+         RingTracer.render(scene, children: 1, atoms: div(max.atoms, q), width: 1024, height: 1024)
+       end},
       {"atoms", "64 children x #{div(max.atoms, 64 * q)} atoms, 1024x1024",
        fn ->
          RingTracer.render(scene,

@@ -15,6 +15,8 @@
 //! | [`MAX_TOML_BYTES`] | 64 MiB | a TOML scene file (its reader needs about 50 bytes a byte) | before parsing |
 //! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
 //! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
+//! | [`MEMORY_HEADROOM`] | 256 MiB | address space kept free under `RLIMIT_AS` when an input-sized array is made | [`crate::memory::check`], before each such array grows |
+//! | [`BVH_BYTES_PER_BOX`], [`BVH_BYTES_PER_NODE`] | 128, 128 | what a BVH build makes per box, then its collapse per binary node | before each stage, against the address space left |
 //!
 //! ## Memory
 //!
@@ -34,6 +36,11 @@
 //! through); a TOML file at [`MAX_TOML_BYTES`] needs at most ~3.2 GiB. Through the
 //! NIF add the scene's bytes once more (the binary the VM holds) and each referenced mesh twice
 //! (its bytes are returned to Elixir to ship to other nodes).
+//!
+//! Under an address-space limit (`ulimit -v`, `prlimit --as`) the parse may need more than
+//! is left: the arrays that grow with the scene are then refused before they are made, with
+//! an [`Error::Memory`] naming the file, the bytes needed and the bytes left, never an abort
+//! ([`crate::memory`]).
 //!
 //! Exceeding one gives [`Error::Limit`], whose message names the quantity, the value, the bound
 //! and its constant, and how to raise it, e.g. `resolution 100000x100000 is 10000000000 pixels,
