@@ -210,7 +210,12 @@ pub fn trace_span(
 ) -> Result<(Vec<f32>, RayStats), Error> {
     // checked before allocating: a span outside the image must not size a buffer
     settings.span_end(start, count)?;
-    let mut out = vec![0.0f32; count as usize * 3];
+    let floats = count as usize * 3;
+    // fallible: an image's span is up to limits::MAX_PIXELS (768 MiB of floats)
+    let mut out = crate::memory::try_with_capacity(floats, || {
+        format!("the pixels of a span of {count} pixels")
+    })?;
+    out.resize(floats, 0.0f32);
     let stats = trace_span_into(scene, settings, start, &mut out)?;
     Ok((out, stats))
 }
@@ -503,7 +508,10 @@ pub fn render_image(
 ) -> Result<(Vec<f32>, RayStats), Error> {
     settings.validate()?;
     let (w, h) = settings.traced_size();
-    let mut image = vec![0.0f32; w as usize * h as usize * 3];
+    let floats = w as usize * h as usize * 3;
+    let mut image =
+        crate::memory::try_with_capacity(floats, || format!("the pixels of a {w}x{h} image"))?;
+    image.resize(floats, 0.0f32);
     let stats = render_image_into(scene, settings, threads, &mut image)?;
     Ok((image, stats))
 }

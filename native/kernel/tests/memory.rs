@@ -29,7 +29,20 @@ fn child_load() {
     };
     // SAFETY: setrlimit reads the struct it is handed.
     assert_eq!(unsafe { libc::setrlimit(libc::RLIMIT_AS, &lim) }, 0);
+    // `PATH span`: the scene's whole image traced as one span
+    let (path, span) = match path.strip_suffix(" span") {
+        Some(p) => (p, true),
+        None => (path, false),
+    };
     let outcome = match ring_tracer_kernel::Scene::load(Path::new(path)) {
+        Ok(scene) if span => {
+            let settings = ring_tracer_kernel::Settings::for_scene(&scene);
+            let pixels = settings.width as u64 * settings.height as u64;
+            match ring_tracer_kernel::trace_span(&scene, &settings, 0, pixels) {
+                Ok((rgb, _)) => format!("ok {}", rgb.len() / 3),
+                Err(e) => format!("error {}: {e}", path),
+            }
+        }
         Ok(scene) => format!("ok {}", scene.primitive_count()),
         Err(e) => format!("error {e}"),
     };
@@ -152,4 +165,27 @@ fn twenty_million_spheres_under_six_gigabytes() {
         &[gb, 2 * gb, 3 * gb, 4 * gb, 5 * gb, 6_000_000_000, 24 * gb],
     );
     std::fs::remove_file(&path).ok();
+}
+
+/// A span of the largest image (64 Mpixel, 768 MiB of floats) with less address space than
+/// that: an error naming the pixels, not an abort.
+#[test]
+fn a_span_too_big_for_the_address_space_is_an_error_not_an_abort() {
+    let dir = std::env::temp_dir().join(format!("rt_memory_span_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("big_image.nff");
+    std::fs::write(
+        &path,
+        "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 8192 8192\n\
+         l 0 5 5\nf 1 1 1 1 0 0 0 0\ns 0 0 0 1\n",
+    )
+    .unwrap();
+    let spec = Path::new(&format!("{} span", path.display())).to_path_buf();
+    let result = load_limited(&spec, 700 << 20);
+    assert!(
+        result.starts_with("error ") && result.contains("the pixels of a span of 67108864 pixels"),
+        "{result}"
+    );
+    assert!(result.contains("bytes of memory"), "{result}");
+    std::fs::remove_dir_all(&dir).ok();
 }
