@@ -68,6 +68,7 @@ pub mod polygon;
 pub mod ray;
 pub mod raysets;
 pub mod render;
+pub mod safe_fs;
 pub mod scene;
 pub mod stats;
 #[cfg(test)]
