@@ -398,9 +398,9 @@ pub fn private_dir(path: &Path, may_exist: bool) -> Result<Dir, Error> {
         return Err(message_error(
             path,
             format!(
-                "can be entered by others (mode {:04o}); fix it with: chmod 700 {}",
-                st.st_mode & 0o7777,
-                path.display()
+                "can be entered by others (chmod 700 {}; its mode is {:04o})",
+                path.display(),
+                st.st_mode & 0o7777
             ),
         ));
     }
@@ -530,7 +530,8 @@ mod tests {
         assert_eq!(names(&p), ["x"]);
         std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
         let e = private_dir(&p, true).unwrap_err().to_string();
-        assert!(e.contains("can be entered by others (mode 0755)"), "{e}");
+        assert!(e.contains("can be entered by others (chmod 700 "), "{e}");
+        assert!(e.ends_with("; its mode is 0755)"), "{e}");
         let l = t.path().join("link");
         symlink(&p, &l).unwrap();
         let e = private_dir(&l, true).unwrap_err().to_string();
