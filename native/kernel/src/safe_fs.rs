@@ -135,6 +135,87 @@ fn check_name(dir: &Path, name: &str) -> Result<(), Error> {
     Ok(())
 }
 
+/// The most symbolic links one path may go through (the kernel's own bound).
+const MAX_LINKS: usize = 40;
+
+/// Opens the folder `path` (`O_PATH`), one component at a time from a descriptor, following
+/// a symbolic link only when it belongs to this user or to root (and the last component's
+/// only when `follow_last`). Another local user's link on the way is refused: whoever owns
+/// a link, or can swap one into a folder of hers, would choose where the caller writes.
+/// (`openat2` cannot say "only links of these owners", hence the walk; each step is one
+/// `openat` with `O_NOFOLLOW` on the folder reached, nothing is resolved by name twice.)
+fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
+    use std::collections::VecDeque;
+    use std::ffi::OsString;
+    use std::os::unix::ffi::OsStrExt;
+    use std::path::Component;
+    let dir_flags = OFlags::PATH | OFlags::DIRECTORY | OFlags::CLOEXEC;
+    let me = rustix::process::geteuid().as_raw();
+    let mut cur = if path.is_absolute() {
+        rfs::open("/", dir_flags, Mode::empty())
+    } else {
+        rfs::open(".", dir_flags, Mode::empty())
+    }
+    .map_err(|e| errno_error(path, e))?;
+    // what is left to walk; `true` marks the path's own last component
+    let mut todo: VecDeque<(OsString, bool)> = VecDeque::new();
+    let parts: Vec<Component> = path.components().collect();
+    for (i, c) in parts.iter().enumerate() {
+        todo.push_back((c.as_os_str().to_os_string(), i + 1 == parts.len()));
+    }
+    let mut links = 0;
+    while let Some((part, last)) = todo.pop_front() {
+        let bytes = part.as_bytes();
+        if bytes == b"/" {
+            cur = rfs::open("/", dir_flags, Mode::empty()).map_err(|e| errno_error(path, e))?;
+            continue;
+        }
+        if bytes == b"." || bytes.is_empty() {
+            continue;
+        }
+        let next = rfs::openat(
+            &cur,
+            part.as_os_str(),
+            OFlags::PATH | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(|e| errno_error(path, e))?;
+        let st = rfs::fstat(&next).map_err(|e| errno_error(path, e))?;
+        match rfs::FileType::from_raw_mode(st.st_mode) {
+            rfs::FileType::Directory => cur = next,
+            rfs::FileType::Symlink => {
+                if last && !follow_last {
+                    return Err(message_error(path, "is a symbolic link, not a folder"));
+                }
+                if st.st_uid != me && st.st_uid != 0 {
+                    return Err(message_error(
+                        path,
+                        format!(
+                            "goes through a symbolic link ({}) that belongs to user {}; \
+                             not following it (name the folder it leads to instead)",
+                            Path::new(&part).display(),
+                            st.st_uid
+                        ),
+                    ));
+                }
+                links += 1;
+                if links > MAX_LINKS {
+                    return Err(errno_error(path, Errno::LOOP));
+                }
+                let target =
+                    rfs::readlinkat(&next, "", Vec::new()).map_err(|e| errno_error(path, e))?;
+                let target = Path::new(std::ffi::OsStr::from_bytes(target.as_bytes()));
+                let comps: Vec<Component> = target.components().collect();
+                for (i, c) in comps.iter().enumerate().rev() {
+                    todo.push_front((c.as_os_str().to_os_string(), last && i + 1 == comps.len()));
+                }
+            }
+            _ => return Err(errno_error(path, Errno::NOTDIR)),
+        }
+    }
+    Ok(cur)
+}
+
 /// The folder and file name of `path` (`a.png` is in `.`).
 pub fn split(path: &Path) -> Result<(PathBuf, String), Error> {
     let name = path
@@ -174,9 +255,11 @@ impl Dir {
     }
 
     fn open_with(path: &Path, extra: OFlags) -> Result<Dir, Error> {
-        let fd = rfs::open(
-            path,
-            OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC | extra,
+        let found = walk(path, !extra.contains(OFlags::NOFOLLOW))?;
+        let fd = rfs::openat(
+            &found,
+            ".",
+            OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC,
             Mode::empty(),
         )
         .map_err(|e| match e {
@@ -536,5 +619,50 @@ mod tests {
         symlink(&p, &l).unwrap();
         let e = private_dir(&l, true).unwrap_err().to_string();
         assert!(e.ends_with("link: is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn folders_are_reached_through_own_links_only() {
+        let t = tempfile::tempdir().unwrap();
+        let real = t.path().join("real");
+        std::fs::create_dir(&real).unwrap();
+        // this user's links are followed, relative and absolute, `..` included
+        symlink("real", t.path().join("rel")).unwrap();
+        symlink(&real, t.path().join("abs")).unwrap();
+        std::fs::create_dir(real.join("sub")).unwrap();
+        symlink("../real/sub/..", real.join("up")).unwrap();
+        for via in ["rel", "abs", "real/up", "rel/sub/../up"] {
+            let p = t.path().join(via).join("x.json");
+            write_path(&p, via.as_bytes(), None, Replace::Yes).unwrap();
+            assert_eq!(std::fs::read(real.join("x.json")).unwrap(), via.as_bytes());
+        }
+        let e = Dir::open_nofollow(&t.path().join("rel"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("rel: is a symbolic link, not a folder"), "{e}");
+        // a loop ends
+        symlink("loop", t.path().join("loop")).unwrap();
+        assert!(Dir::open(&t.path().join("loop")).is_err());
+        // another user's link is not followed
+        let theirs = t.path().join("theirs");
+        symlink(&real, &theirs).unwrap();
+        if rustix::process::geteuid().is_root() {
+            rfs::chownat(
+                rfs::CWD,
+                &theirs,
+                Some(rustix::process::Uid::from_raw(65534)),
+                None,
+                AtFlags::SYMLINK_NOFOLLOW,
+            )
+            .unwrap();
+            let e = write_path(&theirs.join("y.json"), b"1", None, Replace::Yes)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("goes through a symbolic link (theirs) that belongs to user 65534"),
+                "{e}"
+            );
+            assert!(!real.join("y.json").exists());
+        }
     }
 }
