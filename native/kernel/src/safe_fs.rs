@@ -421,8 +421,16 @@ impl Dir {
         check_name(&self.path, name)?;
         let target = self.at(name);
         match kept {
-            Kept::Link(link) => rfs::renameat(&self.fd, link.as_str(), &self.fd, name)
-                .map_err(|e| errno_error(&target, e)),
+            Kept::Link(link) => {
+                rfs::renameat(&self.fd, link.as_str(), &self.fd, name)
+                    .map_err(|e| errno_error(&target, e))?;
+                // when `name` is still the file kept (nothing replaced it), the rename does
+                // nothing at all (two links to one file) and the hidden link stays: remove it
+                match rfs::unlinkat(&self.fd, link.as_str(), AtFlags::empty()) {
+                    Ok(()) | Err(Errno::NOENT) => Ok(()),
+                    Err(e) => Err(errno_error(&target, e)),
+                }
+            }
             Kept::Nothing => match rfs::unlinkat(&self.fd, name, AtFlags::empty()) {
                 Ok(()) | Err(Errno::NOENT) => Ok(()),
                 Err(e) => Err(errno_error(&target, e)),
@@ -591,6 +599,10 @@ mod tests {
             Path::new("target")
         );
         assert_eq!(std::fs::read(t.path().join("target")).unwrap(), b"old");
+        // put back when nothing replaced it (a write that failed first): no hidden link left
+        let kept = dir.keep("out.png").unwrap();
+        dir.put_back("out.png", &kept).unwrap();
+        assert_eq!(names(t.path()), ["out.png", "target"]);
         let nothing = dir.keep("new.json").unwrap();
         assert_eq!(nothing, Kept::Nothing);
         write_path(&t.path().join("new.json"), b"{}", None, Replace::Yes).unwrap();
