@@ -25,7 +25,9 @@ defmodule RingTracer.Output do
   `O_CREAT | O_EXCL | O_NOFOLLOW` and mode 0600, given its final mode with
   `fchmod` on its own descriptor, then renamed over the target in the same
   folder (`ring_tracer_kernel::safe_fs`). No name is chmodded, nothing is
-  resolved twice.
+  resolved twice. The folder is reached following only this user's or
+  root's symbolic links: a path through another user's link is refused
+  (she could point it, at any moment, at a folder of her choice).
 
       iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
       iex> File.mkdir_p!(dir)
