@@ -36,6 +36,14 @@ defmodule RingTracer.Native do
   def to_srgb8_base64(_pixels), do: err()
   def settings_defaults, do: err()
   def ray_counters, do: err()
+  def fs_write(_path, _data, _mode, _replace), do: err()
+  def fs_probe(_path), do: err()
+  def fs_open_dir(_path), do: err()
+  def fs_private_dir(_path, _may_exist), do: err()
+  def fs_dir_path(_dir), do: err()
+  def fs_keep(_dir, _name), do: err()
+  def fs_put_back(_dir, _name, _kept), do: err()
+  def fs_discard(_dir, _kept), do: err()
 
   defp err, do: :erlang.nif_error(:nif_not_loaded)
 end

@@ -19,6 +19,16 @@ defmodule RingTracer.Output do
   over the target, so a failed, cancelled or interrupted render leaves any
   earlier file untouched and never a partial one.
 
+  Another local user may be racing every step (a folder she can write,
+  swapped for a symbolic link in between): the folder is opened once, and
+  the temporary file is made in it through that descriptor with
+  `O_CREAT | O_EXCL | O_NOFOLLOW` and mode 0600, given its final mode with
+  `fchmod` on its own descriptor, then renamed over the target in the same
+  folder (`ring_tracer_kernel::safe_fs`). No name is chmodded, nothing is
+  resolved twice. The folder is reached following only this user's or
+  root's symbolic links: a path through another user's link is refused
+  (she could point it, at any moment, at a folder of her choice).
+
       iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
       iex> File.mkdir_p!(dir)
       iex> scene = Path.join(dir, "scene.nff")
@@ -33,7 +43,7 @@ defmodule RingTracer.Output do
       "{}"
   """
 
-  alias RingTracer.Error
+  alias RingTracer.{Error, Native}
 
   @typedoc "What an output is: it decides the allowed extensions and the option named in errors."
   @type kind :: :image | :stats | :timeline | :ownership
@@ -96,11 +106,11 @@ defmodule RingTracer.Output do
   end
 
   @doc """
-  Writes `data` to `path` atomically: into a temporary file in the same
-  folder, then renamed over `path`. A file replaced keeps its permissions.
-  The temporary file is made in a folder of its own that only this user can
-  enter, and gets its final permissions there, so that nobody can open it
-  on the way (and keep reading it) that the final ones would refuse.
+  Writes `data` to `path` atomically: into a new file made (mode 0600,
+  `O_EXCL | O_NOFOLLOW`) in the folder of `path` opened once, given its
+  final permissions on its descriptor, then renamed over `path`. A file
+  replaced keeps its permission bits, but never setuid, setgid or sticky; a
+  symbolic link at `path` is replaced, never followed.
 
   ## Options
 
@@ -109,66 +119,54 @@ defmodule RingTracer.Output do
   """
   @spec write(Path.t(), iodata(), keyword()) :: :ok | {:error, Error.t()}
   def write(path, data, opts \\ []) do
-    mode =
-      case File.stat(path) do
-        {:ok, %File.Stat{type: :regular, mode: old}} -> Bitwise.band(old, 0o7777)
-        _ -> opts[:mode]
-      end
-
-    case place_privately(path, data, mode, &File.rename/2) do
+    case put(path, data, opts[:mode], true) do
       :ok -> :ok
-      {:error, reason} -> {:error, Error.file(:file, path, reason)}
+      {:error, reason} when is_atom(reason) -> {:error, Error.file(:file, path, reason)}
+      {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
     end
   end
 
   @doc """
-  Puts `data` at `path` through a copy that only this user can reach until
-  it is finished: written in a new folder beside `path` that is closed to
-  others before anything is in it (`private_dir/1`), given `mode` (`nil`:
-  the umask's), then moved into place by `place.(staged, path)`
-  (`File.rename/2`, or a hard link that refuses an existing file); the
-  folder is removed whatever happens. Returns what failed, as `place` or
-  `File` say it.
+  Puts `data` at `path` as `write/3` does (`mode` that of a new file, `nil`
+  the umask's), replacing what is there when `replace?`, else refusing an
+  existing name with `{:error, :eexist}` and replacing nothing, ever.
+  Errors are the system's reason, or words where there is none.
   """
-  @spec place_privately(
-          Path.t(),
-          iodata(),
-          non_neg_integer() | nil,
-          (Path.t(), Path.t() -> :ok | {:error, term()})
-        ) :: :ok | {:error, term()}
-  def place_privately(path, data, mode, place) do
-    private = temporary(path) <> ".d"
-    staged = Path.join(private, "staged")
-
-    try do
-      with :ok <- private_dir(private),
-           :ok <- File.write(staged, data, [:exclusive]),
-           :ok <- if(mode, do: File.chmod(staged, mode), else: :ok) do
-        place.(staged, path)
-      end
-    after
-      File.rm_rf(private)
+  @spec put(Path.t(), iodata(), non_neg_integer() | nil, boolean()) ::
+          :ok | {:error, File.posix() | String.t()}
+  def put(path, data, mode, replace?) do
+    case Native.fs_write(Path.expand(path), IO.iodata_to_binary(data), mode || -1, replace?) do
+      {:ok, _} -> :ok
+      {:error, {nil, message}} -> {:error, message}
+      {:error, {posix, _message}} -> {:error, posix}
     end
   end
 
   @doc """
   Makes the folder `dir`, which must not exist yet (so it is this caller's
-  own, not one someone made there first), and closes it to others before
-  anything is put in it.
+  own, not one someone made there first), with mode 0700 in the one
+  `mkdir`, and checks the folder then opened (without following a symbolic
+  link): this user's, closed to others.
   """
-  @spec private_dir(Path.t()) :: :ok | {:error, File.posix()}
+  @spec private_dir(Path.t()) :: :ok | {:error, File.posix() | String.t()}
   def private_dir(dir) do
-    with :ok <- File.mkdir(dir), do: File.chmod(dir, 0o700)
+    case Native.fs_private_dir(Path.expand(dir), false) do
+      {:ok, _dir} -> :ok
+      {:error, {nil, message}} -> {:error, message}
+      {:error, {posix, _message}} -> {:error, posix}
+    end
   end
 
   @doc """
   Writes several outputs as one: runs each `{path, write}` in turn, where
   `write` writes `path` (atomically, as `write/2` and
   `RingTracer.Image.write/2` do) and returns `:ok` or an error. When one
-  fails, the files the others replaced are put back as they were (a new
-  one removed) and its error is returned: a failed render never leaves
-  its outputs half old, half new. Each target is kept as a hard link
-  beside it while the set is written, so putting it back copies nothing.
+  fails, exactly what was at each path before is put back (a file, a
+  symbolic link as itself; a new one removed) and its error is returned: a
+  failed render never leaves its outputs half old, half new. What is at
+  each target is kept as a hidden hard link beside it (made without
+  following a link, in the folder opened once) while the set is written,
+  so putting it back copies nothing; no hidden file is left either way.
 
       iex> dir = Path.join(System.tmp_dir!(), "rt_write_all_doc_#{System.unique_integer([:positive])}")
       iex> File.mkdir_p!(dir)
@@ -191,8 +189,8 @@ defmodule RingTracer.Output do
         case keep(path) do
           {:ok, kept} ->
             case write.() do
-              :ok -> {:cont, {:ok, [{path, kept} | done]}}
-              {:error, _} = error -> {:halt, {error, [{path, kept} | done]}}
+              :ok -> {:cont, {:ok, [kept | done]}}
+              {:error, _} = error -> {:halt, {error, [kept | done]}}
             end
 
           {:error, _} = error ->
@@ -202,46 +200,28 @@ defmodule RingTracer.Output do
 
     case result do
       {:ok, done} ->
-        for {_path, kept} <- done, kept != :none, do: File.rm(kept)
+        for {dir, _name, link} <- done, do: Native.fs_discard(dir, link)
         :ok
 
       {error, done} ->
-        Enum.each(done, &put_back/1)
+        # the last written first, so that two writes to one name end as it began
+        for {dir, name, link} <- done, do: Native.fs_put_back(dir, name, link)
         error
     end
   end
 
-  # What is at `path` now, as a hard link beside it (or a copy where links
-  # cannot be made), or :none when there is nothing there.
+  # What is at `path` now (anything, a symbolic link as itself), as a
+  # hidden hard link in its folder held open, or nil when nothing is there.
   defp keep(path) do
-    kept = temporary(path) <> ".kept"
+    full = Path.expand(path)
 
-    case File.lstat(path) do
-      {:ok, %File.Stat{type: :regular}} ->
-        case File.ln(path, kept) do
-          :ok ->
-            {:ok, kept}
-
-          {:error, _} ->
-            case File.cp(path, kept) do
-              :ok -> {:ok, kept}
-              {:error, reason} -> {:error, Error.file(:file, path, reason)}
-            end
-        end
-
-      _ ->
-        {:ok, :none}
+    with {:ok, dir} <- Native.fs_open_dir(Path.dirname(full)),
+         {:ok, link} <- Native.fs_keep(dir, Path.basename(full)) do
+      {:ok, {dir, Path.basename(full), link}}
+    else
+      {:error, {nil, message}} -> {:error, Error.new(:file, "#{path}: #{message}")}
+      {:error, {posix, _message}} -> {:error, Error.file(:file, path, posix)}
     end
-  end
-
-  defp put_back({path, :none}), do: File.rm(path)
-  defp put_back({path, kept}), do: File.rename(kept, path)
-
-  @doc "A fresh temporary name beside `path` (hidden, unique)."
-  @spec temporary(Path.t()) :: Path.t()
-  def temporary(path) do
-    rand = Base.encode16(:crypto.strong_rand_bytes(6), case: :lower)
-    Path.join(Path.dirname(path), ".#{Path.basename(path)}.#{rand}.tmp")
   end
 
   @doc "Only the extension rule of `check/2`, for one output."
@@ -285,15 +265,16 @@ defmodule RingTracer.Output do
         error(kind, path, "the folder #{dir} does not exist")
 
       true ->
-        probe = temporary(path)
-
-        case File.write(probe, "", [:exclusive]) do
-          :ok ->
-            File.rm(probe)
+        # a hidden file made and removed in the folder opened once
+        case Native.fs_probe(Path.expand(path)) do
+          {:ok, _} ->
             :ok
 
-          {:error, reason} ->
-            error(kind, path, "cannot write in #{dir}: #{Error.file_reason(probe, reason)}")
+          {:error, {nil, message}} ->
+            error(kind, path, "cannot write in #{dir}: #{message}")
+
+          {:error, {posix, _message}} ->
+            error(kind, path, "cannot write in #{dir}: #{Error.file_reason(path, posix)}")
         end
     end
   end

@@ -35,4 +35,77 @@ defmodule RingTracer.OutputTest do
     # nothing is left beside them
     assert Enum.sort(File.ls!(dir)) == ["asked.json", "fresh.json", "plain"]
   end
+
+  test "a replaced output keeps its permission bits but never setuid, setgid or sticky",
+       %{tmp_dir: dir} do
+    path = Path.join(dir, "a.json")
+    File.write!(path, "old")
+    File.chmod!(path, 0o6755)
+    assert Bitwise.band(File.stat!(path).mode, 0o7777) == 0o6755
+    :ok = RingTracer.Output.write(path, "new", mode: 0o600)
+    assert {Bitwise.band(File.stat!(path).mode, 0o7777), File.read!(path)} == {0o755, "new"}
+  end
+
+  test "a symbolic link at an output is replaced, never followed", %{tmp_dir: dir} do
+    victim = Path.join(dir, "victim")
+    File.write!(victim, "victim's")
+    File.chmod!(victim, 0o644)
+    link = Path.join(dir, "a.json")
+    File.ln_s!(victim, link)
+    :ok = RingTracer.Output.write(link, "{}", mode: 0o600)
+
+    assert {File.read!(victim), File.stat!(victim).mode |> Bitwise.band(0o777)} ==
+             {"victim's", 0o644}
+
+    assert {:ok, %File.Stat{type: :regular}} = File.lstat(link)
+  end
+
+  test "a failed write_all puts back exactly what was there, links included, and leaves no hidden file",
+       %{tmp_dir: dir} do
+    target = Path.join(dir, "target.png")
+    File.write!(target, "earlier")
+    [link, file, new] = for n <- ["link.png", "file.json", "new.svg"], do: Path.join(dir, n)
+    File.ln_s!("target.png", link)
+    File.write!(file, "old")
+    failing = fn -> {:error, RingTracer.Error.new(:file, "no space left on device")} end
+    writes = fn last -> [{link, fn -> RingTracer.Output.write(link, "new") end}, last] end
+
+    # fails after replacing the link, the file and making a new one; or before writing
+    for last <- [
+          {new, failing},
+          {file, fn -> RingTracer.Output.write(file, "new") end}
+        ] do
+      all =
+        writes.(last) ++
+          [{file, fn -> RingTracer.Output.write(file, "new") end}, {new, failing}]
+
+      all = Enum.uniq_by(all, &elem(&1, 0))
+      assert {:error, _} = RingTracer.Output.write_all(all)
+      assert {:ok, "target.png"} = File.read_link(link)
+      assert File.read!(target) == "earlier"
+      assert File.read!(file) == "old"
+      refute File.exists?(new)
+      assert Enum.sort(File.ls!(dir)) == ["file.json", "link.png", "target.png"]
+    end
+
+    # a write that fails before replacing anything leaves nothing either
+    assert {:error, _} = RingTracer.Output.write_all([{file, failing}])
+    assert Enum.sort(File.ls!(dir)) == ["file.json", "link.png", "target.png"]
+
+    :ok = RingTracer.Output.write_all([{link, fn -> RingTracer.Output.write(link, "new") end}])
+    assert {{:error, :einval}, "new"} == {File.read_link(link), File.read!(link)}
+    assert Enum.sort(File.ls!(dir)) == ["file.json", "link.png", "target.png"]
+  end
+
+  test "the folder probe and private_dir work on the folder opened, not a name",
+       %{tmp_dir: dir} do
+    assert :ok = RingTracer.Output.check([stats: Path.join(dir, "a.json")], [])
+    assert File.ls!(dir) == []
+    private = Path.join(dir, "p")
+    assert :ok = RingTracer.Output.private_dir(private)
+    assert Bitwise.band(File.stat!(private).mode, 0o777) == 0o700
+    assert {:error, :eexist} = RingTracer.Output.private_dir(private)
+    File.ln_s!(private, Path.join(dir, "l"))
+    assert {:error, :eexist} = RingTracer.Output.private_dir(Path.join(dir, "l"))
+  end
 end

@@ -24,9 +24,18 @@ defmodule RingTracer.CLI.Server do
 
   alias RingTracer.CLI.Server.Session
 
-  @typedoc "The listening socket and where it is."
-  @type t :: %__MODULE__{socket: :gen_tcp.socket(), path: Path.t(), acceptor: pid()}
-  defstruct [:socket, :path, :acceptor]
+  @typedoc """
+  The listening socket and where it is: `path` as users name it, `local`
+  the same through the folder `dir` held open.
+  """
+  @type t :: %__MODULE__{
+          socket: :gen_tcp.socket(),
+          path: Path.t(),
+          acceptor: pid(),
+          dir: reference(),
+          local: Path.t()
+        }
+  defstruct [:socket, :path, :acceptor, :dir, :local]
 
   @typedoc "What runs a command: its arguments, whether signals reach it; its exit status."
   @type runner :: ([String.t()] -> non_neg_integer())
@@ -44,78 +53,70 @@ defmodule RingTracer.CLI.Server do
   def stop(pid), do: GenServer.stop(pid)
 
   @doc """
-  Checks that `dir` can hold the socket: made if missing, a folder owned by
-  this user that nobody else can enter.
+  Checks that `dir` can hold the socket: made if missing (mode 0700 in the
+  one `mkdir`), then opened without following a symbolic link and checked on
+  that descriptor: a folder owned by this user that nobody else can enter.
   """
   @spec check_dir(Path.t()) :: :ok | {:error, String.t()}
   def check_dir(dir) do
-    with :ok <- make_dir(dir),
-         {:ok, %File.Stat{type: :directory, mode: mode, uid: uid}} <- File.lstat(dir),
-         true <- uid == own_uid() || {:error, "#{dir} belongs to another user"},
-         true <-
-           Bitwise.band(mode, 0o077) == 0 ||
-             {:error, "#{dir} can be entered by others (chmod 700 #{dir})"} do
-      :ok
+    with {:ok, _held} <- open_dir(dir), do: :ok
+  end
+
+  # The socket's folder, made and checked as check_dir/1 says, held open: a
+  # path through the descriptor (/proc/self/fd/N) names that very folder in
+  # this OS process for as long as the handle lives, whatever is done to its
+  # name meanwhile.
+  defp open_dir(dir) do
+    full = Path.expand(dir)
+
+    with :ok <- make_parent(full),
+         {:ok, held} <- RingTracer.Native.fs_private_dir(full, true) do
+      {:ok, held}
     else
-      {:ok, %File.Stat{}} -> {:error, "#{dir} is not a folder"}
-      {:error, reason} when is_atom(reason) -> {:error, "#{dir}: #{:file.format_error(reason)}"}
-      {:error, message} -> {:error, message}
+      {:error, {nil, message}} -> {:error, "#{dir} #{message}"}
+      {:error, {posix, _message}} -> {:error, "#{dir}: #{:file.format_error(posix)}"}
+      {:error, reason} -> {:error, "#{Path.dirname(dir)}: #{:file.format_error(reason)}"}
     end
   end
 
-  defp make_dir(dir) do
-    case File.mkdir_p(Path.dirname(dir)) do
-      :ok ->
-        case :file.make_dir(dir) do
-          :ok -> File.chmod(dir, 0o700)
-          {:error, :eexist} -> :ok
-          error -> error
-        end
-
-      error ->
-        error
-    end
-  end
-
-  defp own_uid do
-    # The uid of this OS process: that of a file it makes.
-    case File.stat("/proc/self") do
-      {:ok, %File.Stat{uid: uid}} -> uid
-      _ -> nil
-    end
-  end
+  # The folders above the socket's are the user's own business (~/.cache,
+  # $XDG_RUNTIME_DIR): made if missing, as mkdir -p would.
+  defp make_parent(dir), do: File.mkdir_p(Path.dirname(dir))
 
   @impl GenServer
   def init({path, runner}) do
     Process.flag(:trap_exit, true)
 
-    with :ok <- check_dir(Path.dirname(path)),
-         :ok <- clear_stale(path),
-         {:ok, socket} <- listen(path),
-         :ok <- File.chmod(path, 0o600) do
+    # the socket is made, checked and removed through the folder held open
+    with {:ok, held} <- open_dir(Path.dirname(path)),
+         local = Path.join(RingTracer.Native.fs_dir_path(held), Path.basename(path)),
+         :ok <- clear_stale(local, path),
+         {:ok, socket} <- listen(local),
+         :ok <- File.chmod(local, 0o600) do
       server = self()
       acceptor = spawn_link(fn -> accept(socket, server, runner) end)
-      {:ok, %__MODULE__{socket: socket, path: path, acceptor: acceptor}}
+      {:ok, %__MODULE__{socket: socket, path: path, acceptor: acceptor, dir: held, local: local}}
     else
       {:error, message} when is_binary(message) -> {:stop, message}
       {:error, reason} -> {:stop, "cannot listen on #{path}: #{inspect(reason)}"}
     end
   end
 
-  # A socket file left by a server that died: nobody answers on it.
-  defp clear_stale(path) do
-    case File.lstat(path) do
+  # A socket file left by a server that died: nobody answers on it. `local`
+  # names it through the folder held open; `path` is the name users know.
+  defp clear_stale(local, path) do
+    case File.lstat(local) do
       {:error, :enoent} ->
         :ok
 
       {:ok, %File.Stat{type: :other}} ->
-        case :gen_tcp.connect({:local, path}, 0, [:local], 1_000) do
+        case :gen_tcp.connect({:local, local}, 0, [:local], 1_000) do
           {:ok, s} ->
             :gen_tcp.close(s)
             {:error, "a server is already running on #{path}"}
 
           {:error, _} ->
-            File.rm(path)
+            File.rm(local)
         end
 
       {:ok, _} ->
@@ -160,7 +161,7 @@ defmodule RingTracer.CLI.Server do
   @impl GenServer
   def terminate(_reason, state) do
     :gen_tcp.close(state.socket)
-    File.rm(state.path)
+    File.rm(state.local)
     :ok
   end
 end

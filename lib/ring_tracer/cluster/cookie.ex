@@ -64,28 +64,22 @@ defmodule RingTracer.Cluster.Cookie do
   @spec create(Path.t()) :: {:ok, Path.t()} | {:error, Error.t()}
   def create(path) do
     cookie = 32 |> :crypto.strong_rand_bytes() |> Base.url_encode64(padding: false)
-    # Finished (mode 0600) where only this user can reach it, then
-    # hard-linked into place, which refuses an existing file. A file created
-    # in place and chmodded afterwards is readable by others for a moment
-    # (its mode comes from the umask), and whoever opens it then keeps
-    # reading it after the chmod.
-    case RingTracer.Output.place_privately(path, cookie <> "\n", 0o600, &link/2) do
-      :ok -> {:ok, path}
-      {:error, %Error{} = error} -> {:error, error}
-      {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
-    end
-  end
-
-  defp link(staged, path) do
-    case :file.make_link(staged, path) do
+    # Made 0600 (O_EXCL, O_NOFOLLOW) in the folder opened once, filled, then
+    # renamed into place in that folder with RENAME_NOREPLACE (or a hard
+    # link), which refuses an existing file: never readable by others, never
+    # seen partly written, never replacing anything.
+    case RingTracer.Output.put(path, cookie <> "\n", 0o600, false) do
       :ok ->
-        :ok
+        {:ok, path}
 
       {:error, :eexist} ->
         {:error, Error.new(:cookie, "#{path} exists already; not replacing a cookie")}
 
-      {:error, reason} ->
+      {:error, reason} when is_atom(reason) ->
         {:error, Error.file(:cookie, path, reason)}
+
+      {:error, message} ->
+        {:error, Error.new(:cookie, "#{path}: #{message}")}
     end
   end
 

@@ -32,6 +32,17 @@ pub enum Error {
         /// The operating system's message.
         message: String,
     },
+    /// A file could not be written, or a folder made or opened, with the system's error
+    /// number where there is one (`EEXIST`, `ENOSPC`, ...: see [`crate::safe_fs`]).
+    #[error("{file}: {message}")]
+    Fs {
+        /// File name.
+        file: String,
+        /// The system's error number (`errno`), if the system said it.
+        errno: Option<i32>,
+        /// What went wrong, in words.
+        message: String,
+    },
     /// A documented upper bound (see [`crate::limits`]) was exceeded; checked before allocating.
     /// Reads e.g. `ray depth is 1000, more than the limit of 64 (limits::MAX_DEPTH); raise the
     /// constant in native/kernel/src/limits.rs and rebuild`.

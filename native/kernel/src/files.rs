@@ -10,7 +10,10 @@
 //! - [`Confinement`]: a file a scene references must lie, after every `..` and symbolic link
 //!   is resolved, inside one of a set of folders (the scene's own, and any the user allows).
 //!   `../../etc/passwd`, `/etc/shadow` and a symbolic link out of the folder are refused, with
-//!   a message naming the reference as written and where it leads.
+//!   a message naming the reference as written and where it leads. The folders are held open
+//!   as descriptors, and a file is opened beneath one of them by the kernel in one call
+//!   (`openat2` with `RESOLVE_BENEATH`), so a folder swapped for a symbolic link while a scene
+//!   loads cannot lead the open outside.
 //!
 //! ```no_run
 //! use ring_tracer_kernel::files::{read_regular, Confinement};
@@ -23,17 +26,22 @@
 //! # Ok::<(), ring_tracer_kernel::Error>(())
 //! ```
 //!
-//! What is left: a folder inside a root that someone swaps for a symbolic link between the
-//! check and the open is followed (the last component is opened with `O_NOFOLLOW`, and the
-//! file must still be a regular file not on a pseudo-filesystem).
+//! Every check is made on the file opened (first with `O_PATH`, which has no effect on a
+//! device or a FIFO; then reopened through `/proc/self/fd` for reading), never on a name
+//! looked up again. A symbolic link inside an allowed folder that leads to a file inside one
+//! (the same or another) is followed, as before; its target is then opened beneath that
+//! folder, so a link swapped meanwhile is refused, not followed out. Needs Linux 5.6 or later
+//! (`openat2`); an older kernel refuses every referenced file, saying so.
 
 use crate::error::escape_bounded;
 use crate::limits;
 use crate::Error;
 use std::fs::{File, FileType, OpenOptions};
 use std::io::Read;
+use std::os::fd::{AsRawFd, OwnedFd};
 use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
 use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
 
 /// Why a file a scene references could not be had, as a resolver (see
 /// [`crate::Scene::parse`]) says it. The two cases differ: a missing OBJ material library
@@ -141,14 +149,48 @@ fn pseudo_filesystem(_file: &File) -> Result<Option<&'static str>, std::io::Erro
     Ok(None)
 }
 
-/// Opens `path` read-only and non-blocking (a FIFO never blocks the open) and checks the open
-/// file: a regular file, not on a pseudo-filesystem. Returns it with its size.
-fn open_checked(path: &Path) -> Result<(File, u64), Error> {
+/// Where an open descriptor leads, as the kernel says (`/proc/self/fd/N`).
+fn fd_path(fd: &OwnedFd) -> Option<PathBuf> {
+    std::fs::read_link(format!("/proc/self/fd/{}", fd.as_raw_fd())).ok()
+}
+
+/// Checks a file opened with `O_PATH` (named `path` in messages): a regular file, not under
+/// [`PSEUDO_DIRS`] (by where the descriptor leads: `real`), then reopens that very file
+/// through `/proc/self/fd` read-only and non-blocking (a FIFO never blocks the open) and
+/// checks the open file too: the same file, not on a pseudo-filesystem. Returns it with its
+/// size.
+fn open_found(path: &Path, found: &OwnedFd, real: &Path) -> Result<(File, u64), Error> {
+    if let Some(dir) = PSEUDO_DIRS.iter().find(|d| real.starts_with(d)) {
+        return Err(io_error(
+            path,
+            format!(
+                "is {}, under {dir}: not a file a scene may read",
+                shown(real)
+            ),
+        ));
+    }
+    let meta = rustix::fs::fstat(found).map_err(|e| io_error(path, errno_text(e)))?;
+    let kind = rustix::fs::FileType::from_raw_mode(meta.st_mode);
+    if kind != rustix::fs::FileType::RegularFile {
+        return Err(not_regular_kind(path, kind));
+    }
     let file = OpenOptions::new()
         .read(true)
-        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY | libc::O_NOFOLLOW)
-        .open(path)
+        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY)
+        .open(format!("/proc/self/fd/{}", found.as_raw_fd()))
         .map_err(|e| io_error(path, e.to_string()))?;
+    let again = file.metadata().map_err(|e| io_error(path, e.to_string()))?;
+    {
+        use std::os::unix::fs::MetadataExt;
+        if again.dev() != meta.st_dev || again.ino() != meta.st_ino {
+            return Err(io_error(path, "changed while it was opened"));
+        }
+    }
+    checked_open_file(path, file)
+}
+
+/// The checks on an open file: a regular file (by `fstat`), not on a pseudo-filesystem.
+fn checked_open_file(path: &Path, file: File) -> Result<(File, u64), Error> {
     // fstat: the file opened, not whatever the name points to now
     let meta = file.metadata().map_err(|e| io_error(path, e.to_string()))?;
     if !meta.file_type().is_file() {
@@ -167,6 +209,66 @@ fn open_checked(path: &Path) -> Result<(File, u64), Error> {
     Ok((file, meta.len()))
 }
 
+/// Opens `path` read-only and non-blocking, refusing a symbolic link as its last component,
+/// and checks the open file (see [`checked_open_file`]).
+#[cfg(test)]
+fn open_checked(path: &Path) -> Result<(File, u64), Error> {
+    let file = OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY | libc::O_NOFOLLOW)
+        .open(path)
+        .map_err(|e| io_error(path, e.to_string()))?;
+    checked_open_file(path, file)
+}
+
+/// An `Errno` in words, without its number.
+fn errno_text(e: rustix::io::Errno) -> String {
+    let s = std::io::Error::from(e).to_string();
+    match s.find(" (os error ") {
+        Some(i) => s[..i].to_string(),
+        None => s,
+    }
+}
+
+/// [`not_regular`] for a type from `fstat`.
+fn not_regular_kind(path: &Path, kind: rustix::fs::FileType) -> Error {
+    use rustix::fs::FileType as T;
+    let what = match kind {
+        T::Directory => "a directory",
+        T::Fifo => "a FIFO (named pipe)",
+        T::Socket => "a socket",
+        T::CharacterDevice => "a character device",
+        T::BlockDevice => "a block device",
+        T::Symlink => "a symbolic link",
+        _ => return io_error(path, "not a regular file"),
+    };
+    io_error(path, format!("is {what}, not a regular file"))
+}
+
+/// Reads at most `max_bytes` of an open, checked file of `size` bytes.
+fn read_bounded(path: &Path, file: File, size: u64, max_bytes: u64) -> Result<Vec<u8>, Error> {
+    let over = |value: u64| {
+        limits::check_with(
+            format!("the size of {}", shown(path)),
+            value,
+            " bytes",
+            max_bytes,
+            "MAX_FILE_BYTES",
+            limits::RAISE,
+        )
+    };
+    over(size)?;
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(size as usize)
+        .map_err(|e| io_error(path, e.to_string()))?;
+    file.take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io_error(path, e.to_string()))?;
+    over(bytes.len() as u64)?;
+    Ok(bytes)
+}
+
 /// Reads a regular file of at most `max_bytes` bytes (normally [`limits::MAX_FILE_BYTES`]).
 ///
 /// Refused, each with a message naming the path and why: a path that does not exist, anything
@@ -180,41 +282,22 @@ pub fn read_regular(path: &Path, max_bytes: u64) -> Result<Vec<u8>, Error> {
 }
 
 /// [`read_regular`], also returning the canonical absolute path of the file read (every
-/// symbolic link and `..` resolved), e.g. so that an output file never overwrites an input.
+/// symbolic link and `..` resolved, as the kernel says of the descriptor read), e.g. so that
+/// an output file never overwrites an input. The name is resolved once (`O_PATH`, symbolic
+/// links followed: this is a path the user named); every check is made on what was opened.
 pub fn read_regular_with_path(path: &Path, max_bytes: u64) -> Result<(Vec<u8>, PathBuf), Error> {
-    let canonical = std::fs::canonicalize(path).map_err(|e| io_error(path, e.to_string()))?;
-    if let Some(dir) = PSEUDO_DIRS.iter().find(|d| canonical.starts_with(d)) {
-        return Err(io_error(
-            path,
-            format!(
-                "is {}, under {dir}: not a file a scene may read",
-                shown(&canonical)
-            ),
-        ));
-    }
-    // stat first, so that a device is not even opened (opening some has effects)
-    let meta = std::fs::metadata(&canonical).map_err(|e| io_error(path, e.to_string()))?;
-    if !meta.file_type().is_file() {
-        return Err(not_regular(path, &meta.file_type()));
-    }
-    let (file, size) = open_checked(&canonical)?;
-    let over = |value: u64| {
-        limits::check_with(
-            format!("the size of {}", shown(path)),
-            value,
-            " bytes",
-            max_bytes,
-            "MAX_FILE_BYTES",
-            limits::RAISE,
-        )
+    let found = rustix::fs::open(
+        path,
+        rustix::fs::OFlags::PATH | rustix::fs::OFlags::CLOEXEC,
+        rustix::fs::Mode::empty(),
+    )
+    .map_err(|e| io_error(path, std::io::Error::from(e).to_string()))?;
+    let canonical = match fd_path(&found) {
+        Some(p) => p,
+        None => std::fs::canonicalize(path).map_err(|e| io_error(path, e.to_string()))?,
     };
-    over(size)?;
-    let mut bytes = Vec::with_capacity(size as usize);
-    file.take(max_bytes.saturating_add(1))
-        .read_to_end(&mut bytes)
-        .map_err(|e| io_error(path, e.to_string()))?;
-    over(bytes.len() as u64)?;
-    Ok((bytes, canonical))
+    let (file, size) = open_found(path, &found, &canonical)?;
+    Ok((read_bounded(path, file, size, max_bytes)?, canonical))
 }
 
 /// `path` with `.` and `..` resolved by the text alone (no symbolic link followed).
@@ -233,29 +316,75 @@ fn lexical(path: &Path) -> PathBuf {
 }
 
 /// The folders whose files a scene may reference: the scene's own folder first, then any the
-/// user allows. Held canonical (absolute, symbolic links resolved).
-#[derive(Clone, Debug, PartialEq, Eq)]
+/// user allows. Held open (descriptors) and by their canonical paths (absolute, symbolic
+/// links resolved: where the descriptors lead).
+#[derive(Clone, Debug)]
 pub struct Confinement {
     roots: Vec<PathBuf>,
+    fds: Vec<Arc<OwnedFd>>,
+}
+
+/// Two confinements are the same when they allow the same folders.
+impl PartialEq for Confinement {
+    fn eq(&self, other: &Self) -> bool {
+        self.roots == other.roots
+    }
+}
+
+impl Eq for Confinement {}
+
+/// Opens a file beneath `root`: `rel` (relative, no `..` left in it) is resolved by the
+/// kernel, symbolic links included, and may not leave `root` (`RESOLVE_BENEATH`, no `/proc`
+/// magic links).
+fn open_beneath(root: &OwnedFd, rel: &Path) -> Result<OwnedFd, rustix::io::Errno> {
+    use rustix::fs::{Mode, OFlags, ResolveFlags};
+    let rel = if rel.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        rel
+    };
+    loop {
+        match rustix::fs::openat2(
+            root,
+            rel,
+            OFlags::PATH | OFlags::CLOEXEC,
+            Mode::empty(),
+            ResolveFlags::BENEATH | ResolveFlags::NO_MAGICLINKS,
+        ) {
+            // the kernel asks for a retry when a rename raced the lookup
+            Err(rustix::io::Errno::AGAIN) | Err(rustix::io::Errno::INTR) => continue,
+            other => return other,
+        }
+    }
 }
 
 impl Confinement {
     /// The folders `roots`, the first being the scene's own (messages call it so). Each must
     /// exist and be a directory.
     pub fn new<P: AsRef<Path>>(roots: impl IntoIterator<Item = P>) -> Result<Confinement, Error> {
-        let roots = roots
-            .into_iter()
-            .map(|r| {
-                let r = r.as_ref();
-                let c = std::fs::canonicalize(r).map_err(|e| io_error(r, e.to_string()))?;
-                if c.is_dir() {
-                    Ok(c)
-                } else {
-                    Err(io_error(r, "is not a folder"))
-                }
-            })
-            .collect::<Result<Vec<_>, Error>>()?;
-        Ok(Confinement { roots })
+        let mut paths = Vec::new();
+        let mut fds = Vec::new();
+        for r in roots {
+            let r = r.as_ref();
+            let fd = rustix::fs::open(
+                r,
+                rustix::fs::OFlags::PATH
+                    | rustix::fs::OFlags::DIRECTORY
+                    | rustix::fs::OFlags::CLOEXEC,
+                rustix::fs::Mode::empty(),
+            )
+            .map_err(|e| match e {
+                rustix::io::Errno::NOTDIR => io_error(r, "is not a folder"),
+                e => io_error(r, std::io::Error::from(e).to_string()),
+            })?;
+            let canonical = match fd_path(&fd) {
+                Some(p) => p,
+                None => std::fs::canonicalize(r).map_err(|e| io_error(r, e.to_string()))?,
+            };
+            paths.push(canonical);
+            fds.push(Arc::new(fd));
+        }
+        Ok(Confinement { roots: paths, fds })
     }
 
     /// The canonical folders, the scene's first.
@@ -287,14 +416,22 @@ impl Confinement {
         )
     }
 
-    /// Where a reference written in a scene (or in a file it references) leads: relative ones
-    /// are taken from `base_dir`, absolute ones as they are; `..` and symbolic links are
-    /// resolved. The canonical path must lie inside one of the folders; the error names the
-    /// reference as written and why, e.g. `'../../etc/passwd' resolves to /etc/passwd,
-    /// outside the scene's folder /x/y (allow it with --allow-dir)` or `'m.obj' does not
-    /// exist (/x/y/m.obj)`. A reference that leaves the folders by its text alone is refused
-    /// before anything on disk is looked at (so whether a file exists outside is not told).
-    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, Unreadable> {
+    /// Opens `path` (absolute, lexically clean) beneath the first folder whose text contains
+    /// it. `None` when no folder does.
+    fn open_in_roots(&self, path: &Path) -> Option<Result<OwnedFd, rustix::io::Errno>> {
+        let (i, root) = self
+            .roots
+            .iter()
+            .enumerate()
+            .find(|(_, r)| path.starts_with(r))?;
+        let rel = path.strip_prefix(root).unwrap_or(Path::new(""));
+        Some(open_beneath(&self.fds[i], rel))
+    }
+
+    /// Opens a reference (see [`Confinement::resolve`]) with `O_PATH`, beneath an allowed
+    /// folder; returns it and where it leads.
+    fn open(&self, base_dir: &Path, reference: &str) -> Result<(OwnedFd, PathBuf), Unreadable> {
+        use rustix::io::Errno;
         use Unreadable::{Missing, Refused};
         let quoted = escape_bounded(reference, PATH_CHARS);
         if reference.is_empty() {
@@ -303,33 +440,91 @@ impl Confinement {
         let base = std::fs::canonicalize(base_dir)
             .map_err(|e| Refused(format!("'{quoted}': the folder {}: {e}", shown(base_dir))))?;
         let written = lexical(&base.join(reference));
-        if !self.contains(&written) {
+        let missing = || Missing(format!("'{quoted}' does not exist ({})", shown(&written)));
+        let other = |e: Errno| {
+            Refused(format!(
+                "'{quoted}': {}: {}",
+                shown(&written),
+                errno_text(e)
+            ))
+        };
+        let Some(first) = self.open_in_roots(&written) else {
             return Err(Refused(self.outside(reference, &written, "")));
-        }
-        let canonical = std::fs::canonicalize(&written).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                Missing(format!("'{quoted}' does not exist ({})", shown(&written)))
-            } else {
-                Refused(format!("'{quoted}': {}: {e}", shown(&written)))
+        };
+        let found = match first {
+            Ok(fd) => fd,
+            Err(Errno::NOENT) => return Err(missing()),
+            // a symbolic link leaves that folder (or is absolute): allowed only if where it
+            // leads now is in an allowed folder, and then opened beneath that one
+            Err(Errno::XDEV) | Err(Errno::LOOP) => {
+                let canonical = std::fs::canonicalize(&written).map_err(|e| {
+                    if e.kind() == std::io::ErrorKind::NotFound {
+                        missing()
+                    } else {
+                        Refused(format!("'{quoted}': {}: {e}", shown(&written)))
+                    }
+                })?;
+                let through = " (through a symbolic link)";
+                match self.open_in_roots(&canonical) {
+                    None => return Err(Refused(self.outside(reference, &canonical, through))),
+                    Some(Ok(fd)) => fd,
+                    Some(Err(Errno::NOENT)) => return Err(missing()),
+                    Some(Err(Errno::XDEV)) | Some(Err(Errno::LOOP)) => {
+                        return Err(Refused(format!(
+                            "'{quoted}' changed while it was opened (a symbolic link on the way \
+                             leads out of the allowed folders)"
+                        )))
+                    }
+                    Some(Err(Errno::NOSYS)) => return Err(Refused(no_openat2(&quoted))),
+                    Some(Err(e)) => return Err(other(e)),
+                }
             }
-        })?;
-        if !self.contains(&canonical) {
+            Err(Errno::NOSYS) => return Err(Refused(no_openat2(&quoted))),
+            Err(e) => return Err(other(e)),
+        };
+        let real = fd_path(&found)
+            .ok_or_else(|| Refused(format!("'{quoted}': where it leads cannot be told")))?;
+        if !self.contains(&real) {
             return Err(Refused(self.outside(
                 reference,
-                &canonical,
+                &real,
                 " (through a symbolic link)",
             )));
         }
-        Ok(canonical)
+        Ok((found, real))
     }
 
-    /// Reads a referenced file: [`Confinement::resolve`], then [`read_regular`] with
-    /// [`limits::MAX_FILE_BYTES`]. Returns the bytes and the canonical path read.
-    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), Unreadable> {
-        let path = self.resolve(base_dir, reference)?;
-        read_regular_with_path(&path, limits::MAX_FILE_BYTES)
-            .map_err(|e| Unreadable::Refused(e.to_string()))
+    /// Where a reference written in a scene (or in a file it references) leads: relative ones
+    /// are taken from `base_dir`, absolute ones as they are; `..` and symbolic links are
+    /// resolved. The canonical path must lie inside one of the folders; the error names the
+    /// reference as written and why, e.g. `'../../etc/passwd' resolves to /etc/passwd,
+    /// outside the scene's folder /x/y (allow it with --allow-dir)` or `'m.obj' does not
+    /// exist (/x/y/m.obj)`. A reference that leaves the folders by its text alone is refused
+    /// before anything on disk is looked at (so whether a file exists outside is not told).
+    /// `..` is taken by the text (`a/../b` is `b`, whatever `a` is); the rest is resolved by
+    /// the kernel beneath an allowed folder.
+    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, Unreadable> {
+        self.open(base_dir, reference).map(|(_, path)| path)
     }
+
+    /// Reads a referenced file: opened as [`Confinement::resolve`] says, then read as
+    /// [`read_regular`] does with [`limits::MAX_FILE_BYTES`], every check made on the file
+    /// opened. Returns the bytes and the canonical path read.
+    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), Unreadable> {
+        let (found, real) = self.open(base_dir, reference)?;
+        let refused = |e: Error| Unreadable::Refused(e.to_string());
+        let (file, size) = open_found(&real, &found, &real).map_err(refused)?;
+        let bytes = read_bounded(&real, file, size, limits::MAX_FILE_BYTES).map_err(refused)?;
+        Ok((bytes, real))
+    }
+}
+
+/// Why nothing can be opened confined on a kernel without `openat2`.
+fn no_openat2(quoted: &str) -> String {
+    format!(
+        "'{quoted}': this system cannot open a file confined to a folder (openat2 needs \
+         Linux 5.6 or later); ship the file with the scene instead"
+    )
 }
 
 #[cfg(test)]

@@ -1,9 +1,9 @@
 //! Image output: 8-bit sRGB PNG and linear f32 OpenEXR.
 
+use crate::safe_fs;
 use crate::Error;
 use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
 use std::io::Write;
-use std::os::unix::fs::PermissionsExt;
 use std::path::Path;
 
 /// sRGB transfer curve of one linear value, clamped to [0, 1] (NaN becomes 0), rounded to 8 bits.
@@ -167,19 +167,19 @@ pub fn write_image_mode(
         file: file.clone(),
         message: e.to_string(),
     };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".ring_tracer_")
-        .suffix(".tmp")
-        .permissions(std::fs::Permissions::from_mode(0o600))
-        .tempfile_in(dir)
-        .map_err(io)?;
-    // dropping `tmp` on any error below removes the temporary file
-    match png {
-        Some(data) => tmp.as_file_mut().write_all(&data).map_err(io)?,
+    let (dir, name) = safe_fs::split(path)?;
+    let dir = safe_fs::Dir::open(&dir).map_err(|e| match e {
+        Error::Fs { errno, message, .. } => Error::Fs {
+            file: file.clone(),
+            errno,
+            message,
+        },
+        other => other,
+    })?;
+    // made 0600 in the folder opened above, given its final mode on its descriptor, renamed
+    // into place; removed on any failure
+    dir.write_file(&name, new_mode, safe_fs::Replace::Yes, |f| match &png {
+        Some(data) => f.write_all(data).map_err(io),
         None => {
             let w = width as usize;
             let pixels = SpecificChannels::rgb(|pos: Vec2<usize>| {
@@ -191,39 +191,16 @@ pub fn write_image_mode(
             });
             Image::from_channels((w, height as usize), pixels)
                 .write()
-                .to_unbuffered(tmp.as_file_mut())
-                .map_err(|e| Error::Image(format!("{file}: {e}")))?;
+                .to_buffered(std::io::BufWriter::new(f))
+                .map_err(|e| Error::Image(format!("{file}: {e}")))
         }
-    }
-    tmp.as_file().sync_all().map_err(io)?;
-    let mode = match std::fs::metadata(path) {
-        Ok(old) if old.is_file() => old.permissions().mode() & 0o7777,
-        _ => new_mode.unwrap_or(0o666 & !umask()) & 0o7777,
-    };
-    tmp.as_file()
-        .set_permissions(std::fs::Permissions::from_mode(mode))
-        .map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
-}
-
-/// This process's umask, read from `/proc/self/status` (setting it to read it back would change
-/// it for every thread meanwhile); `0o077` where it cannot be read, so that a file is then
-/// never more open than its owner's.
-pub(crate) fn umask() -> u32 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("Umask:"))
-                .and_then(|v| u32::from_str_radix(v.trim(), 8).ok())
-        })
-        .unwrap_or(0o077)
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::os::unix::fs::PermissionsExt;
 
     #[test]
     fn fast_srgb_matches_exact() {
@@ -285,7 +262,7 @@ mod tests {
         std::fs::write(dir_out.join("keep"), b"x").unwrap();
         assert!(matches!(
             write_image(&dir_out, 2, 2, &rgb),
-            Err(Error::Io { .. })
+            Err(Error::Fs { .. })
         ));
         assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
         assert_eq!(names(&dir_out), ["keep"]);

@@ -70,6 +70,7 @@ pub mod polygon;
 pub mod ray;
 pub mod raysets;
 pub mod render;
+pub mod safe_fs;
 pub mod scene;
 pub mod stats;
 #[cfg(test)]

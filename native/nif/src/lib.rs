@@ -6,6 +6,7 @@
 
 mod convert;
 mod defaults;
+mod fs;
 mod image;
 mod panic;
 mod scene;

@@ -16,6 +16,14 @@ defmodule RingTracer.Cluster.CookieTest do
     assert {:error, error} = Cookie.create(path)
     assert error.message =~ "exists already"
     assert File.read!(path) == before
+    # a symbolic link at the name is not followed, nor replaced
+    victim = Path.join(dir, "victim")
+    File.write!(victim, "")
+    File.ln_s!(victim, Path.join(dir, "l"))
+    assert {:error, error} = Cookie.create(Path.join(dir, "l"))
+    assert error.message =~ "exists already"
+    assert File.read!(victim) == ""
+    assert File.ls!(dir) |> Enum.sort() == ["c", "l", "victim"]
   end
 
   test "the cookie's name only ever holds the whole secret, mode 0600", %{tmp_dir: dir} do

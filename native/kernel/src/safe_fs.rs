@@ -1,0 +1,680 @@
+//! Files written where another local user may be racing us: every output, the cookie, the
+//! benchmarks' scratch folder and the server's socket folder.
+//!
+//! A folder is opened once, as a descriptor ([`Dir`]), and everything after that is done
+//! relative to it: a new file is created in it with `O_CREAT | O_EXCL | O_NOFOLLOW` and mode
+//! 0600, filled, given its final mode with `fchmod` on its descriptor, then renamed over its
+//! target (or, for a file that must not replace one, put there with `RENAME_NOREPLACE`). No
+//! name is resolved twice, nothing is chmodded by name, and no staging folder exists that
+//! someone could swap for a symbolic link between two steps.
+//!
+//! [`private_dir`] makes a folder with mode 0700 in one `mkdir` and checks the folder it then
+//! opened (`O_NOFOLLOW`, `fstat`): a directory, this user's, closed to others.
+//!
+//! ```no_run
+//! use ring_tracer_kernel::safe_fs::{Dir, Replace};
+//! use std::io::Write;
+//! let dir = Dir::open(std::path::Path::new("renders"))?;
+//! dir.write_file("a.json", None, Replace::Yes, |f| {
+//!     f.write_all(b"{}").map_err(|e| ring_tracer_kernel::Error::Image(e.to_string()))
+//! })?;
+//! # Ok::<(), ring_tracer_kernel::Error>(())
+//! ```
+
+use crate::Error;
+use rustix::fs::{self as rfs, AtFlags, Mode, OFlags, RenameFlags};
+use rustix::io::Errno;
+use std::fs::File;
+use std::os::fd::{AsFd, AsRawFd, BorrowedFd, OwnedFd};
+use std::path::{Path, PathBuf};
+
+/// The crate's error for a file, with the system's error number where there is one (so that
+/// callers can tell "exists" from "no space").
+fn fs_error(path: &Path, errno: Option<i32>, message: String) -> Error {
+    Error::Fs {
+        file: path.display().to_string(),
+        errno,
+        message,
+    }
+}
+
+fn io_error(e: std::io::Error, path: &Path) -> Error {
+    fs_error(path, e.raw_os_error(), plain(&e))
+}
+
+/// The same error, about `path`.
+fn about(e: Error, path: &Path) -> Error {
+    match e {
+        Error::Fs { errno, message, .. } => fs_error(path, errno, message),
+        Error::Io { message, .. } => fs_error(path, None, message),
+        other => fs_error(path, None, other.to_string()),
+    }
+}
+
+/// An `io::Error`'s text without its " (os error N)" tail.
+fn plain(e: &std::io::Error) -> String {
+    let s = e.to_string();
+    match s.find(" (os error ") {
+        Some(i) => s[..i].to_string(),
+        None => s,
+    }
+}
+
+fn errno_error(path: &Path, e: Errno) -> Error {
+    fs_error(
+        path,
+        Some(e.raw_os_error()),
+        plain(&std::io::Error::from(e)),
+    )
+}
+
+fn message_error(path: &Path, message: impl Into<String>) -> Error {
+    fs_error(path, None, message.into())
+}
+
+/// Whether a new file may replace an existing one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Replace {
+    /// Rename over whatever is at the name (a file, a symbolic link: replaced, never followed).
+    Yes,
+    /// Refuse when something is at the name (`EEXIST`); nothing is replaced, ever.
+    No,
+}
+
+/// What [`Dir::keep`] kept of a name: nothing was there, or a hard link to what was (a file
+/// or the symbolic link itself, never what it points to) under a hidden name in the folder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Kept {
+    /// Nothing was at the name.
+    Nothing,
+    /// What was there, under this hidden name.
+    Link(String),
+}
+
+/// A folder opened once; its files are reached through the descriptor only.
+#[derive(Debug)]
+pub struct Dir {
+    fd: OwnedFd,
+    path: PathBuf,
+}
+
+/// A random hidden name beside `name`, ending in `suffix`.
+fn hidden_name(name: &str, suffix: &str) -> String {
+    let mut bytes = [0u8; 8];
+    let mut filled = 0;
+    while filled < bytes.len() {
+        match rustix::rand::getrandom(&mut bytes[filled..], rustix::rand::GetRandomFlags::empty()) {
+            Ok(n) => filled += n,
+            Err(Errno::INTR) => {}
+            Err(_) => {
+                // never fails on Linux ≥ 3.17 once the pool is ready; a clock is unique enough
+                // for O_EXCL to do the rest
+                let t = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_nanos() as u64)
+                    .unwrap_or(0);
+                bytes = (t ^ u64::from(std::process::id())).to_le_bytes();
+                break;
+            }
+        }
+    }
+    let hex: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    // keep the name within NAME_MAX whatever `name` is
+    let head: String = name.chars().take(200).collect();
+    format!(".{head}.{hex}{suffix}")
+}
+
+/// A name for a file in a folder: one component, not `.` or `..`.
+fn check_name(dir: &Path, name: &str) -> Result<(), Error> {
+    if name.is_empty() || name == "." || name == ".." || name.contains('/') || name.contains('\0') {
+        return Err(message_error(
+            &dir.join(name),
+            "not a file name (one path component is needed)",
+        ));
+    }
+    Ok(())
+}
+
+/// The most symbolic links one path may go through (the kernel's own bound).
+const MAX_LINKS: usize = 40;
+
+/// Opens the folder `path` (`O_PATH`), one component at a time from a descriptor, following
+/// a symbolic link only when it belongs to this user or to root (and the last component's
+/// only when `follow_last`). Another local user's link on the way is refused: whoever owns
+/// a link, or can swap one into a folder of hers, would choose where the caller writes.
+/// (`openat2` cannot say "only links of these owners", hence the walk; each step is one
+/// `openat` with `O_NOFOLLOW` on the folder reached, nothing is resolved by name twice.)
+fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
+    use std::collections::VecDeque;
+    use std::ffi::OsString;
+    use std::os::unix::ffi::OsStrExt;
+    use std::path::Component;
+    let dir_flags = OFlags::PATH | OFlags::DIRECTORY | OFlags::CLOEXEC;
+    let me = rustix::process::geteuid().as_raw();
+    let mut cur = if path.is_absolute() {
+        rfs::open("/", dir_flags, Mode::empty())
+    } else {
+        rfs::open(".", dir_flags, Mode::empty())
+    }
+    .map_err(|e| errno_error(path, e))?;
+    // what is left to walk; `true` marks the path's own last component
+    let mut todo: VecDeque<(OsString, bool)> = VecDeque::new();
+    let parts: Vec<Component> = path.components().collect();
+    for (i, c) in parts.iter().enumerate() {
+        todo.push_back((c.as_os_str().to_os_string(), i + 1 == parts.len()));
+    }
+    let mut links = 0;
+    while let Some((part, last)) = todo.pop_front() {
+        let bytes = part.as_bytes();
+        if bytes == b"/" {
+            cur = rfs::open("/", dir_flags, Mode::empty()).map_err(|e| errno_error(path, e))?;
+            continue;
+        }
+        if bytes == b"." || bytes.is_empty() {
+            continue;
+        }
+        let next = rfs::openat(
+            &cur,
+            part.as_os_str(),
+            OFlags::PATH | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(|e| errno_error(path, e))?;
+        let st = rfs::fstat(&next).map_err(|e| errno_error(path, e))?;
+        match rfs::FileType::from_raw_mode(st.st_mode) {
+            rfs::FileType::Directory => cur = next,
+            rfs::FileType::Symlink => {
+                if last && !follow_last {
+                    return Err(message_error(path, "is a symbolic link, not a folder"));
+                }
+                if st.st_uid != me && st.st_uid != 0 {
+                    return Err(message_error(
+                        path,
+                        format!(
+                            "goes through a symbolic link ({}) that belongs to user {}; \
+                             not following it (name the folder it leads to instead)",
+                            Path::new(&part).display(),
+                            st.st_uid
+                        ),
+                    ));
+                }
+                links += 1;
+                if links > MAX_LINKS {
+                    return Err(errno_error(path, Errno::LOOP));
+                }
+                let target =
+                    rfs::readlinkat(&next, "", Vec::new()).map_err(|e| errno_error(path, e))?;
+                let target = Path::new(std::ffi::OsStr::from_bytes(target.as_bytes()));
+                let comps: Vec<Component> = target.components().collect();
+                for (i, c) in comps.iter().enumerate().rev() {
+                    todo.push_front((c.as_os_str().to_os_string(), last && i + 1 == comps.len()));
+                }
+            }
+            _ => return Err(errno_error(path, Errno::NOTDIR)),
+        }
+    }
+    Ok(cur)
+}
+
+/// The folder and file name of `path` (`a.png` is in `.`).
+pub fn split(path: &Path) -> Result<(PathBuf, String), Error> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| message_error(path, "not a file name"))?;
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok((dir, name.to_string()))
+}
+
+/// This process's umask, read from `/proc/self/status` (setting it to read it back would change
+/// it for every thread meanwhile); `0o077` where it cannot be read, so that a file is then
+/// never more open than its owner's.
+pub fn umask() -> u32 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("Umask:"))
+                .and_then(|v| u32::from_str_radix(v.trim(), 8).ok())
+        })
+        .unwrap_or(0o077)
+}
+
+impl Dir {
+    /// Opens the folder `path` (symbolic links on the way are followed, once).
+    pub fn open(path: &Path) -> Result<Dir, Error> {
+        Self::open_with(path, OFlags::empty())
+    }
+
+    /// Opens the folder `path`, refusing a symbolic link as its last component.
+    pub fn open_nofollow(path: &Path) -> Result<Dir, Error> {
+        Self::open_with(path, OFlags::NOFOLLOW)
+    }
+
+    fn open_with(path: &Path, extra: OFlags) -> Result<Dir, Error> {
+        let found = walk(path, !extra.contains(OFlags::NOFOLLOW))?;
+        let fd = rfs::openat(
+            &found,
+            ".",
+            OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(|e| match e {
+            Errno::NOTDIR => message_error(path, "not a folder"),
+            Errno::LOOP if extra.contains(OFlags::NOFOLLOW) => {
+                message_error(path, "is a symbolic link, not a folder")
+            }
+            e => errno_error(path, e),
+        })?;
+        Ok(Dir {
+            fd,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The folder as it was named when opened (for messages).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The descriptor.
+    pub fn fd(&self) -> BorrowedFd<'_> {
+        self.fd.as_fd()
+    }
+
+    /// A path that names this very folder for as long as this `Dir` lives, in this process
+    /// only: `/proc/self/fd/N` (e.g. to bind a Unix socket in it without naming it again).
+    pub fn proc_path(&self) -> PathBuf {
+        PathBuf::from(format!("/proc/self/fd/{}", self.fd.as_raw_fd()))
+    }
+
+    fn at(&self, name: &str) -> PathBuf {
+        self.path.join(name)
+    }
+
+    /// The permission bits a file replacing `name` gets: those of the regular file there now
+    /// (a symbolic link is not followed), without setuid, setgid and sticky; else `new_mode`,
+    /// else `0o666` less the umask.
+    pub fn mode_for(&self, name: &str, new_mode: Option<u32>) -> u32 {
+        match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
+            Ok(st) if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile => {
+                st.st_mode & 0o777
+            }
+            _ => new_mode.unwrap_or(0o666 & !umask()) & 0o777,
+        }
+    }
+
+    /// Puts a new file at `name`: created under a hidden random name in this folder
+    /// (`O_CREAT | O_EXCL | O_NOFOLLOW`, mode 0600), filled by `fill`, flushed to disk, given
+    /// its final mode (see [`Dir::mode_for`]) with `fchmod`, then renamed to `name`. On any
+    /// failure the hidden file is removed and `name` is as it was.
+    pub fn write_file(
+        &self,
+        name: &str,
+        new_mode: Option<u32>,
+        replace: Replace,
+        fill: impl FnOnce(&mut File) -> Result<(), Error>,
+    ) -> Result<(), Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        let mode = match replace {
+            Replace::Yes => self.mode_for(name, new_mode),
+            Replace::No => new_mode.unwrap_or(0o666 & !umask()) & 0o777,
+        };
+        let (tmp, mut file) = self.create_hidden(name, ".tmp")?;
+        let done = (|| {
+            fill(&mut file).map_err(|e| about(e, &target))?;
+            file.sync_all().map_err(|e| io_error(e, &target))?;
+            rfs::fchmod(&file, Mode::from_raw_mode(mode)).map_err(|e| errno_error(&target, e))?;
+            self.place(&tmp, name, replace)
+        })();
+        if done.is_err() {
+            let _ = rfs::unlinkat(&self.fd, tmp.as_str(), AtFlags::empty());
+        }
+        done
+    }
+
+    /// A new empty file under a hidden random name, mode 0600, and its name.
+    fn create_hidden(&self, name: &str, suffix: &str) -> Result<(String, File), Error> {
+        for _ in 0..16 {
+            let tmp = hidden_name(name, suffix);
+            match rfs::openat(
+                &self.fd,
+                tmp.as_str(),
+                OFlags::WRONLY | OFlags::CREATE | OFlags::EXCL | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+                Mode::from_raw_mode(0o600),
+            ) {
+                Ok(fd) => return Ok((tmp, File::from(fd))),
+                Err(Errno::EXIST) => continue,
+                Err(e) => return Err(errno_error(&self.at(name), e)),
+            }
+        }
+        Err(message_error(
+            &self.at(name),
+            "could not make a temporary file beside it",
+        ))
+    }
+
+    /// Moves the hidden file `tmp` to `name`.
+    fn place(&self, tmp: &str, name: &str, replace: Replace) -> Result<(), Error> {
+        let target = self.at(name);
+        match replace {
+            Replace::Yes => {
+                rfs::renameat(&self.fd, tmp, &self.fd, name).map_err(|e| errno_error(&target, e))
+            }
+            Replace::No => {
+                match rfs::renameat_with(&self.fd, tmp, &self.fd, name, RenameFlags::NOREPLACE) {
+                    Ok(()) => Ok(()),
+                    // a filesystem without RENAME_NOREPLACE: a hard link refuses an existing
+                    // name just as well
+                    Err(Errno::INVAL) | Err(Errno::NOSYS) => {
+                        rfs::linkat(&self.fd, tmp, &self.fd, name, AtFlags::empty())
+                            .map_err(|e| errno_error(&target, e))?;
+                        let _ = rfs::unlinkat(&self.fd, tmp, AtFlags::empty());
+                        Ok(())
+                    }
+                    Err(e) => Err(errno_error(&target, e)),
+                }
+            }
+        }
+    }
+
+    /// Whether a new file can be made in this folder: tried for real (permission bits do not
+    /// tell the whole story: root, ACLs, read-only mounts), then removed.
+    pub fn probe(&self, name: &str) -> Result<(), Error> {
+        check_name(&self.path, name)?;
+        let (tmp, file) = self.create_hidden(name, ".tmp")?;
+        drop(file);
+        rfs::unlinkat(&self.fd, tmp.as_str(), AtFlags::empty())
+            .map_err(|e| errno_error(&self.at(name), e))
+    }
+
+    /// Keeps what is at `name` now (a regular file, a symbolic link, anything) as a hard link
+    /// under a hidden name, without following a link, so that [`Dir::put_back`] can restore
+    /// exactly it.
+    pub fn keep(&self, name: &str) -> Result<Kept, Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
+            Err(Errno::NOENT) => return Ok(Kept::Nothing),
+            Err(e) => return Err(errno_error(&target, e)),
+            Ok(_) => {}
+        }
+        for _ in 0..16 {
+            let kept = hidden_name(name, ".kept");
+            match rfs::linkat(&self.fd, name, &self.fd, kept.as_str(), AtFlags::empty()) {
+                Ok(()) => return Ok(Kept::Link(kept)),
+                Err(Errno::EXIST) => continue,
+                Err(Errno::NOENT) => return Ok(Kept::Nothing),
+                Err(e) => return Err(errno_error(&target, e)),
+            }
+        }
+        Err(message_error(&target, "could not keep it beside itself"))
+    }
+
+    /// Puts back what [`Dir::keep`] kept at `name`: the link renamed over `name`, or `name`
+    /// removed when nothing was there.
+    pub fn put_back(&self, name: &str, kept: &Kept) -> Result<(), Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        match kept {
+            Kept::Link(link) => {
+                rfs::renameat(&self.fd, link.as_str(), &self.fd, name)
+                    .map_err(|e| errno_error(&target, e))?;
+                // when `name` is still the file kept (nothing replaced it), the rename does
+                // nothing at all (two links to one file) and the hidden link stays: remove it
+                match rfs::unlinkat(&self.fd, link.as_str(), AtFlags::empty()) {
+                    Ok(()) | Err(Errno::NOENT) => Ok(()),
+                    Err(e) => Err(errno_error(&target, e)),
+                }
+            }
+            Kept::Nothing => match rfs::unlinkat(&self.fd, name, AtFlags::empty()) {
+                Ok(()) | Err(Errno::NOENT) => Ok(()),
+                Err(e) => Err(errno_error(&target, e)),
+            },
+        }
+    }
+
+    /// Drops what [`Dir::keep`] kept (after a success).
+    pub fn discard(&self, kept: &Kept) -> Result<(), Error> {
+        match kept {
+            Kept::Nothing => Ok(()),
+            Kept::Link(link) => match rfs::unlinkat(&self.fd, link.as_str(), AtFlags::empty()) {
+                Ok(()) | Err(Errno::NOENT) => Ok(()),
+                Err(e) => Err(errno_error(&self.at(link), e)),
+            },
+        }
+    }
+}
+
+/// Makes the folder `path` (with `create`; an existing one is taken as it is when
+/// `may_exist`) with mode 0700 in the one `mkdir`, opens it without following a symbolic
+/// link, and checks the folder opened: a directory, owned by this user, that nobody else can
+/// enter (group and other bits clear). Refused otherwise, with what is wrong and, when it is
+/// this user's, the command that fixes it.
+pub fn private_dir(path: &Path, may_exist: bool) -> Result<Dir, Error> {
+    let (parent, name) = split(path)?;
+    check_name(&parent, &name)?;
+    let parent_dir = Dir::open(&parent)?;
+    match rfs::mkdirat(&parent_dir.fd, name.as_str(), Mode::from_raw_mode(0o700)) {
+        Ok(()) => {}
+        Err(Errno::EXIST) if may_exist => {}
+        Err(e) => return Err(errno_error(path, e)),
+    }
+    let fd = rfs::openat(
+        &parent_dir.fd,
+        name.as_str(),
+        OFlags::RDONLY | OFlags::DIRECTORY | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+        Mode::empty(),
+    )
+    .map_err(|e| match e {
+        Errno::NOTDIR | Errno::LOOP => message_error(path, "is not a folder"),
+        e => errno_error(path, e),
+    })?;
+    let st = rfs::fstat(&fd).map_err(|e| errno_error(path, e))?;
+    let me = rustix::process::geteuid().as_raw();
+    if st.st_uid != me {
+        return Err(message_error(
+            path,
+            format!(
+                "belongs to user {}, not to this user ({me}); refusing to use it",
+                st.st_uid
+            ),
+        ));
+    }
+    if st.st_mode & 0o077 != 0 {
+        return Err(message_error(
+            path,
+            format!(
+                "can be entered by others (chmod 700 {}; its mode is {:04o})",
+                path.display(),
+                st.st_mode & 0o7777
+            ),
+        ));
+    }
+    Ok(Dir {
+        fd,
+        path: path.to_path_buf(),
+    })
+}
+
+/// Writes `data` to `path` atomically (see [`Dir::write_file`]).
+pub fn write_path(
+    path: &Path,
+    data: &[u8],
+    new_mode: Option<u32>,
+    replace: Replace,
+) -> Result<(), Error> {
+    use std::io::Write;
+    let (dir, name) = split(path)?;
+    let dir = Dir::open(&dir).map_err(|e| about(e, path))?;
+    dir.write_file(&name, new_mode, replace, |f| {
+        f.write_all(data).map_err(|e| io_error(e, path))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::{symlink, MetadataExt, PermissionsExt};
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn writes_replace_and_refuse() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("a.json");
+        write_path(&p, b"one", Some(0o640), Replace::Yes).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"one");
+        assert_eq!(std::fs::metadata(&p).unwrap().mode() & 0o7777, 0o640);
+        // a replaced file keeps its bits, but never setuid/setgid/sticky
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o6755)).unwrap();
+        write_path(&p, b"two", Some(0o600), Replace::Yes).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        assert_eq!(std::fs::metadata(&p).unwrap().mode() & 0o7777, 0o755);
+        let e = write_path(&p, b"three", Some(0o600), Replace::No).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Fs {
+                    errno: Some(libc::EEXIST),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        // a symbolic link at the name is replaced, its target untouched
+        let victim = t.path().join("victim");
+        std::fs::write(&victim, "keep").unwrap();
+        let link = t.path().join("l.json");
+        symlink(&victim, &link).unwrap();
+        assert!(write_path(&link, b"x", None, Replace::No).is_err());
+        write_path(&link, b"x", None, Replace::Yes).unwrap();
+        assert_eq!(std::fs::read(&victim).unwrap(), b"keep");
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_file());
+        assert_eq!(names(t.path()), ["a.json", "l.json", "victim"]);
+    }
+
+    #[test]
+    fn a_failed_fill_leaves_nothing() {
+        let t = tempfile::tempdir().unwrap();
+        let dir = Dir::open(t.path()).unwrap();
+        let e = dir
+            .write_file("a.png", None, Replace::Yes, |_| {
+                Err(message_error(Path::new(""), "disk full"))
+            })
+            .unwrap_err();
+        assert!(e.to_string().ends_with("a.png: disk full"), "{e}");
+        assert!(names(t.path()).is_empty());
+        dir.probe("a.png").unwrap();
+        assert!(names(t.path()).is_empty());
+    }
+
+    #[test]
+    fn keep_and_put_back_restore_links_exactly() {
+        let t = tempfile::tempdir().unwrap();
+        let dir = Dir::open(t.path()).unwrap();
+        std::fs::write(t.path().join("target"), "old").unwrap();
+        symlink("target", t.path().join("out.png")).unwrap();
+        let kept = dir.keep("out.png").unwrap();
+        dir.write_file("out.png", None, Replace::Yes, |f| {
+            use std::io::Write;
+            f.write_all(b"new").map_err(|e| io_error(e, Path::new("")))
+        })
+        .unwrap();
+        dir.put_back("out.png", &kept).unwrap();
+        assert_eq!(
+            std::fs::read_link(t.path().join("out.png")).unwrap(),
+            Path::new("target")
+        );
+        assert_eq!(std::fs::read(t.path().join("target")).unwrap(), b"old");
+        // put back when nothing replaced it (a write that failed first): no hidden link left
+        let kept = dir.keep("out.png").unwrap();
+        dir.put_back("out.png", &kept).unwrap();
+        assert_eq!(names(t.path()), ["out.png", "target"]);
+        let nothing = dir.keep("new.json").unwrap();
+        assert_eq!(nothing, Kept::Nothing);
+        write_path(&t.path().join("new.json"), b"{}", None, Replace::Yes).unwrap();
+        dir.put_back("new.json", &nothing).unwrap();
+        let kept = dir.keep("target").unwrap();
+        dir.discard(&kept).unwrap();
+        assert_eq!(names(t.path()), ["out.png", "target"]);
+    }
+
+    #[test]
+    fn private_dir_is_made_closed_and_checked() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("private");
+        let d = private_dir(&p, false).unwrap();
+        assert_eq!(std::fs::metadata(&p).unwrap().mode() & 0o777, 0o700);
+        assert!(private_dir(&p, false).is_err());
+        assert!(private_dir(&p, true).is_ok());
+        // a name bound through /proc/self/fd lands in the folder opened
+        std::fs::write(d.proc_path().join("x"), "1").unwrap();
+        assert_eq!(names(&p), ["x"]);
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let e = private_dir(&p, true).unwrap_err().to_string();
+        assert!(e.contains("can be entered by others (chmod 700 "), "{e}");
+        assert!(e.ends_with("; its mode is 0755)"), "{e}");
+        let l = t.path().join("link");
+        symlink(&p, &l).unwrap();
+        let e = private_dir(&l, true).unwrap_err().to_string();
+        assert!(e.ends_with("link: is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn folders_are_reached_through_own_links_only() {
+        let t = tempfile::tempdir().unwrap();
+        let real = t.path().join("real");
+        std::fs::create_dir(&real).unwrap();
+        // this user's links are followed, relative and absolute, `..` included
+        symlink("real", t.path().join("rel")).unwrap();
+        symlink(&real, t.path().join("abs")).unwrap();
+        std::fs::create_dir(real.join("sub")).unwrap();
+        symlink("../real/sub/..", real.join("up")).unwrap();
+        for via in ["rel", "abs", "real/up", "rel/sub/../up"] {
+            let p = t.path().join(via).join("x.json");
+            write_path(&p, via.as_bytes(), None, Replace::Yes).unwrap();
+            assert_eq!(std::fs::read(real.join("x.json")).unwrap(), via.as_bytes());
+        }
+        let e = Dir::open_nofollow(&t.path().join("rel"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("rel: is a symbolic link, not a folder"), "{e}");
+        // a loop ends
+        symlink("loop", t.path().join("loop")).unwrap();
+        assert!(Dir::open(&t.path().join("loop")).is_err());
+        // another user's link is not followed
+        let theirs = t.path().join("theirs");
+        symlink(&real, &theirs).unwrap();
+        if rustix::process::geteuid().is_root() {
+            rfs::chownat(
+                rfs::CWD,
+                &theirs,
+                Some(rustix::process::Uid::from_raw(65534)),
+                None,
+                AtFlags::SYMLINK_NOFOLLOW,
+            )
+            .unwrap();
+            let e = write_path(&theirs.join("y.json"), b"1", None, Replace::Yes)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("goes through a symbolic link (theirs) that belongs to user 65534"),
+                "{e}"
+            );
+            assert!(!real.join("y.json").exists());
+        }
+    }
+}

@@ -1,0 +1,457 @@
+//! A second local user races root on every file operation another user could aim at:
+//! writing outputs (and putting them back), making a cookie, making a private folder (the
+//! server's socket folder), loading a scene's referenced files. The attacker is a forked
+//! process that drops to uid/gid 65534 and swaps a folder of hers with a symbolic link
+//! (`renameat2(RENAME_EXCHANGE)`) as fast as it can, thousands of times over the test; a
+//! reader of hers tries to read everything it sees. Nothing may escape: no root-only secret
+//! in a result, nothing outside created, written or chmodded, a cookie only ever whole at 0600.
+//!
+//! Needs root (to be two users); without it each test says so and passes without racing.
+
+use ring_tracer_kernel::files::Confinement;
+use ring_tracer_kernel::safe_fs::{self, Dir, Replace};
+use std::ffi::CString;
+use std::os::unix::ffi::OsStrExt;
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The attacker's uid and gid.
+const THEM: u32 = 65534;
+
+/// How many times root does each operation under attack.
+const ROUNDS: usize = 3000;
+
+fn root() -> bool {
+    if rustix::process::geteuid().is_root() {
+        true
+    } else {
+        eprintln!("races: skipped, not root (a second user is made by dropping root's rights)");
+        false
+    }
+}
+
+fn cstr(p: &Path) -> CString {
+    CString::new(p.as_os_str().as_bytes()).unwrap()
+}
+
+/// One thing the attacker does in her loop.
+enum Step {
+    /// Swap two names.
+    Exchange(CString, CString),
+    /// Make a symbolic link `link` to `target` (if the name is free).
+    Symlink(CString, CString),
+}
+
+/// The attacker: a child process as uid/gid 65534 doing its steps in a loop, until dropped.
+struct Attacker {
+    pid: libc::pid_t,
+}
+
+impl Attacker {
+    fn start(steps: Vec<Step>) -> Attacker {
+        let mut fds = [0; 2];
+        // SAFETY: a valid array of two ints.
+        assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+        let (r, w) = (fds[0], fds[1]);
+        // SAFETY: after fork the child makes only raw system calls on memory prepared
+        // before it (no allocation, no lock), then `_exit`s.
+        let pid = unsafe { libc::fork() };
+        assert!(pid >= 0, "fork failed");
+        if pid == 0 {
+            unsafe {
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                if libc::setgroups(0, std::ptr::null()) != 0
+                    || libc::setgid(THEM) != 0
+                    || libc::setuid(THEM) != 0
+                    || libc::getuid() != THEM
+                {
+                    libc::_exit(3);
+                }
+                let mut told = false;
+                loop {
+                    for s in &steps {
+                        match s {
+                            Step::Exchange(a, b) => {
+                                libc::syscall(
+                                    libc::SYS_renameat2,
+                                    libc::AT_FDCWD,
+                                    a.as_ptr(),
+                                    libc::AT_FDCWD,
+                                    b.as_ptr(),
+                                    libc::RENAME_EXCHANGE,
+                                );
+                            }
+                            Step::Symlink(target, link) => {
+                                libc::symlink(target.as_ptr(), link.as_ptr());
+                            }
+                        }
+                    }
+                    if !told {
+                        // started, as the other user
+                        libc::write(w, b"x".as_ptr().cast(), 1);
+                        libc::close(w);
+                        told = true;
+                    }
+                }
+            }
+        }
+        unsafe { libc::close(w) };
+        let mut b = [0u8; 1];
+        // SAFETY: reads one byte into a valid buffer.
+        let n = unsafe { libc::read(r, b.as_mut_ptr().cast(), 1) };
+        unsafe { libc::close(r) };
+        assert_eq!(n, 1, "the attacker could not become uid {THEM}");
+        Attacker { pid }
+    }
+}
+
+impl Drop for Attacker {
+    fn drop(&mut self) {
+        // SAFETY: our own child.
+        unsafe {
+            libc::kill(self.pid, libc::SIGKILL);
+            libc::waitpid(self.pid, std::ptr::null_mut(), 0);
+        }
+    }
+}
+
+/// The attacker's reader: reads every file it can see in `dir` (hidden ones too) in a loop and
+/// prints `LEAK` when one holds `secret`.
+struct Reader {
+    child: std::process::Child,
+}
+
+impl Reader {
+    fn start(dir: &Path, secret: &str) -> Reader {
+        use std::os::unix::process::CommandExt;
+        let child = std::process::Command::new("/bin/sh")
+            .arg("-c")
+            .arg(
+                "while :; do for f in \"$0\"/* \"$0\"/.[!.]*; do \
+                 grep -qs \"$1\" \"$f\" && echo LEAK \"$f\"; done; done",
+            )
+            .arg(dir)
+            .arg(secret)
+            .uid(THEM)
+            .gid(THEM)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        Reader { child }
+    }
+
+    /// What it printed (nothing, or the leaks).
+    fn finish(mut self) -> String {
+        let _ = self.child.kill();
+        let out = self.child.wait_with_output().unwrap();
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+}
+
+/// A test's folder that the attacker can enter (its temporary folder is root's, mode 0700).
+fn base() -> tempfile::TempDir {
+    let t = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    t
+}
+
+/// A folder of the attacker's (owned by her, mode `mode`).
+fn theirs(path: &Path, mode: u32) -> PathBuf {
+    std::fs::create_dir(path).unwrap();
+    std::os::unix::fs::chown(path, Some(THEM), Some(THEM)).unwrap();
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+    path.to_path_buf()
+}
+
+/// A symbolic link of the attacker's.
+fn their_link(target: &Path, link: &Path) {
+    std::os::unix::fs::symlink(target, link).unwrap();
+    std::os::unix::fs::lchown(link, Some(THEM), Some(THEM)).unwrap();
+}
+
+/// Names, modes and contents under `dir` (one level), to compare before and after.
+fn snapshot(dir: &Path) -> Vec<(String, u32, Vec<u8>)> {
+    let mut v = vec![(
+        ".".to_string(),
+        std::fs::metadata(dir).unwrap().mode(),
+        Vec::new(),
+    )];
+    for e in std::fs::read_dir(dir).unwrap() {
+        let e = e.unwrap();
+        let m = std::fs::symlink_metadata(e.path()).unwrap();
+        let data = if m.is_file() {
+            std::fs::read(e.path()).unwrap()
+        } else {
+            Vec::new()
+        };
+        v.push((e.file_name().to_string_lossy().into_owned(), m.mode(), data));
+    }
+    v.sort();
+    v
+}
+
+/// A root-only folder holding a root-only file `name` with `secret`, its mode 0755 so that a
+/// chmod to 0700 would show.
+fn victim(base: &Path, name: &str, secret: &str) -> PathBuf {
+    let v = base.join("victim");
+    std::fs::create_dir(&v).unwrap();
+    std::fs::set_permissions(&v, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::write(v.join(name), secret).unwrap();
+    std::fs::set_permissions(v.join(name), std::fs::Permissions::from_mode(0o600)).unwrap();
+    v
+}
+
+#[test]
+fn outputs_are_written_only_where_named_and_put_back_exactly() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let victim = victim(t.path(), "a.json", "victim's own");
+    let before = snapshot(&victim);
+    // her folder holds `out` (a real folder) and `decoy` (her link to the victim), swapped
+    let mine = theirs(&t.path().join("mine"), 0o755);
+    let out = theirs(&mine.join("out"), 0o777);
+    their_link(&victim, &mine.join("decoy"));
+    let attacker = Attacker::start(vec![Step::Exchange(
+        cstr(&mine.join("out")),
+        cstr(&mine.join("decoy")),
+    )]);
+    let reader = Reader::start(&mine.join("out"), "ROOT-ONLY");
+    let (mut written, mut refused) = (0, 0);
+    for i in 0..ROUNDS {
+        let path = out.join("a.json");
+        let data = format!("ROOT-ONLY {i}");
+        match safe_fs::write_path(&path, data.as_bytes(), Some(0o600), Replace::Yes) {
+            Ok(()) => written += 1,
+            Err(e) => {
+                let e = e.to_string();
+                assert!(
+                    e.contains("symbolic link") || e.contains("No such file"),
+                    "{e}"
+                );
+                refused += 1;
+            }
+        }
+        // keep and put back, as a failed render does
+        if let Ok(dir) = Dir::open(&out) {
+            if let Ok(kept) = dir.keep("a.json") {
+                dir.put_back("a.json", &kept).unwrap();
+            }
+        }
+    }
+    drop(attacker);
+    let leaks = reader.finish();
+    eprintln!("outputs: {written} written, {refused} refused under attack");
+    assert_eq!(written + refused, ROUNDS);
+    assert_eq!(snapshot(&victim), before, "something outside was changed");
+    assert_eq!(leaks, "", "the other user read a root-only output");
+    // whichever way the folders ended, no hidden file is left in either
+    for d in [mine.join("out"), mine.join("decoy")] {
+        if let Ok(rd) = std::fs::read_dir(&d) {
+            for e in rd {
+                let n = e.unwrap().file_name().to_string_lossy().into_owned();
+                assert!(!n.starts_with('.'), "left behind: {n}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_cookie_is_only_ever_seen_whole_at_0600() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let victim = victim(t.path(), "keep", "x");
+    let before = snapshot(&victim);
+    // a shared folder she can write in (root's, sticky, like /tmp), and a folder of hers
+    // swapped with a link to the victim
+    let shared = t.path().join("shared");
+    std::fs::create_dir(&shared).unwrap();
+    std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777)).unwrap();
+    let mine = theirs(&t.path().join("mine"), 0o755);
+    theirs(&mine.join("out"), 0o777);
+    their_link(&victim, &mine.join("decoy"));
+    // she plants links at the names root will use, too
+    let mut steps = vec![Step::Exchange(
+        cstr(&mine.join("out")),
+        cstr(&mine.join("decoy")),
+    )];
+    for i in 0..64 {
+        steps.push(Step::Symlink(
+            cstr(&victim.join("keep")),
+            cstr(&shared.join(format!("cookie{i}"))),
+        ));
+    }
+    let attacker = Attacker::start(steps);
+    let reader = Reader::start(&shared, "SECRET");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    // root's watcher: every cookie seen is whole and 0600
+    let watcher = {
+        let stop = stop.clone();
+        let shared = shared.clone();
+        std::thread::spawn(move || {
+            let mut seen = 0;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                for e in std::fs::read_dir(&shared).unwrap() {
+                    let e = e.unwrap();
+                    let Ok(m) = std::fs::symlink_metadata(e.path()) else {
+                        continue;
+                    };
+                    if !m.is_file() {
+                        continue;
+                    }
+                    assert_eq!(m.mode() & 0o7777, 0o600, "{:?}", e.path());
+                    assert_eq!(m.uid(), 0);
+                    if let Ok(data) = std::fs::read(e.path()) {
+                        let name = e.file_name().to_string_lossy().into_owned();
+                        if !name.starts_with('.') {
+                            assert_eq!(data, format!("SECRET {name}\n").as_bytes());
+                            seen += 1;
+                        }
+                    }
+                }
+            }
+            seen
+        })
+    };
+    let (mut made, mut refused) = (0, 0);
+    for i in 0..ROUNDS {
+        let name = format!("cookie{}", i % 128);
+        let data = format!("SECRET {name}\n");
+        for path in [shared.join(&name), mine.join("out").join(&name)] {
+            match safe_fs::write_path(&path, data.as_bytes(), Some(0o600), Replace::No) {
+                Ok(()) => made += 1,
+                Err(_) => refused += 1,
+            }
+        }
+        // free the name for the next round (hers too: she may have planted a link)
+        let _ = std::fs::remove_file(shared.join(&name));
+        if let Ok(d) = Dir::open(&mine.join("out")) {
+            let _ = d.put_back(&name, &safe_fs::Kept::Nothing);
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let seen = watcher
+        .join()
+        .expect("a cookie was seen partial or not 0600");
+    drop(attacker);
+    let leaks = reader.finish();
+    eprintln!("cookies: {made} made, {refused} refused, {seen} seen whole by the watcher");
+    assert!(made > 0);
+    assert_eq!(snapshot(&victim), before, "something outside was changed");
+    assert_eq!(leaks, "", "the other user read a cookie");
+}
+
+#[test]
+fn a_private_folder_is_ours_closed_and_bound_in_place() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let victim = victim(t.path(), "keep", "x");
+    let before = snapshot(&victim);
+    let victim_ino = std::fs::metadata(&victim).unwrap().ino();
+    // $XDG_RUNTIME_DIR (or ~/.cache) of hers: she swaps root's new folder with her link
+    let parent = theirs(&t.path().join("runtime"), 0o777);
+    let run = parent.join("run");
+    their_link(&victim, &parent.join("decoy"));
+    let attacker = Attacker::start(vec![
+        Step::Exchange(cstr(&run), cstr(&parent.join("decoy"))),
+        Step::Symlink(cstr(&victim), cstr(&run)),
+    ]);
+    let (mut ok, mut refused) = (0, 0);
+    for _ in 0..ROUNDS {
+        match safe_fs::private_dir(&run, true) {
+            Ok(dir) => {
+                let st = rustix::fs::fstat(dir.fd()).unwrap();
+                assert_eq!(st.st_uid, 0);
+                assert_eq!(st.st_mode & 0o7777, 0o700);
+                assert_ne!(st.st_ino, victim_ino);
+                // the socket is bound in the folder held, not wherever the name leads now
+                let sock = dir.proc_path().join("s.sock");
+                let listener = std::os::unix::net::UnixListener::bind(&sock).unwrap();
+                assert!(rustix::fs::statat(
+                    dir.fd(),
+                    "s.sock",
+                    rustix::fs::AtFlags::SYMLINK_NOFOLLOW
+                )
+                .is_ok());
+                drop(listener);
+                rustix::fs::unlinkat(dir.fd(), "s.sock", rustix::fs::AtFlags::empty()).unwrap();
+                ok += 1;
+            }
+            Err(e) => {
+                let e = e.to_string();
+                assert!(
+                    e.contains("is not a folder")
+                        || e.contains("belongs to user")
+                        || e.contains("No such file"),
+                    "{e}"
+                );
+                refused += 1;
+            }
+        }
+        // start again: nothing at the name, her link beside it, root's folder gone
+        // wherever it went
+        for n in ["run", "decoy"] {
+            let p = parent.join(n);
+            let _ = std::fs::remove_dir(&p).or_else(|_| std::fs::remove_file(&p));
+        }
+        let _ = std::os::unix::fs::symlink(&victim, parent.join("decoy"))
+            .and_then(|_| std::os::unix::fs::lchown(parent.join("decoy"), Some(THEM), Some(THEM)));
+    }
+    drop(attacker);
+    eprintln!("private folders: {ok} made and checked, {refused} refused under attack");
+    assert_eq!(ok + refused, ROUNDS);
+    assert_eq!(snapshot(&victim), before, "something outside was changed");
+}
+
+#[test]
+fn a_scene_never_reads_outside_its_folder() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let secret_dir = t.path().join("root_only");
+    std::fs::create_dir(&secret_dir).unwrap();
+    std::fs::set_permissions(&secret_dir, std::fs::Permissions::from_mode(0o700)).unwrap();
+    std::fs::write(secret_dir.join("mesh.obj"), "# ROOT-ONLY\nv 9 9 9\n").unwrap();
+    // her scene folder: `m/mesh.obj` public, `decoy` her link to the root-only folder (one
+    // absolute, one relative), swapped with `m`
+    let scene = theirs(&t.path().join("scene"), 0o755);
+    let m = theirs(&scene.join("m"), 0o755);
+    std::fs::write(m.join("mesh.obj"), "v 0 0 0\n").unwrap();
+    their_link(&secret_dir, &scene.join("decoy"));
+    their_link(Path::new("../root_only"), &scene.join("decoy2"));
+    let attacker = Attacker::start(vec![
+        Step::Exchange(cstr(&scene.join("m")), cstr(&scene.join("decoy"))),
+        Step::Exchange(cstr(&scene.join("m")), cstr(&scene.join("decoy2"))),
+    ]);
+    let confinement = Confinement::new([&scene]).unwrap();
+    let (mut read, mut refused) = (0, 0);
+    let t0 = Instant::now();
+    for _ in 0..ROUNDS {
+        match confinement.read(&scene, "m/mesh.obj") {
+            Ok((bytes, path)) => {
+                assert_eq!(bytes, b"v 0 0 0\n", "read {path:?}");
+                assert!(path.starts_with(confinement.roots()[0].as_path()));
+                read += 1;
+            }
+            Err(e) => {
+                assert!(!e.to_string().contains("ROOT-ONLY"));
+                refused += 1;
+            }
+        }
+    }
+    drop(attacker);
+    eprintln!(
+        "scene files: {read} read, {refused} refused under attack in {:?}",
+        t0.elapsed()
+    );
+    assert_eq!(read + refused, ROUNDS);
+    assert!(t0.elapsed() < Duration::from_secs(120));
+}
