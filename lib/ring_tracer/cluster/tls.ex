@@ -147,7 +147,7 @@ defmodule RingTracer.Cluster.TLS do
         )
 
       true ->
-        with :ok <- private(dir, 0o022, "change"),
+        with :ok <- private(dir, 0o022, "changed"),
              :ok <- private(Path.join(dir, "node.key"), 0o077, "read") do
           valid_now(Path.join(dir, "node.pem"))
         end
@@ -155,7 +155,7 @@ defmodule RingTracer.Cluster.TLS do
   end
 
   defp private(path, bits, what) do
-    {:ok, %File.Stat{mode: mode, uid: uid}} = File.lstat(path)
+    {:ok, %File.Stat{mode: mode, uid: uid}} = File.stat(path)
     own = RingTracer.Cluster.Epmd.own_uid()
 
     cond do
