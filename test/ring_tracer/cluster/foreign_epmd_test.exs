@@ -185,6 +185,23 @@ defmodule RingTracer.Cluster.ForeignEpmdTest do
     assert output =~ "--allow-foreign-epmd"
   end
 
+  test "--listen 0.0.0.0 with an epmd on loopback only is an error, not silence", %{
+    ns: ns,
+    cookie: cookie
+  } do
+    {status, output} =
+      OSNode.wait_exit(
+        in_ns(
+          ns,
+          ["worker", "--sname", name("any"), "--cookie-file", cookie, "--listen", "0.0.0.0"],
+          tls()
+        )
+      )
+
+    assert status == 1
+    assert output =~ "epmd runs but does not listen on every address (--listen 0.0.0.0)"
+  end
+
   test "over TLS (the default) she is warned about, and her relay carries only ciphertext", %{
     ns: ns,
     fake: fake,
