@@ -67,6 +67,8 @@ defmodule RingTracer.Cluster.Distribution do
          {:ok, ports} <- ports(opts[:ports]),
          {:ok, transport} <- transport(opts),
          {:ok, cookie} <- cookie(opts[:cookie_file]) do
+      quiet_tls(transport)
+
       if Node.alive?() do
         set_cookie(cookie)
         {:ok, node()}
@@ -557,6 +559,17 @@ defmodule RingTracer.Cluster.Distribution do
          )}
     end
   end
+
+  # A refused handshake is explained in one line by whoever connects
+  # (RingTracer.Cluster.check/1); OTP's ssl would also log a notice of
+  # several lines for it on stderr.
+  defp quiet_tls(:tls) do
+    _ = Application.load(:ssl)
+    _ = :logger.set_application_level(:ssl, :error)
+    :ok
+  end
+
+  defp quiet_tls(:plain), do: :ok
 
   # OTP reports a distribution that fails to start with pages of
   # supervisor reports; the error returned says it in one line.

@@ -284,6 +284,10 @@ defmodule RingTracer.Cluster.TLS do
 
   defp ssl_connect(host, port, opts) do
     {:ok, _} = Application.ensure_all_started(:ssl)
+    # What the handshake says is told in one line; ssl's own notices and
+    # its warning about verify_none (a probe that trusts nothing) would
+    # add several more.
+    _ = :logger.set_application_level(:ssl, :error)
     :ssl.connect(host, port, opts, 5_000)
   end
 
