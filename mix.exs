@@ -20,8 +20,19 @@ defmodule RingTracer.MixProject do
       test_coverage: [summary: [threshold: 0]],
       dialyzer_ignore: [],
       # :inets (the preview's HTTP server) is started by RingTracer.Preview, like
-      # :ssl by TLS, only when used.
-      xref: [exclude: [:ssl, :inets, :httpd, :httpd_util, :httpd_response, :httpc]],
+      # :ssl by TLS (and :public_key, which :ssl needs, for a certificate's dates), only when used.
+      xref: [
+        exclude: [
+          :ssl,
+          :public_key,
+          :pubkey_cert,
+          :inets,
+          :httpd,
+          :httpd_util,
+          :httpd_response,
+          :httpc
+        ]
+      ],
       aliases: aliases()
     ]
   end

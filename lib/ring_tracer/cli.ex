@@ -6,8 +6,8 @@ defmodule RingTracer.CLI do
       erl -noshell +Bi -pa ... -s Elixir.RingTracer.CLI main -extra render scene.nff -o a.png
 
   Commands: `render` (`RingTracer.CLI.Render`), `worker`
-  (`RingTracer.CLI.Worker`), `cookie`, `tls-args` (the VM flags for `--tls
-  DIR`, for the launcher). `--help`/`-h` works on each. Exit status: 0 ok,
+  (`RingTracer.CLI.Worker`), `serve`, `cookie`. `--help`/`-h` works on
+  each. Exit status: 0 ok,
   1 a failure, 2 a usage error, 130/143 interrupted.
   """
 
@@ -93,11 +93,6 @@ defmodule RingTracer.CLI do
             error("cookie", e.message, 1)
         end
     end
-  end
-
-  def run(["tls-args", dir]) do
-    IO.puts(Enum.join(RingTracer.Cluster.TLS.vm_args(Paths.expand(dir)), " "))
-    0
   end
 
   def run([help]) when help in ["help", "--help", "-h"] do
@@ -210,7 +205,14 @@ defmodule RingTracer.CLI do
       --cookie-file PATH      the cookie, in a file only you can read (default ~/.erlang.cookie)
       --listen ADDR           the address to listen on (default 127.0.0.1: this machine only)
       --ports MIN-MAX         the distribution listener's ports, for firewalls
-      --tls DIR               distribution over TLS with the certificates in DIR
+      --tls DIR               the TLS certificates (default: your own, made on first use in
+                              ~/.config/ringtracer/tls; see ringtracer tls)
+      --insecure-plain        plain TCP distribution instead of TLS: whoever answers on port
+                              4369 (any local user who starts epmd first) or sits on the
+                              network can read and alter everything, and run code here
+      --allow-foreign-epmd    with --insecure-plain, start even when epmd is another user's
+
+    Distribution runs over TLS with mutual authentication by default, loopback included.
 
     Example:
       ringtracer worker --sname w1 &

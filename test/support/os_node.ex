@@ -9,7 +9,11 @@ defmodule RingTracer.Test.OSNode do
 
   @type t :: %__MODULE__{port: port(), os_pid: non_neg_integer(), output: String.t()}
 
-  @doc "Starts `ringtracer ARGS...` as an OS process (optionally as another user)."
+  @doc """
+  Starts `ringtracer ARGS...` as an OS process. Options: `:vm_args`, `:env`,
+  and `:prefix`, a command that runs `erl` (for instance
+  `["ip", "netns", "exec", NS]`).
+  """
   @spec start([String.t()], keyword()) :: t()
   def start(args, opts \\ []) do
     erl = System.find_executable("erl")
@@ -21,8 +25,14 @@ defmodule RingTracer.Test.OSNode do
         paths ++
         ["-s", "Elixir.RingTracer.CLI", "main", "-extra" | args]
 
+    {exe, argv} =
+      case Keyword.get(opts, :prefix, []) do
+        [] -> {erl, argv}
+        [command | rest] -> {System.find_executable(command), rest ++ [erl | argv]}
+      end
+
     port =
-      Port.open({:spawn_executable, erl}, [
+      Port.open({:spawn_executable, exe}, [
         :binary,
         :exit_status,
         :stderr_to_stdout,
@@ -83,9 +93,9 @@ defmodule RingTracer.Test.OSNode do
     end
   end
 
-  # The application's, Elixir's and Logger's code: what the launcher puts
-  # in the code path.
-  defp code_paths do
+  @doc "The application's, Elixir's and Logger's code: what the launcher puts in the code path."
+  @spec code_paths() :: [String.t()]
+  def code_paths do
     [:ring_tracer, :elixir, :logger]
     |> Enum.map(&(:code.lib_dir(&1, :ebin) |> List.to_string()))
   end

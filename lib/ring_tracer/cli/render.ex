@@ -129,7 +129,9 @@ defmodule RingTracer.CLI.Render do
           --sname NAME, --name NAME@HOST    this node's name
           --cookie-file PATH  the cookie, in a file only you can read (default ~/.erlang.cookie)
           --listen ADDR, --ports MIN-MAX    where this node listens (default 127.0.0.1)
-          --tls DIR           distribution over TLS (ringtracer tls ...)
+          --tls DIR           TLS certificates (default: your own, made on first use)
+          --insecure-plain    plain TCP distribution: any local user who answers on port
+                              4369 can read and alter it (--allow-foreign-epmd: even then)
 
     Files:
           --allow-dir DIR     a folder besides the scene's own it may read meshes from (repeatable)

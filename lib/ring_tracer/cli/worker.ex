@@ -13,7 +13,14 @@ defmodule RingTracer.CLI.Worker do
       this machine can connect)
     * `--ports MIN-MAX` — the distribution listener's ports, for firewalls
     * `--tls DIR` — distribution over TLS with the certificates in `DIR`
-      (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS)
+      (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS).
+      Without it, TLS with the user's own certificates
+      (`RingTracer.Cluster.TLS.default_dir/0`, made on first use)
+    * `--insecure-plain` — plain TCP distribution instead: whoever answers
+      on port 4369 (any local user, if she starts epmd first) or sits on
+      the network can read and alter the stream
+    * `--allow-foreign-epmd` — with `--insecure-plain`, start even when
+      epmd belongs to another user
   """
 
   alias RingTracer.CLI.Paths
@@ -26,11 +33,13 @@ defmodule RingTracer.CLI.Worker do
     cookie_file: :string,
     listen: :string,
     ports: :string,
-    tls: :string
+    tls: :string,
+    insecure_plain: :boolean,
+    allow_foreign_epmd: :boolean
   ]
 
   @doc "The command-line switches that make a node distributed (also the render's)."
-  @spec switches() :: [{atom(), :string}]
+  @spec switches() :: [{atom(), :string | :boolean}]
   def switches, do: @switches
 
   @doc """
@@ -48,7 +57,7 @@ defmodule RingTracer.CLI.Worker do
           {:ok, node,
            "RingTracer worker #{node} ready (cookie from " <>
              "#{opts[:cookie_file] || "~/.erlang.cookie"}" <>
-             "#{if opts[:tls], do: ", TLS from #{opts[:tls]}"})"}
+             "#{transport_note(opts)})"}
         else
           {:error, %RingTracer.Error{message: message}} -> {:error, message}
           {:error, reason} -> {:error, "could not start :ring_tracer: #{inspect(reason)}"}
@@ -60,5 +69,11 @@ defmodule RingTracer.CLI.Worker do
       {_, _, invalid} ->
         {:error, "invalid option(s): #{Enum.map_join(invalid, ", ", &elem(&1, 0))}"}
     end
+  end
+
+  defp transport_note(opts) do
+    if opts[:insecure_plain],
+      do: ", plain TCP: readable and alterable by whoever answers on port 4369",
+      else: ", TLS from #{opts[:tls] || RingTracer.Cluster.TLS.booted_dir()}"
   end
 end

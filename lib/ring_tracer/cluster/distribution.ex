@@ -12,8 +12,16 @@ defmodule RingTracer.Cluster.Distribution do
       (`cookie_file:`, default `~/.erlang.cookie`) that only its owner can
       read (`RingTracer.Cluster.Cookie`), and is set after the node has
       started, so `ps` never shows it.
-    * **TLS** (`tls: DIR`, see `RingTracer.Cluster.TLS`) is chosen when the
-      VM boots; here it is only checked that the VM was booted with it.
+    * **Mutual TLS, or nothing, by default.** Distribution runs over TLS
+      with mutual authentication (`RingTracer.Cluster.TLS`), chosen when
+      the VM boots: the launcher boots every node with the certificates
+      of `--tls DIR` or, without it, with the user's own private CA and
+      node certificate (made on first use). Here it is checked that the
+      VM was booted so. Plain TCP distribution, which whoever answers on
+      port 4369 can read and alter, needs `insecure_plain: true`.
+    * **epmd's owner.** An epmd (port 4369) that belongs to another user
+      (the kernel's socket tables say whose) is warned about; with plain
+      distribution it is refused unless `allow_foreign_epmd: true`.
     * **Unique names.** A made-up name holds the OS process id and random
       bytes; a name already registered with epmd is a clear error.
 
@@ -30,11 +38,17 @@ defmodule RingTracer.Cluster.Distribution do
       (default `"127.0.0.1"`)
     * `:ports` — `{min, max}` ports of the distribution listener (default:
       any free port)
-    * `:tls` — the node's TLS folder (`RingTracer.Cluster.TLS`)
+    * `:tls` — the node's TLS folder (`RingTracer.Cluster.TLS`); without
+      it, the folder the VM was booted with
+    * `:insecure_plain` — plain TCP distribution instead of TLS: anyone
+      who answers on port 4369, or sits on the network, can read and
+      alter everything the nodes say, and so run code on them
+    * `:allow_foreign_epmd` — with `:insecure_plain`, go on even when epmd
+      belongs to another user
   """
 
-  require Logger
-  alias RingTracer.Cluster.{Cookie, TLS}
+  alias RingTracer.CLI.Console
+  alias RingTracer.Cluster.{Cookie, Epmd, TLS}
   alias RingTracer.Error
 
   @epmd_port 4369
@@ -51,15 +65,17 @@ defmodule RingTracer.Cluster.Distribution do
     with :ok <- refuse_cookie(opts),
          {:ok, listen} <- listen_address(opts[:listen]),
          {:ok, ports} <- ports(opts[:ports]),
-         :ok <- TLS.check_booted(opts[:tls]),
+         {:ok, transport} <- transport(opts),
          {:ok, cookie} <- cookie(opts[:cookie_file]) do
+      quiet_tls(transport)
+
       if Node.alive?() do
         set_cookie(cookie)
         {:ok, node()}
       else
-        with {:ok, name, type} <- name(opts, listen),
+        with {:ok, name, type} <- node_name(opts, listen),
              :ok <- configure_listener(listen, ports),
-             :ok <- ensure_epmd(listen),
+             :ok <- ensure_epmd(listen, transport, opts),
              :ok <- free_name(name),
              :ok <- start_node(name, type) do
           set_cookie(cookie)
@@ -178,6 +194,48 @@ defmodule RingTracer.Cluster.Distribution do
     end
   end
 
+  @doc """
+  Which transport `opts` and the VM's boot arguments give: `:tls` when the
+  VM was booted with TLS distribution (and the folder is sound), `:plain`
+  only with `insecure_plain: true`, else an error.
+  """
+  @spec transport(keyword()) :: {:ok, :tls | :plain} | {:error, Error.t()}
+  def transport(opts) do
+    cond do
+      opts[:tls] && opts[:insecure_plain] ->
+        {:error,
+         Error.new(:invalid_option, "--tls and --insecure-plain exclude each other: choose one")}
+
+      opts[:tls] ->
+        with :ok <- TLS.check_booted(opts[:tls]), do: {:ok, :tls}
+
+      TLS.enabled?() and opts[:insecure_plain] ->
+        {:error,
+         Error.new(
+           :invalid_option,
+           "--insecure-plain: this VM was booted with TLS distribution; start it " <>
+             "through bin/ringtracer with --insecure-plain"
+         )}
+
+      TLS.enabled?() ->
+        with :ok <- TLS.check_dir(TLS.booted_dir()), do: {:ok, :tls}
+
+      opts[:insecure_plain] ->
+        {:ok, :plain}
+
+      true ->
+        {:error,
+         Error.new(
+           :distribution,
+           "distribution runs over TLS with mutual authentication, and this VM was " <>
+             "booted without it: start it through bin/ringtracer (which makes your own " <>
+             "certificates on first use), or give --tls DIR; --insecure-plain runs plain " <>
+             "TCP instead, which any user of this machine who answers on port 4369 can " <>
+             "read and alter"
+         )}
+    end
+  end
+
   # A given cookie file is read (and checked) before anything starts. The
   # default one is left to Erlang, which reads it when the node starts (and
   # makes one, mode 0400, if there is none); it is checked here first for a
@@ -197,14 +255,93 @@ defmodule RingTracer.Cluster.Distribution do
   defp set_cookie(nil), do: :ok
   defp set_cookie(cookie), do: Node.set_cookie(cookie)
 
-  defp name(opts, listen) do
+  @doc """
+  The node's full name and name type from `opts` (`:name`, `:sname`,
+  `:generate`), checked before OTP sees it: OTP answers a bad name with
+  pages of crash reports.
+
+      iex> RingTracer.Cluster.Distribution.node_name([sname: "w1"], {127, 0, 0, 1})
+      {:ok, "w1@localhost", :shortnames}
+      iex> RingTracer.Cluster.Distribution.node_name([name: "w1@10.0.0.5"], {10, 0, 0, 5})
+      {:ok, "w1@10.0.0.5", :longnames}
+      iex> {:error, %RingTracer.Error{message: message}} =
+      ...>   RingTracer.Cluster.Distribution.node_name([sname: "w 1"], {127, 0, 0, 1})
+      iex> message
+      "--sname: a node name is letters, digits, _ and - (at most 200), got: \\"w 1\\""
+  """
+  @spec node_name(keyword(), :inet.ip_address()) ::
+          {:ok, String.t(), :shortnames | :longnames} | {:error, Error.t()}
+  def node_name(opts, listen) do
     cond do
-      opts[:name] -> {:ok, opts[:name], :longnames}
-      opts[:sname] -> {:ok, short(opts[:sname], listen), :shortnames}
+      opts[:name] -> long_name(opts[:name])
+      opts[:sname] -> short_name(opts[:sname], listen)
       opts[:generate] -> {:ok, short(unique_name("ringtracer"), listen), :shortnames}
       true -> {:error, Error.new(:distribution, "give the node a name: --sname NAME")}
     end
   end
+
+  @name_part ~r/^[A-Za-z0-9_-]{1,200}$/
+  @short_host ~r/^[A-Za-z0-9-]{1,63}$/
+  @long_host ~r/^[A-Za-z0-9-]{1,63}(\.[A-Za-z0-9-]{1,63})*$/
+
+  defp short_name(name, listen) do
+    case String.split(name, "@") do
+      [n] ->
+        with :ok <- name_part(n, "--sname"), do: {:ok, short(n, listen), :shortnames}
+
+      [n, host] ->
+        cond do
+          name_part(n, "--sname") != :ok ->
+            name_part(n, "--sname")
+
+          not Regex.match?(@short_host, host) ->
+            bad_name(
+              "--sname #{inspect(name)}: a short name's host is one word without dots " <>
+                "(for NAME@HOST.DOMAIN give --name)"
+            )
+
+          true ->
+            {:ok, name, :shortnames}
+        end
+
+      _ ->
+        bad_name("--sname #{inspect(name)}: a node name holds at most one @")
+    end
+  end
+
+  defp long_name(name) do
+    case String.split(name, "@") do
+      [n, host] ->
+        cond do
+          name_part(n, "--name") != :ok ->
+            name_part(n, "--name")
+
+          Regex.match?(@long_host, host) or
+              match?({:ok, _}, :inet.parse_strict_address(String.to_charlist(host))) ->
+            {:ok, name, :longnames}
+
+          true ->
+            bad_name(
+              "--name #{inspect(name)}: the host must be a host name (w1.example.org) " <>
+                "or an IP address"
+            )
+        end
+
+      _ ->
+        bad_name("--name takes NAME@HOST (for example w1@10.0.0.5), got: #{inspect(name)}")
+    end
+  end
+
+  defp name_part(n, flag) do
+    if Regex.match?(@name_part, n),
+      do: :ok,
+      else:
+        bad_name(
+          "#{flag}: a node name is letters, digits, _ and - (at most 200), got: #{inspect(n)}"
+        )
+  end
+
+  defp bad_name(message), do: {:error, Error.new(:invalid_option, message)}
 
   # On loopback a short name lives on `localhost`: the host name of the
   # machine may resolve to an address the node does not listen on.
@@ -230,28 +367,97 @@ defmodule RingTracer.Cluster.Distribution do
   # epmd, the port-mapper other nodes ask for our port, must run before the
   # node starts. One started here listens on loopback (and on the listen
   # address, if another is given). One that already runs is kept; a check
-  # says whether it is reachable where it must be, and warns when it is
-  # reachable where it need not be.
-  defp ensure_epmd(listen) do
+  # says whether it is reachable where it must be, whose it is, and warns
+  # when it is reachable where it need not be.
+  defp ensure_epmd(listen, transport, opts) do
     unless epmd_at?(@loopback), do: start_epmd(listen)
 
-    cond do
-      not wait_epmd(@loopback, 40) ->
-        {:error,
-         Error.new(:distribution, "epmd (the Erlang port mapper) did not start on 127.0.0.1:4369")}
+    if wait_epmd(@loopback, 40) do
+      listeners = Epmd.listeners()
 
-      not loopback?(listen) and not any_address?(listen) and not epmd_at?(listen) ->
-        {:error,
-         Error.new(
-           :distribution,
-           "epmd runs but does not listen on #{:inet.ntoa(listen)}, so other machines cannot " <>
-             "find this node; stop it (epmd -kill) and start again"
-         )}
-
-      true ->
+      with :ok <- reachable(listen, listeners),
+           :ok <- owner(listeners, transport, opts) do
         if loopback?(listen), do: warn_exposed_epmd()
         :ok
+      end
+    else
+      {:error,
+       Error.new(:distribution, "epmd (the Erlang port mapper) did not start on 127.0.0.1:4369")}
     end
+  end
+
+  defp reachable(listen, listeners) do
+    cond do
+      loopback?(listen) ->
+        :ok
+
+      any_address?(listen) ->
+        if listeners != :unknown and listeners != [] and not Epmd.any_address?(listeners) and
+             Enum.all?(listeners, &loopback?(&1.address)),
+           do: epmd_elsewhere("every address (--listen #{:inet.ntoa(listen)})"),
+           else: :ok
+
+      epmd_at?(listen) ->
+        :ok
+
+      true ->
+        epmd_elsewhere(to_string(:inet.ntoa(listen)))
+    end
+  end
+
+  defp epmd_elsewhere(where) do
+    {:error,
+     Error.new(
+       :distribution,
+       "epmd runs but does not listen on #{where}, only on loopback, so other machines " <>
+         "cannot find this node; stop it (epmd -kill) and start again"
+     )}
+  end
+
+  # An epmd of another user answers every port query: with plain
+  # distribution she can hand out a relay of hers and read and alter the
+  # stream; TLS refuses her relay, but she can still misdirect.
+  defp owner(:unknown, _transport, _opts), do: :ok
+
+  defp owner(listeners, transport, opts) do
+    case Epmd.foreign(listeners, Epmd.own_uid()) do
+      [] ->
+        :ok
+
+      foreign ->
+        whose = "epmd (port 4369) belongs to #{Epmd.describe(foreign)}, not to you"
+
+        cond do
+          transport == :tls ->
+            warn(
+              "#{whose}: that user learns this node's name and port and can misdirect " <>
+                "connections between nodes (TLS refuses her, so she can stop nodes from " <>
+                "finding each other, but not read or join the cluster); have it stopped " <>
+                "and start a node first"
+            )
+
+          opts[:allow_foreign_epmd] ->
+            warn(
+              "#{whose}, and distribution is plain TCP (--insecure-plain, " <>
+                "--allow-foreign-epmd): that user can read and alter everything this node says"
+            )
+
+          true ->
+            {:error,
+             Error.new(
+               :distribution,
+               "#{whose}: with plain TCP distribution (--insecure-plain) that user could " <>
+                 "read and alter everything this node says, and so run code on it. Drop " <>
+                 "--insecure-plain (distribution over TLS is the default), or give " <>
+                 "--allow-foreign-epmd to go on anyway"
+             )}
+        end
+    end
+  end
+
+  defp warn(message) do
+    IO.puts(Console.err(), "ringtracer: warning: #{message}")
+    :ok
   end
 
   defp start_epmd(listen) do
@@ -297,7 +503,7 @@ defmodule RingTracer.Cluster.Distribution do
     exposed = Enum.filter(own_addresses(), &epmd_at?(&1, 200))
 
     if exposed != [] do
-      Logger.warning(
+      warn(
         "epmd (port 4369) was started before, by someone else, and listens on " <>
           "#{Enum.map_join(exposed, ", ", &:inet.ntoa/1)} too: it tells anyone there which " <>
           "nodes run here. Restart it on loopback: epmd -kill, then " <>
@@ -341,7 +547,7 @@ defmodule RingTracer.Cluster.Distribution do
   end
 
   defp start_node(name, type) do
-    case Node.start(String.to_atom(name), type) do
+    case quietly(fn -> Node.start(String.to_atom(name), type) end) do
       {:ok, _} ->
         :ok
 
@@ -351,6 +557,30 @@ defmodule RingTracer.Cluster.Distribution do
            :distribution,
            "could not start node #{name}: #{explain(reason)}"
          )}
+    end
+  end
+
+  # A refused handshake is explained in one line by whoever connects
+  # (RingTracer.Cluster.check/1); OTP's ssl would also log a notice of
+  # several lines for it on stderr.
+  defp quiet_tls(:tls) do
+    _ = Application.load(:ssl)
+    _ = :logger.set_application_level(:ssl, :error)
+    :ok
+  end
+
+  defp quiet_tls(:plain), do: :ok
+
+  # OTP reports a distribution that fails to start with pages of
+  # supervisor reports; the error returned says it in one line.
+  defp quietly(fun) do
+    %{level: level} = :logger.get_primary_config()
+    :ok = :logger.update_primary_config(%{level: :none})
+
+    try do
+      fun.()
+    after
+      :logger.update_primary_config(%{level: level})
     end
   end
 

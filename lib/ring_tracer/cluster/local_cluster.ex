@@ -9,14 +9,21 @@ defmodule RingTracer.LocalCluster do
   (`~/.erlang.cookie`: nothing secret on their command lines). Each peer
   stops when its controlling process, or this node, goes. For real
   clusters, start workers with `ringtracer worker` instead.
+
+  Distribution runs over TLS with mutual authentication: this node must
+  have been booted with it (`bin/ringtracer mix ...` boots Mix's VMs with
+  the user's own certificates), and peers get the same certificates.
   """
 
   alias RingTracer.Cluster.{Distribution, TLS}
 
-  @doc "Makes this node distributed (starting epmd first) unless it already is."
+  @doc """
+  Makes this node distributed (starting epmd first) unless it already is;
+  raises `RingTracer.Error` when it cannot (a VM booted without TLS).
+  """
   @spec ensure_distributed() :: :ok
   def ensure_distributed do
-    {:ok, _} = Distribution.start(generate: true)
+    _ = Distribution.start!(generate: true)
     :ok
   end
 
@@ -27,13 +34,15 @@ defmodule RingTracer.LocalCluster do
 
     * `:code` — with `true` (default) the peer gets this node's code paths
       and starts `:ring_tracer`; with `false` it is a bare Erlang node
-    * `:tls` — a TLS folder (`RingTracer.Cluster.TLS`): the peer runs
-      distribution over TLS. This node cannot talk to it over distribution
-      then, so it is controlled through its standard input and output
-      (`call/4`), and this node need not be distributed
+    * `:tls` — a TLS folder (`RingTracer.Cluster.TLS`) for the peer
+      (default: this node's). With another folder than this node's, or
+      `nil` (no certificates), this node cannot talk to it over
+      distribution, so it is controlled through its standard input and
+      output (`call/4`), and this node need not be distributed
+    * `:plain` — `true`: the peer runs plain TCP distribution, controlled
+      through its standard I/O (for tests of refusals)
     * `:connection` — `:stdio` to control the peer through its standard I/O
-      even without `:tls` (for a peer whose distribution this node cannot
-      join)
+      (for a peer whose distribution this node cannot join)
     * `:args` — more VM arguments (strings)
 
   Returns `{peer_pid, node}`.
@@ -41,8 +50,19 @@ defmodule RingTracer.LocalCluster do
   @spec start(String.t(), keyword()) :: {pid(), node()}
   def start(prefix, opts \\ []) do
     code? = Keyword.get(opts, :code, true)
-    tls = opts[:tls]
-    stdio? = tls != nil or opts[:connection] == :stdio
+    own = if TLS.enabled?(), do: TLS.booted_dir()
+
+    tls =
+      cond do
+        opts[:plain] -> nil
+        Keyword.has_key?(opts, :tls) -> opts[:tls]
+        true -> own
+      end
+
+    stdio? =
+      opts[:connection] == :stdio or opts[:plain] == true or
+        (Keyword.has_key?(opts, :tls) and tls != own)
+
     unless stdio?, do: ensure_distributed()
     paths = if code?, do: Enum.flat_map(:code.get_path(), &[~c"-pa", &1]), else: []
     name = String.to_atom(Distribution.unique_name(prefix))

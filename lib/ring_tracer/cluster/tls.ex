@@ -66,10 +66,40 @@ defmodule RingTracer.Cluster.TLS do
       side.("server") ++ ["server_fail_if_no_peer_cert", "true"] ++ side.("client")
   end
 
-  @doc "Whether this VM runs distribution over TLS."
+  @doc """
+  Whether this VM runs distribution over TLS: exactly one `-proto_dist
+  inet_tls` among its boot arguments (OTP's `net_kernel` falls back to
+  plain TCP when `-proto_dist` is given twice).
+  """
   @spec enabled?() :: boolean()
   def enabled? do
-    match?({:ok, [[~c"inet_tls" | _] | _]}, :init.get_argument(:proto_dist))
+    match?({:ok, [[~c"inet_tls"]]}, :init.get_argument(:proto_dist))
+  end
+
+  @doc "The TLS folder this VM was booted with (that of its certificate), or nil."
+  @spec booted_dir() :: Path.t() | nil
+  def booted_dir do
+    case List.keyfind(boot_pairs(), "server_certfile", 0) do
+      {_, cert} -> Path.dirname(cert)
+      nil -> nil
+    end
+  end
+
+  @doc """
+  The user's own TLS folder, which the launcher fills on first use with a
+  private CA's certificate and a node certificate signed by it (the CA's
+  key is thrown away): `$XDG_CONFIG_HOME/ringtracer/tls`, else
+  `~/.config/ringtracer/tls`.
+  """
+  @spec default_dir() :: Path.t()
+  def default_dir do
+    base =
+      case System.get_env("XDG_CONFIG_HOME") do
+        dir when is_binary(dir) and dir != "" -> dir
+        _ -> Path.join(System.user_home!(), ".config")
+      end
+
+    Path.join([base, "ringtracer", "tls"])
   end
 
   @doc """
@@ -95,40 +125,99 @@ defmodule RingTracer.Cluster.TLS do
     end
   end
 
-  @doc "Checks that `dir` holds the three files and that the key is private."
-  @spec check_dir(Path.t()) :: :ok | {:error, Error.t()}
+  @doc """
+  Checks a TLS folder: it holds the three files, it and the key belong to
+  this user and no one else can change the folder or read the key, and the
+  node's certificate is valid now.
+  """
+  @spec check_dir(Path.t() | nil) :: :ok | {:error, Error.t()}
+  def check_dir(nil),
+    do: {:error, Error.new(:distribution, "this VM's TLS options name no certificate")}
+
   def check_dir(dir) do
     missing = Enum.reject(@files, &File.regular?(Path.join(dir, &1)))
 
     cond do
       not File.dir?(dir) ->
-        {:error,
-         Error.new(
-           :distribution,
-           "--tls #{dir}: no such folder (make one with: ringtracer tls node)"
-         )}
+        tls_error("--tls #{dir}: no such folder (make one with: ringtracer tls node)")
 
       missing != [] ->
-        {:error,
-         Error.new(
-           :distribution,
-           "--tls #{dir}: missing #{Enum.join(missing, ", ")} (make them with: ringtracer tls node)"
-         )}
+        tls_error(
+          "--tls #{dir}: missing #{Enum.join(missing, ", ")} (make them with: ringtracer tls node)"
+        )
 
       true ->
-        key = Path.join(dir, "node.key")
-        %File.Stat{mode: mode} = File.stat!(key)
-
-        if (mode &&& 0o077) != 0,
-          do:
-            {:error,
-             Error.new(
-               :distribution,
-               "#{key} can be read by other users; fix it with: chmod 600 #{key}"
-             )},
-          else: :ok
+        with :ok <- private(dir, 0o022, "changed"),
+             :ok <- private(Path.join(dir, "node.key"), 0o077, "read") do
+          valid_now(Path.join(dir, "node.pem"))
+        end
     end
   end
+
+  defp private(path, bits, what) do
+    {:ok, %File.Stat{mode: mode, uid: uid}} = File.stat(path)
+    own = RingTracer.Cluster.Epmd.own_uid()
+
+    cond do
+      uid != own ->
+        tls_error(
+          "#{path} belongs to #{RingTracer.Cluster.Epmd.user_name(uid)}, not to you: " <>
+            "use a TLS folder of your own"
+        )
+
+      (mode &&& bits) != 0 ->
+        tls_error(
+          "#{path} can be #{what} by other users; fix it with: chmod #{if bits == 0o022, do: "700", else: "600"} #{path}"
+        )
+
+      true ->
+        :ok
+    end
+  end
+
+  @doc """
+  Checks that the certificate in `pem` is valid at this moment: one not yet
+  valid and one expired are told apart (a machine's clock is often what is
+  wrong).
+  """
+  @spec valid_now(Path.t()) :: :ok | {:error, Error.t()}
+  def valid_now(pem) do
+    with {:ok, text} <- File.read(pem),
+         [{:Certificate, der, _} | _] <- :public_key.pem_decode(text),
+         {:OTPCertificate, tbs, _, _} <- :public_key.pkix_decode_cert(der, :otp),
+         {:Validity, from, until} <- elem(tbs, 5) do
+      now = :calendar.datetime_to_gregorian_seconds(:calendar.universal_time())
+      from_s = :pubkey_cert.time_str_2_gregorian_sec(from)
+      until_s = :pubkey_cert.time_str_2_gregorian_sec(until)
+
+      cond do
+        now < from_s ->
+          tls_error(
+            "#{pem} is not valid yet: only from #{date(from_s)} UTC (is this machine's " <>
+              "clock right? it says #{date(now)})"
+          )
+
+        now > until_s ->
+          tls_error(
+            "#{pem} expired on #{date(until_s)} UTC; make a new one with: ringtracer tls node"
+          )
+
+        true ->
+          :ok
+      end
+    else
+      _ -> tls_error("#{pem} holds no certificate that can be read")
+    end
+  end
+
+  defp date(seconds) do
+    {{y, mo, d}, {h, mi, _}} = :calendar.gregorian_seconds_to_datetime(seconds)
+
+    :io_lib.format("~4..0B-~2..0B-~2..0B ~2..0B:~2..0B", [y, mo, d, h, mi])
+    |> IO.iodata_to_binary()
+  end
+
+  defp tls_error(message), do: {:error, Error.new(:distribution, message)}
 
   @doc """
   Why a connection to `node` failed, as far as a TLS handshake with its
@@ -195,23 +284,29 @@ defmodule RingTracer.Cluster.TLS do
 
   defp ssl_connect(host, port, opts) do
     {:ok, _} = Application.ensure_all_started(:ssl)
+    # What the handshake says is told in one line; ssl's own notices and
+    # its warning about verify_none (a probe that trusts nothing) would
+    # add several more.
+    _ = :logger.set_application_level(:ssl, :error)
     :ssl.connect(host, port, opts, 5_000)
   end
 
   # This node's client options, from its boot arguments.
   defp client_opts do
-    pairs =
-      case :init.get_argument(:ssl_dist_opt) do
-        {:ok, args} -> args |> Enum.concat() |> chunk_pairs()
-        :error -> []
-      end
-
-    for {"client_" <> key, value} <- pairs,
+    for {"client_" <> key, value} <- boot_pairs(),
         key in ["certfile", "keyfile", "cacertfile", "verify"] do
       case key do
         "verify" -> {:verify, String.to_existing_atom(value)}
         _ -> {String.to_existing_atom(key), String.to_charlist(value)}
       end
+    end
+  end
+
+  # The `-ssl_dist_opt` key-value pairs this VM was booted with.
+  defp boot_pairs do
+    case :init.get_argument(:ssl_dist_opt) do
+      {:ok, args} -> args |> Enum.concat() |> chunk_pairs()
+      :error -> []
     end
   end
 
@@ -227,7 +322,7 @@ defmodule RingTracer.Cluster.TLS do
 
   @doc false
   @spec describe(term()) :: String.t()
-  def describe({:tls_alert, {kind, detail}}), do: alert(kind, to_string(detail))
+  def describe({:tls_alert, {kind, detail}}), do: alert(kind, one_line(detail))
   def describe({:tls_alert, kind}) when is_atom(kind), do: alert(kind, "")
 
   def describe({:options, _} = reason),
@@ -250,5 +345,13 @@ defmodule RingTracer.Cluster.TLS do
   defp alert(:handshake_failure, detail),
     do: "the TLS handshake failed (#{detail})"
 
-  defp alert(kind, detail), do: "the TLS handshake failed: #{kind} #{detail}"
+  defp alert(:certificate_expired, _),
+    do:
+      "the TLS handshake failed: a certificate is outside its validity dates (expired, or " <>
+        "not valid yet: check both machines' clocks and the dates of each node.pem)"
+
+  defp alert(kind, detail), do: String.trim("the TLS handshake failed: #{kind} #{detail}")
+
+  # OTP's alert texts end with a newline, some hold several lines.
+  defp one_line(detail), do: detail |> to_string() |> String.split() |> Enum.join(" ")
 end

@@ -7,7 +7,7 @@ defmodule RingTracer.Cluster.SecurityTest do
   @moduletag :tmp_dir
   @moduletag timeout: 120_000
 
-  alias RingTracer.Cluster.Cookie
+  alias RingTracer.Cluster.{Cookie, TLS}
   alias RingTracer.Test.OSNode
 
   @attacker "rtattacker"
@@ -27,8 +27,12 @@ defmodule RingTracer.Cluster.SecurityTest do
 
   defp sname, do: "wsec_#{System.unique_integer([:positive])}"
 
+  # The flags the launcher boots a worker with: TLS with this user's own
+  # certificates (this test's VM was booted with them too).
+  defp tls, do: [vm_args: TLS.vm_args(TLS.booted_dir())]
+
   defp start_worker!(args) do
-    worker = OSNode.start(["worker" | args])
+    worker = OSNode.start(["worker" | args], tls())
     {:ok, worker} = OSNode.await(worker, "ready")
     on_exit(fn -> OSNode.stop(worker) end)
     worker
@@ -97,7 +101,7 @@ defmodule RingTracer.Cluster.SecurityTest do
     cookie_file: cookie_file
   } do
     {status, output} =
-      OSNode.wait_exit(OSNode.start(["worker", "--sname", sname(), "--cookie", "c"]))
+      OSNode.wait_exit(OSNode.start(["worker", "--sname", sname(), "--cookie", "c"], tls()))
 
     assert status == 1
     assert output =~ "--cookie-file"
@@ -105,7 +109,9 @@ defmodule RingTracer.Cluster.SecurityTest do
     File.chmod!(cookie_file, 0o644)
 
     {status, output} =
-      OSNode.wait_exit(OSNode.start(["worker", "--sname", sname(), "--cookie-file", cookie_file]))
+      OSNode.wait_exit(
+        OSNode.start(["worker", "--sname", sname(), "--cookie-file", cookie_file], tls())
+      )
 
     assert status == 1
     assert output =~ "can be read by other users"
@@ -134,7 +140,9 @@ defmodule RingTracer.Cluster.SecurityTest do
     _first = start_worker!(["--sname", name, "--cookie-file", cookie_file])
 
     {status, output} =
-      OSNode.wait_exit(OSNode.start(["worker", "--sname", name, "--cookie-file", cookie_file]))
+      OSNode.wait_exit(
+        OSNode.start(["worker", "--sname", name, "--cookie-file", cookie_file], tls())
+      )
 
     assert status == 1
     assert output =~ "the node name #{name} is in use"

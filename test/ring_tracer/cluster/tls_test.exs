@@ -33,7 +33,8 @@ defmodule RingTracer.Cluster.TLSTest do
       peers_no_cert =
       Peers.start("tls_nocert", args: ["-proto_dist", "inet_tls"], tls: nil, connection: :stdio)
 
-    {_, plain} = plain_peer = Peers.start("plain")
+    # Plain TCP distribution (this node runs TLS: controlled through its standard I/O).
+    plain_peer = Peers.start("plain", plain: true)
 
     on_exit(fn ->
       Enum.each([peers_no_cert, plain_peer | Map.values(peers)], fn {p, _} -> Peers.stop(p) end)
@@ -43,7 +44,7 @@ defmodule RingTracer.Cluster.TLSTest do
     {:ok,
      peers: peers,
      no_cert: {elem(peers_no_cert, 0), no_cert},
-     plain: plain,
+     plain: plain_peer,
      reference: TestScenes.reference(@scene, 64, 48)}
   end
 
@@ -90,7 +91,7 @@ defmodule RingTracer.Cluster.TLSTest do
     assert error.message =~ "not signed by our CA"
   end
 
-  test "a plain-TCP node is refused both ways", %{peers: peers, plain: plain} do
+  test "a plain-TCP node is refused both ways", %{peers: peers, plain: {_, plain} = plain_peer} do
     {_, w1} = peers["w1"]
 
     {:error, error} =
@@ -102,8 +103,8 @@ defmodule RingTracer.Cluster.TLSTest do
     assert error.message =~ "cannot connect to node #{plain}"
     assert error.message =~ "plain TCP"
 
-    refute :erpc.call(plain, Node, :connect, [w1])
-    {:error, error} = :erpc.call(plain, RingTracer.Cluster, :check, [[w1]])
+    refute call(plain_peer, Node, :connect, [w1])
+    {:error, error} = call(plain_peer, RingTracer.Cluster, :check, [[w1]])
     assert error.message =~ "over TLS only"
   end
 
