@@ -37,9 +37,12 @@ defmodule RingTracer.Preview do
   Cost: the job's parent sends the preview one message per atom and per
   hand-over, children one per protocol event; the preview converts an
   atom's pixels to sRGB base64 once (in the NIF, on a normal scheduler),
-  and viewers read the one log. A slow or
-  stalled browser lags behind the log and holds no buffer; the job never
-  waits for the preview (`RingTracer.Bench.Preview` measures it).
+  and viewers read the one log. A slow browser lags behind the log and
+  holds no buffer; one that stops reading is disconnected (every send has a
+  deadline), and a stop drops at once a viewer that is not reading. The
+  job, its outputs and the end of `render/2` never wait for a viewer, and
+  the job never waits for the preview (`RingTracer.Bench.Preview` measures
+  it).
   """
 
   alias RingTracer.Preview.Server
@@ -100,8 +103,10 @@ defmodule RingTracer.Preview do
 
   @doc """
   Stops the preview, after waiting up to `drain_ms` (default 2000) for
-  connected browsers to have received the job's final frame. When it
-  returns, the page's listening socket is closed.
+  connected browsers to have received the job's final frame: a browser
+  whose connection takes no data for 100 ms meanwhile is dropped, not
+  waited for, and those still connected after `drain_ms` are dropped too.
+  When it returns, the page's listening socket is closed.
   """
   @spec stop(t(), non_neg_integer()) :: :ok
   def stop(%__MODULE__{pid: pid}, drain_ms \\ 2_000) do

@@ -13,7 +13,10 @@ defmodule RingTracer.Preview.HTTP do
   frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
   up to 256 KB, at most one every #{40} ms, until the job's end frame. The
   handler reads the log itself: a slow viewer lags without holding any
-  buffer, and a stalled one blocks only its own connection's process.
+  buffer. Every send has a deadline (2 s): a viewer whose connection
+  takes nothing for that long while a chunk waits (so at most one chunk
+  waits in the VM for it) is disconnected; a browser reconnects from its
+  `Last-Event-ID`. Beyond `:max_viewers` streams at once, `/events` is 503.
   """
 
   require Record
@@ -29,6 +32,8 @@ defmodule RingTracer.Preview.HTTP do
   @chunk_bytes 256 * 1024
   @interval_ms 40
   @keep_alive_ms 10_000
+  @send_timeout_ms 2_000
+  @join_timeout_ms 5_000
   @csp ~c"default-src 'self'; img-src 'self' data:; connect-src 'self'; frame-ancestors 'none'"
 
   @doc "The folder of the page's files."
@@ -122,21 +127,40 @@ defmodule RingTracer.Preview.HTTP do
 
   defp stream(m, server, table) do
     Process.flag(:priority, :low)
-    ref = Process.monitor(server)
-    send(server, {:viewer, self()})
+    socket = mod(m, :socket)
+    # Every send to the viewer has a deadline: one whose connection takes
+    # nothing for @send_timeout_ms while a chunk waits is disconnected, and
+    # at most one chunk waits in the VM for it.
+    _ = :inet.setopts(socket, send_timeout: @send_timeout_ms, send_timeout_close: true)
 
-    headers =
-      [content_type: ~c"text/event-stream", cache_control: ~c"no-store"] ++
-        if mod(m, :http_version) == ~c"HTTP/1.1", do: [transfer_encoding: ~c"chunked"], else: []
+    case join(server, socket) do
+      :ok ->
+        ref = Process.monitor(server)
 
-    :httpd_response.send_header(m, 200, headers)
+        headers =
+          [content_type: ~c"text/event-stream", cache_control: ~c"no-store"] ++
+            if mod(m, :http_version) == ~c"HTTP/1.1",
+              do: [transfer_encoding: ~c"chunked"],
+              else: []
 
-    if loop(m, server, table, ref, last_event_id(m)) == :ok,
-      do: :httpd_response.send_final_chunk(m, false)
+        :httpd_response.send_header(m, 200, headers)
 
-    send(server, {:viewer_done, self()})
-    Process.demonitor(ref, [:flush])
-    {:proceed, [{:response, {:already_sent, 200, 0}}]}
+        if loop(m, server, table, ref, last_event_id(m)) == :ok,
+          do: :httpd_response.send_final_chunk(m, false)
+
+        send(server, {:viewer_done, self()})
+        Process.demonitor(ref, [:flush])
+        {:proceed, [{:response, {:already_sent, 200, 0}}]}
+
+      {:error, :full} ->
+        {:proceed, [{:response, {503, ~c"as many viewers as the preview takes"}}]}
+    end
+  end
+
+  defp join(server, socket) do
+    GenServer.call(server, {:viewer, self(), socket}, @join_timeout_ms)
+  catch
+    :exit, _ -> {:error, :full}
   end
 
   defp last_event_id(m) do

@@ -21,6 +21,10 @@ defmodule RingTracer.Preview.Server do
 
   alias RingTracer.Preview.Log
 
+  # How long a viewer's connection may take no data, during a stop, before
+  # it is dropped.
+  @stall_ms 100
+
   @doc false
   @spec start(keyword()) :: GenServer.on_start()
   def start(opts), do: GenServer.start(__MODULE__, opts)
@@ -68,6 +72,7 @@ defmodule RingTracer.Preview.Server do
           handlers: [],
           waiters: MapSet.new(),
           viewers: %{},
+          max_viewers: Keyword.get(opts, :max_viewers, 32),
           expect: nil,
           ended: :atomics.new(1, []),
           cpu_share: Keyword.get(opts, :cpu_share, 0.01),
@@ -89,6 +94,17 @@ defmodule RingTracer.Preview.Server do
     do: {:reply, {state.addr, state.port, state.token}, state}
 
   def handle_call(:viewers, _from, state), do: {:reply, map_size(state.viewers), state}
+
+  # A viewer's request process, with its socket: one more viewer unless
+  # there are already `:max_viewers`.
+  def handle_call({:viewer, pid, socket}, _from, state) do
+    if map_size(state.viewers) >= state.max_viewers do
+      {:reply, {:error, :full}, state}
+    else
+      viewer = %{ref: Process.monitor(pid), socket: socket, queued: 0, sent: nil}
+      {:reply, :ok, %{state | viewers: Map.put(state.viewers, pid, viewer)}}
+    end
+  end
 
   def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,
     do: {:reply, {:error, :already_watching}, state}
@@ -174,12 +190,9 @@ defmodule RingTracer.Preview.Server do
   def handle_info({:DOWN, _, :process, pid, _}, %{owner: pid} = state),
     do: {:stop, :normal, state}
 
-  def handle_info({:viewer, pid}, state),
-    do: {:noreply, %{state | viewers: Map.put(state.viewers, pid, Process.monitor(pid))}}
-
   def handle_info({:viewer_done, pid}, state) do
-    {ref, viewers} = Map.pop(state.viewers, pid)
-    if ref, do: Process.demonitor(ref, [:flush])
+    {viewer, viewers} = Map.pop(state.viewers, pid)
+    if viewer, do: Process.demonitor(viewer.ref, [:flush])
     {:noreply, drained(%{state | viewers: viewers})}
   end
 
@@ -188,7 +201,26 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({:drain, from, ref, ms}, state) do
     timer = Process.send_after(self(), {:drain_timeout, ref}, ms)
-    {:noreply, drained(%{state | drain: {from, ref, timer}})}
+    state = %{state | drain: {from, ref, timer}, viewers: sample(state.viewers)}
+    if state.viewers != %{}, do: Process.send_after(self(), {:drain_check, ref}, @stall_ms)
+    {:noreply, drained(state)}
+  end
+
+  # During a stop, a viewer whose connection has data waiting and took none
+  # of it since the last look is not reading: it is dropped, not waited for.
+  def handle_info({:drain_check, ref}, %{drain: {_, ref, _}} = state) do
+    {stalled, reading} =
+      state.viewers
+      |> sample()
+      |> Enum.split_with(fn {pid, v} -> stalled?(v, state.viewers[pid]) end)
+
+    for {pid, v} <- stalled do
+      Process.demonitor(v.ref, [:flush])
+      Process.exit(pid, :kill)
+    end
+
+    Process.send_after(self(), {:drain_check, ref}, @stall_ms)
+    {:noreply, drained(%{state | viewers: Map.new(reading)})}
   end
 
   def handle_info({:drain_timeout, ref}, %{drain: {from, ref, _}} = state) do
@@ -207,9 +239,35 @@ defmodule RingTracer.Preview.Server do
 
   defp drained(state), do: state
 
+  # Each viewer's bytes queued in the VM for its socket and bytes the socket
+  # has taken so far.
+  defp sample(viewers) do
+    Map.new(viewers, fn {pid, v} ->
+      queued =
+        case :erlang.port_info(v.socket, :queue_size) do
+          {:queue_size, n} -> n
+          _ -> 0
+        end
+
+      sent =
+        case :inet.getstat(v.socket, [:send_oct]) do
+          {:ok, [send_oct: n]} -> n
+          _ -> nil
+        end
+
+      {pid, %{v | queued: queued, sent: sent}}
+    end)
+  end
+
+  defp stalled?(now, before), do: now.queued > 0 and now.sent == before.sent
+
   @impl GenServer
   def terminate(_reason, state) do
     detach(state.handlers)
+    # A viewer still connected is dropped at once: a stop never waits on a
+    # browser (one that does not read would hold its connection's process in
+    # a send until the send's deadline).
+    Enum.each(Map.keys(state.viewers), &Process.exit(&1, :kill))
     close(state.httpd, state.listener)
   end
 

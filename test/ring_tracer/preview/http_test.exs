@@ -200,6 +200,118 @@ defmodule RingTracer.Preview.HTTPTest do
     :gen_tcp.close(sock)
   end
 
+  # A client that asks for `url`'s stream and never reads it (a small
+  # receive buffer, so that its connection is soon full).
+  defp stalled_viewer(url) do
+    %URI{port: port, path: path} = URI.parse(url)
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false, recbuf: 1024])
+    :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: localhost\r\n\r\n")
+    sock
+  end
+
+  @tag :tmp_dir
+  test "viewers that never read hold up neither the render, nor its outputs, nor its end",
+       %{tmp_dir: dir} do
+    out = Path.join(dir, "big.png")
+    me = self()
+    handler = {__MODULE__, :job_end, me}
+
+    :ok =
+      RingTracer.Telemetry.attach(
+        handler,
+        [:ring_tracer, :job, :stop],
+        fn _, _, _, pid -> send(pid, {:job_end, System.monotonic_time(:millisecond)}) end,
+        me
+      )
+
+    try do
+      capture_io(:stderr, fn ->
+        # As soon as the render prints its page's address, 30 viewers ask
+        # for the stream and never read it (a log of about 10 MB: far more
+        # than their connections hold).
+        stderr = Process.whereis(:standard_error)
+
+        spawn_link(fn ->
+          url =
+            Stream.repeatedly(fn ->
+              Process.sleep(5)
+              Regex.run(~r|preview: (\S+)|, elem(StringIO.contents(stderr), 1))
+            end)
+            |> Enum.find(& &1)
+            |> List.last()
+
+          socks = for _ <- 1..30, do: stalled_viewer(url)
+          # Theirs to keep open: a socket closes with its owner.
+          Enum.each(socks, &(:ok = :gen_tcp.controlling_process(&1, me)))
+          send(me, {:stalled, socks})
+        end)
+
+        argv =
+          [
+            @scene,
+            "-o",
+            out,
+            "-w",
+            "2400",
+            "--height",
+            "1600",
+            "--children",
+            "2",
+            "--atoms",
+            "32"
+          ] ++
+            ["--speeds", "4,4", "--progress", "none", "--preview"]
+
+        capture_io(fn -> assert :ok = RingTracer.CLI.Render.execute(argv) end)
+        done = System.monotonic_time(:millisecond)
+        assert_received {:stalled, socks}
+        assert_received {:job_end, ended}
+        send(me, {:times, ended, done, socks})
+      end)
+
+      assert_received {:times, ended, done, socks}
+      # The image is written, and the command returned, without waiting on
+      # any of them (it took 6 s: 2 s of a drain that waited on them, then
+      # 4 s of httpd's shutdown of their connections' processes, blocked in
+      # a send that had no deadline).
+      assert File.exists?(out)
+      assert done - ended < 2_000, "#{done - ended} ms from the job's end to the command's"
+
+      # Each was disconnected: past what its connection held, it reads the end.
+      for sock <- socks, do: assert(drain(sock) == :closed)
+    after
+      RingTracer.Telemetry.detach(handler)
+    end
+  end
+
+  test "a viewer that stops reading is disconnected; one that reads gets everything",
+       %{preview: p} do
+    me = self()
+    stalled = stalled_viewer(p.url)
+    spawn_link(fn -> send(me, {:reader, Viewer.viewer(p.url <> "events", 60_000)}) end)
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 2 end)
+
+    # A log of about 15 MB, far more than the stalled viewer's connection
+    # holds: its process has a chunk waiting, and the send's deadline.
+    {:ok, _} =
+      RingTracer.render(@scene, width: 2400, height: 1600, children: 2, atoms: 32, preview: p)
+
+    assert_receive {:reader, {:ok, n}}, 60_000
+    assert n == length(frames(p.url))
+    # Dropped by the preview, which still runs (before: it stayed a viewer
+    # until the preview stopped).
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 0 end, 1_000)
+    assert drain(stalled) == :closed
+    assert {200, _, _} = get(p.url)
+  end
+
+  defp drain(sock) do
+    case :gen_tcp.recv(sock, 0, 5_000) do
+      {:ok, _} -> drain(sock)
+      {:error, reason} -> reason
+    end
+  end
+
   test "open/2 previews a job already running, from the atoms traced so far" do
     # Slow enough (about a second) to be still running when the preview
     # opens, even on a loaded machine.
