@@ -87,9 +87,36 @@ defmodule RingTracer.Preview do
       {:ok, pid} ->
         {:ok, pid}
 
+      {:error, {:listen, reason}} ->
+        {:error, RingTracer.Error.new(:preview, listen_failure(reason, opts))}
+
       {:error, reason} ->
         {:error,
          RingTracer.Error.new(:preview, "could not start the preview: #{inspect(reason)}")}
+    end
+  end
+
+  defp listen_failure(reason, opts) do
+    addr = host(Keyword.fetch!(opts, :listen))
+    port = Keyword.get(opts, :port, 0)
+
+    case reason do
+      :eaddrinuse ->
+        "port #{port} on #{addr} is in use (another program listens there): " <>
+          "give another port, or 0 for a free one"
+
+      :eacces ->
+        "may not listen on port #{port} on #{addr} (ports below 1024 need privileges): " <>
+          "give another port, or 0 for a free one"
+
+      :eaddrnotavail ->
+        "cannot listen on #{addr}: it is not an address of this machine"
+
+      :not_listening ->
+        "could not listen on #{addr}, port #{port} (is #{addr} an address of this machine?)"
+
+      other ->
+        "could not listen on #{addr}, port #{port}: #{:inet.format_error(other)}"
     end
   end
 

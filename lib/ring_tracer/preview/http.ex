@@ -5,9 +5,11 @@ defmodule RingTracer.Preview.HTTP do
   files, by fixed name from `priv/preview`, and `GET /events`, the job's
   Server-Sent Events stream, all under `/TOKEN/`, the preview's random
   first segment. Anything else is 404 (an unknown path, or one outside the
-  token) or 405 (a method other than GET); a request whose `Host` header
-  names another host than the preview's address (`hosts/1`: a page that
-  rebound its own name to 127.0.0.1) is 421.
+  token) or 405 (a method other than GET); a request target that is not a
+  path (the absolute form `GET http://host/...`, or `*`) is 400; a request
+  whose `Host` header names another host than the preview's address
+  (`hosts/1`: a page that rebound its own name to 127.0.0.1) is 421. No
+  response has a `Server` header.
 
   `/events` streams the log of `RingTracer.Preview.Server` from its first
   frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
@@ -67,7 +69,8 @@ defmodule RingTracer.Preview.HTTP do
 
   @doc false
   def unquote(:do)(m) do
-    {server, table, token, hosts} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+    {server, table, secret} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+    {token, hosts} = address(secret)
 
     full = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
 
@@ -78,6 +81,11 @@ defmodule RingTracer.Preview.HTTP do
       end
 
     cond do
+      # Only the origin form (`GET /path`): the absolute form is for
+      # proxies, and the preview is none.
+      not origin_form?(m) ->
+        {:proceed, [{:response, {400, ~c"only a path as the request target"}}]}
+
       not host_allowed?(m, hosts) ->
         {:proceed, [{:response, {421, ~c"the preview answers on its own address only"}}]}
 
@@ -108,6 +116,21 @@ defmodule RingTracer.Preview.HTTP do
       true ->
         {:proceed, [{:response, {404, ~c"not found"}}]}
     end
+  end
+
+  # The preview's token and host names (none once it is stopping).
+  defp address(secret) do
+    [{:address, token, hosts}] = :ets.lookup(secret, :address)
+    {token, hosts}
+  rescue
+    ArgumentError -> {nil, []}
+  end
+
+  defp origin_form?(m) do
+    match?(
+      [_method, "/" <> _, _version],
+      m |> mod(:request_line) |> to_string() |> String.split(" ")
+    )
   end
 
   defp host_allowed?(_m, :any), do: true

@@ -42,6 +42,8 @@ defmodule RingTracer.Preview.Server do
     # can reach loopback) or a web page that rebinds a name of its own to
     # 127.0.0.1 cannot guess it, and only sees 404s.
     token = Base.url_encode64(:crypto.strong_rand_bytes(16), padding: false)
+    secret = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
+    :ets.insert(secret, {:address, token, RingTracer.Preview.HTTP.hosts(addr)})
 
     config = [
       port: Keyword.get(opts, :port, 0),
@@ -52,42 +54,53 @@ defmodule RingTracer.Preview.Server do
       ipfamily: if(tuple_size(addr) == 8, do: :inet6, else: :inet),
       modules: [RingTracer.Preview.HTTP],
       max_clients: Keyword.get(opts, :max_viewers, 32),
+      # No Server header: nothing to tell a prober what answers here.
+      server_tokens: :none,
       keep_alive_timeout: 60,
-      ring_tracer_preview: {self(), table, token, RingTracer.Preview.HTTP.hosts(addr)}
+      # The token is not in httpd's configuration, which httpd prints when
+      # it cannot start: it is in a table of its own, read by the handler.
+      ring_tracer_preview: {self(), table, secret}
     ]
 
-    case :inets.start(:httpd, config, :stand_alone) do
-      {:ok, httpd} ->
-        port = port(httpd)
+    with {:ok, httpd} <- :inets.start(:httpd, config, :stand_alone),
+         {:ok, port} <- port(httpd, config) do
+      state = %{
+        table: table,
+        httpd: httpd,
+        listener: listener(addr, port),
+        port: port,
+        addr: addr,
+        token: token,
+        log: Log.new(Keyword.take(opts, [:max_events])),
+        parent: nil,
+        handlers: [],
+        waiters: MapSet.new(),
+        viewers: %{},
+        max_viewers: Keyword.get(opts, :max_viewers, 32),
+        expect: nil,
+        ended: :atomics.new(1, []),
+        cpu_share: Keyword.get(opts, :cpu_share, 0.01),
+        pending: [],
+        queue: :queue.new(),
+        pacing: nil,
+        drain: nil
+      }
 
-        state = %{
-          table: table,
-          httpd: httpd,
-          listener: listener(addr, port),
-          port: port,
-          addr: addr,
-          token: token,
-          log: Log.new(Keyword.take(opts, [:max_events])),
-          parent: nil,
-          handlers: [],
-          waiters: MapSet.new(),
-          viewers: %{},
-          max_viewers: Keyword.get(opts, :max_viewers, 32),
-          expect: nil,
-          ended: :atomics.new(1, []),
-          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
-          pending: [],
-          queue: :queue.new(),
-          pacing: nil,
-          drain: nil
-        }
-
-        {:ok, state}
-
-      {:error, reason} ->
-        {:stop, {:httpd, reason}}
+      {:ok, state}
+    else
+      {:error, reason} -> {:stop, {:listen, listen_error(reason)}}
     end
   end
+
+  # What stopped httpd from listening (`:eaddrinuse`, `:eacces`...), out of
+  # its supervisors' reports; a port this VM already serves is in use too.
+  defp listen_error({:listen, reason}), do: reason
+
+  defp listen_error({:shutdown, {:failed_to_start_child, _, {:already_started, _}}}),
+    do: :eaddrinuse
+
+  defp listen_error({:shutdown, {:failed_to_start_child, _, inner}}), do: listen_error(inner)
+  defp listen_error(other), do: other
 
   @impl GenServer
   def handle_call(:address, _from, state),
@@ -318,12 +331,26 @@ defmodule RingTracer.Preview.Server do
   # httpd.info/2 knows only servers started under the :inets application;
   # this one is ours (stand-alone, linked), and its instance supervisor is
   # named by address and port.
-  defp port(httpd) do
-    [port] =
-      for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
-          do: port
+  defp port(httpd, config) do
+    case for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
+             do: port do
+      [port] ->
+        {:ok, port}
 
-    port
+      # Started without a listener (with port 0, httpd does not report why:
+      # a listen of our own, closed at once, tells).
+      [] ->
+        :inets.stop(:stand_alone, httpd)
+
+        case :gen_tcp.listen(config[:port], ip: config[:bind_address]) do
+          {:ok, socket} ->
+            :gen_tcp.close(socket)
+            {:error, :not_listening}
+
+          {:error, reason} ->
+            {:error, {:listen, reason}}
+        end
+    end
   end
 
   defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),

@@ -108,6 +108,90 @@ defmodule RingTracer.Preview.HTTPTest do
     end
   end
 
+  # One raw HTTP/1.1 exchange on `port`: the response's status line and headers.
+  defp raw(port, request) do
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false])
+    :ok = :gen_tcp.send(sock, request)
+    {:ok, head} = :gen_tcp.recv(sock, 0, 5_000)
+    :gen_tcp.close(sock)
+    head |> String.split("\r\n\r\n") |> hd()
+  end
+
+  test "a request target in absolute form is refused; no response names the server",
+       %{preview: p} do
+    %URI{path: path, port: port} = URI.parse(p.url)
+
+    for target <-
+          ["http://127.0.0.1:#{port}#{path}", "HTTP://127.0.0.1#{path}events"] ++
+            ["https://127.0.0.1#{path}", "*"] do
+      head = raw(port, "GET #{target} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+      assert head =~ ~r/\AHTTP\/1\.1 400 /, target
+    end
+
+    assert raw(port, "GET #{path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") =~ ~r/\AHTTP\/1\.1 200 /
+
+    for url <- [p.url, p.url <> "preview.js", p.url <> "nothing", "http://127.0.0.1:#{port}/"] do
+      {_, headers, _} = get(url)
+      refute Map.has_key?(headers, "server"), url
+    end
+
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false])
+    :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    {:ok, head} = :gen_tcp.recv(sock, 0, 5_000)
+    :gen_tcp.close(sock)
+    assert head =~ "text/event-stream"
+    refute head =~ ~r/^server:/im
+  end
+
+  test "a port in use, or not this machine's address, is said in words" do
+    {:ok, taken} = :gen_tcp.listen(0, ip: {127, 0, 0, 1})
+    {:ok, port} = :inet.port(taken)
+
+    assert {:error, %RingTracer.Error{reason: :preview, message: m}} = Preview.start(port: port)
+
+    assert m ==
+             "port #{port} on 127.0.0.1 is in use (another program listens there): give another port, or 0 for a free one"
+
+    # Another preview of this VM on that port.
+    :gen_tcp.close(taken)
+    {:ok, first} = Preview.start(port: port)
+    assert {:error, %RingTracer.Error{message: ^m}} = Preview.start(port: port)
+    Preview.stop(first, 0)
+
+    for addr <- ["192.0.2.1", "10.255.255.254"] do
+      log =
+        ExUnit.CaptureLog.capture_log(fn ->
+          assert {:error, %RingTracer.Error{reason: :preview, message: m}} =
+                   Preview.start(listen: addr)
+
+          assert m =~ addr and m =~ "not an address of this machine", m
+          refute m =~ "{"
+        end)
+
+      # httpd's report of its failed start prints its configuration: the
+      # page's secret is not in it (it was).
+      refute log =~ ~r/"[\w-]{22}"/, log
+    end
+
+    err =
+      capture_io(:stderr, fn ->
+        {:ok, taken} = :gen_tcp.listen(port, ip: {127, 0, 0, 1})
+
+        assert {:ok, _} =
+                 RingTracer.render(@scene,
+                   width: 8,
+                   height: 8,
+                   children: 2,
+                   atoms: 2,
+                   preview: port
+                 )
+
+        :gen_tcp.close(taken)
+      end)
+
+    assert err =~ "preview: port #{port} on 127.0.0.1 is in use"
+  end
+
   test "--listen widens: the page answers on the address given" do
     {:ok, p} = Preview.start(listen: "0.0.0.0")
     assert p.url =~ "http://0.0.0.0:"
