@@ -21,7 +21,17 @@ defmodule RingTracer.MixProject do
       dialyzer_ignore: [],
       # :inets (the preview's HTTP server) is started by RingTracer.Preview, like
       # :ssl by TLS, only when used.
-      xref: [exclude: [:ssl, :inets, :httpd, :httpd_util, :httpd_response, :httpc]],
+      xref: [
+        exclude: [
+          :ssl,
+          :inets,
+          :httpd,
+          :httpd_util,
+          :httpd_response,
+          :httpd_connection_sup,
+          :httpc
+        ]
+      ],
       aliases: aliases()
     ]
   end

@@ -24,6 +24,13 @@ defmodule RingTracer.Preview.Server do
   # How long a viewer's connection may take no data, during a stop, before
   # it is dropped.
   @stall_ms 100
+  # Seconds a connection has to send its request line and headers.
+  @request_deadline_s 5
+  # Connections without a stream kept at most (the oldest beyond are
+  # dropped, each @sweep_ms), and httpd's backstop beyond the viewers.
+  @max_waiting 64
+  @sweep_ms 100
+  @max_connections 1024
 
   @doc false
   @spec start(keyword()) :: GenServer.on_start()
@@ -53,10 +60,18 @@ defmodule RingTracer.Preview.Server do
       bind_address: addr,
       ipfamily: if(tuple_size(addr) == 8, do: :inet6, else: :inet),
       modules: [RingTracer.Preview.HTTP],
-      max_clients: Keyword.get(opts, :max_viewers, 32),
+      # Viewers are counted by this server (`:max_viewers`); httpd's limit is
+      # only a backstop: the connections without a stream are kept to
+      # @max_waiting by the sweep, which drops the oldest first.
+      max_clients: Keyword.get(opts, :max_viewers, 32) + @max_connections,
       # No Server header: nothing to tell a prober what answers here.
       server_tokens: :none,
-      keep_alive_timeout: 60,
+      # One deadline, from the connection (or the end of the previous
+      # response) to the end of the request's headers: httpd arms one timer
+      # and cancels it only when the request is whole, so a client that
+      # trickles its request a byte at a time is cut off at the deadline.
+      # It is also how long a kept-alive connection may idle.
+      keep_alive_timeout: @request_deadline_s,
       # The token is not in httpd's configuration, which httpd prints when
       # it cannot start: it is in a table of its own, read by the handler.
       ring_tracer_preview: {self(), table, secret}
@@ -83,9 +98,12 @@ defmodule RingTracer.Preview.Server do
         pending: [],
         queue: :queue.new(),
         pacing: nil,
-        drain: nil
+        drain: nil,
+        connections: :httpd_connection_sup.connection_sup(addr, port),
+        waiting: %{}
       }
 
+      Process.send_after(self(), :sweep, @sweep_ms)
       {:ok, state}
     else
       {:error, reason} -> {:stop, {:listen, listen_error(reason)}}
@@ -241,7 +259,46 @@ defmodule RingTracer.Preview.Server do
     {:noreply, %{state | drain: nil}}
   end
 
+  def handle_info(:sweep, state) do
+    Process.send_after(self(), :sweep, @sweep_ms)
+    {:noreply, sweep(state)}
+  end
+
   def handle_info(_other, state), do: {:noreply, state}
+
+  # The connections that are not viewers (a request on its way, a page
+  # file being sent, a kept-alive connection between requests), with when
+  # this server first saw each: beyond @max_waiting, the oldest are
+  # dropped. A page's own requests are answered within milliseconds of
+  # their connection, so clients that hold connections open without the
+  # token (or many of them) cannot keep the owner from the page.
+  defp sweep(state) do
+    now = System.monotonic_time(:millisecond)
+
+    waiting =
+      for pid <- connections(state.connections),
+          not is_map_key(state.viewers, pid),
+          into: %{},
+          do: {pid, Map.get(state.waiting, pid, now)}
+
+    excess = map_size(waiting) - @max_waiting
+
+    if excess > 0 do
+      dropped =
+        waiting |> Enum.sort_by(&elem(&1, 1)) |> Enum.take(excess) |> Enum.map(&elem(&1, 0))
+
+      Enum.each(dropped, &Process.exit(&1, :kill))
+      %{state | waiting: Map.drop(waiting, dropped)}
+    else
+      %{state | waiting: waiting}
+    end
+  end
+
+  defp connections(sup) do
+    for {_, pid, _, _} <- Supervisor.which_children(sup), is_pid(pid), do: pid
+  catch
+    :exit, _ -> []
+  end
 
   # A stop waits for the viewers still reading the log.
   defp drained(%{drain: {from, ref, timer}, viewers: v} = state) when map_size(v) == 0 do

@@ -192,6 +192,82 @@ defmodule RingTracer.Preview.HTTPTest do
     assert err =~ "preview: port #{port} on 127.0.0.1 is in use"
   end
 
+  # A client without the token that sends a request that never ends, one
+  # byte each `every_ms`, and connects again whenever the preview cuts it
+  # off, telling `to` how long each connection lasted.
+  defp trickler(port, every_ms, to) do
+    request =
+      "GET /nothing HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Pad: " <> String.duplicate("a", 9_000)
+
+    case :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false], 5_000) do
+      {:ok, sock} ->
+        t = System.monotonic_time(:millisecond)
+        sent = trickle(sock, request, every_ms, 0)
+        send(to, {:cut, System.monotonic_time(:millisecond) - t, sent})
+
+      {:error, _} ->
+        Process.sleep(every_ms)
+    end
+
+    trickler(port, every_ms, to)
+  end
+
+  defp trickle(sock, <<byte, rest::binary>>, every_ms, sent) do
+    with :ok <- :gen_tcp.send(sock, <<byte>>),
+         {:error, :timeout} <- :gen_tcp.recv(sock, 0, every_ms) do
+      trickle(sock, rest, every_ms, sent + 1)
+    else
+      _ ->
+        :gen_tcp.close(sock)
+        sent
+    end
+  end
+
+  test "a request trickled a byte at a time is cut off at one deadline", %{preview: p} do
+    me = self()
+    pid = spawn_link(fn -> trickler(p.port, 200, me) end)
+    # Still sending, byte after byte, it is cut off 5 s after it connected
+    # (httpd's one timer for the whole request; it was 60 s).
+    assert_receive {:cut, ms, sent}, 12_000
+    Process.unlink(pid)
+    Process.exit(pid, :kill)
+    assert ms >= 4_500 and ms < 10_000, "cut after #{ms} ms"
+    assert sent >= 10
+  end
+
+  test "clients that hold connections without the token do not keep the owner from the page",
+       %{preview: p} do
+    me = self()
+    # 150 of them, each trickling a request that never ends and connecting
+    # again as soon as it is cut off: far more than the 32 viewers.
+    pids = for _ <- 1..150, do: spawn_link(fn -> trickler(p.port, 1_000, me) end)
+    Process.sleep(1_500)
+
+    try do
+      # Over 7 s, through the deadline and the tricklers' reconnections, the
+      # page and its stream answer every time (before: 503, heavy load).
+      for _ <- 1..10 do
+        assert {200, _, body} = get(p.url)
+        assert body =~ ~s(<script src="preview.js">)
+
+        {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, p.port, [:binary, active: false])
+        path = URI.parse(p.url).path
+        :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert {:ok, "HTTP/1.1 200 " <> _} = :gen_tcp.recv(sock, 0, 5_000)
+        :gen_tcp.close(sock)
+        Process.sleep(700)
+      end
+
+      # They were cut off, and came back.
+      assert_received {:cut, _, _}
+    after
+      for pid <- pids do
+        Process.unlink(pid)
+        Process.exit(pid, :kill)
+      end
+    end
+  end
+
   test "--listen widens: the page answers on the address given" do
     {:ok, p} = Preview.start(listen: "0.0.0.0")
     assert p.url =~ "http://0.0.0.0:"
