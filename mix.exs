@@ -30,6 +30,7 @@ defmodule RingTracer.MixProject do
           :httpd,
           :httpd_util,
           :httpd_response,
+          :httpd_connection_sup,
           :httpc
         ]
       ],

@@ -37,9 +37,12 @@ defmodule RingTracer.Preview do
   Cost: the job's parent sends the preview one message per atom and per
   hand-over, children one per protocol event; the preview converts an
   atom's pixels to sRGB base64 once (in the NIF, on a normal scheduler),
-  and viewers read the one log. A slow or
-  stalled browser lags behind the log and holds no buffer; the job never
-  waits for the preview (`RingTracer.Bench.Preview` measures it).
+  and viewers read the one log. A slow browser lags behind the log and
+  holds no buffer; one that stops reading is disconnected (every send has a
+  deadline), and a stop drops at once a viewer that is not reading. The
+  job, its outputs and the end of `render/2` never wait for a viewer, and
+  the job never waits for the preview (`RingTracer.Bench.Preview` measures
+  it).
   """
 
   alias RingTracer.Preview.Server
@@ -84,9 +87,36 @@ defmodule RingTracer.Preview do
       {:ok, pid} ->
         {:ok, pid}
 
+      {:error, {:listen, reason}} ->
+        {:error, RingTracer.Error.new(:preview, listen_failure(reason, opts))}
+
       {:error, reason} ->
         {:error,
          RingTracer.Error.new(:preview, "could not start the preview: #{inspect(reason)}")}
+    end
+  end
+
+  defp listen_failure(reason, opts) do
+    addr = host(Keyword.fetch!(opts, :listen))
+    port = Keyword.get(opts, :port, 0)
+
+    case reason do
+      :eaddrinuse ->
+        "port #{port} on #{addr} is in use (another program listens there): " <>
+          "give another port, or 0 for a free one"
+
+      :eacces ->
+        "may not listen on port #{port} on #{addr} (ports below 1024 need privileges): " <>
+          "give another port, or 0 for a free one"
+
+      :eaddrnotavail ->
+        "cannot listen on #{addr}: it is not an address of this machine"
+
+      :not_listening ->
+        "could not listen on #{addr}, port #{port} (is #{addr} an address of this machine?)"
+
+      other ->
+        "could not listen on #{addr}, port #{port}: #{:inet.format_error(other)}"
     end
   end
 
@@ -100,8 +130,10 @@ defmodule RingTracer.Preview do
 
   @doc """
   Stops the preview, after waiting up to `drain_ms` (default 2000) for
-  connected browsers to have received the job's final frame. When it
-  returns, the page's listening socket is closed.
+  connected browsers to have received the job's final frame: a browser
+  whose connection takes no data for 100 ms meanwhile is dropped, not
+  waited for, and those still connected after `drain_ms` are dropped too.
+  When it returns, the page's listening socket is closed.
   """
   @spec stop(t(), non_neg_integer()) :: :ok
   def stop(%__MODULE__{pid: pid}, drain_ms \\ 2_000) do

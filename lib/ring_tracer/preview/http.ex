@@ -5,15 +5,20 @@ defmodule RingTracer.Preview.HTTP do
   files, by fixed name from `priv/preview`, and `GET /events`, the job's
   Server-Sent Events stream, all under `/TOKEN/`, the preview's random
   first segment. Anything else is 404 (an unknown path, or one outside the
-  token) or 405 (a method other than GET); a request whose `Host` header
-  names another host than the preview's address (`hosts/1`: a page that
-  rebound its own name to 127.0.0.1) is 421.
+  token) or 405 (a method other than GET); a request target that is not a
+  path (the absolute form `GET http://host/...`, or `*`) is 400; a request
+  whose `Host` header names another host than the preview's address
+  (`hosts/1`: a page that rebound its own name to 127.0.0.1) is 421. No
+  response has a `Server` header.
 
   `/events` streams the log of `RingTracer.Preview.Server` from its first
   frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
   up to 256 KB, at most one every #{40} ms, until the job's end frame. The
   handler reads the log itself: a slow viewer lags without holding any
-  buffer, and a stalled one blocks only its own connection's process.
+  buffer. Every send has a deadline (2 s): a viewer whose connection
+  takes nothing for that long while a chunk waits (so at most one chunk
+  waits in the VM for it) is disconnected; a browser reconnects from its
+  `Last-Event-ID`. Beyond `:max_viewers` streams at once, `/events` is 503.
   """
 
   require Record
@@ -29,6 +34,8 @@ defmodule RingTracer.Preview.HTTP do
   @chunk_bytes 256 * 1024
   @interval_ms 40
   @keep_alive_ms 10_000
+  @send_timeout_ms 2_000
+  @join_timeout_ms 5_000
   @csp ~c"default-src 'self'; img-src 'self' data:; connect-src 'self'; frame-ancestors 'none'"
 
   @doc "The folder of the page's files."
@@ -62,7 +69,8 @@ defmodule RingTracer.Preview.HTTP do
 
   @doc false
   def unquote(:do)(m) do
-    {server, table, token, hosts} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+    {server, table, secret} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+    {token, hosts} = address(secret)
 
     full = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
 
@@ -73,6 +81,11 @@ defmodule RingTracer.Preview.HTTP do
       end
 
     cond do
+      # Only the origin form (`GET /path`): the absolute form is for
+      # proxies, and the preview is none.
+      not origin_form?(m) ->
+        {:proceed, [{:response, {400, ~c"only a path as the request target"}}]}
+
       not host_allowed?(m, hosts) ->
         {:proceed, [{:response, {421, ~c"the preview answers on its own address only"}}]}
 
@@ -105,6 +118,21 @@ defmodule RingTracer.Preview.HTTP do
     end
   end
 
+  # The preview's token and host names (none once it is stopping).
+  defp address(secret) do
+    [{:address, token, hosts}] = :ets.lookup(secret, :address)
+    {token, hosts}
+  rescue
+    ArgumentError -> {nil, []}
+  end
+
+  defp origin_form?(m) do
+    match?(
+      [_method, "/" <> _, _version],
+      m |> mod(:request_line) |> to_string() |> String.split(" ")
+    )
+  end
+
   defp host_allowed?(_m, :any), do: true
 
   defp host_allowed?(m, hosts) do
@@ -122,21 +150,40 @@ defmodule RingTracer.Preview.HTTP do
 
   defp stream(m, server, table) do
     Process.flag(:priority, :low)
-    ref = Process.monitor(server)
-    send(server, {:viewer, self()})
+    socket = mod(m, :socket)
+    # Every send to the viewer has a deadline: one whose connection takes
+    # nothing for @send_timeout_ms while a chunk waits is disconnected, and
+    # at most one chunk waits in the VM for it.
+    _ = :inet.setopts(socket, send_timeout: @send_timeout_ms, send_timeout_close: true)
 
-    headers =
-      [content_type: ~c"text/event-stream", cache_control: ~c"no-store"] ++
-        if mod(m, :http_version) == ~c"HTTP/1.1", do: [transfer_encoding: ~c"chunked"], else: []
+    case join(server, socket) do
+      :ok ->
+        ref = Process.monitor(server)
 
-    :httpd_response.send_header(m, 200, headers)
+        headers =
+          [content_type: ~c"text/event-stream", cache_control: ~c"no-store"] ++
+            if mod(m, :http_version) == ~c"HTTP/1.1",
+              do: [transfer_encoding: ~c"chunked"],
+              else: []
 
-    if loop(m, server, table, ref, last_event_id(m)) == :ok,
-      do: :httpd_response.send_final_chunk(m, false)
+        :httpd_response.send_header(m, 200, headers)
 
-    send(server, {:viewer_done, self()})
-    Process.demonitor(ref, [:flush])
-    {:proceed, [{:response, {:already_sent, 200, 0}}]}
+        if loop(m, server, table, ref, last_event_id(m)) == :ok,
+          do: :httpd_response.send_final_chunk(m, false)
+
+        send(server, {:viewer_done, self()})
+        Process.demonitor(ref, [:flush])
+        {:proceed, [{:response, {:already_sent, 200, 0}}]}
+
+      {:error, :full} ->
+        {:proceed, [{:response, {503, ~c"as many viewers as the preview takes"}}]}
+    end
+  end
+
+  defp join(server, socket) do
+    GenServer.call(server, {:viewer, self(), socket}, @join_timeout_ms)
+  catch
+    :exit, _ -> {:error, :full}
   end
 
   defp last_event_id(m) do

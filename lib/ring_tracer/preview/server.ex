@@ -21,6 +21,17 @@ defmodule RingTracer.Preview.Server do
 
   alias RingTracer.Preview.Log
 
+  # How long a viewer's connection may take no data, during a stop, before
+  # it is dropped.
+  @stall_ms 100
+  # Seconds a connection has to send its request line and headers.
+  @request_deadline_s 5
+  # Connections without a stream kept at most (the oldest beyond are
+  # dropped, each @sweep_ms), and httpd's backstop beyond the viewers.
+  @max_waiting 64
+  @sweep_ms 100
+  @max_connections 1024
+
   @doc false
   @spec start(keyword()) :: GenServer.on_start()
   def start(opts), do: GenServer.start(__MODULE__, opts)
@@ -38,6 +49,8 @@ defmodule RingTracer.Preview.Server do
     # can reach loopback) or a web page that rebinds a name of its own to
     # 127.0.0.1 cannot guess it, and only sees 404s.
     token = Base.url_encode64(:crypto.strong_rand_bytes(16), padding: false)
+    secret = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
+    :ets.insert(secret, {:address, token, RingTracer.Preview.HTTP.hosts(addr)})
 
     config = [
       port: Keyword.get(opts, :port, 0),
@@ -47,48 +60,82 @@ defmodule RingTracer.Preview.Server do
       bind_address: addr,
       ipfamily: if(tuple_size(addr) == 8, do: :inet6, else: :inet),
       modules: [RingTracer.Preview.HTTP],
-      max_clients: Keyword.get(opts, :max_viewers, 32),
-      keep_alive_timeout: 60,
-      ring_tracer_preview: {self(), table, token, RingTracer.Preview.HTTP.hosts(addr)}
+      # Viewers are counted by this server (`:max_viewers`); httpd's limit is
+      # only a backstop: the connections without a stream are kept to
+      # @max_waiting by the sweep, which drops the oldest first.
+      max_clients: Keyword.get(opts, :max_viewers, 32) + @max_connections,
+      # No Server header: nothing to tell a prober what answers here.
+      server_tokens: :none,
+      # One deadline, from the connection (or the end of the previous
+      # response) to the end of the request's headers: httpd arms one timer
+      # and cancels it only when the request is whole, so a client that
+      # trickles its request a byte at a time is cut off at the deadline.
+      # It is also how long a kept-alive connection may idle.
+      keep_alive_timeout: @request_deadline_s,
+      # The token is not in httpd's configuration, which httpd prints when
+      # it cannot start: it is in a table of its own, read by the handler.
+      ring_tracer_preview: {self(), table, secret}
     ]
 
-    case :inets.start(:httpd, config, :stand_alone) do
-      {:ok, httpd} ->
-        port = port(httpd)
+    with {:ok, httpd} <- :inets.start(:httpd, config, :stand_alone),
+         {:ok, port} <- port(httpd, config) do
+      state = %{
+        table: table,
+        httpd: httpd,
+        listener: listener(addr, port),
+        port: port,
+        addr: addr,
+        token: token,
+        log: Log.new(Keyword.take(opts, [:max_events])),
+        parent: nil,
+        handlers: [],
+        waiters: MapSet.new(),
+        viewers: %{},
+        max_viewers: Keyword.get(opts, :max_viewers, 32),
+        expect: nil,
+        ended: :atomics.new(1, []),
+        cpu_share: Keyword.get(opts, :cpu_share, 0.01),
+        pending: [],
+        queue: :queue.new(),
+        pacing: nil,
+        drain: nil,
+        connections: :httpd_connection_sup.connection_sup(addr, port),
+        waiting: %{}
+      }
 
-        state = %{
-          table: table,
-          httpd: httpd,
-          listener: listener(addr, port),
-          port: port,
-          addr: addr,
-          token: token,
-          log: Log.new(Keyword.take(opts, [:max_events])),
-          parent: nil,
-          handlers: [],
-          waiters: MapSet.new(),
-          viewers: %{},
-          expect: nil,
-          ended: :atomics.new(1, []),
-          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
-          pending: [],
-          queue: :queue.new(),
-          pacing: nil,
-          drain: nil
-        }
-
-        {:ok, state}
-
-      {:error, reason} ->
-        {:stop, {:httpd, reason}}
+      Process.send_after(self(), :sweep, @sweep_ms)
+      {:ok, state}
+    else
+      {:error, reason} -> {:stop, {:listen, listen_error(reason)}}
     end
   end
+
+  # What stopped httpd from listening (`:eaddrinuse`, `:eacces`...), out of
+  # its supervisors' reports; a port this VM already serves is in use too.
+  defp listen_error({:listen, reason}), do: reason
+
+  defp listen_error({:shutdown, {:failed_to_start_child, _, {:already_started, _}}}),
+    do: :eaddrinuse
+
+  defp listen_error({:shutdown, {:failed_to_start_child, _, inner}}), do: listen_error(inner)
+  defp listen_error(other), do: other
 
   @impl GenServer
   def handle_call(:address, _from, state),
     do: {:reply, {state.addr, state.port, state.token}, state}
 
   def handle_call(:viewers, _from, state), do: {:reply, map_size(state.viewers), state}
+
+  # A viewer's request process, with its socket: one more viewer unless
+  # there are already `:max_viewers`.
+  def handle_call({:viewer, pid, socket}, _from, state) do
+    if map_size(state.viewers) >= state.max_viewers do
+      {:reply, {:error, :full}, state}
+    else
+      viewer = %{ref: Process.monitor(pid), socket: socket, queued: 0, sent: nil}
+      {:reply, :ok, %{state | viewers: Map.put(state.viewers, pid, viewer)}}
+    end
+  end
 
   def handle_call({:expect, _id, _nodes}, _from, %{expect: e} = state) when e != nil,
     do: {:reply, {:error, :already_watching}, state}
@@ -174,12 +221,9 @@ defmodule RingTracer.Preview.Server do
   def handle_info({:DOWN, _, :process, pid, _}, %{owner: pid} = state),
     do: {:stop, :normal, state}
 
-  def handle_info({:viewer, pid}, state),
-    do: {:noreply, %{state | viewers: Map.put(state.viewers, pid, Process.monitor(pid))}}
-
   def handle_info({:viewer_done, pid}, state) do
-    {ref, viewers} = Map.pop(state.viewers, pid)
-    if ref, do: Process.demonitor(ref, [:flush])
+    {viewer, viewers} = Map.pop(state.viewers, pid)
+    if viewer, do: Process.demonitor(viewer.ref, [:flush])
     {:noreply, drained(%{state | viewers: viewers})}
   end
 
@@ -188,7 +232,26 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({:drain, from, ref, ms}, state) do
     timer = Process.send_after(self(), {:drain_timeout, ref}, ms)
-    {:noreply, drained(%{state | drain: {from, ref, timer}})}
+    state = %{state | drain: {from, ref, timer}, viewers: sample(state.viewers)}
+    if state.viewers != %{}, do: Process.send_after(self(), {:drain_check, ref}, @stall_ms)
+    {:noreply, drained(state)}
+  end
+
+  # During a stop, a viewer whose connection has data waiting and took none
+  # of it since the last look is not reading: it is dropped, not waited for.
+  def handle_info({:drain_check, ref}, %{drain: {_, ref, _}} = state) do
+    {stalled, reading} =
+      state.viewers
+      |> sample()
+      |> Enum.split_with(fn {pid, v} -> stalled?(v, state.viewers[pid]) end)
+
+    for {pid, v} <- stalled do
+      Process.demonitor(v.ref, [:flush])
+      Process.exit(pid, :kill)
+    end
+
+    Process.send_after(self(), {:drain_check, ref}, @stall_ms)
+    {:noreply, drained(%{state | viewers: Map.new(reading)})}
   end
 
   def handle_info({:drain_timeout, ref}, %{drain: {from, ref, _}} = state) do
@@ -196,7 +259,46 @@ defmodule RingTracer.Preview.Server do
     {:noreply, %{state | drain: nil}}
   end
 
+  def handle_info(:sweep, state) do
+    Process.send_after(self(), :sweep, @sweep_ms)
+    {:noreply, sweep(state)}
+  end
+
   def handle_info(_other, state), do: {:noreply, state}
+
+  # The connections that are not viewers (a request on its way, a page
+  # file being sent, a kept-alive connection between requests), with when
+  # this server first saw each: beyond @max_waiting, the oldest are
+  # dropped. A page's own requests are answered within milliseconds of
+  # their connection, so clients that hold connections open without the
+  # token (or many of them) cannot keep the owner from the page.
+  defp sweep(state) do
+    now = System.monotonic_time(:millisecond)
+
+    waiting =
+      for pid <- connections(state.connections),
+          not is_map_key(state.viewers, pid),
+          into: %{},
+          do: {pid, Map.get(state.waiting, pid, now)}
+
+    excess = map_size(waiting) - @max_waiting
+
+    if excess > 0 do
+      dropped =
+        waiting |> Enum.sort_by(&elem(&1, 1)) |> Enum.take(excess) |> Enum.map(&elem(&1, 0))
+
+      Enum.each(dropped, &Process.exit(&1, :kill))
+      %{state | waiting: Map.drop(waiting, dropped)}
+    else
+      %{state | waiting: waiting}
+    end
+  end
+
+  defp connections(sup) do
+    for {_, pid, _, _} <- Supervisor.which_children(sup), is_pid(pid), do: pid
+  catch
+    :exit, _ -> []
+  end
 
   # A stop waits for the viewers still reading the log.
   defp drained(%{drain: {from, ref, timer}, viewers: v} = state) when map_size(v) == 0 do
@@ -207,9 +309,35 @@ defmodule RingTracer.Preview.Server do
 
   defp drained(state), do: state
 
+  # Each viewer's bytes queued in the VM for its socket and bytes the socket
+  # has taken so far.
+  defp sample(viewers) do
+    Map.new(viewers, fn {pid, v} ->
+      queued =
+        case :erlang.port_info(v.socket, :queue_size) do
+          {:queue_size, n} -> n
+          _ -> 0
+        end
+
+      sent =
+        case :inet.getstat(v.socket, [:send_oct]) do
+          {:ok, [send_oct: n]} -> n
+          _ -> nil
+        end
+
+      {pid, %{v | queued: queued, sent: sent}}
+    end)
+  end
+
+  defp stalled?(now, before), do: now.queued > 0 and now.sent == before.sent
+
   @impl GenServer
   def terminate(_reason, state) do
     detach(state.handlers)
+    # A viewer still connected is dropped at once: a stop never waits on a
+    # browser (one that does not read would hold its connection's process in
+    # a send until the send's deadline).
+    Enum.each(Map.keys(state.viewers), &Process.exit(&1, :kill))
     close(state.httpd, state.listener)
   end
 
@@ -260,12 +388,26 @@ defmodule RingTracer.Preview.Server do
   # httpd.info/2 knows only servers started under the :inets application;
   # this one is ours (stand-alone, linked), and its instance supervisor is
   # named by address and port.
-  defp port(httpd) do
-    [port] =
-      for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
-          do: port
+  defp port(httpd, config) do
+    case for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
+             do: port do
+      [port] ->
+        {:ok, port}
 
-    port
+      # Started without a listener (with port 0, httpd does not report why:
+      # a listen of our own, closed at once, tells).
+      [] ->
+        :inets.stop(:stand_alone, httpd)
+
+        case :gen_tcp.listen(config[:port], ip: config[:bind_address]) do
+          {:ok, socket} ->
+            :gen_tcp.close(socket)
+            {:error, :not_listening}
+
+          {:error, reason} ->
+            {:error, {:listen, reason}}
+        end
+    end
   end
 
   defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),

@@ -108,6 +108,166 @@ defmodule RingTracer.Preview.HTTPTest do
     end
   end
 
+  # One raw HTTP/1.1 exchange on `port`: the response's status line and headers.
+  defp raw(port, request) do
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false])
+    :ok = :gen_tcp.send(sock, request)
+    {:ok, head} = :gen_tcp.recv(sock, 0, 5_000)
+    :gen_tcp.close(sock)
+    head |> String.split("\r\n\r\n") |> hd()
+  end
+
+  test "a request target in absolute form is refused; no response names the server",
+       %{preview: p} do
+    %URI{path: path, port: port} = URI.parse(p.url)
+
+    for target <-
+          ["http://127.0.0.1:#{port}#{path}", "HTTP://127.0.0.1#{path}events"] ++
+            ["https://127.0.0.1#{path}", "*"] do
+      head = raw(port, "GET #{target} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+      assert head =~ ~r/\AHTTP\/1\.1 400 /, target
+    end
+
+    assert raw(port, "GET #{path} HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n") =~ ~r/\AHTTP\/1\.1 200 /
+
+    for url <- [p.url, p.url <> "preview.js", p.url <> "nothing", "http://127.0.0.1:#{port}/"] do
+      {_, headers, _} = get(url)
+      refute Map.has_key?(headers, "server"), url
+    end
+
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false])
+    :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+    {:ok, head} = :gen_tcp.recv(sock, 0, 5_000)
+    :gen_tcp.close(sock)
+    assert head =~ "text/event-stream"
+    refute head =~ ~r/^server:/im
+  end
+
+  test "a port in use, or not this machine's address, is said in words" do
+    {:ok, taken} = :gen_tcp.listen(0, ip: {127, 0, 0, 1})
+    {:ok, port} = :inet.port(taken)
+
+    assert {:error, %RingTracer.Error{reason: :preview, message: m}} = Preview.start(port: port)
+
+    assert m ==
+             "port #{port} on 127.0.0.1 is in use (another program listens there): give another port, or 0 for a free one"
+
+    # Another preview of this VM on that port.
+    :gen_tcp.close(taken)
+    {:ok, first} = Preview.start(port: port)
+    assert {:error, %RingTracer.Error{message: ^m}} = Preview.start(port: port)
+    Preview.stop(first, 0)
+
+    for addr <- ["192.0.2.1", "10.255.255.254"] do
+      log =
+        ExUnit.CaptureLog.capture_log(fn ->
+          assert {:error, %RingTracer.Error{reason: :preview, message: m}} =
+                   Preview.start(listen: addr)
+
+          assert m =~ addr and m =~ "not an address of this machine", m
+          refute m =~ "{"
+        end)
+
+      # httpd's report of its failed start prints its configuration: the
+      # page's secret is not in it (it was).
+      refute log =~ ~r/"[\w-]{22}"/, log
+    end
+
+    err =
+      capture_io(:stderr, fn ->
+        {:ok, taken} = :gen_tcp.listen(port, ip: {127, 0, 0, 1})
+
+        assert {:ok, _} =
+                 RingTracer.render(@scene,
+                   width: 8,
+                   height: 8,
+                   children: 2,
+                   atoms: 2,
+                   preview: port
+                 )
+
+        :gen_tcp.close(taken)
+      end)
+
+    assert err =~ "preview: port #{port} on 127.0.0.1 is in use"
+  end
+
+  # A client without the token that sends a request that never ends, one
+  # byte each `every_ms`, and connects again whenever the preview cuts it
+  # off, telling `to` how long each connection lasted.
+  defp trickler(port, every_ms, to) do
+    request =
+      "GET /nothing HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Pad: " <> String.duplicate("a", 9_000)
+
+    case :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false], 5_000) do
+      {:ok, sock} ->
+        t = System.monotonic_time(:millisecond)
+        sent = trickle(sock, request, every_ms, 0)
+        send(to, {:cut, System.monotonic_time(:millisecond) - t, sent})
+
+      {:error, _} ->
+        Process.sleep(every_ms)
+    end
+
+    trickler(port, every_ms, to)
+  end
+
+  defp trickle(sock, <<byte, rest::binary>>, every_ms, sent) do
+    with :ok <- :gen_tcp.send(sock, <<byte>>),
+         {:error, :timeout} <- :gen_tcp.recv(sock, 0, every_ms) do
+      trickle(sock, rest, every_ms, sent + 1)
+    else
+      _ ->
+        :gen_tcp.close(sock)
+        sent
+    end
+  end
+
+  test "a request trickled a byte at a time is cut off at one deadline", %{preview: p} do
+    me = self()
+    pid = spawn_link(fn -> trickler(p.port, 200, me) end)
+    # Still sending, byte after byte, it is cut off 5 s after it connected
+    # (httpd's one timer for the whole request; it was 60 s).
+    assert_receive {:cut, ms, sent}, 12_000
+    Process.unlink(pid)
+    Process.exit(pid, :kill)
+    assert ms >= 4_500 and ms < 10_000, "cut after #{ms} ms"
+    assert sent >= 10
+  end
+
+  test "clients that hold connections without the token do not keep the owner from the page",
+       %{preview: p} do
+    me = self()
+    # 150 of them, each trickling a request that never ends and connecting
+    # again as soon as it is cut off: far more than the 32 viewers.
+    pids = for _ <- 1..150, do: spawn_link(fn -> trickler(p.port, 1_000, me) end)
+    Process.sleep(1_500)
+
+    try do
+      # Over 7 s, through the deadline and the tricklers' reconnections, the
+      # page and its stream answer every time (before: 503, heavy load).
+      for _ <- 1..10 do
+        assert {200, _, body} = get(p.url)
+        assert body =~ ~s(<script src="preview.js">)
+
+        {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, p.port, [:binary, active: false])
+        path = URI.parse(p.url).path
+        :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+        assert {:ok, "HTTP/1.1 200 " <> _} = :gen_tcp.recv(sock, 0, 5_000)
+        :gen_tcp.close(sock)
+        Process.sleep(700)
+      end
+
+      # They were cut off, and came back.
+      assert_received {:cut, _, _}
+    after
+      for pid <- pids do
+        Process.unlink(pid)
+        Process.exit(pid, :kill)
+      end
+    end
+  end
+
   test "--listen widens: the page answers on the address given" do
     {:ok, p} = Preview.start(listen: "0.0.0.0")
     assert p.url =~ "http://0.0.0.0:"
@@ -198,6 +358,118 @@ defmodule RingTracer.Preview.HTTPTest do
     {:message_queue_len, q} = Process.info(p.pid, :message_queue_len)
     assert q < 10
     :gen_tcp.close(sock)
+  end
+
+  # A client that asks for `url`'s stream and never reads it (a small
+  # receive buffer, so that its connection is soon full).
+  defp stalled_viewer(url) do
+    %URI{port: port, path: path} = URI.parse(url)
+    {:ok, sock} = :gen_tcp.connect({127, 0, 0, 1}, port, [:binary, active: false, recbuf: 1024])
+    :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: localhost\r\n\r\n")
+    sock
+  end
+
+  @tag :tmp_dir
+  test "viewers that never read hold up neither the render, nor its outputs, nor its end",
+       %{tmp_dir: dir} do
+    out = Path.join(dir, "big.png")
+    me = self()
+    handler = {__MODULE__, :job_end, me}
+
+    :ok =
+      RingTracer.Telemetry.attach(
+        handler,
+        [:ring_tracer, :job, :stop],
+        fn _, _, _, pid -> send(pid, {:job_end, System.monotonic_time(:millisecond)}) end,
+        me
+      )
+
+    try do
+      capture_io(:stderr, fn ->
+        # As soon as the render prints its page's address, 30 viewers ask
+        # for the stream and never read it (a log of about 10 MB: far more
+        # than their connections hold).
+        stderr = Process.whereis(:standard_error)
+
+        spawn_link(fn ->
+          url =
+            Stream.repeatedly(fn ->
+              Process.sleep(5)
+              Regex.run(~r|preview: (\S+)|, elem(StringIO.contents(stderr), 1))
+            end)
+            |> Enum.find(& &1)
+            |> List.last()
+
+          socks = for _ <- 1..30, do: stalled_viewer(url)
+          # Theirs to keep open: a socket closes with its owner.
+          Enum.each(socks, &(:ok = :gen_tcp.controlling_process(&1, me)))
+          send(me, {:stalled, socks})
+        end)
+
+        argv =
+          [
+            @scene,
+            "-o",
+            out,
+            "-w",
+            "2400",
+            "--height",
+            "1600",
+            "--children",
+            "2",
+            "--atoms",
+            "32"
+          ] ++
+            ["--speeds", "4,4", "--progress", "none", "--preview"]
+
+        capture_io(fn -> assert :ok = RingTracer.CLI.Render.execute(argv) end)
+        done = System.monotonic_time(:millisecond)
+        assert_received {:stalled, socks}
+        assert_received {:job_end, ended}
+        send(me, {:times, ended, done, socks})
+      end)
+
+      assert_received {:times, ended, done, socks}
+      # The image is written, and the command returned, without waiting on
+      # any of them (it took 6 s: 2 s of a drain that waited on them, then
+      # 4 s of httpd's shutdown of their connections' processes, blocked in
+      # a send that had no deadline).
+      assert File.exists?(out)
+      assert done - ended < 3_000, "#{done - ended} ms from the job's end to the command's"
+
+      # Each was disconnected: past what its connection held, it reads the end.
+      for sock <- socks, do: assert(drain(sock) == :closed)
+    after
+      RingTracer.Telemetry.detach(handler)
+    end
+  end
+
+  test "a viewer that stops reading is disconnected; one that reads gets everything",
+       %{preview: p} do
+    me = self()
+    stalled = stalled_viewer(p.url)
+    spawn_link(fn -> send(me, {:reader, Viewer.viewer(p.url <> "events", 60_000)}) end)
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 2 end)
+
+    # A log of about 15 MB, far more than the stalled viewer's connection
+    # holds: its process has a chunk waiting, and the send's deadline.
+    {:ok, _} =
+      RingTracer.render(@scene, width: 2400, height: 1600, children: 2, atoms: 32, preview: p)
+
+    assert_receive {:reader, {:ok, n}}, 60_000
+    assert n == length(frames(p.url))
+    # Dropped by the preview, which still runs (before: it stayed a viewer
+    # until the preview stopped).
+    assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 0 end, 1_000)
+    assert drain(stalled) == :closed
+    assert {200, _, _} = get(p.url)
+  end
+
+  defp drain(sock) do
+    case :gen_tcp.recv(sock, 0, 5_000) do
+      {:ok, _} -> drain(sock)
+      {:error, reason} -> reason
+    end
   end
 
   test "open/2 previews a job already running, from the atoms traced so far" do
