@@ -11,12 +11,12 @@
 
 use crate::{frame, FALLBACK};
 use std::ffi::OsString;
-use std::io::{IsTerminal, Write};
+use std::io::{ErrorKind, IsTerminal, Write};
 use std::os::fd::OwnedFd;
 use std::os::unix::ffi::OsStrExt;
 use std::os::unix::net::UnixStream;
 use std::path::Path;
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{Receiver, Sender};
 use std::time::{Duration, Instant};
 
 /// How long connecting to the socket may take.
@@ -77,9 +77,14 @@ pub fn run(
 ) -> u8 {
     let (tx, rx) = events;
     // `tx` stays here, so the channel outlives the reader thread
-    let Ok(mut stream) = connect(socket) else {
-        // no server (or one too busy to let us in): nothing was sent
-        return FALLBACK;
+    let mut stream = match connect(socket) {
+        Ok(stream) => stream,
+        // a socket left by a server that is gone: nothing to say
+        Err(e) if e.kind() == ErrorKind::ConnectionRefused || e.kind() == ErrorKind::NotFound => {
+            return FALLBACK
+        }
+        // one too busy to let us in (its queue is full), or slow to
+        Err(e) => return cannot_use(socket, &format!("cannot connect to the server: {e}")),
     };
     let status = over(socket, &mut stream, cwd, &args, tx.clone(), &rx);
     // the reader's clone of the stream ends too
@@ -163,10 +168,8 @@ fn next(rx: &Receiver<Event>, deadline: Option<Instant>) -> Option<Event> {
         None => rx.recv().ok(),
         Some(deadline) => {
             let left = deadline.saturating_duration_since(Instant::now());
-            match rx.recv_timeout(left) {
-                Ok(event) => Some(event),
-                Err(RecvTimeoutError::Timeout | RecvTimeoutError::Disconnected) => None,
-            }
+            // a timeout or a closed channel: nothing more comes in time
+            rx.recv_timeout(left).ok()
         }
     }
 }
@@ -182,6 +185,10 @@ fn request(stream: &mut UnixStream, cwd: &OsString, args: &[OsString]) -> std::i
         b"0"
     };
     frame::write(stream, b'T', tty)?;
+    // `~` in a path is this user's home, not the server's
+    if let Some(home) = std::env::var_os("HOME").filter(|h| !h.is_empty()) {
+        frame::write(stream, b'H', home.as_bytes())?;
+    }
     if let Some(umask) = umask() {
         frame::write(stream, b'U', format!("{umask:o}").as_bytes())?;
     }

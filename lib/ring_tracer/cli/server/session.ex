@@ -8,7 +8,7 @@ defmodule RingTracer.CLI.Server.Session do
   data), client to server: `C` the caller's folder, `A` an argument (one
   each, in order), `T` `1` if the client's stderr is a terminal, `U` its
   umask in octal (the files the command creates get the permissions the
-  client's own would give them), `G` that is all; `Y` go ahead (after the
+  client's own would give them), `H` its home (`~` in a path), `G` that is all; `Y` go ahead (after the
   server's `R`); later `I` interrupt (Ctrl-C) and `K` terminate. Server to
   client: `R` the server takes the command, `O` bytes for stdout, `E` bytes
   for stderr, `X` the exit status (one byte), or `F` alone: boot a VM of
@@ -32,6 +32,7 @@ defmodule RingTracer.CLI.Server.Session do
           args: [String.t()],
           tty?: boolean(),
           umask: non_neg_integer() | nil,
+          home: Path.t() | nil,
           command: {pid(), reference()} | nil,
           runner: RingTracer.CLI.Server.runner(),
           phase: :request | :confirm | :running,
@@ -45,6 +46,7 @@ defmodule RingTracer.CLI.Server.Session do
     args: [],
     tty?: false,
     umask: nil,
+    home: nil,
     command: nil,
     phase: :request
   ]
@@ -112,6 +114,9 @@ defmodule RingTracer.CLI.Server.Session do
       {:tcp, _, <<"A", arg::binary>>} ->
         loop(%{state | args: [arg | state.args]})
 
+      {:tcp, _, <<"H", home::binary>>} ->
+        loop(%{state | home: home})
+
       {:tcp, _, <<"T", flag::binary>>} ->
         loop(%{state | tty?: flag == "1"})
 
@@ -177,7 +182,15 @@ defmodule RingTracer.CLI.Server.Session do
     me = self()
     out = Device.start(state.socket, "O", state.tty?, me)
     err = Device.start(state.socket, "E", state.tty?, me)
-    console = %Console{err: err, cwd: state.cwd, tty?: state.tty?, umask: state.umask}
+
+    console = %Console{
+      err: err,
+      cwd: state.cwd,
+      tty?: state.tty?,
+      umask: state.umask,
+      home: state.home
+    }
+
     {args, runner} = {state.args, state.runner}
 
     {pid, ref} =
