@@ -27,6 +27,13 @@ const WRITE_WAIT: Duration = Duration::from_secs(1);
 pub const ANSWER_WAIT: Duration = Duration::from_secs(2);
 /// How long the server has to end the command once it was told to stop.
 pub const STOP_WAIT: Duration = Duration::from_millis(800);
+/// How long the server may send nothing while it runs the command: it
+/// sends `P` every second, so silence this long is a server stopped or
+/// wedged mid-command.
+#[cfg(not(test))]
+pub const SILENCE_WAIT: Duration = Duration::from_secs(30);
+#[cfg(test)]
+pub const SILENCE_WAIT: Duration = Duration::from_secs(1);
 
 /// What the client waits for: a frame, the end of the stream, a signal
 /// (`b'I'` an interrupt, `b'K'` SIGTERM).
@@ -209,8 +216,19 @@ fn relay(socket: &Path, stream: &mut UnixStream, rx: &Receiver<Event>) -> u8 {
     let (mut out, mut err) = (std::io::stdout().lock(), std::io::stderr());
     // Set by an interrupt: its tag, and when the server must have ended the command.
     let mut stopping: Option<(u8, Instant)> = None;
+    let mut heard = Instant::now();
     loop {
-        let Some(event) = next(rx, stopping.map(|(_, d)| d)) else {
+        let deadline = stopping.map_or(heard + SILENCE_WAIT, |(_, d)| d);
+        let Some(event) = next(rx, Some(deadline)) else {
+            if stopping.is_none() {
+                let _ = out.flush();
+                eprintln!(
+                    "ringtracer: the server has sent nothing for {} s (stopped or wedged?); \
+                     giving up on this command (the server cancels it once it sees this client gone)",
+                    SILENCE_WAIT.as_secs()
+                );
+                return 1;
+            }
             // The server did not end the command in time: this client goes,
             // and the server cancels the job of a client that went.
             let (tag, _) = stopping.unwrap_or((b'I', Instant::now()));
@@ -222,7 +240,12 @@ fn relay(socket: &Path, stream: &mut UnixStream, rx: &Receiver<Event>) -> u8 {
             );
             return status;
         };
+        if matches!(event, Event::Frame(..)) {
+            heard = Instant::now();
+        }
         match event {
+            // the server is alive and the command runs
+            Event::Frame(b'P', _) => {}
             // A closed stdout (`| head`) does not stop the command.
             Event::Frame(b'O', data) => {
                 let _ = out.write_all(&data).and_then(|_| out.flush());
@@ -336,6 +359,47 @@ mod tests {
         );
         server.join().unwrap();
         assert_eq!(status, FALLBACK);
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    /// A server that takes the command and then goes silent (stopped
+    /// mid-command): the client gives up after `SILENCE_WAIT`, while pings
+    /// keep it waiting.
+    #[test]
+    fn a_server_silent_mid_command_is_left_in_time() {
+        let path = socket_path("silent-mid");
+        let listener = UnixListener::bind(&path).unwrap();
+        let server = std::thread::spawn(move || {
+            let (mut conn, _) = listener.accept().unwrap();
+            while let Ok(Some((tag, _))) = frame::read(&mut conn) {
+                if tag == b'G' {
+                    frame::write(&mut conn, b'R', b"").unwrap();
+                }
+                if tag == b'Y' {
+                    // pings for twice the silence allowed, then nothing
+                    for _ in 0..8 {
+                        std::thread::sleep(SILENCE_WAIT / 4);
+                        frame::write(&mut conn, b'P', b"").unwrap();
+                    }
+                    return conn;
+                }
+            }
+            panic!("no Y");
+        });
+        let t = Instant::now();
+        let status = run(
+            &path,
+            &OsString::from("/"),
+            vec!["render".into()],
+            mpsc::channel(),
+        );
+        let took = t.elapsed();
+        let _conn = server.join().unwrap();
+        assert_eq!(status, 1);
+        assert!(
+            took >= SILENCE_WAIT * 3 && took < SILENCE_WAIT * 3 + Duration::from_secs(2),
+            "{took:?}"
+        );
         let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 

@@ -279,6 +279,28 @@ defmodule RingTracer.CLI.ServerTest do
     end
   end
 
+  test "a server stopped mid-job: its client gives up after 30 s of silence", ctx do
+    {socket, server, vm} = own_server(ctx, "silent")
+
+    try do
+      env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+      args = ~w(render mine.nff -o silent.png --width 256 --speeds 400 --progress bar)
+      {port, _pid} = open(args, ctx.scenes, env)
+      until(port, "atoms")
+      {_, 0} = System.cmd("kill", ["-STOP", vm])
+      t0 = System.monotonic_time(:millisecond)
+      {status, out} = collect(port)
+      took = elapsed_ms(t0)
+      assert status == 1, out
+      assert out =~ "the server has sent nothing for 30 s"
+      # up to 1 s between pings, then 30 s of silence allowed
+      assert took in 28_000..45_000, "#{took} ms"
+    after
+      System.cmd("kill", ["-CONT", vm])
+      stop(server)
+    end
+  end
+
   test "a job that fails takes no other with it, and each client prints its own reason", ctx do
     {socket, server, _vm} = own_server(ctx, "isolation")
     env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]

@@ -11,9 +11,9 @@ defmodule RingTracer.CLI.Server.Session do
   client's own would give them), `H` its home (`~` in a path), `G` that is all; `Y` go ahead (after the
   server's `R`); later `I` interrupt (Ctrl-C) and `K` terminate. Server to
   client: `R` the server takes the command, `O` bytes for stdout, `E` bytes
-  for stderr, `X` the exit status (one byte), or `F` alone: boot a VM of
-  your own for this command (a render on other nodes, or a command other
-  than `render`).
+  for stderr, `P` (every second while the command runs) still at work, `X`
+  the exit status (one byte), or `F` alone: boot a VM of your own for this
+  command (a render on other nodes, or a command other than `render`).
 
   The command runs only after the client's `Y`: a client that gave up
   waiting for `R` (a server stopped or busy for a while) has a VM of its
@@ -53,6 +53,8 @@ defmodule RingTracer.CLI.Server.Session do
 
   # How long a client has to send its request, and then its `Y`.
   @request_ms 5_000
+  # How often a running command's client hears from the server.
+  @ping_ms 1_000
 
   # How long a command may take to stop once its client has gone.
   @stop_ms 2_000
@@ -88,6 +90,8 @@ defmodule RingTracer.CLI.Server.Session do
 
   defp deadline, do: System.monotonic_time(:millisecond) + @request_ms
 
+  # while the command runs: until the next `P`
+  defp left(%{phase: :running}), do: @ping_ms
   defp left(%{deadline: nil}), do: :infinity
   defp left(%{deadline: d}), do: max(d - System.monotonic_time(:millisecond), 0)
 
@@ -159,8 +163,14 @@ defmodule RingTracer.CLI.Server.Session do
         finish(state, status)
     after
       left(state) ->
-        # a client that does not finish its request in time: dropped unrun
-        :gen_tcp.close(state.socket)
+        if state.phase == :running do
+          # the client's sign that the server is not stopped or wedged
+          _ = :gen_tcp.send(state.socket, "P")
+          loop(state)
+        else
+          # a client that does not finish its request in time: dropped unrun
+          :gen_tcp.close(state.socket)
+        end
     end
   end
 
