@@ -204,7 +204,17 @@ defmodule RingTracer.CLI.ServerTest do
     {port, launcher} = open(["serve"], ctx.dir, [{"RINGTRACER_SOCKET", socket}])
     wait_for(socket, 600)
     {vm, 0} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{launcher}"])
-    {socket, {port, launcher}, String.trim(vm)}
+    vm = String.trim(vm)
+    ends_with_test(launcher, vm)
+    {socket, {port, launcher}, vm}
+  end
+
+  # A test that fails half-way leaves no server running: woken and stopped.
+  defp ends_with_test(launcher, vm) do
+    on_exit(fn ->
+      System.cmd("kill", ["-CONT", vm], stderr_to_stdout: true)
+      System.cmd("kill", ["-TERM", "#{launcher}", vm], stderr_to_stdout: true)
+    end)
   end
 
   defp elapsed_ms(t0), do: System.monotonic_time(:millisecond) - t0
@@ -373,6 +383,7 @@ defmodule RingTracer.CLI.ServerTest do
     wait_for(socket, 600)
     {vm, 0} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{launcher}"])
     vm = String.trim(vm)
+    ends_with_test(launcher, vm)
 
     # clients that connect and say nothing, more than the server has descriptors for
     hogs =
