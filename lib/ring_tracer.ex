@@ -76,7 +76,8 @@ defmodule RingTracer do
       referenced files from (default none; see `RingTracer.Scene.load/2`)
     * `:preview` — a live page of the job in a browser (`RingTracer.Preview`):
       `true` (a free port on 127.0.0.1), a port, `[port: p, listen: address]`,
-      each printing the page's address on stderr and stopping the page when
+      each printing the page's address on stderr (on the I/O device
+      `announce: device` instead, if given) and stopping the page when
       the job ends, or a preview started with `RingTracer.Preview.start/1`
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`

@@ -148,10 +148,13 @@ defmodule RingTracer.CLI do
     Path.join([base, "ringtracer", "serve.sock"])
   end
 
-  # What the first command would otherwise load: every module of Elixir and
-  # of the application, and the kernel's first trace.
+  # What the first command would otherwise load: every module of OTP's
+  # kernel and stdlib, of Elixir and of the application, and the kernel's
+  # first trace. Loaded now, they need no descriptor later: out of them
+  # (emfile), a module loaded on first use fails, and the logger's handler
+  # with it.
   defp warm_up do
-    for app <- [:elixir, :logger, :ring_tracer],
+    for app <- [:kernel, :stdlib, :elixir, :logger, :ring_tracer],
         {:ok, modules} = :application.get_key(app, :modules),
         module <- modules,
         do: Code.ensure_loaded(module)
@@ -226,11 +229,16 @@ defmodule RingTracer.CLI do
 
     Keeps a render node running for this user, until stopped (Ctrl-C). While it runs,
     `ringtracer render` hands its work to it instead of booting a VM of its own, so the
-    render starts at once. Output, progress, Ctrl-C and exit status are the same.
+    render starts at once. Output, progress, Ctrl-C and exit status are the same. A
+    server that does not answer within 2 s (stopped, busy) is left for a VM of the
+    render's own.
     Renders on other nodes (--nodes, --tls, ...) still boot their own VM.
 
-      --socket PATH           the Unix socket (default $XDG_RUNTIME_DIR/ringtracer/serve.sock,
-                              else ~/.cache/ringtracer/serve.sock); its folder is mode 0700
+      --socket PATH           the Unix socket; its folder is mode 0700. Default, one per
+                              checkout: $XDG_RUNTIME_DIR/ringtracer/serve-N.sock, else
+                              ~/.cache/ringtracer/serve-N.sock (N: a checksum of the
+                              checkout's path); RINGTRACER_SOCKET overrides it, for
+                              `ringtracer render` too
       RINGTRACER_SERVER=off   in the environment of `ringtracer render`: never use a server
       RINGTRACER_SERVER=only  fail rather than boot a VM of its own
 

@@ -144,7 +144,24 @@ defmodule RingTracer.Cluster do
   end
 
   def handle_info({:nodedown, n}, state) do
-    Logger.info("RingTracer: node #{n} down; jobs with children there re-link their rings")
+    # Nodes connect to each other through the workers they share: another
+    # render's VM going is no news for the renders of this one.
+    if hosts_our_children?(n),
+      do: Logger.info("RingTracer: node #{n} down; jobs with children there re-link their rings"),
+      else: Logger.debug("RingTracer: node #{n} down")
+
     {:noreply, state}
+  end
+
+  @doc false
+  # Whether a job with children on this node also has one on `n` (its ring,
+  # published in this node's `RingTracer.Job.Directory`).
+  @spec hosts_our_children?(node()) :: boolean()
+  def hosts_our_children?(n) do
+    spec = [{{:_, :"$1"}, [{:==, {:node, :"$1"}, n}], [true]}]
+    match?({[_ | _], _}, :ets.select(RingTracer.Names.directory_table(), spec, 1))
+  rescue
+    # no table: the application is not running here
+    ArgumentError -> false
   end
 end

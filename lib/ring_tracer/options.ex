@@ -222,6 +222,7 @@ defmodule RingTracer.Options do
           {:listen, a} -> match?({:ok, _}, RingTracer.Preview.address(a))
           {:max_viewers, m} -> is_integer(m) and m > 0
           {:cpu_share, c} -> is_number(c) and c > 0 and c <= 1
+          {:announce, d} -> is_pid(d) or is_atom(d)
           _ -> false
         end)
 

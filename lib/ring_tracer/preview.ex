@@ -213,16 +213,19 @@ defmodule RingTracer.Preview do
         opts when is_list(opts) -> opts
       end
 
+    # where the address goes: the render's own stderr (a served render's is its client's)
+    {announce, opts} = Keyword.pop(opts, :announce, :standard_error)
+
     case start(opts) do
       {:ok, preview} ->
         # Gone with the render, however it ends (a :timeout kills it).
         send(preview.pid, {:owner, self()})
-        IO.puts(:stderr, "preview: #{preview.url}")
+        IO.puts(announce, "preview: #{preview.url}")
         :ok = GenServer.call(preview.pid, {:expect, job, nodes})
         {preview, true}
 
       {:error, error} ->
-        IO.puts(:stderr, "preview: #{error.message}")
+        IO.puts(announce, "preview: #{error.message}")
         nil
     end
   end

@@ -11,18 +11,20 @@ defmodule RingTracer.CLI.Console do
   through `err/0`; the files it creates get `new_file_mode/0`.
   """
 
-  defstruct err: :standard_error, cwd: nil, tty?: nil, umask: nil
+  defstruct err: :standard_error, cwd: nil, tty?: nil, umask: nil, home: nil
 
   @typedoc """
   `err`: the stderr device; `cwd`: the caller's folder (`nil`: from the
   environment); `tty?`: whether stderr is a terminal (`nil`: ask the VM);
-  `umask`: the caller's (`nil`: the VM's own applies).
+  `umask`: the caller's (`nil`: the VM's own applies); `home`: the caller's
+  home, what `~` in a path stands for (`nil`: the VM's).
   """
   @type t :: %__MODULE__{
           err: :io.device(),
           cwd: Path.t() | nil,
           tty?: boolean() | nil,
-          umask: non_neg_integer() | nil
+          umask: non_neg_integer() | nil,
+          home: Path.t() | nil
         }
 
   @key {__MODULE__, :console}
@@ -66,6 +68,10 @@ defmodule RingTracer.CLI.Console do
   @doc "The caller's folder."
   @spec cwd() :: Path.t()
   def cwd, do: get().cwd || System.get_env("RINGTRACER_CWD") || File.cwd!()
+
+  @doc "The caller's home: what `~` in a path stands for."
+  @spec home() :: Path.t()
+  def home, do: get().home || System.user_home!()
 
   @doc "Whether stderr is a terminal."
   @spec tty?() :: boolean()

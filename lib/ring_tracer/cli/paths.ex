@@ -11,12 +11,18 @@ defmodule RingTracer.CLI.Paths do
   def cwd, do: RingTracer.CLI.Console.cwd()
 
   @doc """
-  `path` made absolute against the caller's folder.
+  `path` made absolute against the caller's folder; a leading `~` is the
+  caller's home (`RingTracer.CLI.Console.home/0`: also through the server,
+  whose own home may differ).
 
       iex> RingTracer.CLI.Paths.expand("/tmp/x.png")
       "/tmp/x.png"
+      iex> RingTracer.CLI.Paths.expand("~/x.png") == Path.join(System.user_home!(), "x.png")
+      true
   """
   @spec expand(Path.t()) :: Path.t()
+  def expand("~"), do: Path.expand(RingTracer.CLI.Console.home())
+  def expand("~/" <> rest), do: Path.expand(rest, RingTracer.CLI.Console.home())
   def expand(path) when is_binary(path), do: Path.expand(path, cwd())
 
   @doc "The values of `keys` in `opts` made absolute (each may be repeated)."

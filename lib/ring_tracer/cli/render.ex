@@ -91,7 +91,8 @@ defmodule RingTracer.CLI.Render do
     Usage: ringtracer render SCENE --out FILE [options]
 
     Renders SCENE (.nff, .toml or .obj) through a ring of children and writes FILE
-    (.png, 8-bit sRGB, or .exr, linear float). Paths are relative to this folder.
+    (.png, 8-bit sRGB, or .exr, linear float). Paths are relative to this folder; a
+    leading ~ in one is your $HOME (also when `ringtracer serve` renders it).
 
     Image:
       -o, --out FILE          the image to write (required)
@@ -326,8 +327,13 @@ defmodule RingTracer.CLI.Render do
 
   defp preview(render_opts, opts) do
     case opts[:preview] do
-      nil -> render_opts
-      port -> Keyword.put(render_opts, :preview, [port: port] ++ Keyword.take(opts, [:listen]))
+      nil ->
+        render_opts
+
+      # its address on this command's stderr: a served render's goes to its client
+      port ->
+        preview = [port: port, announce: Console.err()] ++ Keyword.take(opts, [:listen])
+        Keyword.put(render_opts, :preview, preview)
     end
   end
 

@@ -135,9 +135,17 @@ defmodule RingTracer.CLI.Server do
     ])
   end
 
-  defp accept(socket, server, runner) do
+  # The pause after a failed accept, doubled on each failure in a row up to
+  # the last: out of descriptors (emfile, enfile), accept fails at once, and
+  # trying again without a pause is a busy loop that floods the log.
+  @backoff_ms {50, 1_000}
+
+  defp accept(socket, server, runner, failures \\ 0) do
     case :gen_tcp.accept(socket) do
       {:ok, client} ->
+        if failures > 0,
+          do: Logger.warning("ringtracer serve: accepting commands again")
+
         {:ok, pid} = Session.start(client, runner)
         :ok = :gen_tcp.controlling_process(client, pid)
         send(pid, :go)
@@ -147,10 +155,33 @@ defmodule RingTracer.CLI.Server do
         :ok
 
       {:error, reason} ->
-        Logger.warning("ringtracer serve: accept failed: #{inspect(reason)}")
-        accept(socket, server, runner)
+        # one line for a run of failures, not one per try
+        if failures == 0,
+          do:
+            Logger.warning(
+              "ringtracer serve: cannot accept a command: #{accept_error(reason)}; " <>
+                "trying again, less often, until it can"
+            )
+
+        Process.sleep(backoff(failures))
+        accept(socket, server, runner, failures + 1)
     end
   end
+
+  @doc false
+  # The pause after the `failures`-th failed accept in a row (0 the first).
+  @spec backoff(non_neg_integer()) :: pos_integer()
+  def backoff(failures) do
+    {first, last} = @backoff_ms
+    min(first * Integer.pow(2, min(failures, 16)), last)
+  end
+
+  # No :file.format_error/1 here: out of descriptors, a module not loaded
+  # yet (its erl_posix_msg) cannot be loaded.
+  defp accept_error(reason) when reason in [:emfile, :enfile],
+    do: "too many open files (#{reason})"
+
+  defp accept_error(reason), do: inspect(reason)
 
   @impl GenServer
   def handle_info({:EXIT, pid, reason}, %{acceptor: pid} = state),

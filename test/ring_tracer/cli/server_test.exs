@@ -197,6 +197,252 @@ defmodule RingTracer.CLI.ServerTest do
     refute File.exists?(Path.join(ctx.scenes, "killed.png"))
   end
 
+  # A second server of the tests' own, on a socket of its own, whose VM the
+  # test may stop (SIGSTOP): its OS pid is the launcher's child.
+  defp own_server(ctx, name) do
+    socket = Path.join([ctx.dir, name, "serve.sock"])
+    {port, launcher} = open(["serve"], ctx.dir, [{"RINGTRACER_SOCKET", socket}])
+    wait_for(socket, 600)
+    {vm, 0} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{launcher}"])
+    vm = String.trim(vm)
+    ends_with_test(launcher, vm)
+    {socket, {port, launcher}, vm}
+  end
+
+  # A test that fails half-way leaves no server running: woken and stopped.
+  defp ends_with_test(launcher, vm) do
+    on_exit(fn ->
+      System.cmd("kill", ["-CONT", vm], stderr_to_stdout: true)
+      System.cmd("kill", ["-TERM", "#{launcher}", vm], stderr_to_stdout: true)
+    end)
+  end
+
+  defp elapsed_ms(t0), do: System.monotonic_time(:millisecond) - t0
+
+  test "a stopped server: the render goes to a VM of its own within seconds, and never runs twice",
+       ctx do
+    {socket, server, vm} = own_server(ctx, "stopped")
+    {_, 0} = System.cmd("kill", ["-STOP", vm])
+
+    try do
+      env = [{"RINGTRACER_SOCKET", socket}]
+      args = ~w(render mine.nff --width 32 --atoms 4)
+      t0 = System.monotonic_time(:millisecond)
+      {0, out} = run(open(args ++ ~w(-o fell.png), ctx.scenes, env))
+      assert out =~ "did not answer within 2 s"
+      assert out =~ "wrote #{Path.join(ctx.scenes, "fell.png")}"
+      refute out =~ "the server's, over all its renders"
+      # two seconds for the server, then a VM's boot and a small render
+      assert elapsed_ms(t0) < 30_000
+
+      # told to use only the server, it fails as soon as the server misses its deadline
+      t0 = System.monotonic_time(:millisecond)
+
+      {1, out} =
+        run(open(args ++ ~w(-o only.png), ctx.scenes, [{"RINGTRACER_SERVER", "only"} | env]))
+
+      assert elapsed_ms(t0) < 10_000
+      assert out =~ "did not answer within 2 s"
+
+      # woken up, the server finds both requests unconfirmed: it renders neither
+      File.rm!(Path.join(ctx.scenes, "fell.png"))
+      {_, 0} = System.cmd("kill", ["-CONT", vm])
+
+      {0, _} =
+        run(open(args ++ ~w(-o woken.png), ctx.scenes, [{"RINGTRACER_SERVER", "only"} | env]))
+
+      Process.sleep(1_000)
+      refute File.exists?(Path.join(ctx.scenes, "fell.png"))
+      refute File.exists?(Path.join(ctx.scenes, "only.png"))
+    after
+      System.cmd("kill", ["-CONT", vm])
+      stop(server)
+    end
+  end
+
+  for {signal, status} <- [{"INT", 130}, {"TERM", 143}] do
+    test "SIG#{signal} ends a render within a second when its server stopped mid-job", ctx do
+      {socket, server, vm} = own_server(ctx, "wedged#{unquote(signal)}")
+
+      try do
+        env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+        args = ~w(render mine.nff -o wedged.png --width 256 --speeds 400 --progress bar)
+        {port, pid} = open(args, ctx.scenes, env)
+        until(port, "atoms")
+        {_, 0} = System.cmd("kill", ["-STOP", vm])
+        t0 = System.monotonic_time(:millisecond)
+        {_, 0} = System.cmd("kill", ["-#{unquote(signal)}", "#{pid}"])
+        {status, out} = collect(port)
+        took = elapsed_ms(t0)
+        assert status == unquote(status), out
+        assert out =~ "the server did not confirm"
+        # 800 ms for the server, and the launcher's and the test's own latency
+        assert took < 1_500, "#{took} ms"
+      after
+        System.cmd("kill", ["-CONT", vm])
+        stop(server)
+      end
+
+      # the woken server cancelled the job of the client that went
+      Process.sleep(3_000)
+      refute File.exists?(Path.join(ctx.scenes, "wedged.png"))
+    end
+  end
+
+  test "a server stopped mid-job: its client gives up after 30 s of silence", ctx do
+    {socket, server, vm} = own_server(ctx, "silent")
+
+    try do
+      env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+      args = ~w(render mine.nff -o silent.png --width 256 --speeds 400 --progress bar)
+      {port, _pid} = open(args, ctx.scenes, env)
+      until(port, "atoms")
+      {_, 0} = System.cmd("kill", ["-STOP", vm])
+      t0 = System.monotonic_time(:millisecond)
+      {status, out} = collect(port)
+      took = elapsed_ms(t0)
+      assert status == 1, out
+      assert out =~ "the server has sent nothing for 30 s"
+      # up to 1 s between pings, then 30 s of silence allowed
+      assert took in 28_000..45_000, "#{took} ms"
+    after
+      System.cmd("kill", ["-CONT", vm])
+      stop(server)
+    end
+  end
+
+  test "a job that fails takes no other with it, and each client prints its own reason", ctx do
+    {socket, server, _vm} = own_server(ctx, "isolation")
+    env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+
+    slow =
+      open(
+        ~w(render mine.nff -o kept.png --width 256 --speeds 400 --progress bar),
+        ctx.scenes,
+        env
+      )
+
+    until(elem(slow, 0), "atoms")
+    {1, bad} = run(open(~w(render nowhere.nff -o bad.png), ctx.scenes, env))
+    assert bad =~ "nowhere.nff"
+    {0, good} = collect(elem(slow, 0))
+    assert good =~ "wrote #{Path.join(ctx.scenes, "kept.png")}"
+    refute good =~ "nowhere.nff"
+    stop(server)
+  end
+
+  test "a server killed mid-job: each of its clients renders in a VM of its own", ctx do
+    {socket, server, vm} = own_server(ctx, "killed")
+    env = [{"RINGTRACER_SOCKET", socket}]
+    args = ~w(render mine.nff --width 256 --speeds 400 --progress bar)
+
+    clients =
+      for name <- ~w(k1 k2), do: {name, open(args ++ ["-o", name <> ".png"], ctx.scenes, env)}
+
+    for {_, {port, _}} <- clients, do: until(port, "atoms")
+    {_, 0} = System.cmd("kill", ["-KILL", vm])
+
+    for {name, {port, _}} <- clients do
+      {status, out} = collect(port)
+      assert status == 0, out
+      assert out =~ "the server ended before this command did; rendering in a VM of its own"
+      assert out =~ "wrote #{Path.join(ctx.scenes, name <> ".png")}"
+    end
+
+    stop(server)
+  end
+
+  # Stops a server of `own_server/2` and returns what it wrote (its log).
+  defp stop_log({port, launcher}) do
+    System.cmd("kill", ["-TERM", "#{launcher}"])
+    {_, log} = collect(port)
+    log
+  end
+
+  # The CPU time (user + system, seconds) OS process `pid` has used.
+  defp cpu_seconds(pid) do
+    [_, after_name] = String.split(File.read!("/proc/#{pid}/stat"), ")", parts: 2)
+    fields = String.split(after_name)
+    (String.to_integer(Enum.at(fields, 11)) + String.to_integer(Enum.at(fields, 12))) / 100
+  end
+
+  test "out of file descriptors, serve backs off, keeps logging and serves again", ctx do
+    socket = Path.join([ctx.dir, "nofile", "serve.sock"])
+    # 64 descriptors: the VM needs about 20, each waiting client takes one
+    port =
+      Port.open({:spawn_executable, "/bin/sh"}, [
+        :binary,
+        :exit_status,
+        :stderr_to_stdout,
+        args: ["-c", "ulimit -n 64 && exec \"$0\" serve", @launcher],
+        cd: ctx.dir,
+        env: [{~c"RINGTRACER_SOCKET", String.to_charlist(socket)}]
+      ])
+
+    {:os_pid, launcher} = Port.info(port, :os_pid)
+    wait_for(socket, 600)
+    {vm, 0} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{launcher}"])
+    vm = String.trim(vm)
+    ends_with_test(launcher, vm)
+
+    # clients that connect and say nothing, more than the server has descriptors for
+    hogs =
+      for _ <- 1..120,
+          {:ok, s} <- [:gen_tcp.connect({:local, socket}, 0, [:local, active: false], 1_000)],
+          do: s
+
+    assert length(hogs) > 44
+    Process.sleep(500)
+    cpu0 = cpu_seconds(vm)
+    Process.sleep(3_000)
+    # a busy loop on accept would take most of a core for these 3 s
+    assert cpu_seconds(vm) - cpu0 < 1.0
+    Enum.each(hogs, &:gen_tcp.close/1)
+    # the closed ones still in its queue are taken and dropped at once; its
+    # pause between tries is at most 1 s
+    log = until(port, "accepting commands again")
+    Process.sleep(2_000)
+
+    env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+    {0, out} = run(open(~w(render mine.nff -o nofile.png --width 16), ctx.scenes, env))
+    assert out =~ "the server's, over all its renders"
+
+    log = log <> stop_log({port, launcher})
+    # one line for the run of failures, and the logger still works after it
+    assert length(String.split(log, "cannot accept a command: too many open files")) in 2..4,
+           log
+
+    assert log =~ "accepting commands again"
+    refute log =~ "removed"
+  end
+
+  test "--preview through the server: the page's address goes to the client, not the server's log",
+       ctx do
+    {socket, server, _vm} = own_server(ctx, "preview")
+    env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+    {0, out} = run(open(~w(render mine.nff -o pv.png --width 16 --preview), ctx.scenes, env))
+    assert [_, token] = Regex.run(~r{preview: http://127\.0\.0\.1:\d+/([^/\s]+)/}, out)
+    log = stop_log(server)
+    refute log =~ token
+    refute log =~ "preview:"
+  end
+
+  test "~ in a served render's paths is the client's home, not the server's", ctx do
+    home = Path.join(ctx.dir, "home")
+    File.mkdir_p!(home)
+    env = [{"RINGTRACER_SOCKET", ctx.socket}, {"RINGTRACER_SERVER", "only"}, {"HOME", home}]
+    {0, out} = run(open(~w(render mine.nff --width 16 --out=~/tilde.png), ctx.scenes, env))
+    assert out =~ "wrote #{Path.join(home, "tilde.png")}"
+    assert File.exists?(Path.join(home, "tilde.png"))
+  end
+
+  test "a built checkout runs for a user without cargo on PATH", ctx do
+    env = [{"HOME", ctx.dir}, {"PATH", "/usr/local/bin:/usr/bin:/bin"}]
+    {0, out} = run(open(~w(render mine.nff -o nocargo.png --width 16), ctx.scenes, env))
+    refute out =~ "cargo not found"
+    assert out =~ "wrote"
+  end
+
   test "the socket's folder must be this user's alone", ctx do
     open_dir = Path.join(ctx.dir, "open")
     File.mkdir_p!(open_dir)

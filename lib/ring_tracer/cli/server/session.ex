@@ -8,10 +8,18 @@ defmodule RingTracer.CLI.Server.Session do
   data), client to server: `C` the caller's folder, `A` an argument (one
   each, in order), `T` `1` if the client's stderr is a terminal, `U` its
   umask in octal (the files the command creates get the permissions the
-  client's own would give them), `G` run it; later `I` interrupt (Ctrl-C) and `K` terminate. Server to client:
-  `O` bytes for stdout, `E` bytes for stderr, `X` the exit status (one
-  byte), or `F` alone: boot a VM of your own for this command (a render on
-  other nodes, or a command other than `render`).
+  client's own would give them), `H` its home (`~` in a path), `G` that is all; `Y` go ahead (after the
+  server's `R`); later `I` interrupt (Ctrl-C) and `K` terminate. Server to
+  client: `R` the server takes the command, `O` bytes for stdout, `E` bytes
+  for stderr, `P` (every second while the command runs) still at work, `X`
+  the exit status (one byte), or `F` alone: boot a VM of your own for this
+  command (a render on other nodes, or a command other than `render`).
+
+  The command runs only after the client's `Y`: a client that gave up
+  waiting for `R` (a server stopped or busy for a while) has a VM of its
+  own do the command, and never gets a second run from a server that wakes
+  up late. A client has 5 s to send its request, and 5 s more for its
+  `Y`; one that does not is dropped without running anything.
   """
 
   alias RingTracer.CLI.{Console, Render, Signals}
@@ -24,10 +32,29 @@ defmodule RingTracer.CLI.Server.Session do
           args: [String.t()],
           tty?: boolean(),
           umask: non_neg_integer() | nil,
+          home: Path.t() | nil,
           command: {pid(), reference()} | nil,
-          runner: RingTracer.CLI.Server.runner()
+          runner: RingTracer.CLI.Server.runner(),
+          phase: :request | :confirm | :running,
+          deadline: integer() | nil
         }
-  defstruct [:socket, :cwd, :runner, args: [], tty?: false, umask: nil, command: nil]
+  defstruct [
+    :socket,
+    :cwd,
+    :runner,
+    :deadline,
+    args: [],
+    tty?: false,
+    umask: nil,
+    home: nil,
+    command: nil,
+    phase: :request
+  ]
+
+  # How long a client has to send its request, and then its `Y`.
+  @request_ms 5_000
+  # How often a running command's client hears from the server.
+  @ping_ms 1_000
 
   # How long a command may take to stop once its client has gone.
   @stop_ms 2_000
@@ -38,7 +65,8 @@ defmodule RingTracer.CLI.Server.Session do
     pid =
       spawn(fn ->
         receive do
-          :go -> loop(%__MODULE__{socket: socket, runner: runner})
+          :go ->
+            loop(%__MODULE__{socket: socket, runner: runner, deadline: deadline()})
         end
       end)
 
@@ -60,15 +88,38 @@ defmodule RingTracer.CLI.Server.Session do
   def served?(["render" | argv]), do: not Render.own_vm?(argv)
   def served?(_args), do: false
 
-  defp loop(state) do
-    :ok = :inet.setopts(state.socket, active: :once)
+  defp deadline, do: System.monotonic_time(:millisecond) + @request_ms
 
+  # while the command runs: until the next `P`
+  defp left(%{phase: :running}), do: @ping_ms
+  defp left(%{deadline: nil}), do: :infinity
+  defp left(%{deadline: d}), do: max(d - System.monotonic_time(:millisecond), 0)
+
+  defp loop(state) do
+    case :inet.setopts(state.socket, active: :once) do
+      :ok -> receive_next(state)
+      # the client went before its command ran: nothing to stop
+      {:error, _} when state.command == nil -> :gen_tcp.close(state.socket)
+      {:error, _} -> gone(state)
+    end
+  end
+
+  defp receive_next(state) do
     receive do
+      {:tcp, _, "Y"} when state.phase == :confirm ->
+        run(%{state | phase: :running, deadline: nil})
+
+      {:tcp, _, _} when state.phase == :confirm ->
+        finish(state, 2)
+
       {:tcp, _, <<"C", cwd::binary>>} ->
         loop(%{state | cwd: cwd})
 
       {:tcp, _, <<"A", arg::binary>>} ->
         loop(%{state | args: [arg | state.args]})
+
+      {:tcp, _, <<"H", home::binary>>} ->
+        loop(%{state | home: home})
 
       {:tcp, _, <<"T", flag::binary>>} ->
         loop(%{state | tty?: flag == "1"})
@@ -79,8 +130,8 @@ defmodule RingTracer.CLI.Server.Session do
           _ -> finish(state, 2)
         end
 
-      {:tcp, _, "G"} ->
-        run(%{state | args: Enum.reverse(state.args)})
+      {:tcp, _, "G"} when state.phase == :request ->
+        take(%{state | args: Enum.reverse(state.args)})
 
       {:tcp, _, "I"} ->
         loop(interrupt(state, :sigint))
@@ -110,31 +161,58 @@ defmodule RingTracer.CLI.Server.Session do
           end
 
         finish(state, status)
+    after
+      left(state) ->
+        if state.phase == :running do
+          # the client's sign that the server is not stopped or wedged
+          _ = :gen_tcp.send(state.socket, "P")
+          loop(state)
+        else
+          # a client that does not finish its request in time: dropped unrun
+          :gen_tcp.close(state.socket)
+        end
     end
   end
 
-  defp run(state) do
+  # The request is complete: take it (`R`, then wait for the client's `Y`)
+  # or send it to a VM of its own.
+  defp take(state) do
     if served?(state.args) and is_binary(state.cwd) do
-      me = self()
-      out = Device.start(state.socket, "O", state.tty?, me)
-      err = Device.start(state.socket, "E", state.tty?, me)
-      console = %Console{err: err, cwd: state.cwd, tty?: state.tty?, umask: state.umask}
-      {args, runner} = {state.args, state.runner}
-
-      {pid, ref} =
-        spawn_monitor(fn ->
-          Process.group_leader(self(), out)
-          Console.put(console)
-          ref = receive do: ({:ref, ref} -> ref)
-          send(me, {:status, ref, runner.(args)})
-        end)
-
-      send(pid, {:ref, ref})
-      loop(%{state | command: {pid, ref}})
+      case :gen_tcp.send(state.socket, "R") do
+        :ok -> loop(%{state | phase: :confirm, deadline: deadline()})
+        {:error, _} -> :gen_tcp.close(state.socket)
+      end
     else
       _ = :gen_tcp.send(state.socket, "F")
       :gen_tcp.close(state.socket)
     end
+  end
+
+  defp run(state) do
+    me = self()
+    out = Device.start(state.socket, "O", state.tty?, me)
+    err = Device.start(state.socket, "E", state.tty?, me)
+
+    console = %Console{
+      err: err,
+      cwd: state.cwd,
+      tty?: state.tty?,
+      umask: state.umask,
+      home: state.home
+    }
+
+    {args, runner} = {state.args, state.runner}
+
+    {pid, ref} =
+      spawn_monitor(fn ->
+        Process.group_leader(self(), out)
+        Console.put(console)
+        ref = receive do: ({:ref, ref} -> ref)
+        send(me, {:status, ref, runner.(args)})
+      end)
+
+    send(pid, {:ref, ref})
+    loop(%{state | command: {pid, ref}})
   end
 
   # The command takes an interrupt as it takes one from the launcher.
