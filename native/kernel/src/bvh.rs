@@ -1280,7 +1280,7 @@ mod tests {
     fn avx_and_sse_node_tests_agree_bit_for_bit() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
         // in [-2, 2)
-        let mut f = || crate::test_rng::rng(&mut seed) * 2.0;
+        let mut f = || crate::test_support::rng(&mut seed) * 2.0;
         let mut hits = 0;
         for round in 0..5000 {
             let mut node = Node8::empty();

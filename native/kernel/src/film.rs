@@ -200,6 +200,7 @@ pub fn write_image_mode(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::names;
     use std::os::unix::fs::PermissionsExt;
 
     #[test]
@@ -221,16 +222,6 @@ mod tests {
         for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e30, -0.0] {
             assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
         }
-    }
-
-    /// The names in a folder.
-    fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
     }
 
     #[test]

@@ -438,7 +438,7 @@ mod tests {
     #[test]
     fn cone_sure_miss_keeps_every_hit() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || crate::test_rng::rng(&mut seed);
+        let mut rnd = || crate::test_support::rng(&mut seed);
         let (mut hits, mut rejected) = (0, 0);
         for round in 0..200_000 {
             let base = Vec3A::new(rnd(), rnd(), rnd()) * 10.0;

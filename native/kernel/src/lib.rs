@@ -74,7 +74,7 @@ pub mod safe_fs;
 pub mod scene;
 pub mod stats;
 #[cfg(test)]
-mod test_rng;
+mod test_support;
 pub mod toml_scene;
 mod tri4;
 pub mod warning;

@@ -1064,7 +1064,7 @@ mod tests {
     use glam::Vec3A;
     use std::path::Path;
 
-    use crate::test_rng::rng;
+    use crate::test_support::rng;
 
     fn v(seed: &mut u64) -> Vec3A {
         Vec3A::new(rng(seed), rng(seed), rng(seed))

@@ -519,16 +519,8 @@ pub fn write_path(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_support::names;
     use std::os::unix::fs::{symlink, MetadataExt, PermissionsExt};
-
-    fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
 
     #[test]
     fn writes_replace_and_refuse() {

@@ -205,7 +205,7 @@ mod tests {
     use super::*;
     use crate::geometry::hit_triangle;
 
-    use crate::test_rng::rng;
+    use crate::test_support::rng;
 
     #[test]
     fn lanes_agree_bit_for_bit_with_the_scalar_test() {
