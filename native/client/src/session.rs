@@ -299,6 +299,36 @@ mod tests {
         dir.join("s.sock")
     }
 
+    /// `render` through the socket at `path`, as the launcher runs it.
+    fn render(path: &Path) -> u8 {
+        run(
+            path,
+            &OsString::from("/"),
+            vec!["render".into()],
+            mpsc::channel(),
+        )
+    }
+
+    /// A server on `listener` that takes one client's command (`R` to its
+    /// `G`) and, once the client says `Y`, hands the connection to `then`.
+    fn server<T: Send + 'static>(
+        listener: UnixListener,
+        then: impl FnOnce(UnixStream) -> T + Send + 'static,
+    ) -> std::thread::JoinHandle<T> {
+        std::thread::spawn(move || {
+            let (mut conn, _) = listener.accept().unwrap();
+            while let Ok(Some((tag, _))) = frame::read(&mut conn) {
+                if tag == b'G' {
+                    frame::write(&mut conn, b'R', b"").unwrap();
+                }
+                if tag == b'Y' {
+                    return then(conn);
+                }
+            }
+            panic!("no Y");
+        })
+    }
+
     /// A server that lets the client in and then never answers (a stopped
     /// or wedged `ringtracer serve`): the client gives up on it in time and
     /// asks for a VM of its own.
@@ -307,12 +337,7 @@ mod tests {
         let path = socket_path("silent");
         let listener = UnixListener::bind(&path).unwrap();
         let t = Instant::now();
-        let status = run(
-            &path,
-            &OsString::from("/"),
-            vec!["render".into()],
-            mpsc::channel(),
-        );
+        let status = render(&path);
         let took = t.elapsed();
         assert_eq!(status, FALLBACK);
         assert!(
@@ -338,25 +363,10 @@ mod tests {
     fn a_server_that_goes_mid_command_leaves_it_to_a_vm_of_our_own() {
         let path = socket_path("dies");
         let listener = UnixListener::bind(&path).unwrap();
-        let server = std::thread::spawn(move || {
-            let (mut conn, _) = listener.accept().unwrap();
-            while let Ok(Some((tag, _))) = frame::read(&mut conn) {
-                if tag == b'G' {
-                    frame::write(&mut conn, b'R', b"").unwrap();
-                }
-                if tag == b'Y' {
-                    frame::write(&mut conn, b'E', b"progress\n").unwrap();
-                    return;
-                }
-            }
-            panic!("no Y");
+        let server = server(listener, |mut conn| {
+            frame::write(&mut conn, b'E', b"progress\n").unwrap();
         });
-        let status = run(
-            &path,
-            &OsString::from("/"),
-            vec!["render".into()],
-            mpsc::channel(),
-        );
+        let status = render(&path);
         server.join().unwrap();
         assert_eq!(status, FALLBACK);
         let _ = std::fs::remove_dir_all(path.parent().unwrap());
@@ -369,30 +379,16 @@ mod tests {
     fn a_server_silent_mid_command_is_left_in_time() {
         let path = socket_path("silent-mid");
         let listener = UnixListener::bind(&path).unwrap();
-        let server = std::thread::spawn(move || {
-            let (mut conn, _) = listener.accept().unwrap();
-            while let Ok(Some((tag, _))) = frame::read(&mut conn) {
-                if tag == b'G' {
-                    frame::write(&mut conn, b'R', b"").unwrap();
-                }
-                if tag == b'Y' {
-                    // pings for twice the silence allowed, then nothing
-                    for _ in 0..8 {
-                        std::thread::sleep(SILENCE_WAIT / 4);
-                        frame::write(&mut conn, b'P', b"").unwrap();
-                    }
-                    return conn;
-                }
+        let server = server(listener, |mut conn| {
+            // pings for twice the silence allowed, then nothing
+            for _ in 0..8 {
+                std::thread::sleep(SILENCE_WAIT / 4);
+                frame::write(&mut conn, b'P', b"").unwrap();
             }
-            panic!("no Y");
+            conn
         });
         let t = Instant::now();
-        let status = run(
-            &path,
-            &OsString::from("/"),
-            vec!["render".into()],
-            mpsc::channel(),
-        );
+        let status = render(&path);
         let took = t.elapsed();
         let _conn = server.join().unwrap();
         assert_eq!(status, 1);
@@ -407,27 +403,10 @@ mod tests {
     fn the_exit_status_is_the_servers() {
         let path = socket_path("status");
         let listener = UnixListener::bind(&path).unwrap();
-        let server = std::thread::spawn(move || {
-            let (mut conn, _) = listener.accept().unwrap();
-            while let Ok(Some((tag, _))) = frame::read(&mut conn) {
-                if tag == b'G' {
-                    frame::write(&mut conn, b'R', b"").unwrap();
-                }
-                if tag == b'Y' {
-                    frame::write(&mut conn, b'X', &[7]).unwrap();
-                    return;
-                }
-            }
+        let server = server(listener, |mut conn| {
+            frame::write(&mut conn, b'X', &[7]).unwrap();
         });
-        assert_eq!(
-            run(
-                &path,
-                &OsString::from("/"),
-                vec!["render".into()],
-                mpsc::channel()
-            ),
-            7
-        );
+        assert_eq!(render(&path), 7);
         server.join().unwrap();
         let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
