@@ -219,6 +219,17 @@ defmodule RingTracer.CLI.ServerTest do
 
   defp elapsed_ms(t0), do: System.monotonic_time(:millisecond) - t0
 
+  # A slow render through the server at `socket` only, once it has started
+  # tracing, and the server's VM `vm` stopped then: {port, pid, when stopped}.
+  defp stopped_mid_job(ctx, socket, vm, out) do
+    env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
+    args = ~w(render mine.nff -o #{out} --width 256 --speeds 400 --progress bar)
+    {port, pid} = open(args, ctx.scenes, env)
+    until(port, "atoms")
+    {_, 0} = System.cmd("kill", ["-STOP", vm])
+    {port, pid, System.monotonic_time(:millisecond)}
+  end
+
   test "a stopped server: the render goes to a VM of its own within seconds, and never runs twice",
        ctx do
     {socket, server, vm} = own_server(ctx, "stopped")
@@ -265,12 +276,7 @@ defmodule RingTracer.CLI.ServerTest do
       {socket, server, vm} = own_server(ctx, "wedged#{unquote(signal)}")
 
       try do
-        env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
-        args = ~w(render mine.nff -o wedged.png --width 256 --speeds 400 --progress bar)
-        {port, pid} = open(args, ctx.scenes, env)
-        until(port, "atoms")
-        {_, 0} = System.cmd("kill", ["-STOP", vm])
-        t0 = System.monotonic_time(:millisecond)
+        {port, pid, t0} = stopped_mid_job(ctx, socket, vm, "wedged.png")
         {_, 0} = System.cmd("kill", ["-#{unquote(signal)}", "#{pid}"])
         {status, out} = collect(port)
         took = elapsed_ms(t0)
@@ -293,12 +299,7 @@ defmodule RingTracer.CLI.ServerTest do
     {socket, server, vm} = own_server(ctx, "silent")
 
     try do
-      env = [{"RINGTRACER_SOCKET", socket}, {"RINGTRACER_SERVER", "only"}]
-      args = ~w(render mine.nff -o silent.png --width 256 --speeds 400 --progress bar)
-      {port, _pid} = open(args, ctx.scenes, env)
-      until(port, "atoms")
-      {_, 0} = System.cmd("kill", ["-STOP", vm])
-      t0 = System.monotonic_time(:millisecond)
+      {port, _pid, t0} = stopped_mid_job(ctx, socket, vm, "silent.png")
       {status, out} = collect(port)
       took = elapsed_ms(t0)
       assert status == 1, out

@@ -11,7 +11,7 @@ defmodule RingTracer.Cluster.ForeignEpmdTest do
   @moduletag timeout: 240_000
 
   alias RingTracer.Cluster.{Cookie, TLS}
-  alias RingTracer.Test.OSNode
+  alias RingTracer.Test.{OSNode, SecondUser}
 
   @attacker "rtdistevil"
   @scene Path.expand("priv/scenes/balls_s2.nff")
@@ -22,7 +22,7 @@ defmodule RingTracer.Cluster.ForeignEpmdTest do
       _ -> flunk("needs root: it creates a second user and a network namespace")
     end
 
-    :ok = ensure_user()
+    :ok = SecondUser.ensure(@attacker)
     ns = "rtdist_#{System.unique_integer([:positive])}"
     {_, 0} = System.cmd("ip", ["netns", "add", ns], stderr_to_stdout: true)
     on_exit(fn -> remove_namespace(ns) end)
@@ -46,21 +46,6 @@ defmodule RingTracer.Cluster.ForeignEpmdTest do
     cookie = Path.join(dir, "cookie")
     {:ok, _} = Cookie.create(cookie)
     {:ok, cookie: cookie}
-  end
-
-  defp ensure_user do
-    case System.cmd("id", [@attacker], stderr_to_stdout: true) do
-      {_, 0} ->
-        :ok
-
-      _ ->
-        {_, 0} =
-          System.cmd("useradd", ["--no-create-home", "--shell", "/usr/sbin/nologin", @attacker],
-            stderr_to_stdout: true
-          )
-
-        :ok
-    end
   end
 
   defp uid do

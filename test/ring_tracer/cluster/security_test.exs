@@ -8,7 +8,7 @@ defmodule RingTracer.Cluster.SecurityTest do
   @moduletag timeout: 120_000
 
   alias RingTracer.Cluster.{Cookie, TLS}
-  alias RingTracer.Test.OSNode
+  alias RingTracer.Test.{OSNode, SecondUser}
 
   @attacker "rtattacker"
 
@@ -42,25 +42,10 @@ defmodule RingTracer.Cluster.SecurityTest do
   # that is not possible.
   defp attacker do
     with {"0\n", 0} <- System.cmd("id", ["-u"]),
-         :ok <- ensure_user() do
+         :ok <- SecondUser.ensure(@attacker) do
       @attacker
     else
       _ -> nil
-    end
-  end
-
-  defp ensure_user do
-    case System.cmd("id", [@attacker], stderr_to_stdout: true) do
-      {_, 0} ->
-        :ok
-
-      _ ->
-        {_, status} =
-          System.cmd("useradd", ["--no-create-home", "--shell", "/usr/sbin/nologin", @attacker],
-            stderr_to_stdout: true
-          )
-
-        if status == 0, do: :ok, else: :error
     end
   end
 
