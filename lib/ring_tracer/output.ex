@@ -119,11 +119,8 @@ defmodule RingTracer.Output do
   """
   @spec write(Path.t(), iodata(), keyword()) :: :ok | {:error, Error.t()}
   def write(path, data, opts \\ []) do
-    case put(path, data, opts[:mode], true) do
-      :ok -> :ok
-      {:error, reason} when is_atom(reason) -> {:error, Error.file(:file, path, reason)}
-      {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
-    end
+    with {:error, reason} <- put(path, data, opts[:mode], true),
+         do: {:error, file_error(path, reason)}
   end
 
   @doc """
@@ -135,11 +132,9 @@ defmodule RingTracer.Output do
   @spec put(Path.t(), iodata(), non_neg_integer() | nil, boolean()) ::
           :ok | {:error, File.posix() | String.t()}
   def put(path, data, mode, replace?) do
-    case Native.fs_write(Path.expand(path), IO.iodata_to_binary(data), mode || -1, replace?) do
-      {:ok, _} -> :ok
-      {:error, {nil, message}} -> {:error, message}
-      {:error, {posix, _message}} -> {:error, posix}
-    end
+    with {:ok, _} <-
+           fs(Native.fs_write(Path.expand(path), IO.iodata_to_binary(data), mode || -1, replace?)),
+         do: :ok
   end
 
   @doc """
@@ -150,12 +145,18 @@ defmodule RingTracer.Output do
   """
   @spec private_dir(Path.t()) :: :ok | {:error, File.posix() | String.t()}
   def private_dir(dir) do
-    case Native.fs_private_dir(Path.expand(dir), false) do
-      {:ok, _dir} -> :ok
-      {:error, {nil, message}} -> {:error, message}
-      {:error, {posix, _message}} -> {:error, posix}
-    end
+    with {:ok, _dir} <- fs(Native.fs_private_dir(Path.expand(dir), false)), do: :ok
   end
+
+  # The file NIFs' errors (`{posix, message}`, `posix` nil where the system
+  # gave no reason) as the system's reason, or the words where there is none.
+  defp fs({:error, {nil, message}}), do: {:error, message}
+  defp fs({:error, {posix, _message}}), do: {:error, posix}
+  defp fs(ok), do: ok
+
+  # An error of the file NIFs' (`fs/1`) about `path`.
+  defp file_error(path, reason) when is_atom(reason), do: Error.file(:file, path, reason)
+  defp file_error(path, message), do: Error.new(:file, "#{path}: #{message}")
 
   @doc """
   Writes several outputs as one: runs each `{path, write}` in turn, where
@@ -215,12 +216,11 @@ defmodule RingTracer.Output do
   defp keep(path) do
     full = Path.expand(path)
 
-    with {:ok, dir} <- Native.fs_open_dir(Path.dirname(full)),
-         {:ok, link} <- Native.fs_keep(dir, Path.basename(full)) do
+    with {:ok, dir} <- fs(Native.fs_open_dir(Path.dirname(full))),
+         {:ok, link} <- fs(Native.fs_keep(dir, Path.basename(full))) do
       {:ok, {dir, Path.basename(full), link}}
     else
-      {:error, {nil, message}} -> {:error, Error.new(:file, "#{path}: #{message}")}
-      {:error, {posix, _message}} -> {:error, Error.file(:file, path, posix)}
+      {:error, reason} -> {:error, file_error(path, reason)}
     end
   end
 
@@ -266,15 +266,15 @@ defmodule RingTracer.Output do
 
       true ->
         # a hidden file made and removed in the folder opened once
-        case Native.fs_probe(Path.expand(path)) do
+        case fs(Native.fs_probe(Path.expand(path))) do
           {:ok, _} ->
             :ok
 
-          {:error, {nil, message}} ->
-            error(kind, path, "cannot write in #{dir}: #{message}")
-
-          {:error, {posix, _message}} ->
+          {:error, posix} when is_atom(posix) ->
             error(kind, path, "cannot write in #{dir}: #{Error.file_reason(path, posix)}")
+
+          {:error, message} ->
+            error(kind, path, "cannot write in #{dir}: #{message}")
         end
     end
   end

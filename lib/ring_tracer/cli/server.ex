@@ -168,10 +168,8 @@ defmodule RingTracer.CLI.Server do
     end
   end
 
-  @doc false
   # The pause after the `failures`-th failed accept in a row (0 the first).
-  @spec backoff(non_neg_integer()) :: pos_integer()
-  def backoff(failures) do
+  defp backoff(failures) do
     {first, last} = @backoff_ms
     min(first * Integer.pow(2, min(failures, 16)), last)
   end

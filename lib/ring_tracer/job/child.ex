@@ -657,16 +657,16 @@ defmodule RingTracer.Job.Child do
     end
   end
 
-  defp fill_pipe(%{in_flight: in_flight} = state) when length(in_flight) < @pipe_depth do
+  defp fill_pipe(state) when length(state.in_flight) < @pipe_depth do
     case Queue.next(state.queue) do
-      {atom, rest} -> fill_pipe(%{state | queue: rest}, atom, in_flight)
+      {atom, rest} -> fill_pipe(%{state | queue: rest}, atom)
       :empty -> state
     end
   end
 
   defp fill_pipe(state), do: state
 
-  defp fill_pipe(state, atom, in_flight) do
+  defp fill_pipe(state, atom) do
     state =
       case parts_of(state, atom) do
         1 ->
@@ -678,8 +678,8 @@ defmodule RingTracer.Job.Child do
           %{state | parts: Map.put(state.parts, atom, n)}
       end
 
-    state = if in_flight == [], do: %{state | current_since: now()}, else: state
-    fill_pipe(%{state | in_flight: in_flight ++ [atom]})
+    state = if state.in_flight == [], do: %{state | current_since: now()}, else: state
+    fill_pipe(%{state | in_flight: state.in_flight ++ [atom]})
   end
 
   # In how many parts the grandchild traces `atom` (the strategy's

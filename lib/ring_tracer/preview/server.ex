@@ -45,6 +45,7 @@ defmodule RingTracer.Preview.Server do
     Process.flag(:priority, :low)
     table = :ets.new(__MODULE__, [:ordered_set, :protected, read_concurrency: true])
     addr = Keyword.get(opts, :listen, {127, 0, 0, 1})
+    max_viewers = Keyword.get(opts, :max_viewers, 32)
     # The page's address holds a random path: another local user (anyone
     # can reach loopback) or a web page that rebinds a name of its own to
     # 127.0.0.1 cannot guess it, and only sees 404s.
@@ -63,7 +64,7 @@ defmodule RingTracer.Preview.Server do
       # Viewers are counted by this server (`:max_viewers`); httpd's limit is
       # only a backstop: the connections without a stream are kept to
       # @max_waiting by the sweep, which drops the oldest first.
-      max_clients: Keyword.get(opts, :max_viewers, 32) + @max_connections,
+      max_clients: max_viewers + @max_connections,
       # No Server header: nothing to tell a prober what answers here.
       server_tokens: :none,
       # One deadline, from the connection (or the end of the previous
@@ -91,7 +92,7 @@ defmodule RingTracer.Preview.Server do
         handlers: [],
         waiters: MapSet.new(),
         viewers: %{},
-        max_viewers: Keyword.get(opts, :max_viewers, 32),
+        max_viewers: max_viewers,
         expect: nil,
         ended: :atomics.new(1, []),
         cpu_share: Keyword.get(opts, :cpu_share, 0.01),

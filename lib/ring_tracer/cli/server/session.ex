@@ -92,7 +92,6 @@ defmodule RingTracer.CLI.Server.Session do
 
   # while the command runs: until the next `P`
   defp left(%{phase: :running}), do: @ping_ms
-  defp left(%{deadline: nil}), do: :infinity
   defp left(%{deadline: d}), do: max(d - System.monotonic_time(:millisecond), 0)
 
   defp loop(state) do
@@ -107,7 +106,7 @@ defmodule RingTracer.CLI.Server.Session do
   defp receive_next(state) do
     receive do
       {:tcp, _, "Y"} when state.phase == :confirm ->
-        run(%{state | phase: :running, deadline: nil})
+        run(%{state | phase: :running})
 
       {:tcp, _, _} when state.phase == :confirm ->
         finish(state, 2)
