@@ -158,8 +158,7 @@ defmodule RingTracer.Cluster do
   # published in this node's `RingTracer.Job.Directory`).
   @spec hosts_our_children?(node()) :: boolean()
   def hosts_our_children?(n) do
-    spec = [{{:_, :"$1"}, [{:==, {:node, :"$1"}, n}], [true]}]
-    match?({[_ | _], _}, :ets.select(RingTracer.Names.directory_table(), spec, 1))
+    RingTracer.Job.Directory.any_on?(n)
   rescue
     # no table: the application is not running here
     ArgumentError -> false

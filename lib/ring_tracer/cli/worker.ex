@@ -15,7 +15,7 @@ defmodule RingTracer.CLI.Worker do
     * `--tls DIR` — distribution over TLS with the certificates in `DIR`
       (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS).
       Without it, TLS with the user's own certificates
-      (`RingTracer.Cluster.TLS.default_dir/0`, made on first use)
+      (`~/.config/ringtracer/tls`, made by `bin/ringtracer` on first use)
     * `--insecure-plain` — plain TCP distribution instead: whoever answers
       on port 4369 (any local user, if she starts epmd first) or sits on
       the network can read and alter the stream

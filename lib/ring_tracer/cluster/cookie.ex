@@ -117,15 +117,12 @@ defmodule RingTracer.Cluster.Cookie do
   end
 
   defp check(path, %File.Stat{uid: uid}) do
-    case own_uid() do
+    case RingTracer.Cluster.Epmd.own_uid() do
       ^uid ->
         :ok
 
-      me when is_integer(me) ->
+      me ->
         {:error, Error.new(:cookie, "#{path} belongs to user #{uid}, not to this user (#{me})")}
-
-      nil ->
-        :ok
     end
   end
 
@@ -137,14 +134,4 @@ defmodule RingTracer.Cluster.Cookie do
   end
 
   defp mode_string(mode), do: "0" <> Integer.to_string(mode &&& 0o777, 8)
-
-  # This OS process's user id, from /proc (Linux); nil where unknown.
-  defp own_uid do
-    with {:ok, status} <- File.read("/proc/self/status"),
-         [_, uid] <- Regex.run(~r/^Uid:\s+(\d+)/m, status) do
-      String.to_integer(uid)
-    else
-      _ -> nil
-    end
-  end
 end

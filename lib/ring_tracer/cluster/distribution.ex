@@ -51,7 +51,6 @@ defmodule RingTracer.Cluster.Distribution do
   alias RingTracer.Cluster.{Cookie, Epmd, TLS}
   alias RingTracer.Error
 
-  @epmd_port 4369
   @loopback {127, 0, 0, 1}
 
   @doc """
@@ -67,7 +66,7 @@ defmodule RingTracer.Cluster.Distribution do
          {:ok, ports} <- ports(opts[:ports]),
          {:ok, transport} <- transport(opts),
          {:ok, cookie} <- cookie(opts[:cookie_file]) do
-      quiet_tls(transport)
+      if transport == :tls, do: TLS.quiet_ssl()
 
       if Node.alive?() do
         set_cookie(cookie)
@@ -290,18 +289,14 @@ defmodule RingTracer.Cluster.Distribution do
         with :ok <- name_part(n, "--sname"), do: {:ok, short(n, listen), :shortnames}
 
       [n, host] ->
-        cond do
-          name_part(n, "--sname") != :ok ->
-            name_part(n, "--sname")
-
-          not Regex.match?(@short_host, host) ->
-            bad_name(
-              "--sname #{inspect(name)}: a short name's host is one word without dots " <>
-                "(for NAME@HOST.DOMAIN give --name)"
-            )
-
-          true ->
-            {:ok, name, :shortnames}
+        with :ok <- name_part(n, "--sname") do
+          if Regex.match?(@short_host, host),
+            do: {:ok, name, :shortnames},
+            else:
+              bad_name(
+                "--sname #{inspect(name)}: a short name's host is one word without dots " <>
+                  "(for NAME@HOST.DOMAIN give --name)"
+              )
         end
 
       _ ->
@@ -312,19 +307,15 @@ defmodule RingTracer.Cluster.Distribution do
   defp long_name(name) do
     case String.split(name, "@") do
       [n, host] ->
-        cond do
-          name_part(n, "--name") != :ok ->
-            name_part(n, "--name")
-
-          Regex.match?(@long_host, host) or
-              match?({:ok, _}, :inet.parse_strict_address(String.to_charlist(host))) ->
-            {:ok, name, :longnames}
-
-          true ->
-            bad_name(
-              "--name #{inspect(name)}: the host must be a host name (w1.example.org) " <>
-                "or an IP address"
-            )
+        with :ok <- name_part(n, "--name") do
+          if Regex.match?(@long_host, host) or
+               match?({:ok, _}, :inet.parse_strict_address(String.to_charlist(host))),
+             do: {:ok, name, :longnames},
+             else:
+               bad_name(
+                 "--name #{inspect(name)}: the host must be a host name (w1.example.org) " <>
+                   "or an IP address"
+               )
         end
 
       _ ->
@@ -377,7 +368,9 @@ defmodule RingTracer.Cluster.Distribution do
 
       with :ok <- reachable(listen, listeners),
            :ok <- owner(listeners, transport, opts) do
-        if loopback?(listen), do: warn_exposed_epmd()
+        # /proc said where epmd listens: the probe of each own address is
+        # needed only when it could not, or when that is beyond loopback
+        if loopback?(listen) and not loopback_only?(listeners), do: warn_exposed_epmd()
         :ok
       end
     else
@@ -392,10 +385,9 @@ defmodule RingTracer.Cluster.Distribution do
         :ok
 
       any_address?(listen) ->
-        if listeners != :unknown and listeners != [] and not Epmd.any_address?(listeners) and
-             Enum.all?(listeners, &loopback?(&1.address)),
-           do: epmd_elsewhere("every address (--listen #{:inet.ntoa(listen)})"),
-           else: :ok
+        if listeners != [] and loopback_only?(listeners),
+          do: epmd_elsewhere("every address (--listen #{:inet.ntoa(listen)})"),
+          else: :ok
 
       epmd_at?(listen) ->
         :ok
@@ -489,7 +481,7 @@ defmodule RingTracer.Cluster.Distribution do
   end
 
   defp epmd_at?(ip, timeout \\ 500) do
-    case :gen_tcp.connect(ip, @epmd_port, [:binary, active: false], timeout) do
+    case :gen_tcp.connect(ip, Epmd.port(), [:binary, active: false], timeout) do
       {:ok, socket} ->
         :gen_tcp.close(socket)
         true
@@ -498,6 +490,10 @@ defmodule RingTracer.Cluster.Distribution do
         false
     end
   end
+
+  # Whether /proc showed every epmd listener on a loopback address.
+  defp loopback_only?(:unknown), do: false
+  defp loopback_only?(listeners), do: Enum.all?(listeners, &loopback?(&1.address))
 
   defp warn_exposed_epmd do
     exposed = Enum.filter(own_addresses(), &epmd_at?(&1, 200))
@@ -559,17 +555,6 @@ defmodule RingTracer.Cluster.Distribution do
          )}
     end
   end
-
-  # A refused handshake is explained in one line by whoever connects
-  # (RingTracer.Cluster.check/1); OTP's ssl would also log a notice of
-  # several lines for it on stderr.
-  defp quiet_tls(:tls) do
-    _ = Application.load(:ssl)
-    _ = :logger.set_application_level(:ssl, :error)
-    :ok
-  end
-
-  defp quiet_tls(:plain), do: :ok
 
   # OTP reports a distribution that fails to start with pages of
   # supervisor reports; the error returned says it in one line.

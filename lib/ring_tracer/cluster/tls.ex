@@ -86,30 +86,10 @@ defmodule RingTracer.Cluster.TLS do
   end
 
   @doc """
-  The user's own TLS folder, which the launcher fills on first use with a
-  private CA's certificate and a node certificate signed by it (the CA's
-  key is thrown away): `$XDG_CONFIG_HOME/ringtracer/tls`, else
-  `~/.config/ringtracer/tls`.
-  """
-  @spec default_dir() :: Path.t()
-  def default_dir do
-    base =
-      case System.get_env("XDG_CONFIG_HOME") do
-        dir when is_binary(dir) and dir != "" -> dir
-        _ -> Path.join(System.user_home!(), ".config")
-      end
-
-    Path.join([base, "ringtracer", "tls"])
-  end
-
-  @doc """
   Checks a node's TLS folder: the three files exist, the key is readable by
-  its owner only, and this VM was booted with TLS distribution. `nil` (no
-  TLS asked for) is fine.
+  its owner only, and this VM was booted with TLS distribution.
   """
-  @spec check_booted(Path.t() | nil) :: :ok | {:error, Error.t()}
-  def check_booted(nil), do: :ok
-
+  @spec check_booted(Path.t()) :: :ok | {:error, Error.t()}
   def check_booted(dir) do
     with :ok <- check_dir(dir) do
       if enabled?(),
@@ -284,11 +264,20 @@ defmodule RingTracer.Cluster.TLS do
 
   defp ssl_connect(host, port, opts) do
     {:ok, _} = Application.ensure_all_started(:ssl)
-    # What the handshake says is told in one line; ssl's own notices and
-    # its warning about verify_none (a probe that trusts nothing) would
-    # add several more.
-    _ = :logger.set_application_level(:ssl, :error)
+    quiet_ssl()
     :ssl.connect(host, port, opts, 5_000)
+  end
+
+  @doc false
+  # What a handshake says is told in one line by whoever connects
+  # (RingTracer.Cluster.check/1, this module's probe); OTP's ssl would add
+  # a notice of several lines on stderr for a refused one, and a warning
+  # about verify_none for a probe that trusts nothing.
+  @spec quiet_ssl() :: :ok
+  def quiet_ssl do
+    _ = Application.load(:ssl)
+    _ = :logger.set_application_level(:ssl, :error)
+    :ok
   end
 
   # This node's client options, from its boot arguments.

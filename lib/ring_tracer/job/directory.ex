@@ -37,6 +37,13 @@ defmodule RingTracer.Job.Directory do
   @spec sibling(reference(), non_neg_integer()) :: pid()
   def sibling(id, index), do: :ets.lookup_element(@table, {id, index}, 2)
 
+  @doc "Whether a job in this node's table has a child on `node`."
+  @spec any_on?(node()) :: boolean()
+  def any_on?(node) do
+    spec = [{{:_, :"$1"}, [{:==, {:node, :"$1"}, node}], [true]}]
+    match?({[_ | _], _}, :ets.select(@table, spec, 1))
+  end
+
   @doc "How many jobs this node's table holds (for tests and diagnostics)."
   @spec jobs() :: non_neg_integer()
   def jobs, do: GenServer.call(__MODULE__, :jobs)
