@@ -131,7 +131,7 @@ fn over(
             }
         }
     });
-    match next(rx, Some(Instant::now() + ANSWER_WAIT)) {
+    match next(rx, Instant::now() + ANSWER_WAIT) {
         Some(Event::Frame(b'R', _)) => {}
         Some(Event::Frame(b'F', _)) => return FALLBACK,
         Some(Event::Signal(tag)) => {
@@ -170,15 +170,10 @@ fn connect(socket: &Path) -> std::io::Result<UnixStream> {
 }
 
 /// The next event, or `None` once `deadline` has passed.
-fn next(rx: &Receiver<Event>, deadline: Option<Instant>) -> Option<Event> {
-    match deadline {
-        None => rx.recv().ok(),
-        Some(deadline) => {
-            let left = deadline.saturating_duration_since(Instant::now());
-            // a timeout or a closed channel: nothing more comes in time
-            rx.recv_timeout(left).ok()
-        }
-    }
+fn next(rx: &Receiver<Event>, deadline: Instant) -> Option<Event> {
+    let left = deadline.saturating_duration_since(Instant::now());
+    // a timeout or a closed channel: nothing more comes in time
+    rx.recv_timeout(left).ok()
 }
 
 fn request(stream: &mut UnixStream, cwd: &OsString, args: &[OsString]) -> std::io::Result<()> {
@@ -219,8 +214,8 @@ fn relay(socket: &Path, stream: &mut UnixStream, rx: &Receiver<Event>) -> u8 {
     let mut heard = Instant::now();
     loop {
         let deadline = stopping.map_or(heard + SILENCE_WAIT, |(_, d)| d);
-        let Some(event) = next(rx, Some(deadline)) else {
-            if stopping.is_none() {
+        let Some(event) = next(rx, deadline) else {
+            let Some((tag, _)) = stopping else {
                 let _ = out.flush();
                 eprintln!(
                     "ringtracer: the server has sent nothing for {} s (stopped or wedged?); \
@@ -228,10 +223,9 @@ fn relay(socket: &Path, stream: &mut UnixStream, rx: &Receiver<Event>) -> u8 {
                     SILENCE_WAIT.as_secs()
                 );
                 return 1;
-            }
+            };
             // The server did not end the command in time: this client goes,
             // and the server cancels the job of a client that went.
-            let (tag, _) = stopping.unwrap_or((b'I', Instant::now()));
             let (status, what) = interrupt(tag);
             let _ = out.flush();
             eprintln!(

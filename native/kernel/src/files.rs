@@ -35,13 +35,13 @@
 
 use crate::error::escape_bounded;
 use crate::limits;
+use crate::safe_fs::errno_text;
 use crate::Error;
-use std::fs::{File, FileType, OpenOptions};
+use std::fs::{File, OpenOptions};
 use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
-use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Component, Path, PathBuf};
-use std::sync::Arc;
 
 /// Why a file a scene references could not be had, as a resolver (see
 /// [`crate::Scene::parse`]) says it. The two cases differ: a missing OBJ material library
@@ -93,26 +93,6 @@ fn io_error(path: &Path, message: impl Into<String>) -> Error {
         file: shown(path),
         message: message.into(),
     }
-}
-
-/// Why a file that is not a regular file is refused, naming what it is where it can.
-fn not_regular(path: &Path, ft: &FileType) -> Error {
-    let what = if ft.is_dir() {
-        "a directory"
-    } else if ft.is_fifo() {
-        "a FIFO (named pipe)"
-    } else if ft.is_socket() {
-        "a socket"
-    } else if ft.is_char_device() {
-        "a character device"
-    } else if ft.is_block_device() {
-        "a block device"
-    } else if ft.is_symlink() {
-        "a symbolic link"
-    } else {
-        return io_error(path, "not a regular file");
-    };
-    io_error(path, format!("is {what}, not a regular file"))
 }
 
 /// The pseudo-filesystem a file is on (by `fstatfs`), if any.
@@ -172,7 +152,7 @@ fn open_found(path: &Path, found: &OwnedFd, real: &Path) -> Result<(File, u64), 
     let meta = rustix::fs::fstat(found).map_err(|e| io_error(path, errno_text(e)))?;
     let kind = rustix::fs::FileType::from_raw_mode(meta.st_mode);
     if kind != rustix::fs::FileType::RegularFile {
-        return Err(not_regular_kind(path, kind));
+        return Err(not_regular(path, kind));
     }
     let file = OpenOptions::new()
         .read(true)
@@ -186,15 +166,22 @@ fn open_found(path: &Path, found: &OwnedFd, real: &Path) -> Result<(File, u64), 
             return Err(io_error(path, "changed while it was opened"));
         }
     }
-    checked_open_file(path, file)
+    checked_open_file(path, file, again)
 }
 
-/// The checks on an open file: a regular file (by `fstat`), not on a pseudo-filesystem.
-fn checked_open_file(path: &Path, file: File) -> Result<(File, u64), Error> {
-    // fstat: the file opened, not whatever the name points to now
-    let meta = file.metadata().map_err(|e| io_error(path, e.to_string()))?;
+/// The checks on an open file, given its metadata (from `fstat`: the file opened, not
+/// whatever the name points to now): a regular file, not on a pseudo-filesystem.
+fn checked_open_file(
+    path: &Path,
+    file: File,
+    meta: std::fs::Metadata,
+) -> Result<(File, u64), Error> {
+    use std::os::unix::fs::MetadataExt;
     if !meta.file_type().is_file() {
-        return Err(not_regular(path, &meta.file_type()));
+        return Err(not_regular(
+            path,
+            rustix::fs::FileType::from_raw_mode(meta.mode()),
+        ));
     }
     match pseudo_filesystem(&file) {
         Ok(None) => {}
@@ -218,20 +205,13 @@ fn open_checked(path: &Path) -> Result<(File, u64), Error> {
         .custom_flags(libc::O_NONBLOCK | libc::O_CLOEXEC | libc::O_NOCTTY | libc::O_NOFOLLOW)
         .open(path)
         .map_err(|e| io_error(path, e.to_string()))?;
-    checked_open_file(path, file)
+    let meta = file.metadata().map_err(|e| io_error(path, e.to_string()))?;
+    checked_open_file(path, file, meta)
 }
 
-/// An `Errno` in words, without its number.
-fn errno_text(e: rustix::io::Errno) -> String {
-    let s = std::io::Error::from(e).to_string();
-    match s.find(" (os error ") {
-        Some(i) => s[..i].to_string(),
-        None => s,
-    }
-}
-
-/// [`not_regular`] for a type from `fstat`.
-fn not_regular_kind(path: &Path, kind: rustix::fs::FileType) -> Error {
+/// Why a file that is not a regular file (its type from `fstat`) is refused, naming what it
+/// is where it can.
+fn not_regular(path: &Path, kind: rustix::fs::FileType) -> Error {
     use rustix::fs::FileType as T;
     let what = match kind {
         T::Directory => "a directory",
@@ -318,20 +298,11 @@ fn lexical(path: &Path) -> PathBuf {
 /// The folders whose files a scene may reference: the scene's own folder first, then any the
 /// user allows. Held open (descriptors) and by their canonical paths (absolute, symbolic
 /// links resolved: where the descriptors lead).
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Confinement {
     roots: Vec<PathBuf>,
-    fds: Vec<Arc<OwnedFd>>,
+    fds: Vec<OwnedFd>,
 }
-
-/// Two confinements are the same when they allow the same folders.
-impl PartialEq for Confinement {
-    fn eq(&self, other: &Self) -> bool {
-        self.roots == other.roots
-    }
-}
-
-impl Eq for Confinement {}
 
 /// Opens a file beneath `root`: `rel` (relative, no `..` left in it) is resolved by the
 /// kernel, symbolic links included, and may not leave `root` (`RESOLVE_BENEATH`, no `/proc`
@@ -382,7 +353,7 @@ impl Confinement {
                 None => std::fs::canonicalize(r).map_err(|e| io_error(r, e.to_string()))?,
             };
             paths.push(canonical);
-            fds.push(Arc::new(fd));
+            fds.push(fd);
         }
         Ok(Confinement { roots: paths, fds })
     }
@@ -448,12 +419,16 @@ impl Confinement {
                 errno_text(e)
             ))
         };
+        let fail = |e: Errno| match e {
+            Errno::NOENT => missing(),
+            Errno::NOSYS => Refused(no_openat2(&quoted)),
+            e => other(e),
+        };
         let Some(first) = self.open_in_roots(&written) else {
             return Err(Refused(self.outside(reference, &written, "")));
         };
         let found = match first {
             Ok(fd) => fd,
-            Err(Errno::NOENT) => return Err(missing()),
             // a symbolic link leaves that folder (or is absolute): allowed only if where it
             // leads now is in an allowed folder, and then opened beneath that one
             Err(Errno::XDEV) | Err(Errno::LOOP) => {
@@ -468,19 +443,16 @@ impl Confinement {
                 match self.open_in_roots(&canonical) {
                     None => return Err(Refused(self.outside(reference, &canonical, through))),
                     Some(Ok(fd)) => fd,
-                    Some(Err(Errno::NOENT)) => return Err(missing()),
                     Some(Err(Errno::XDEV)) | Some(Err(Errno::LOOP)) => {
                         return Err(Refused(format!(
                             "'{quoted}' changed while it was opened (a symbolic link on the way \
                              leads out of the allowed folders)"
                         )))
                     }
-                    Some(Err(Errno::NOSYS)) => return Err(Refused(no_openat2(&quoted))),
-                    Some(Err(e)) => return Err(other(e)),
+                    Some(Err(e)) => return Err(fail(e)),
                 }
             }
-            Err(Errno::NOSYS) => return Err(Refused(no_openat2(&quoted))),
-            Err(e) => return Err(other(e)),
+            Err(e) => return Err(fail(e)),
         };
         let real = fd_path(&found)
             .ok_or_else(|| Refused(format!("'{quoted}': where it leads cannot be told")))?;

@@ -167,15 +167,7 @@ pub fn write_image_mode(
         file: file.clone(),
         message: e.to_string(),
     };
-    let (dir, name) = safe_fs::split(path)?;
-    let dir = safe_fs::Dir::open(&dir).map_err(|e| match e {
-        Error::Fs { errno, message, .. } => Error::Fs {
-            file: file.clone(),
-            errno,
-            message,
-        },
-        other => other,
-    })?;
+    let (dir, name) = safe_fs::open_parent(path)?;
     // made 0600 in the folder opened above, given its final mode on its descriptor, renamed
     // into place; removed on any failure
     dir.write_file(&name, new_mode, safe_fs::Replace::Yes, |f| match &png {

@@ -51,6 +51,11 @@ fn about(e: Error, path: &Path) -> Error {
     }
 }
 
+/// An `Errno` in words, without its number.
+pub(crate) fn errno_text(e: Errno) -> String {
+    plain(&std::io::Error::from(e))
+}
+
 /// An `io::Error`'s text without its " (os error N)" tail.
 fn plain(e: &std::io::Error) -> String {
     let s = e.to_string();
@@ -61,11 +66,7 @@ fn plain(e: &std::io::Error) -> String {
 }
 
 fn errno_error(path: &Path, e: Errno) -> Error {
-    fs_error(
-        path,
-        Some(e.raw_os_error()),
-        plain(&std::io::Error::from(e)),
-    )
+    fs_error(path, Some(e.raw_os_error()), errno_text(e))
 }
 
 fn message_error(path: &Path, message: impl Into<String>) -> Error {
@@ -303,7 +304,7 @@ impl Dir {
             Ok(st) if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile => {
                 st.st_mode & 0o777
             }
-            _ => new_mode.unwrap_or(0o666 & !umask()) & 0o777,
+            _ => new_file_mode(new_mode),
         }
     }
 
@@ -322,7 +323,7 @@ impl Dir {
         let target = self.at(name);
         let mode = match replace {
             Replace::Yes => self.mode_for(name, new_mode),
-            Replace::No => new_mode.unwrap_or(0o666 & !umask()) & 0o777,
+            Replace::No => new_file_mode(new_mode),
         };
         let (tmp, mut file) = self.create_hidden(name, ".tmp")?;
         let done = (|| {
@@ -501,6 +502,19 @@ pub fn private_dir(path: &Path, may_exist: bool) -> Result<Dir, Error> {
     })
 }
 
+/// The permission bits of a new file: `new_mode`, else `0o666` less the umask (read only
+/// then).
+fn new_file_mode(new_mode: Option<u32>) -> u32 {
+    new_mode.unwrap_or_else(|| 0o666 & !umask()) & 0o777
+}
+
+/// The folder `path` is in, opened (errors about `path`), and its name there.
+pub fn open_parent(path: &Path) -> Result<(Dir, String), Error> {
+    let (dir, name) = split(path)?;
+    let dir = Dir::open(&dir).map_err(|e| about(e, path))?;
+    Ok((dir, name))
+}
+
 /// Writes `data` to `path` atomically (see [`Dir::write_file`]).
 pub fn write_path(
     path: &Path,
@@ -509,8 +523,7 @@ pub fn write_path(
     replace: Replace,
 ) -> Result<(), Error> {
     use std::io::Write;
-    let (dir, name) = split(path)?;
-    let dir = Dir::open(&dir).map_err(|e| about(e, path))?;
+    let (dir, name) = open_parent(path)?;
     dir.write_file(&name, new_mode, replace, |f| {
         f.write_all(data).map_err(|e| io_error(e, path))
     })

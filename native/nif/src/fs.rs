@@ -81,9 +81,8 @@ fn fs_write<'a>(
 /// Whether a new file can be made beside `path` (made for real in its folder, then removed).
 #[rustler::nif(schedule = "DirtyIo")]
 fn fs_probe(env: Env, path: String) -> FsResult<Atom> {
-    let (dir, name) = safe_fs::split(Path::new(&path)).map_err(|e| fail(env, e))?;
-    Dir::open(&dir)
-        .and_then(|d| d.probe(&name))
+    safe_fs::open_parent(Path::new(&path))
+        .and_then(|(dir, name)| dir.probe(&name))
         .map_err(|e| fail(env, e))?;
     Ok(ok())
 }
