@@ -27,6 +27,7 @@ defmodule RingTracer.Native do
   def read_scene_file(_path), do: err()
   def scene_live_count, do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
+  def trace_atom_short(_scene, _settings, _start, _count, _budget_us), do: err()
   def render_image(_scene, _settings, _threads), do: err()
   def row_work(_scene, _settings), do: err()
   def validate_settings(_settings), do: err()

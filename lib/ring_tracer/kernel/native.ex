@@ -1,13 +1,14 @@
 defmodule RingTracer.Kernel.Native do
   @moduledoc """
-  The Rust kernel through the NIF: traces on a dirty CPU scheduler with the
-  scene parsed once per node and pinned there while the job runs
-  (`RingTracer.SceneCache`). A panic or error in
+  The Rust kernel through the NIF: traces on a dirty CPU scheduler (an atom
+  of a few pixels first on the grandchild's own scheduler, for at most
+  200 µs) with the scene parsed once per node and pinned there while the job
+  runs (`RingTracer.SceneCache`). A panic or error in
   the kernel comes back as `{:error, message}`, never as a crash of the VM.
   """
   @behaviour RingTracer.Kernel
 
-  alias RingTracer.{Layout, Native, SceneCache, Settings}
+  alias RingTracer.{Layout, Native, Rays, SceneCache, Settings}
 
   # Pixels of the preview that `atom_work/2` traces (about 0.1% of a
   # 1024x1024 image), and at most this share of a small image's.
@@ -16,6 +17,12 @@ defmodule RingTracer.Kernel.Native do
   # freezes meanwhile is disconnected sooner, by the job's liveness watch).
   @prepare_ms 60_000
   @preview_share 1 / 64
+  # An atom of at most this many pixels is traced on the grandchild's own
+  # scheduler for at most @short_budget_us, and only what is left over on a
+  # dirty one: a dirty call's two scheduler switches cost more than a few
+  # cheap pixels take to trace.
+  @short_pixels 256
+  @short_budget_us 200
 
   @impl RingTracer.Kernel
   def prepare(spec, _opts) do
@@ -90,6 +97,24 @@ defmodule RingTracer.Kernel.Native do
   end
 
   @impl RingTracer.Kernel
+  def trace({scene, native}, first, count, _atom) when count <= @short_pixels do
+    case Native.trace_atom_short(scene.ref, native, first, count, @short_budget_us) do
+      {:ok, {pixels, rays, us, ^count}} ->
+        {:ok, pixels, rays, us}
+
+      {:ok, {head, head_rays, head_us, done}} ->
+        with {:ok, {pixels, rays, us}} <-
+               Native.trace_atom(scene.ref, native, first + done, count - done) do
+          {:ok, head <> pixels, Rays.add(head_rays, rays), head_us + us}
+        end
+
+      {:error, message} ->
+        {:error, message}
+    end
+  rescue
+    e in ErlangError -> {:error, "kernel raised: #{Exception.message(e)}"}
+  end
+
   def trace({scene, native}, first, count, _atom) do
     case Native.trace_atom(scene.ref, native, first, count) do
       {:ok, {pixels, rays, us}} -> {:ok, pixels, rays, us}

@@ -3,7 +3,7 @@
 
 use ring_tracer_kernel::{
     render_image as kernel_render_image, render_image_into, trace_span, trace_span_into,
-    work_by_row,
+    work_by_row, RayStats,
 };
 use std::time::Instant;
 
@@ -44,6 +44,61 @@ fn trace_atom<'a>(
     .map_err(message)?;
     let micros = t0.elapsed().as_micros() as u64;
     Ok((bin.release(env), stats.into(), micros))
+}
+
+/// Pixels traced at a time by [`trace_atom_short`], between two looks at the clock.
+const SHORT_CHUNK: u64 = 8;
+
+/// Traces up to `count` pixels from `start` on a normal scheduler, in chunks of
+/// [`SHORT_CHUNK`] pixels, and stops after the chunk that takes it past `budget_us`
+/// microseconds: the pixels traced (a prefix of the span), the ray counters, the
+/// microseconds spent and how many pixels that is.
+///
+/// A dirty call costs two scheduler switches, tens of microseconds on a busy
+/// machine, more than a few cheap pixels take to trace; a short atom is traced
+/// here instead, and what the budget leaves goes to [`trace_atom`]. Any split of
+/// a span gives the same bits (the kernel's pixels are independent), and the
+/// budget keeps this call within the time a normal scheduler may be held.
+#[rustler::nif]
+fn trace_atom_short<'a>(
+    env: Env<'a>,
+    scene: ResourceArc<SceneResource>,
+    settings: SettingsTerm,
+    start: u64,
+    count: u64,
+    budget_us: u64,
+) -> Result<(Binary<'a>, RayStatsTerm, u64, u64), String> {
+    let settings = settings.to_kernel()?;
+    // checked before allocating the binary
+    settings.span_end(start, count).map_err(message)?;
+    let mut bin = OwnedBinary::new(count as usize * 12);
+    let t0 = Instant::now();
+    let mut stats = RayStats::default();
+    let mut done = 0u64;
+    // at least one chunk, so that every call makes progress
+    while done < count && (done == 0 || (t0.elapsed().as_micros() as u64) < budget_us) {
+        let n = SHORT_CHUNK.min(count - done);
+        let bytes = &mut bin.as_mut_slice()[done as usize * 12..(done + n) as usize * 12];
+        let chunk = match bytemuck::try_cast_slice_mut::<u8, f32>(bytes) {
+            Ok(out) => trace_span_into(&scene.scene, &settings, start + done, out),
+            Err(_) => trace_span(&scene.scene, &settings, start + done, n).map(|(rgb, s)| {
+                copy_floats(bytes, &rgb);
+                s
+            }),
+        }
+        .map_err(message)?;
+        stats += chunk;
+        done += n;
+    }
+    let micros = t0.elapsed().as_micros() as u64;
+    // what a normal scheduler's time slice (about a millisecond) this took
+    let percent = (micros / 10).clamp(1, 100) as i32;
+    rustler::schedule::consume_timeslice(env, percent);
+    let bin = bin.release(env);
+    let prefix = bin
+        .make_subbinary(0, done as usize * 12)
+        .map_err(|_| "the traced pixels outgrew their binary".to_string())?;
+    Ok((prefix, stats.into(), micros, done))
 }
 
 /// The kernel work units of each row of the (small) image `settings` describes: a preview of

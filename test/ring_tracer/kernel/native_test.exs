@@ -52,4 +52,41 @@ defmodule RingTracer.Kernel.NativeTest do
     assert {:error, message} = Native.atom_work(bad, [])
     assert is_binary(message)
   end
+
+  # `work` is what the tracing cost, and coherent rays traced as packets
+  # cost less: it depends on how pixels are grouped, the rays do not.
+  defp rays_only(rays), do: Map.delete(rays, :work)
+
+  test "a short atom gives the same pixels and rays on its own scheduler as on a dirty one" do
+    spec = spec("balls_s2.nff", 64, 64, 1, 64)
+    {:ok, {scene, native} = context} = Native.prepare(spec, [])
+
+    for {first, count} <- [{0, 1}, {100, 7}, {640, 64}, {1000, 256}, {2000, 257}] do
+      {:ok, {dirty, dirty_rays, _}} =
+        RingTracer.Native.trace_atom(scene.ref, native, first, count)
+
+      assert {:ok, pixels, rays, _us} = Native.trace(context, first, count, 0)
+
+      assert {pixels, rays_only(rays)} == {dirty, rays_only(dirty_rays)},
+             "#{count} pixels from #{first}"
+    end
+  end
+
+  test "the normal-scheduler call stops at its budget, on a chunk boundary, and the rest is traced dirty" do
+    spec = spec("balls_s2.nff", 64, 64, 1, 64)
+    {:ok, {scene, native}} = Native.prepare(spec, [])
+    {:ok, {whole, whole_rays, _}} = RingTracer.Native.trace_atom(scene.ref, native, 0, 256)
+
+    # no budget: one chunk of eight pixels, then it stops
+    assert {:ok, {head, head_rays, _us, 8}} =
+             RingTracer.Native.trace_atom_short(scene.ref, native, 0, 256, 0)
+
+    assert byte_size(head) == 8 * 12
+    {:ok, {rest, rest_rays, _}} = RingTracer.Native.trace_atom(scene.ref, native, 8, 248)
+    assert head <> rest == whole
+    assert rays_only(RingTracer.Rays.add(head_rays, rest_rays)) == rays_only(whole_rays)
+
+    # a span past the image is refused before anything is traced
+    assert {:error, _} = RingTracer.Native.trace_atom_short(scene.ref, native, 4090, 16, 200)
+  end
 end
