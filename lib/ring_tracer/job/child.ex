@@ -535,7 +535,7 @@ defmodule RingTracer.Job.Child do
         trace_us: s.trace_us + timing.trace_us,
         first_atom_us: s.first_atom_us || started,
         last_atom_us: ended,
-        rays: Map.merge(s.rays, rays, fn _, a, b -> a + b end)
+        rays: RingTracer.Rays.add(s.rays, rays)
     }
 
     record = %{

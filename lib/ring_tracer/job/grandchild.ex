@@ -102,7 +102,7 @@ defmodule RingTracer.Job.Grandchild do
           acc = %{
             acc
             | pixels: [pixels | acc.pixels],
-              rays: Rays.add(acc.rays, rays),
+              rays: if(i == 0, do: rays, else: Rays.add(acc.rays, rays)),
               us: acc.us + us,
               slowdown: slowdown
           }
