@@ -65,7 +65,8 @@ defmodule RingTracer do
     * `:children_per_node` — with `:nodes`, that many children on each node
       instead of `:children` round robin
     * `:progress` — a pid that gets `{RingTracer, job_id, {:progress, done,
-      total}}` as atoms arrive
+      total}}` as atoms arrive (for every atom of jobs of up to 1,000
+      atoms, then every thousandth of the job, and always for the last)
     * `:kernel` — what traces the atoms, `{module, options}` (default the
       native ray tracer, `RingTracer.Kernel.Native`; see `RingTracer.Kernel`)
     * `:timeout` — milliseconds, or `:infinity` (default)

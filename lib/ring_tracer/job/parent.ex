@@ -60,7 +60,8 @@ defmodule RingTracer.Job.Parent do
     relinking: false,
     redone: 0,
     node_bytes: %{},
-    helpers: []
+    helpers: [],
+    reported: 0
   ]
 
   @typedoc """
@@ -91,7 +92,8 @@ defmodule RingTracer.Job.Parent do
           relinking: boolean(),
           redone: non_neg_integer(),
           node_bytes: %{node() => non_neg_integer()},
-          helpers: [{pid(), reference()}]
+          helpers: [{pid(), reference()}],
+          reported: non_neg_integer()
         }
 
   @typedoc "A job that is stopping: its outcome, and the reports of the children so far."
@@ -431,7 +433,7 @@ defmodule RingTracer.Job.Parent do
             missing: state.missing - done
         }
 
-        if done == 1, do: progress(state)
+        state = if done == 1, do: progress(state), else: state
         atom_event(state, child, atom, pixels, rays, us)
 
         cond do
@@ -583,11 +585,22 @@ defmodule RingTracer.Job.Parent do
     )
   end
 
-  defp progress(%{spec: %Spec{progress: nil}}), do: :ok
+  # Progress goes to the caller about a thousand times a job at most (every
+  # atom when there are fewer), and always when the last atom arrives: a
+  # message per atom would cost the caller as much as the atom at a million
+  # atoms.
+  defp progress(%{spec: %Spec{progress: nil}} = state), do: state
 
   defp progress(%{spec: spec} = state) do
     total = Layout.atom_count(spec.layout)
-    send(spec.progress, {@reply_tag, spec.id, {:progress, total - state.missing, total}})
+    done = total - state.missing
+
+    if done == total or done - state.reported >= max(div(total, 1000), 1) do
+      send(spec.progress, {@reply_tag, spec.id, {:progress, done, total}})
+      %{state | reported: done}
+    else
+      state
+    end
   end
 
   defp stop_children(state),
@@ -637,13 +650,25 @@ defmodule RingTracer.Job.Parent do
   end
 
   # One record per atom or piece: the copy whose pixels the parent kept.
+  # In image order (by first pixel; the atom's name breaks ties), by one
+  # stable key sort, after which the copies of one atom are neighbours and
+  # the first is kept: a million atoms take a fraction of a second.
   defp kept_atoms(reports, traced_by, layout) do
     reports
-    |> Enum.flat_map(& &1.atoms)
-    |> Enum.filter(&(Map.get(traced_by, &1.atom) == &1.child))
-    |> Enum.uniq_by(& &1.atom)
-    |> Enum.sort_by(&{Layout.base(&1.atom), Layout.span(layout, &1.atom)})
+    |> Enum.flat_map(fn report ->
+      for %{atom: atom, child: child} = record <- report.atoms,
+          Map.get(traced_by, atom) == child,
+          do: {{Layout.span(layout, atom), atom}, record}
+    end)
+    |> then(&:lists.keysort(1, &1))
+    |> first_copies(nil, [])
   end
+
+  defp first_copies([], _last, acc), do: Enum.reverse(acc)
+  defp first_copies([{key, _} | rest], key, acc), do: first_copies(rest, key, acc)
+
+  defp first_copies([{key, record} | rest], _last, acc),
+    do: first_copies(rest, key, [record | acc])
 
   @doc """
   The image from the pixels received, by atom or piece (`results`): each
@@ -659,6 +684,28 @@ defmodule RingTracer.Job.Parent do
   """
   @spec assemble(Layout.t(), %{Layout.atom_id() => binary()}) :: binary()
   def assemble(layout, results) do
+    whole = if map_size(results) == Layout.atom_count(layout), do: whole_atoms(layout, results)
+    whole || assemble_pieces(layout, results)
+  end
+
+  # Every atom came back whole (as many results as atoms, each an atom's):
+  # the image is their pixels in atom order.
+  defp whole_atoms(layout, results) do
+    layout
+    |> Layout.atoms()
+    |> Enum.reduce_while([], fn a, acc ->
+      case results do
+        %{^a => pixels} -> {:cont, [pixels | acc]}
+        _ -> {:halt, nil}
+      end
+    end)
+    |> case do
+      nil -> nil
+      reversed -> reversed |> Enum.reverse() |> IO.iodata_to_binary()
+    end
+  end
+
+  defp assemble_pieces(layout, results) do
     by_atom = Enum.group_by(results, fn {a, _} -> Layout.base(a) end)
 
     layout
