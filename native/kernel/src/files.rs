@@ -212,17 +212,13 @@ fn open_checked(path: &Path) -> Result<(File, u64), Error> {
 /// Why a file that is not a regular file (its type from `fstat`) is refused, naming what it
 /// is where it can.
 fn not_regular(path: &Path, kind: rustix::fs::FileType) -> Error {
-    use rustix::fs::FileType as T;
-    let what = match kind {
-        T::Directory => "a directory",
-        T::Fifo => "a FIFO (named pipe)",
-        T::Socket => "a socket",
-        T::CharacterDevice => "a character device",
-        T::BlockDevice => "a block device",
-        T::Symlink => "a symbolic link",
-        _ => return io_error(path, "not a regular file"),
-    };
-    io_error(path, format!("is {what}, not a regular file"))
+    io_error(
+        path,
+        format!(
+            "is {}, not a regular file",
+            crate::safe_fs::kind_words(kind)
+        ),
+    )
 }
 
 /// Reads at most `max_bytes` of an open, checked file of `size` bytes.

@@ -502,6 +502,97 @@ pub fn private_dir(path: &Path, may_exist: bool) -> Result<Dir, Error> {
     })
 }
 
+/// What a file that is not a regular one is, in words (from its type as `fstat` gives it).
+pub(crate) fn kind_words(kind: rfs::FileType) -> &'static str {
+    use rfs::FileType as T;
+    match kind {
+        T::RegularFile => "a regular file",
+        T::Directory => "a directory",
+        T::Fifo => "a FIFO (named pipe)",
+        T::Socket => "a socket",
+        T::CharacterDevice => "a character device",
+        T::BlockDevice => "a block device",
+        T::Symlink => "a symbolic link",
+        _ => "a file of another kind",
+    }
+}
+
+/// Reads a secret file (a cookie) that must be this user's own: opened once, without following
+/// a symbolic link as its last component and without blocking (`O_NOFOLLOW | O_NONBLOCK`, so a
+/// FIFO or a device swapped in never hangs the open), then checked on that descriptor
+/// (`fstat`): a regular file, owned by this user, no bit for group or others, at most
+/// `max_bytes`; and read from that same descriptor, never more than `max_bytes + 1` bytes
+/// (a file that grows meanwhile is refused too). Nothing is looked up by name twice, so no
+/// other file can be swapped in between the checks and the read.
+pub fn read_private(path: &Path, max_bytes: u64) -> Result<Vec<u8>, Error> {
+    use std::io::Read;
+    let fd = rfs::open(
+        path,
+        OFlags::RDONLY | OFlags::NOFOLLOW | OFlags::NONBLOCK | OFlags::NOCTTY | OFlags::CLOEXEC,
+        Mode::empty(),
+    )
+    .map_err(|e| match e {
+        Errno::LOOP => fs_error(
+            path,
+            Some(e.raw_os_error()),
+            "is a symbolic link (not followed: name the file itself)".to_string(),
+        ),
+        e => errno_error(path, e),
+    })?;
+    let st = rfs::fstat(&fd).map_err(|e| errno_error(path, e))?;
+    let kind = rfs::FileType::from_raw_mode(st.st_mode);
+    if kind != rfs::FileType::RegularFile {
+        return Err(message_error(
+            path,
+            format!("is {}, not a regular file", kind_words(kind)),
+        ));
+    }
+    let me = rustix::process::geteuid().as_raw();
+    if st.st_uid != me {
+        return Err(message_error(
+            path,
+            format!("belongs to user {}, not to this user ({me})", st.st_uid),
+        ));
+    }
+    let open_bits = st.st_mode & 0o077;
+    if open_bits != 0 {
+        let what = if open_bits & 0o044 != 0 {
+            "read"
+        } else if open_bits & 0o022 != 0 {
+            "changed"
+        } else {
+            "run"
+        };
+        return Err(message_error(
+            path,
+            format!(
+                "can be {what} by other users (mode {:04o}); fix it with: chmod 600 {}",
+                st.st_mode & 0o7777,
+                path.display()
+            ),
+        ));
+    }
+    let too_large = |size: u64| {
+        message_error(
+            path,
+            format!("is too large ({size} bytes, at most {max_bytes})"),
+        )
+    };
+    let size = u64::try_from(st.st_size).unwrap_or(u64::MAX);
+    if size > max_bytes {
+        return Err(too_large(size));
+    }
+    let mut bytes = Vec::new();
+    File::from(fd)
+        .take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io_error(e, path))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
 /// The permission bits of a new file: `new_mode`, else `0o666` less the umask (read only
 /// then).
 fn new_file_mode(new_mode: Option<u32>) -> u32 {
@@ -636,6 +727,89 @@ mod tests {
         symlink(&p, &l).unwrap();
         let e = private_dir(&l, true).unwrap_err().to_string();
         assert!(e.ends_with("link: is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn a_private_file_is_read_only_when_it_is_ours_closed_and_small() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("cookie");
+        std::fs::write(&p, "abc\n").unwrap();
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(read_private(&p, 4).unwrap(), b"abc\n");
+        let e = read_private(&p, 3).unwrap_err().to_string();
+        assert!(
+            e.ends_with("cookie: is too large (4 bytes, at most 3)"),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let e = read_private(&p, 4).unwrap_err().to_string();
+        assert!(
+            e.ends_with(&format!(
+                "cookie: can be read by other users (mode 0640); fix it with: chmod 600 {}",
+                p.display()
+            )),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o620)).unwrap();
+        let e = read_private(&p, 4).unwrap_err().to_string();
+        assert!(
+            e.contains("can be changed by other users (mode 0620)"),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o400)).unwrap();
+        assert_eq!(read_private(&p, 4).unwrap(), b"abc\n");
+        // a symbolic link is not followed, even to a good file
+        symlink(&p, t.path().join("link")).unwrap();
+        let e = read_private(&t.path().join("link"), 4).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Fs {
+                    errno: Some(libc::ELOOP),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e
+            .to_string()
+            .ends_with("link: is a symbolic link (not followed: name the file itself)"));
+        // a FIFO is refused at once, a folder too
+        let fifo = t.path().join("fifo");
+        rustix::fs::mknodat(
+            rfs::CWD,
+            &fifo,
+            rfs::FileType::Fifo,
+            Mode::from_raw_mode(0o600),
+            0,
+        )
+        .unwrap();
+        let e = read_private(&fifo, 4).unwrap_err().to_string();
+        assert!(
+            e.ends_with("fifo: is a FIFO (named pipe), not a regular file"),
+            "{e}"
+        );
+        let e = read_private(t.path(), 4).unwrap_err().to_string();
+        assert!(e.ends_with(": is a directory, not a regular file"), "{e}");
+        let e = read_private(&t.path().join("none"), 4).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Fs {
+                    errno: Some(libc::ENOENT),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        if rustix::process::geteuid().is_root() {
+            std::os::unix::fs::chown(&p, Some(65534), None).unwrap();
+            let e = read_private(&p, 4).unwrap_err().to_string();
+            assert!(
+                e.ends_with("cookie: belongs to user 65534, not to this user (0)"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -455,3 +455,68 @@ fn a_scene_never_reads_outside_its_folder() {
     assert_eq!(read + refused, ROUNDS);
     assert!(t0.elapsed() < Duration::from_secs(120));
 }
+
+#[test]
+fn a_cookie_is_read_only_from_this_users_own_closed_file() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let victim = victim(t.path(), "secret", "ROOT-ONLY\n");
+    // root's cookie in a folder of hers, which she swaps with her link to a root-only file
+    // (regular, root's, 0600: what a check by name that follows links would accept) and
+    // with her FIFO (which would hang a blocking open), as fast as she can
+    let mine = theirs(&t.path().join("mine"), 0o755);
+    let cookie = mine.join("cookie");
+    std::fs::write(&cookie, "GOOD\n").unwrap();
+    std::fs::set_permissions(&cookie, std::fs::Permissions::from_mode(0o600)).unwrap();
+    their_link(&victim.join("secret"), &mine.join("link"));
+    let fifo = mine.join("fifo");
+    rustix::fs::mknodat(
+        rustix::fs::CWD,
+        &fifo,
+        rustix::fs::FileType::Fifo,
+        rustix::fs::Mode::from_raw_mode(0o666),
+        0,
+    )
+    .unwrap();
+    std::os::unix::fs::lchown(&fifo, Some(THEM), Some(THEM)).unwrap();
+    let attacker = Attacker::start(vec![
+        Step::Exchange(cstr(&cookie), cstr(&mine.join("link"))),
+        Step::Exchange(cstr(&cookie), cstr(&fifo)),
+    ]);
+    // the reads run on a thread of their own so that a hung read fails the test
+    let (tx, rx) = std::sync::mpsc::channel();
+    let path = cookie.clone();
+    std::thread::spawn(move || {
+        let (mut read, mut refused) = (0, 0);
+        for _ in 0..ROUNDS {
+            match safe_fs::read_private(&path, 4096) {
+                Ok(bytes) => {
+                    assert_eq!(bytes, b"GOOD\n", "read something other than the cookie");
+                    read += 1;
+                }
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(!e.contains("ROOT-ONLY"), "{e}");
+                    assert!(
+                        e.contains("is a symbolic link")
+                            || e.contains("is a FIFO")
+                            || e.contains("belongs to user")
+                            || e.contains("No such file"),
+                        "{e}"
+                    );
+                    refused += 1;
+                }
+            }
+        }
+        let _ = tx.send((read, refused));
+    });
+    let (read, refused) = rx
+        .recv_timeout(Duration::from_secs(120))
+        .expect("a cookie read hung, or found something else than the cookie");
+    drop(attacker);
+    eprintln!("cookie reads: {read} read, {refused} refused under attack");
+    assert_eq!(read + refused, ROUNDS);
+    assert!(read > 0 && refused > 0, "the swaps did not race the reads");
+}

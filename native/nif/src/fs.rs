@@ -9,7 +9,7 @@ use std::path::Path;
 
 use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace};
 use ring_tracer_kernel::Error;
-use rustler::{Atom, Binary, Env, ResourceArc};
+use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
 
 rustler::atoms! { ok }
 
@@ -76,6 +76,15 @@ fn fs_write<'a>(
     safe_fs::write_path(Path::new(&path), data.as_slice(), mode_arg(mode), replace)
         .map_err(|e| fail(env, e))?;
     Ok(ok())
+}
+
+/// Reads the secret file `path` (a cookie), which must be this user's, closed to others and
+/// at most `max_bytes`: opened once without following a link or blocking, checked by `fstat`
+/// and read through that descriptor (`safe_fs::read_private`).
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_read_private<'a>(env: Env<'a>, path: String, max_bytes: u64) -> FsResult<'a, Binary<'a>> {
+    let bytes = safe_fs::read_private(Path::new(&path), max_bytes).map_err(|e| fail(env, e))?;
+    Ok(OwnedBinary::from_slice(&bytes).release(env))
 }
 
 /// Whether a new file can be made beside `path` (made for real in its folder, then removed).
