@@ -23,7 +23,7 @@ defmodule RingTracer.Native do
     end
   end
 
-  def scene_parse(_bytes, _format, _name, _base_dir, _allow_dirs, _includes), do: err()
+  def scene_parse(_bytes, _format, _name, _scene_dir, _allow_dirs, _includes), do: err()
   def read_scene_file(_path), do: err()
   def scene_live_count, do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()

@@ -8,7 +8,7 @@
 //!
 //! Needs root (to be two users); without it each test says so and passes without racing.
 
-use ring_tracer_kernel::files::Confinement;
+use ring_tracer_kernel::files::{self, Confinement};
 use ring_tracer_kernel::safe_fs::{self, Dir, Replace};
 use std::ffi::CString;
 use std::os::unix::ffi::OsStrExt;
@@ -435,7 +435,7 @@ fn a_scene_never_reads_outside_its_folder() {
     let (mut read, mut refused) = (0, 0);
     let t0 = Instant::now();
     for _ in 0..ROUNDS {
-        match confinement.read(&scene, "m/mesh.obj") {
+        match confinement.read("m/mesh.obj") {
             Ok((bytes, path)) => {
                 assert_eq!(bytes, b"v 0 0 0\n", "read {path:?}");
                 assert!(path.starts_with(confinement.roots()[0].as_path()));
@@ -519,4 +519,91 @@ fn a_cookie_is_read_only_from_this_users_own_closed_file() {
     eprintln!("cookie reads: {read} read, {refused} refused under attack");
     assert_eq!(read + refused, ROUNDS);
     assert!(read > 0 && refused > 0, "the swaps did not race the reads");
+}
+
+/// Her scene tree for the scene-folder races: `top/scene/s/{scene.toml, mesh.obj}` (hers,
+/// public), `top/scene/decoy` her link to a root-only folder holding a `mesh.obj` (and no
+/// scene), `top/decoyp` her link to a root-only folder holding `s/mesh.obj`. Returns the
+/// scene file's path and her swaps: the scene's folder with `decoy`, its parent with
+/// `decoyp`.
+fn scene_tree(t: &Path) -> (PathBuf, Vec<Step>) {
+    let secret = "# ROOT-ONLY\nv 9 9 9\nv 9 9 8\nv 9 8 9\nf 1 2 3\n";
+    let root_only = t.join("root_only");
+    std::fs::create_dir(&root_only).unwrap();
+    std::fs::set_permissions(&root_only, std::fs::Permissions::from_mode(0o700)).unwrap();
+    std::fs::write(root_only.join("mesh.obj"), secret).unwrap();
+    let root_parent = t.join("root_parent");
+    std::fs::create_dir_all(root_parent.join("s")).unwrap();
+    std::fs::set_permissions(&root_parent, std::fs::Permissions::from_mode(0o700)).unwrap();
+    std::fs::write(root_parent.join("s/mesh.obj"), secret).unwrap();
+    let top = theirs(&t.join("top"), 0o755);
+    let scene = theirs(&top.join("scene"), 0o755);
+    let s = theirs(&scene.join("s"), 0o755);
+    std::fs::write(
+        s.join("scene.toml"),
+        "[camera]\nfrom = [0, 0, 5]\nat = [0, 0, 0]\n\n\
+         [[lights]]\nposition = [0, 5, 5]\n\n\
+         [[objects]]\ntype = \"mesh\"\nfile = \"mesh.obj\"\n",
+    )
+    .unwrap();
+    std::fs::write(s.join("mesh.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    their_link(&root_only, &scene.join("decoy"));
+    their_link(&root_parent, &top.join("decoyp"));
+    let steps = vec![
+        Step::Exchange(cstr(&scene.join("s")), cstr(&scene.join("decoy"))),
+        Step::Exchange(cstr(&scene), cstr(&top.join("decoyp"))),
+    ];
+    (s.join("scene.toml"), steps)
+}
+
+#[test]
+fn a_scene_reads_its_meshes_in_the_folder_it_was_read_in() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let (path, steps) = scene_tree(t.path());
+    let attacker = Attacker::start(steps);
+    let (mut read, mut refused, mut loaded) = (0, 0, 0);
+    let t0 = Instant::now();
+    for i in 0..ROUNDS {
+        // as a render loads it: the scene file, then its mesh beneath the folder held
+        match files::open_scene(&path, 1 << 20) {
+            Ok(scene) => {
+                assert!(scene.bytes.starts_with(b"[camera]"));
+                let confinement = Confinement::beneath(scene.dir, Vec::<PathBuf>::new()).unwrap();
+                match confinement.read("mesh.obj") {
+                    Ok((bytes, at)) => {
+                        assert_eq!(
+                            bytes, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+                            "read {at:?}"
+                        );
+                        read += 1;
+                    }
+                    Err(e) => {
+                        assert!(!e.to_string().contains("ROOT-ONLY"), "{e}");
+                        refused += 1;
+                    }
+                }
+            }
+            Err(e) => {
+                assert!(!e.to_string().contains("ROOT-ONLY"), "{e}");
+                refused += 1;
+            }
+        }
+        // and the kernel's own load, every tenth round: her one triangle, never root's
+        if i % 10 == 0 {
+            if let Ok(scene) = ring_tracer_kernel::Scene::load(&path) {
+                assert!(scene.bounds().min.x < 1.0, "loaded root's mesh");
+                loaded += 1;
+            }
+        }
+    }
+    drop(attacker);
+    eprintln!(
+        "scenes: {read} meshes read, {refused} refused, {loaded} loaded whole under attack in {:?}",
+        t0.elapsed()
+    );
+    assert_eq!(read + refused, ROUNDS);
+    assert!(read > 0, "no round loaded the scene");
 }
