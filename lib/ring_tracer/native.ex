@@ -39,6 +39,7 @@ defmodule RingTracer.Native do
   def fs_write(_path, _data, _mode, _replace), do: err()
   def fs_probe(_path), do: err()
   def fs_read_private(_path, _max_bytes), do: err()
+  def fs_check_trusted(_path, _public, _private), do: err()
   def fs_open_dir(_path), do: err()
   def fs_private_dir(_path, _may_exist), do: err()
   def fs_dir_path(_dir), do: err()

@@ -139,13 +139,28 @@ fn check_name(dir: &Path, name: &str) -> Result<(), Error> {
 /// The most symbolic links one path may go through (the kernel's own bound).
 const MAX_LINKS: usize = 40;
 
+/// What a walk does with a symbolic link as the path's last component.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LastLink {
+    /// Follows it (when it is this user's or root's, as every link on the way).
+    Follow,
+    /// Refuses it: the path must name the folder itself.
+    Refuse,
+}
+
+/// A check a walk makes on every folder it goes through (each one it opens something in),
+/// given the folder's descriptor and the path it was reached by.
+type FolderCheck<'a> = &'a dyn Fn(&OwnedFd, &Path) -> Result<(), Error>;
+
 /// Opens the folder `path` (`O_PATH`), one component at a time from a descriptor, following
 /// a symbolic link only when it belongs to this user or to root (and the last component's
-/// only when `follow_last`). Another local user's link on the way is refused: whoever owns
-/// a link, or can swap one into a folder of hers, would choose where the caller writes.
+/// only with [`LastLink::Follow`]). Another local user's link on the way is refused: whoever
+/// owns a link, or can swap one into a folder of hers, would choose where the caller writes.
 /// (`openat2` cannot say "only links of these owners", hence the walk; each step is one
 /// `openat` with `O_NOFOLLOW` on the folder reached, nothing is resolved by name twice.)
-fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
+/// `check`, when given, is made on every folder the walk opens something in (not on the
+/// folder it ends at), before it does.
+fn walk(path: &Path, last_link: LastLink, check: Option<FolderCheck>) -> Result<OwnedFd, Error> {
     use std::collections::VecDeque;
     use std::ffi::OsString;
     use std::os::unix::ffi::OsStrExt;
@@ -158,6 +173,12 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         rfs::open(".", dir_flags, Mode::empty())
     }
     .map_err(|e| errno_error(path, e))?;
+    // where the walk is, by the names it went through (for `check`'s messages)
+    let mut at = if path.is_absolute() {
+        PathBuf::from("/")
+    } else {
+        PathBuf::from(".")
+    };
     // what is left to walk; `true` marks the path's own last component
     let mut todo: VecDeque<(OsString, bool)> = VecDeque::new();
     let parts: Vec<Component> = path.components().collect();
@@ -169,10 +190,14 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         let bytes = part.as_bytes();
         if bytes == b"/" {
             cur = rfs::open("/", dir_flags, Mode::empty()).map_err(|e| errno_error(path, e))?;
+            at = PathBuf::from("/");
             continue;
         }
         if bytes == b"." || bytes.is_empty() {
             continue;
+        }
+        if let Some(check) = check {
+            check(&cur, &at)?;
         }
         let next = rfs::openat(
             &cur,
@@ -183,9 +208,16 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         .map_err(|e| errno_error(path, e))?;
         let st = rfs::fstat(&next).map_err(|e| errno_error(path, e))?;
         match rfs::FileType::from_raw_mode(st.st_mode) {
-            rfs::FileType::Directory => cur = next,
+            rfs::FileType::Directory => {
+                cur = next;
+                if bytes == b".." {
+                    at.pop();
+                } else {
+                    at.push(&part);
+                }
+            }
             rfs::FileType::Symlink => {
-                if last && !follow_last {
+                if last && last_link == LastLink::Refuse {
                     return Err(message_error(path, "is a symbolic link, not a folder"));
                 }
                 if st.st_uid != me && st.st_uid != 0 {
@@ -247,27 +279,29 @@ pub fn umask() -> u32 {
 impl Dir {
     /// Opens the folder `path` (symbolic links on the way are followed, once).
     pub fn open(path: &Path) -> Result<Dir, Error> {
-        Self::open_with(path, OFlags::empty())
+        Self::open_with(path, LastLink::Follow)
     }
 
     /// Opens the folder `path`, refusing a symbolic link as its last component.
     pub fn open_nofollow(path: &Path) -> Result<Dir, Error> {
-        Self::open_with(path, OFlags::NOFOLLOW)
+        Self::open_with(path, LastLink::Refuse)
     }
 
-    fn open_with(path: &Path, extra: OFlags) -> Result<Dir, Error> {
-        let found = walk(path, !extra.contains(OFlags::NOFOLLOW))?;
+    fn open_with(path: &Path, last_link: LastLink) -> Result<Dir, Error> {
+        let found = walk(path, last_link, None)?;
+        Self::reopen(path, &found)
+    }
+
+    /// The folder `found` (`O_PATH`) opened for reading, through its descriptor.
+    fn reopen(path: &Path, found: &OwnedFd) -> Result<Dir, Error> {
         let fd = rfs::openat(
-            &found,
+            found,
             ".",
             OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC,
             Mode::empty(),
         )
         .map_err(|e| match e {
             Errno::NOTDIR => message_error(path, "not a folder"),
-            Errno::LOOP if extra.contains(OFlags::NOFOLLOW) => {
-                message_error(path, "is a symbolic link, not a folder")
-            }
             e => errno_error(path, e),
         })?;
         Ok(Dir {
@@ -593,6 +627,140 @@ pub fn read_private(path: &Path, max_bytes: u64) -> Result<Vec<u8>, Error> {
     Ok(bytes)
 }
 
+/// How closed a file in a trusted folder must be ([`Dir::check_trusted_file`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Secrecy {
+    /// Anyone may read it (a certificate): this user's or root's, nobody else may change it.
+    Public,
+    /// Only its owner may read it (a private key): this user's, no bit for group or others.
+    Private,
+}
+
+/// Opens the folder `path` after checking every folder on the way to it, from `/` (a relative
+/// path is taken from the current folder's absolute name), and every symbolic link followed:
+/// each belongs to this user or to root and no other user can change it (no write bit for
+/// group or others), so nobody else can rename or replace anything on the way, now or later;
+/// the folder itself must be this user's and closed to changes by others. What is checked
+/// is what is opened (descriptors, `fstat`); refused otherwise, naming the folder at fault
+/// and why. Files in it are then checked with [`Dir::check_trusted_file`]: a program that
+/// later reads them by name (OTP's ssl reads a node's certificates so) reads the same files.
+pub fn trusted_dir(path: &Path) -> Result<Dir, Error> {
+    let me = rustix::process::geteuid().as_raw();
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .map_err(|e| io_error(e, path))?
+            .join(path)
+    };
+    let on_the_way = |fd: &OwnedFd, at: &Path| -> Result<(), Error> {
+        let st = rfs::fstat(fd).map_err(|e| errno_error(at, e))?;
+        if st.st_uid != me && st.st_uid != 0 {
+            return Err(message_error(
+                at,
+                format!(
+                    "is on the way to {} and belongs to user {}, who could swap what is in it; \
+                     use a folder that only you and root can change",
+                    path.display(),
+                    st.st_uid
+                ),
+            ));
+        }
+        if st.st_mode & 0o022 != 0 {
+            return Err(message_error(
+                at,
+                format!(
+                    "is on the way to {} and can be changed by other users (mode {:04o}), who \
+                     could swap what is in it; use a folder that only you and root can change",
+                    path.display(),
+                    st.st_mode & 0o7777
+                ),
+            ));
+        }
+        Ok(())
+    };
+    let found = walk(&absolute, LastLink::Follow, Some(&on_the_way))?;
+    let st = rfs::fstat(&found).map_err(|e| errno_error(path, e))?;
+    if st.st_uid != me {
+        return Err(message_error(
+            path,
+            format!(
+                "belongs to user {}, not to you: use a folder of your own",
+                st.st_uid
+            ),
+        ));
+    }
+    if st.st_mode & 0o022 != 0 {
+        return Err(message_error(
+            path,
+            format!(
+                "can be changed by other users; fix it with: chmod 700 {}",
+                path.display()
+            ),
+        ));
+    }
+    Dir::reopen(path, &found)
+}
+
+impl Dir {
+    /// Checks the file `name` in this folder, without following a symbolic link (refused):
+    /// a regular file, and as `secrecy` says. Made on the file opened (`O_PATH`, `fstat`).
+    pub fn check_trusted_file(&self, name: &str, secrecy: Secrecy) -> Result<(), Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        let fd = rfs::openat(
+            &self.fd,
+            name,
+            OFlags::PATH | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(|e| errno_error(&target, e))?;
+        let st = rfs::fstat(&fd).map_err(|e| errno_error(&target, e))?;
+        let kind = rfs::FileType::from_raw_mode(st.st_mode);
+        if kind != rfs::FileType::RegularFile {
+            return Err(message_error(
+                &target,
+                format!(
+                    "is {}, not a regular file (put the file itself in the folder)",
+                    kind_words(kind)
+                ),
+            ));
+        }
+        let me = rustix::process::geteuid().as_raw();
+        let (owners_ok, open_bits, fix) = match secrecy {
+            Secrecy::Public => (st.st_uid == me || st.st_uid == 0, 0o022, "go-w"),
+            Secrecy::Private => (st.st_uid == me, 0o077, "600"),
+        };
+        if !owners_ok {
+            return Err(message_error(
+                &target,
+                format!(
+                    "belongs to user {}, not to you: use a folder of your own",
+                    st.st_uid
+                ),
+            ));
+        }
+        let bits = st.st_mode & open_bits;
+        if bits != 0 {
+            let what = if bits & 0o044 != 0 {
+                "read"
+            } else if bits & 0o022 != 0 {
+                "changed"
+            } else {
+                "run"
+            };
+            return Err(message_error(
+                &target,
+                format!(
+                    "can be {what} by other users; fix it with: chmod {fix} {}",
+                    target.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The permission bits of a new file: `new_mode`, else `0o666` less the umask (read only
 /// then).
 fn new_file_mode(new_mode: Option<u32>) -> u32 {
@@ -807,6 +975,101 @@ mod tests {
             let e = read_private(&p, 4).unwrap_err().to_string();
             assert!(
                 e.ends_with("cookie: belongs to user 65534, not to this user (0)"),
+                "{e}"
+            );
+        }
+    }
+
+    /// A TLS folder `tls` (0700) holding `ca.pem`, `node.pem` (0644) and `node.key` (0600).
+    fn tls_folder(parent: &Path) -> PathBuf {
+        let d = parent.join("tls");
+        std::fs::create_dir(&d).unwrap();
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+        for (name, mode) in [("ca.pem", 0o644), ("node.pem", 0o644), ("node.key", 0o600)] {
+            std::fs::write(d.join(name), name).unwrap();
+            std::fs::set_permissions(d.join(name), std::fs::Permissions::from_mode(mode)).unwrap();
+        }
+        d
+    }
+
+    fn check_tls(d: &Path) -> Result<(), Error> {
+        let dir = trusted_dir(d)?;
+        dir.check_trusted_file("ca.pem", Secrecy::Public)?;
+        dir.check_trusted_file("node.pem", Secrecy::Public)?;
+        dir.check_trusted_file("node.key", Secrecy::Private)
+    }
+
+    #[test]
+    fn a_trusted_folder_is_closed_to_others_all_the_way_from_the_root() {
+        // not under /tmp, which every user can write in
+        let t = tempfile::tempdir_in(concat!(env!("CARGO_MANIFEST_DIR"), "/../target")).unwrap();
+        std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+        let d = tls_folder(t.path());
+        check_tls(&d).unwrap();
+        // this user's links on the way are followed, and what they lead through is checked
+        symlink(&d, t.path().join("via")).unwrap();
+        check_tls(&t.path().join("via")).unwrap();
+        let shared = tempfile::tempdir().unwrap();
+        let open = tls_folder(shared.path());
+        if std::env::temp_dir().metadata().unwrap().mode() & 0o022 != 0 {
+            let e = check_tls(&open).unwrap_err().to_string();
+            assert!(
+                e.contains(" can be changed by other users (mode 1777), who could swap"),
+                "{e}"
+            );
+            symlink(&open, t.path().join("to_tmp")).unwrap();
+            let e = check_tls(&t.path().join("to_tmp")).unwrap_err().to_string();
+            assert!(e.contains("is on the way to "), "{e}");
+        }
+        // the folder, then each file
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o770)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        let shown = d.display();
+        assert_eq!(
+            e,
+            format!("{shown}: can be changed by other users; fix it with: chmod 700 {shown}")
+        );
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+        let key = d.join("node.key");
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(
+            e.ends_with(&format!(
+                "node.key: can be read by other users; fix it with: chmod 600 {}",
+                key.display()
+            )),
+            "{e}"
+        );
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        std::fs::set_permissions(d.join("ca.pem"), std::fs::Permissions::from_mode(0o666)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(
+            e.contains("ca.pem: can be changed by other users; fix it with: chmod go-w"),
+            "{e}"
+        );
+        std::fs::set_permissions(d.join("ca.pem"), std::fs::Permissions::from_mode(0o644)).unwrap();
+        std::fs::rename(d.join("node.pem"), t.path().join("node.pem")).unwrap();
+        symlink(t.path().join("node.pem"), d.join("node.pem")).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(e.ends_with("node.pem: is a symbolic link, not a regular file (put the file itself in the folder)"), "{e}");
+        std::fs::remove_file(d.join("node.pem")).unwrap();
+        std::fs::rename(t.path().join("node.pem"), d.join("node.pem")).unwrap();
+        check_tls(&d).unwrap();
+        if rustix::process::geteuid().is_root() {
+            // another user's folder on the way, another user's file
+            std::os::unix::fs::chown(t.path(), Some(65534), None).unwrap();
+            let e = check_tls(&d).unwrap_err().to_string();
+            assert!(
+                e.contains("and belongs to user 65534, who could swap what is in it"),
+                "{e}"
+            );
+            std::os::unix::fs::chown(t.path(), Some(0), None).unwrap();
+            std::os::unix::fs::chown(d.join("node.key"), Some(65534), None).unwrap();
+            let e = check_tls(&d).unwrap_err().to_string();
+            assert!(
+                e.ends_with(
+                    "node.key: belongs to user 65534, not to you: use a folder of your own"
+                ),
                 "{e}"
             );
         }

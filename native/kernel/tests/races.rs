@@ -607,3 +607,72 @@ fn a_scene_reads_its_meshes_in_the_folder_it_was_read_in() {
     assert_eq!(read + refused, ROUNDS);
     assert!(read > 0, "no round loaded the scene");
 }
+
+/// A node's TLS folder `name` in `parent` (0700, owned by `uid`) holding `ca.pem`,
+/// `node.pem` (0644) and `node.key` (0600) with `text`.
+fn tls_folder(parent: &Path, name: &str, uid: u32, text: &str) -> PathBuf {
+    let d = parent.join(name);
+    std::fs::create_dir(&d).unwrap();
+    for (file, mode) in [("ca.pem", 0o644), ("node.pem", 0o644), ("node.key", 0o600)] {
+        std::fs::write(d.join(file), text).unwrap();
+        std::fs::set_permissions(d.join(file), std::fs::Permissions::from_mode(mode)).unwrap();
+        std::os::unix::fs::chown(d.join(file), Some(uid), Some(uid)).unwrap();
+    }
+    std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+    std::os::unix::fs::chown(&d, Some(uid), Some(uid)).unwrap();
+    d
+}
+
+/// The checks of a TLS folder (as `RingTracer.Cluster.TLS.check_dir/1` makes them).
+fn check_tls(d: &Path) -> Result<(), ring_tracer_kernel::Error> {
+    use safe_fs::Secrecy;
+    let dir = safe_fs::trusted_dir(d)?;
+    dir.check_trusted_file("ca.pem", Secrecy::Public)?;
+    dir.check_trusted_file("node.pem", Secrecy::Public)?;
+    dir.check_trusted_file("node.key", Secrecy::Private)
+}
+
+#[test]
+fn a_tls_folder_is_trusted_only_when_nobody_else_can_swap_it() {
+    if !root() {
+        return;
+    }
+    // not under /tmp (every user can write in it): a folder whose every parent is root's
+    let t = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+    std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let good = tls_folder(t.path(), "good", 0, "root's");
+    // root's TLS folder inside a folder of hers, which she swaps with her own TLS folder
+    // and with her link to root's good one, as fast as she can; and root's own link to it
+    let hers = theirs(&t.path().join("hers"), 0o755);
+    let tls = tls_folder(&hers, "tls", 0, "root's");
+    tls_folder(&hers, "mine", THEM, "HERS");
+    their_link(&good, &hers.join("link"));
+    std::os::unix::fs::symlink(&tls, t.path().join("rootlink")).unwrap();
+    let attacker = Attacker::start(vec![
+        Step::Exchange(cstr(&tls), cstr(&hers.join("mine"))),
+        Step::Exchange(cstr(&tls), cstr(&hers.join("link"))),
+        // and she tries the same on root's folders (refused: not hers)
+        Step::Exchange(cstr(&good), cstr(&hers.join("mine"))),
+    ]);
+    let t0 = Instant::now();
+    for _ in 0..ROUNDS {
+        // through her folder: refused every time, whatever is at the name at that moment
+        for via in [tls.clone(), t.path().join("rootlink")] {
+            let e = check_tls(&via).expect_err("trusted a folder she can swap");
+            let e = e.to_string();
+            assert!(
+                e.contains("is on the way to") && e.contains("belongs to user 65534"),
+                "{e}"
+            );
+        }
+        // root's own: accepted every time, and it holds root's files
+        check_tls(&good).unwrap();
+        assert_eq!(std::fs::read(good.join("node.key")).unwrap(), b"root's");
+    }
+    drop(attacker);
+    eprintln!(
+        "tls folders: {} checks of each kind in {:?}",
+        ROUNDS,
+        t0.elapsed()
+    );
+}

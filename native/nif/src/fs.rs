@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace};
+use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace, Secrecy};
 use ring_tracer_kernel::Error;
 use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
 
@@ -85,6 +85,37 @@ fn fs_write<'a>(
 fn fs_read_private<'a>(env: Env<'a>, path: String, max_bytes: u64) -> FsResult<'a, Binary<'a>> {
     let bytes = safe_fs::read_private(Path::new(&path), max_bytes).map_err(|e| fail(env, e))?;
     Ok(OwnedBinary::from_slice(&bytes).release(env))
+}
+
+/// Checks a folder whose files another program reads later by name (a node's TLS folder):
+/// every folder on the way and every link followed is this user's or root's and closed to
+/// changes by others, the folder is this user's, `public` files are regular files nobody
+/// else can change, `private` ones regular files of this user's closed to others
+/// (`safe_fs::trusted_dir`, `Dir::check_trusted_file`). Errors are `{posix, file, message}`,
+/// `file` the folder or file at fault.
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_check_trusted(
+    env: Env,
+    path: String,
+    public: Vec<String>,
+    private: Vec<String>,
+) -> Result<Atom, (Atom, String, String)> {
+    let checked = safe_fs::trusted_dir(Path::new(&path)).and_then(|dir| {
+        let public = public.iter().map(|n| (n, Secrecy::Public));
+        let private = private.iter().map(|n| (n, Secrecy::Private));
+        public
+            .chain(private)
+            .try_for_each(|(name, secrecy)| dir.check_trusted_file(name, secrecy))
+    });
+    checked.map_err(|e| match e {
+        Error::Fs {
+            file,
+            errno,
+            message,
+        } => (posix(env, errno), file, message),
+        other => (posix(env, None), path.clone(), other.to_string()),
+    })?;
+    Ok(ok())
 }
 
 /// Whether a new file can be made beside `path` (made for real in its folder, then removed).
