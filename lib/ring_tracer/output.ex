@@ -108,9 +108,10 @@ defmodule RingTracer.Output do
   @doc """
   Writes `data` to `path` atomically: into a new file made (mode 0600,
   `O_EXCL | O_NOFOLLOW`) in the folder of `path` opened once, given its
-  final permissions on its descriptor, then renamed over `path`. A file
-  replaced keeps its permission bits, but never setuid, setgid or sticky; a
-  symbolic link at `path` is replaced, never followed.
+  final permissions on its descriptor, then renamed over `path`. A file of
+  this user's replaced keeps its permission bits, but never setuid, setgid
+  or sticky; a file of another user's lends none (a new file's mode is used:
+  she chose hers); a symbolic link at `path` is replaced, never followed.
 
   ## Options
 

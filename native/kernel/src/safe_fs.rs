@@ -331,11 +331,17 @@ impl Dir {
     }
 
     /// The permission bits a file replacing `name` gets: those of the regular file there now
-    /// (a symbolic link is not followed), without setuid, setgid and sticky; else `new_mode`,
-    /// else `0o666` less the umask.
+    /// when it is this user's (a symbolic link is not followed), without setuid, setgid and
+    /// sticky; else `new_mode`, else `0o666` less the umask. A file another user put at the
+    /// name (in a folder both can write in) gives nothing: its mode is hers to choose, and
+    /// copying it would open this user's output to whoever she likes.
     pub fn mode_for(&self, name: &str, new_mode: Option<u32>) -> u32 {
+        let me = rustix::process::geteuid().as_raw();
         match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
-            Ok(st) if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile => {
+            Ok(st)
+                if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile
+                    && st.st_uid == me =>
+            {
                 st.st_mode & 0o777
             }
             _ => new_file_mode(new_mode),
@@ -828,6 +834,14 @@ mod tests {
         assert_eq!(std::fs::read(&victim).unwrap(), b"keep");
         assert!(std::fs::symlink_metadata(&link).unwrap().is_file());
         assert_eq!(names(t.path()), ["a.json", "l.json", "victim"]);
+        // another user's file at the name lends it nothing
+        if rustix::process::geteuid().is_root() {
+            std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o666)).unwrap();
+            std::os::unix::fs::chown(&p, Some(65534), None).unwrap();
+            write_path(&p, b"four", Some(0o600), Replace::Yes).unwrap();
+            let m = std::fs::metadata(&p).unwrap();
+            assert_eq!((m.uid(), m.mode() & 0o7777), (0, 0o600));
+        }
     }
 
     #[test]

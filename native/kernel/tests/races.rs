@@ -41,6 +41,8 @@ enum Step {
     Exchange(CString, CString),
     /// Make a symbolic link `link` to `target` (if the name is free).
     Symlink(CString, CString),
+    /// Make a file open to everyone (mode 0666) at the name (if it is free).
+    Plant(CString),
 }
 
 /// The attacker: a child process as uid/gid 65534 doing its steps in a loop, until dropped.
@@ -84,6 +86,17 @@ impl Attacker {
                             }
                             Step::Symlink(target, link) => {
                                 libc::symlink(target.as_ptr(), link.as_ptr());
+                            }
+                            Step::Plant(path) => {
+                                let fd = libc::open(
+                                    path.as_ptr(),
+                                    libc::O_WRONLY | libc::O_CREAT | libc::O_EXCL,
+                                    0o666,
+                                );
+                                if fd >= 0 {
+                                    libc::fchmod(fd, 0o666);
+                                    libc::close(fd);
+                                }
                             }
                         }
                     }
@@ -675,4 +688,44 @@ fn a_tls_folder_is_trusted_only_when_nobody_else_can_swap_it() {
         ROUNDS,
         t0.elapsed()
     );
+}
+
+#[test]
+fn an_output_replacing_her_file_does_not_take_its_mode() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    // a folder both can write in (root's, sticky, like /tmp); she plants files open to all at
+    // the output's name whenever it is free, and reads all she can
+    let shared = t.path().join("shared");
+    std::fs::create_dir(&shared).unwrap();
+    std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777)).unwrap();
+    let out = shared.join("out.json");
+    let attacker = Attacker::start(vec![Step::Plant(cstr(&out))]);
+    let reader = Reader::start(&shared, "ROOT-ONLY");
+    let (mut over_hers, mut fresh) = (0, 0);
+    for i in 0..ROUNDS {
+        let hers = std::fs::symlink_metadata(&out).is_ok_and(|m| m.uid() == THEM);
+        let data = format!("ROOT-ONLY {i}");
+        safe_fs::write_path(&out, data.as_bytes(), Some(0o600), Replace::Yes).unwrap();
+        let m = std::fs::symlink_metadata(&out).unwrap();
+        assert_eq!(m.uid(), 0);
+        assert_eq!(
+            m.mode() & 0o7777,
+            0o600,
+            "round {i}: took the mode of her file"
+        );
+        if hers {
+            over_hers += 1;
+        } else {
+            fresh += 1;
+        }
+        std::fs::remove_file(&out).unwrap();
+    }
+    drop(attacker);
+    let leaks = reader.finish();
+    eprintln!("outputs over hers: {over_hers} replaced her file, {fresh} others");
+    assert!(over_hers > 0, "she never planted a file in time");
+    assert_eq!(leaks, "", "the other user read a root-only output");
 }
