@@ -169,6 +169,10 @@ defmodule RingTracer.Output do
   each target is kept as a hidden hard link beside it (made without
   following a link, in the folder opened once) while the set is written,
   so putting it back copies nothing; no hidden file is left either way.
+  A render killed mid-way (`SIGKILL`) can leave one: the next write of
+  that output removes this user's hidden links for it that are over an
+  hour old (`ring_tracer_kernel::safe_fs::Dir::sweep_kept`), never another
+  user's, never a name that only looks like one.
 
       iex> dir = Path.join(System.tmp_dir!(), "rt_write_all_doc_#{System.unique_integer([:positive])}")
       iex> File.mkdir_p!(dir)

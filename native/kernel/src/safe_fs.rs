@@ -92,6 +92,11 @@ pub enum Kept {
     Link(String),
 }
 
+/// How long ago a hidden link [`Dir::keep`] made must have been made (or its name's file
+/// replaced) to be taken for one a killed write left behind ([`Dir::sweep_kept`]): far longer
+/// than any write of a render's outputs takes.
+pub const STALE_KEPT: std::time::Duration = std::time::Duration::from_secs(3600);
+
 /// A folder opened once; its files are reached through the descriptor only.
 #[derive(Debug)]
 pub struct Dir {
@@ -435,10 +440,13 @@ impl Dir {
 
     /// Keeps what is at `name` now (a regular file, a symbolic link, anything) as a hard link
     /// under a hidden name, without following a link, so that [`Dir::put_back`] can restore
-    /// exactly it.
+    /// exactly it. First removes this user's hidden links for `name` older than
+    /// [`STALE_KEPT`] ([`Dir::sweep_kept`]): those a killed write left.
     pub fn keep(&self, name: &str) -> Result<Kept, Error> {
         check_name(&self.path, name)?;
         let target = self.at(name);
+        // what a killed write of this output kept and never took back
+        self.sweep_kept(name, STALE_KEPT)?;
         match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
             Err(Errno::NOENT) => return Ok(Kept::Nothing),
             Err(e) => return Err(errno_error(&target, e)),
@@ -454,6 +462,59 @@ impl Dir {
             }
         }
         Err(message_error(&target, "could not keep it beside itself"))
+    }
+
+    /// Removes the hidden links [`Dir::keep`] made for `name` and that nothing took back: a
+    /// write of several outputs killed (`SIGKILL`) before it put back or dropped what it kept
+    /// leaves one behind. Only an entry whose name is exactly one `keep` makes for `name`
+    /// (`.NAME.` sixteen hex digits `.kept`), that belongs to this user, and whose inode last
+    /// changed (`ctime`: the link made, or the name it was kept for replaced) more than
+    /// `older_than` ago, so that a write of the same output still running elsewhere keeps its
+    /// own. Listed and removed through the folder's descriptor (`unlinkat` removes the entry,
+    /// never follows it). Returns how many were removed.
+    pub fn sweep_kept(&self, name: &str, older_than: std::time::Duration) -> Result<usize, Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        let head: String = name.chars().take(200).collect();
+        let prefix = format!(".{head}.");
+        let ours = |entry: &str| {
+            entry
+                .strip_prefix(prefix.as_str())
+                .and_then(|rest| rest.strip_suffix(".kept"))
+                .is_some_and(|hex| {
+                    hex.len() == 16 && hex.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+                })
+        };
+        let me = rustix::process::geteuid().as_raw();
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0);
+        let before = now.saturating_sub(older_than.as_secs());
+        let mut list = rfs::Dir::read_from(&self.fd).map_err(|e| errno_error(&target, e))?;
+        let mut removed = 0;
+        while let Some(entry) = list.read() {
+            let entry = entry.map_err(|e| errno_error(&target, e))?;
+            let Ok(entry) = entry.file_name().to_str() else {
+                continue;
+            };
+            if !ours(entry) {
+                continue;
+            }
+            let Ok(st) = rfs::statat(&self.fd, entry, AtFlags::SYMLINK_NOFOLLOW) else {
+                continue;
+            };
+            let changed = u64::try_from(st.st_ctime).unwrap_or(0);
+            if st.st_uid != me || changed > before {
+                continue;
+            }
+            match rfs::unlinkat(&self.fd, entry, AtFlags::empty()) {
+                Ok(()) => removed += 1,
+                Err(Errno::NOENT) => {}
+                Err(e) => return Err(errno_error(&self.at(entry), e)),
+            }
+        }
+        Ok(removed)
     }
 
     /// Puts back what [`Dir::keep`] kept at `name`: the link renamed over `name`, or `name`
@@ -888,6 +949,72 @@ mod tests {
         let kept = dir.keep("target").unwrap();
         dir.discard(&kept).unwrap();
         assert_eq!(names(t.path()), ["out.png", "target"]);
+    }
+
+    #[test]
+    fn a_killed_writes_kept_link_is_swept_on_the_next_write() {
+        let t = tempfile::tempdir().unwrap();
+        std::fs::write(t.path().join("out.png"), "old").unwrap();
+        // a child keeps the output, as a write of several does first, and is killed there
+        // SAFETY: the child only calls this crate's code on memory it owns, then is killed
+        // (or exits) without returning into the test harness.
+        let pid = unsafe { libc::fork() };
+        assert!(pid >= 0);
+        if pid == 0 {
+            let dir = Dir::open(t.path()).unwrap();
+            let _ = dir.keep("out.png");
+            unsafe { libc::raise(libc::SIGKILL) };
+            unsafe { libc::_exit(1) };
+        }
+        let mut status = 0;
+        // SAFETY: our own child.
+        assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
+        assert!(libc::WIFSIGNALED(status));
+        let left = names(t.path());
+        assert_eq!(left.len(), 2, "{left:?}");
+        assert!(left[0].starts_with(".out.png.") && left[0].ends_with(".kept"));
+        // names that only look alike, and another output's, are not touched
+        for other in [
+            ".out.png.kept",
+            ".out.png.0123456789abcdeg.kept",
+            ".a.png.0123456789abcdef.kept",
+            "x.0123456789abcdef.kept",
+        ] {
+            std::fs::write(t.path().join(other), "").unwrap();
+        }
+        let dir = Dir::open(t.path()).unwrap();
+        // too new to be taken for a killed write's: kept
+        let kept = dir.keep("out.png").unwrap();
+        assert_eq!(names(t.path()).len(), 7);
+        dir.discard(&kept).unwrap();
+        assert_eq!(
+            dir.sweep_kept("out.png", std::time::Duration::ZERO)
+                .unwrap(),
+            1
+        );
+        assert_eq!(
+            names(t.path()),
+            [
+                ".a.png.0123456789abcdef.kept",
+                ".out.png.0123456789abcdeg.kept",
+                ".out.png.kept",
+                "out.png",
+                "x.0123456789abcdef.kept"
+            ]
+        );
+        assert_eq!(std::fs::read(t.path().join("out.png")).unwrap(), b"old");
+        // another user's is not touched either
+        if rustix::process::geteuid().is_root() {
+            let theirs = t.path().join(".out.png.00000000000000ff.kept");
+            std::fs::write(&theirs, "").unwrap();
+            std::os::unix::fs::lchown(&theirs, Some(65534), None).unwrap();
+            assert_eq!(
+                dir.sweep_kept("out.png", std::time::Duration::ZERO)
+                    .unwrap(),
+                0
+            );
+            assert!(theirs.exists());
+        }
     }
 
     #[test]

@@ -729,3 +729,60 @@ fn an_output_replacing_her_file_does_not_take_its_mode() {
     assert!(over_hers > 0, "she never planted a file in time");
     assert_eq!(leaks, "", "the other user read a root-only output");
 }
+
+#[test]
+fn a_sweep_of_kept_links_removes_only_roots_own() {
+    if !root() {
+        return;
+    }
+    let t = base();
+    let victim = victim(t.path(), "keep", "x");
+    let before = snapshot(&victim);
+    // root's output in a folder of hers, where she keeps names that look like root's hidden
+    // links: her file, and her link to a root-only file, swapped with each other and with a
+    // link to the victim folder, as fast as she can
+    let out = theirs(&t.path().join("out"), 0o777);
+    let a = out.join(".out.json.aaaaaaaaaaaaaaaa.kept");
+    let b = out.join(".out.json.bbbbbbbbbbbbbbbb.kept");
+    std::fs::write(&a, "hers").unwrap();
+    std::os::unix::fs::lchown(&a, Some(THEM), Some(THEM)).unwrap();
+    their_link(&victim.join("keep"), &b);
+    let attacker = Attacker::start(vec![Step::Exchange(cstr(&a), cstr(&b))]);
+    let (mut swept, mut kept) = (0, 0);
+    for i in 0..ROUNDS {
+        let Ok(dir) = Dir::open(&out) else { continue };
+        safe_fs::write_path(
+            &out.join("out.json"),
+            format!("{i}").as_bytes(),
+            None,
+            Replace::Yes,
+        )
+        .unwrap();
+        // a killed write's leftover: kept, never put back nor dropped
+        if dir.keep("out.json").is_ok() {
+            kept += 1;
+        }
+        swept += dir.sweep_kept("out.json", Duration::ZERO).unwrap();
+    }
+    drop(attacker);
+    eprintln!("kept links: {kept} left behind, {swept} swept under attack");
+    assert_eq!(
+        swept, kept,
+        "a leftover of root's was missed, or one of hers removed"
+    );
+    // hers are both still there, and nothing else is left
+    let mut left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        [
+            ".out.json.aaaaaaaaaaaaaaaa.kept",
+            ".out.json.bbbbbbbbbbbbbbbb.kept",
+            "out.json"
+        ]
+    );
+    assert_eq!(snapshot(&victim), before, "something outside was changed");
+}
