@@ -11,6 +11,8 @@ use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace, Secrecy};
 use ring_tracer_kernel::Error;
 use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
 
+use crate::convert::mode_arg;
+
 rustler::atoms! { ok }
 
 /// A folder held open. Dropped (closed) when Erlang lets go of the handle.
@@ -55,10 +57,6 @@ fn fail(env: Env, e: Error) -> (Atom, String) {
         Error::Fs { errno, message, .. } => (posix(env, errno), message),
         other => (posix(env, None), other.to_string()),
     }
-}
-
-fn mode_arg(mode: i64) -> Option<u32> {
-    u32::try_from(mode).ok().map(|m| m & 0o777)
 }
 
 /// Writes `data` to `path` atomically in the folder opened once (see

@@ -7,7 +7,7 @@ use ring_tracer_kernel::{
 };
 use rustler::{Atom, Binary, Env, OwnedBinary};
 
-use crate::convert::{binary_to_floats, message};
+use crate::convert::{binary_to_floats, message, mode_arg};
 
 rustler::atoms! { ok }
 
@@ -34,8 +34,7 @@ fn write_image(
 ) -> Result<Atom, String> {
     let rgb = binary_to_floats(&pixels)?;
     check_size(width, height, &rgb)?;
-    let new_mode = u32::try_from(mode).ok().map(|m| m & 0o7777);
-    kernel_write(Path::new(&path), width, height, &rgb, new_mode).map_err(message)?;
+    kernel_write(Path::new(&path), width, height, &rgb, mode_arg(mode)).map_err(message)?;
     Ok(ok())
 }
 
