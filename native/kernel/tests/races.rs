@@ -1,10 +1,12 @@
 //! A second local user races root on every file operation another user could aim at:
-//! writing outputs (and putting them back), making a cookie, making a private folder (the
-//! server's socket folder), loading a scene's referenced files. The attacker is a forked
-//! process that drops to uid/gid 65534 and swaps a folder of hers with a symbolic link
-//! (`renameat2(RENAME_EXCHANGE)`) as fast as it can, thousands of times over the test; a
-//! reader of hers tries to read everything it sees. Nothing may escape: no root-only secret
-//! in a result, nothing outside created, written or chmodded, a cookie only ever whole at 0600.
+//! writing outputs (and putting them back, and sweeping what a killed write kept), making and
+//! reading a cookie, making a private folder (the server's socket folder), loading a scene and
+//! its referenced files, checking a TLS folder. The attacker is a forked process that drops to
+//! uid/gid 65534 and swaps a folder or file of hers with a symbolic link or a FIFO
+//! (`renameat2(RENAME_EXCHANGE)`), or plants files open to all, as fast as it can, thousands
+//! of times over the test; a reader of hers tries to read everything it sees. Nothing may
+//! escape: no root-only secret in a result, nothing outside created, written, chmodded or
+//! removed, a cookie only ever whole at 0600, no output taking the mode of her file.
 //!
 //! Needs root (to be two users); without it each test says so and passes without racing.
 
