@@ -17,7 +17,7 @@ rustler::atoms! { ok }
 
 /// A folder held open. Dropped (closed) when Erlang lets go of the handle.
 pub struct DirResource {
-    dir: Dir,
+    pub dir: Dir,
 }
 
 #[rustler::resource_impl]
@@ -113,6 +113,30 @@ fn fs_check_trusted(
         } => (posix(env, errno), file, message),
         other => (posix(env, None), path.clone(), other.to_string()),
     })?;
+    Ok(ok())
+}
+
+/// `fs_write` into a folder held open (`fs_open_dir`), as `name` there.
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_write_in<'a>(
+    env: Env<'a>,
+    dir: ResourceArc<DirResource>,
+    name: String,
+    data: Binary<'a>,
+    mode: i64,
+    replace: bool,
+) -> FsResult<'a, Atom> {
+    use std::io::Write;
+    let replace = if replace { Replace::Yes } else { Replace::No };
+    let target = dir.dir.path().join(&name);
+    dir.dir
+        .write_file(&name, mode_arg(mode), replace, |f| {
+            f.write_all(data.as_slice()).map_err(|e| Error::Io {
+                file: target.display().to_string(),
+                message: e.to_string(),
+            })
+        })
+        .map_err(|e| fail(env, e))?;
     Ok(ok())
 }
 
