@@ -505,7 +505,12 @@ fn a_cookie_is_read_only_from_this_users_own_closed_file() {
     let path = cookie.clone();
     std::thread::spawn(move || {
         let (mut read, mut refused) = (0, 0);
-        for _ in 0..ROUNDS {
+        // at least ROUNDS reads, and on until both a read and a refusal were seen (her swaps
+        // can stay ahead for a while), for at most a minute
+        let t0 = Instant::now();
+        while read + refused < ROUNDS
+            || ((read == 0 || refused == 0) && t0.elapsed() < Duration::from_secs(60))
+        {
             match safe_fs::read_private(&path, 4096) {
                 Ok(bytes) => {
                     assert_eq!(bytes, b"GOOD\n", "read something other than the cookie");
@@ -528,11 +533,11 @@ fn a_cookie_is_read_only_from_this_users_own_closed_file() {
         let _ = tx.send((read, refused));
     });
     let (read, refused) = rx
-        .recv_timeout(Duration::from_secs(120))
+        .recv_timeout(Duration::from_secs(180))
         .expect("a cookie read hung, or found something else than the cookie");
     drop(attacker);
     eprintln!("cookie reads: {read} read, {refused} refused under attack");
-    assert_eq!(read + refused, ROUNDS);
+    assert!(read + refused >= ROUNDS);
     assert!(read > 0 && refused > 0, "the swaps did not race the reads");
 }
 
@@ -581,7 +586,11 @@ fn a_scene_reads_its_meshes_in_the_folder_it_was_read_in() {
     let attacker = Attacker::start(steps);
     let (mut read, mut refused, mut loaded) = (0, 0, 0);
     let t0 = Instant::now();
-    for i in 0..ROUNDS {
+    // at least ROUNDS rounds, and on until one has read the mesh (her swaps can win every
+    // round for a while), for at most a minute
+    let mut i = 0;
+    while i < ROUNDS || (read == 0 && t0.elapsed() < Duration::from_secs(60)) {
+        i += 1;
         // as a render loads it: the scene file, then its mesh beneath the folder held
         match files::open_scene(&path, 1 << 20) {
             Ok(scene) => {
@@ -619,8 +628,8 @@ fn a_scene_reads_its_meshes_in_the_folder_it_was_read_in() {
         "scenes: {read} meshes read, {refused} refused, {loaded} loaded whole under attack in {:?}",
         t0.elapsed()
     );
-    assert_eq!(read + refused, ROUNDS);
-    assert!(read > 0, "no round loaded the scene");
+    assert_eq!(read + refused, i);
+    assert!(read > 0, "no round in a minute read the scene's mesh");
 }
 
 /// A node's TLS folder `name` in `parent` (0700, owned by `uid`) holding `ca.pem`,
