@@ -23,6 +23,8 @@ defmodule RingTracer.Image do
 
     * `:mode` — the permissions of a new file (default: `0o666` less the
       umask); a file replaced keeps its own
+    * `:in` — the folder of `path` already held open (see
+      `RingTracer.Output.write_all/1`): written there under `path`'s name
   """
   @spec write(Result.t(), Path.t(), keyword()) :: :ok | {:error, Error.t()}
   def write(%Result{width: w, height: h, pixels: pixels}, path, opts \\ []),
@@ -40,7 +42,15 @@ defmodule RingTracer.Image do
          Error.new(:file, "#{path}: unknown image format #{inspect(ext)}; use .png or .exr")}
 
       true ->
-        case Native.write_image(Path.expand(path), width, height, pixels, opts[:mode] || -1) do
+        mode = opts[:mode] || -1
+
+        written =
+          case opts[:in] do
+            nil -> Native.write_image(Path.expand(path), width, height, pixels, mode)
+            dir -> Native.write_image_in(dir, Path.basename(path), width, height, pixels, mode)
+          end
+
+        case written do
           {:ok, _} -> :ok
           {:error, message} -> {:error, Error.new(:file, "#{path}: #{message}")}
         end

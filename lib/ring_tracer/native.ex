@@ -23,7 +23,7 @@ defmodule RingTracer.Native do
     end
   end
 
-  def scene_parse(_bytes, _format, _name, _base_dir, _allow_dirs, _includes), do: err()
+  def scene_parse(_bytes, _format, _name, _scene_dir, _allow_dirs, _includes), do: err()
   def read_scene_file(_path), do: err()
   def scene_live_count, do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
@@ -32,13 +32,17 @@ defmodule RingTracer.Native do
   def row_work(_scene, _settings), do: err()
   def validate_settings(_settings), do: err()
   def write_image(_path, _width, _height, _pixels, _mode), do: err()
+  def write_image_in(_dir, _name, _width, _height, _pixels, _mode), do: err()
   def encode_png(_width, _height, _pixels), do: err()
   def to_srgb8_binary(_pixels), do: err()
   def to_srgb8_base64(_pixels), do: err()
   def settings_defaults, do: err()
   def ray_counters, do: err()
   def fs_write(_path, _data, _mode, _replace), do: err()
+  def fs_write_in(_dir, _name, _data, _mode, _replace), do: err()
   def fs_probe(_path), do: err()
+  def fs_read_private(_path, _max_bytes), do: err()
+  def fs_check_trusted(_path, _public, _private), do: err()
   def fs_open_dir(_path), do: err()
   def fs_private_dir(_path, _may_exist), do: err()
   def fs_dir_path(_dir), do: err()

@@ -45,6 +45,9 @@ defmodule RingTracer.Output do
 
   alias RingTracer.{Error, Native}
 
+  @typedoc "A folder held open by the file NIFs (`write_all/1` gives it to its writes)."
+  @opaque dir :: reference()
+
   @typedoc "What an output is: it decides the allowed extensions and the option named in errors."
   @type kind :: :image | :stats | :timeline | :ownership
 
@@ -108,19 +111,35 @@ defmodule RingTracer.Output do
   @doc """
   Writes `data` to `path` atomically: into a new file made (mode 0600,
   `O_EXCL | O_NOFOLLOW`) in the folder of `path` opened once, given its
-  final permissions on its descriptor, then renamed over `path`. A file
-  replaced keeps its permission bits, but never setuid, setgid or sticky; a
-  symbolic link at `path` is replaced, never followed.
+  final permissions on its descriptor, then renamed over `path`. A file of
+  this user's replaced keeps its permission bits, but never setuid, setgid
+  or sticky; a file of another user's lends none (a new file's mode is used:
+  she chose hers); a symbolic link at `path` is replaced, never followed.
 
   ## Options
 
     * `:mode` — the permissions of a new file (default: `0o666` less the
       umask)
+    * `:in` — the folder of `path` already held open (the handle
+      `write_all/1` gives its writes): the file is written there, under
+      `path`'s name, without opening its folder again
   """
   @spec write(Path.t(), iodata(), keyword()) :: :ok | {:error, Error.t()}
   def write(path, data, opts \\ []) do
-    with {:error, reason} <- put(path, data, opts[:mode], true),
-         do: {:error, file_error(path, reason)}
+    result =
+      case opts[:in] do
+        nil ->
+          put(path, data, opts[:mode], true)
+
+        dir ->
+          binary = IO.iodata_to_binary(data)
+          fs(Native.fs_write_in(dir, Path.basename(path), binary, opts[:mode] || -1, true))
+      end
+
+    case result do
+      {:error, reason} -> {:error, file_error(path, reason)}
+      _ -> :ok
+    end
   end
 
   @doc """
@@ -168,6 +187,13 @@ defmodule RingTracer.Output do
   each target is kept as a hidden hard link beside it (made without
   following a link, in the folder opened once) while the set is written,
   so putting it back copies nothing; no hidden file is left either way.
+  A `write` of one argument is given that folder, held open (`:in` of
+  `write/3` and `RingTracer.Image.write/5`), so that it writes in the very
+  folder where what it replaces was kept.
+  A render killed mid-way (`SIGKILL`) can leave one: the next write of
+  that output removes this user's hidden links for it that are over an
+  hour old (`ring_tracer_kernel::safe_fs::Dir::sweep_kept`), never another
+  user's, never a name that only looks like one.
 
       iex> dir = Path.join(System.tmp_dir!(), "rt_write_all_doc_#{System.unique_integer([:positive])}")
       iex> File.mkdir_p!(dir)
@@ -183,13 +209,14 @@ defmodule RingTracer.Output do
       iex> File.rm_rf!(dir) |> length()
       2
   """
-  @spec write_all([{Path.t(), (() -> :ok | {:error, Error.t()})}]) :: :ok | {:error, Error.t()}
+  @spec write_all([{Path.t(), (() -> result) | (dir() -> result)}]) :: :ok | {:error, Error.t()}
+        when result: :ok | {:error, Error.t()}
   def write_all(writes) do
     result =
       Enum.reduce_while(writes, {:ok, []}, fn {path, write}, {:ok, done} ->
         case keep(path) do
-          {:ok, kept} ->
-            case write.() do
+          {:ok, {dir, _, _} = kept} ->
+            case if(is_function(write, 1), do: write.(dir), else: write.()) do
               :ok -> {:cont, {:ok, [kept | done]}}
               {:error, _} = error -> {:halt, {error, [kept | done]}}
             end

@@ -68,7 +68,10 @@ defmodule RingTracer.Scene do
   after symlinks it must lie inside the scene file's folder or one of
   `:allow_dirs`, and be a regular file of bounded size, or the load fails
   with the scene's file and line and the reference as written. Nothing is
-  read before these checks pass.
+  read before these checks pass. The scene file's folder is opened once,
+  when the scene file is read in it, and every reference is opened beneath
+  that descriptor: swapping the folder, or one above it, for a symbolic
+  link while the scene loads changes nothing.
 
   Input that cannot mean what it says (a second viewpoint, a `fov` of 200,
   a cone whose radii have opposite signs) is an error. Input that renders,
@@ -91,16 +94,12 @@ defmodule RingTracer.Scene do
 
     with {:ok, format} <- format_of(path),
          :ok <- check_dirs(allow),
-         {:ok, bytes, real} <- read(path) do
+         {:ok, bytes, real, dir} <- read(path) do
+      # `dir`: the folder the scene file was read in, held open by the
+      # kernel; its references are read beneath that very folder, never
+      # looked up again by name
       with {:ok, scene} <-
-             parse(
-               bytes,
-               format,
-               Error.escape(Path.basename(path)),
-               Path.dirname(real),
-               allow,
-               %{}
-             ),
+             parse(bytes, format, Error.escape(Path.basename(path)), dir, allow, %{}),
            do: {:ok, %{scene | path: real}}
     end
   end
@@ -123,8 +122,8 @@ defmodule RingTracer.Scene do
     parse(source.bytes, source.format, source.name, nil, [], source.includes)
   end
 
-  defp parse(bytes, format, name, base_dir, allow, includes) do
-    case Native.scene_parse(bytes, format, name, base_dir, allow, includes) do
+  defp parse(bytes, format, name, scene_dir, allow, includes) do
+    case Native.scene_parse(bytes, format, name, scene_dir, allow, includes) do
       {:ok, {ref, info, files, paths}} ->
         source = Source.new(name, format, bytes, Map.new(files))
 
@@ -169,7 +168,7 @@ defmodule RingTracer.Scene do
 
   defp read(path) do
     case Native.read_scene_file(Path.expand(path)) do
-      {:ok, {bytes, real}} -> {:ok, bytes, real}
+      {:ok, {bytes, real, dir}} -> {:ok, bytes, real, dir}
       # the kernel's message names the file
       {:error, message} -> {:error, Error.new(:file, message)}
     end

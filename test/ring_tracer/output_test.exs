@@ -13,6 +13,64 @@ defmodule RingTracer.OutputTest do
     assert error.message =~ "would overwrite"
   end
 
+  test "write_all's writes land in the folder it kept the old files in, opened once", %{
+    tmp_dir: dir
+  } do
+    d = Path.join(dir, "d")
+    other = Path.join(dir, "other")
+    moved = Path.join(dir, "d_moved")
+    File.mkdir!(d)
+    File.mkdir!(other)
+    [a, img] = [Path.join(d, "a.json"), Path.join(d, "i.png")]
+    File.write!(a, "old")
+    File.write!(img, "old image")
+    pixels = for _ <- 1..3, into: <<>>, do: <<0.5::float-32-native>>
+
+    # the folder's name leads elsewhere once the old files are kept (a link of
+    # this user's, which a path would follow)
+    swap = fn ->
+      File.rename!(d, moved)
+      File.ln_s!(other, d)
+    end
+
+    failing = {:error, RingTracer.Error.new(:file, "b.svg: no space left on device")}
+
+    assert {:error, _} =
+             RingTracer.Output.write_all([
+               {a, fn folder -> RingTracer.Output.write(a, "new", in: folder) end},
+               {img,
+                fn folder ->
+                  swap.()
+                  RingTracer.Image.write(img, 1, 1, pixels, in: folder)
+                end},
+               {Path.join(d, "b.svg"), fn _ -> failing end}
+             ])
+
+    # put back where they were kept, nothing written through the new name
+    assert File.ls!(other) == []
+    assert File.read!(Path.join(moved, "a.json")) == "old"
+    assert File.read!(Path.join(moved, "i.png")) == "old image"
+    assert Enum.sort(File.ls!(moved)) == ["a.json", "i.png"]
+
+    File.rm!(d)
+    File.rename!(moved, d)
+
+    assert :ok =
+             RingTracer.Output.write_all([
+               {a, fn folder -> RingTracer.Output.write(a, "new", in: folder) end},
+               {img,
+                fn folder ->
+                  swap.()
+                  RingTracer.Image.write(img, 1, 1, pixels, in: folder)
+                end}
+             ])
+
+    assert File.ls!(other) == []
+    assert File.read!(Path.join(moved, "a.json")) == "new"
+    assert <<137, "PNG", _::binary>> = File.read!(Path.join(moved, "i.png"))
+    assert Enum.sort(File.ls!(moved)) == ["a.json", "i.png"]
+  end
+
   test "an existing folder in place of a file is refused", %{tmp_dir: dir} do
     File.mkdir_p!(Path.join(dir, "a.png"))
     assert {:error, error} = RingTracer.Output.check([image: Path.join(dir, "a.png")], [])

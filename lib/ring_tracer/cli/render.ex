@@ -468,13 +468,14 @@ defmodule RingTracer.CLI.Render do
 
     writes =
       [
-        {job.out, &RingTracer.Image.write(result, &1, mode)},
-        {o[:stats], &RingTracer.Report.Stats.write(result, &1, mode)},
-        {o[:timeline], &RingTracer.Report.Timeline.write(result, &1, mode)},
-        {o[:ownership], &RingTracer.Report.Ownership.write(result, &1, mode)}
+        {job.out, &RingTracer.Image.write(result, &1, &2)},
+        {o[:stats], &RingTracer.Report.Stats.write(result, &1, &2)},
+        {o[:timeline], &RingTracer.Report.Timeline.write(result, &1, &2)},
+        {o[:ownership], &RingTracer.Report.Ownership.write(result, &1, &2)}
       ]
       |> Enum.reject(fn {path, _} -> path == nil end)
-      |> Enum.map(fn {path, write} -> {path, fn -> write.(path) end} end)
+      # each written in the folder write_all/1 opened once and kept its old file in
+      |> Enum.map(fn {path, write} -> {path, fn dir -> write.(path, [in: dir] ++ mode) end} end)
 
     case RingTracer.Output.write_all(writes) do
       :ok -> :ok

@@ -27,7 +27,6 @@ defmodule RingTracer.Cluster.Cookie do
       2
   """
 
-  import Bitwise
   alias RingTracer.Error
 
   @max_bytes 4096
@@ -38,13 +37,16 @@ defmodule RingTracer.Cluster.Cookie do
 
   @doc """
   Reads the cookie in `path` (a regular file, mode 0600 or 0400, owned by
-  this user, not empty).
+  this user, not empty, at most 4096 bytes).
+
+  The file is opened once, without following a symbolic link and without
+  blocking (a FIFO is refused at once), checked on that open descriptor
+  and read from it, so another local user cannot swap anything in between
+  the checks and the read.
   """
   @spec read(Path.t()) :: {:ok, atom()} | {:error, Error.t()}
   def read(path) do
-    with {:ok, stat} <- stat(path),
-         :ok <- check(path, stat),
-         {:ok, bytes} <- read_file(path) do
+    with {:ok, bytes} <- read_file(path) do
       case String.trim(bytes) do
         "" ->
           {:error, Error.new(:cookie, "#{path}: the cookie file is empty")}
@@ -83,12 +85,12 @@ defmodule RingTracer.Cluster.Cookie do
     end
   end
 
-  defp stat(path) do
-    case File.stat(path) do
-      {:ok, stat} ->
-        {:ok, stat}
+  defp read_file(path) do
+    case RingTracer.Native.fs_read_private(Path.expand(path), @max_bytes) do
+      {:ok, bytes} ->
+        {:ok, bytes}
 
-      {:error, :enoent} ->
+      {:error, {:enoent, _}} ->
         {:error,
          Error.new(
            :cookie,
@@ -96,42 +98,8 @@ defmodule RingTracer.Cluster.Cookie do
              "and copy it (mode 0600) to every node"
          )}
 
-      {:error, reason} ->
-        {:error, Error.file(:cookie, path, reason)}
+      {:error, {_posix, message}} ->
+        {:error, Error.new(:cookie, "#{path}: the cookie file #{message}")}
     end
   end
-
-  defp check(path, %File.Stat{type: type}) when type != :regular,
-    do: {:error, Error.new(:cookie, "#{path}: the cookie file must be a regular file")}
-
-  defp check(path, %File.Stat{size: size}) when size > @max_bytes,
-    do: {:error, Error.new(:cookie, "#{path}: too large for a cookie file (#{size} bytes)")}
-
-  defp check(path, %File.Stat{mode: mode}) when (mode &&& 0o077) != 0 do
-    {:error,
-     Error.new(
-       :cookie,
-       "#{path} can be read by other users (mode #{mode_string(mode)}); anyone who reads it " <>
-         "can run any code on every node. Fix it with: chmod 600 #{path}"
-     )}
-  end
-
-  defp check(path, %File.Stat{uid: uid}) do
-    case RingTracer.Cluster.Epmd.own_uid() do
-      ^uid ->
-        :ok
-
-      me ->
-        {:error, Error.new(:cookie, "#{path} belongs to user #{uid}, not to this user (#{me})")}
-    end
-  end
-
-  defp read_file(path) do
-    case File.read(path) do
-      {:ok, bytes} -> {:ok, bytes}
-      {:error, reason} -> {:error, Error.file(:cookie, path, reason)}
-    end
-  end
-
-  defp mode_string(mode), do: "0" <> Integer.to_string(mode &&& 0o777, 8)
 end

@@ -125,9 +125,4 @@ defmodule RingTracer.Cluster.Epmd do
         Enum.map_join(Enum.uniq(addresses), ", ", &to_string(:inet.ntoa(&1)))
     end)
   end
-
-  @doc "Whether any listener is bound to every address (0.0.0.0 or ::)."
-  @spec any_address?([listener()]) :: boolean()
-  def any_address?(listeners),
-    do: Enum.any?(listeners, &(&1.address in [{0, 0, 0, 0}, {0, 0, 0, 0, 0, 0, 0, 0}]))
 end

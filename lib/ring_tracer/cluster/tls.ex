@@ -21,7 +21,6 @@ defmodule RingTracer.Cluster.TLS do
   sure a node asked for TLS really runs it.
   """
 
-  import Bitwise
   alias RingTracer.Error
 
   @files ["ca.pem", "node.pem", "node.key"]
@@ -106,9 +105,16 @@ defmodule RingTracer.Cluster.TLS do
   end
 
   @doc """
-  Checks a TLS folder: it holds the three files, it and the key belong to
-  this user and no one else can change the folder or read the key, and the
-  node's certificate is valid now.
+  Checks a TLS folder: it holds the three files, every folder on the way
+  to it (and every symbolic link followed) belongs to this user or to root
+  and no other user can change it, the folder is this user's, no other
+  user can change `ca.pem` or `node.pem` (this user's or root's) or read
+  `node.key` (this user's), and the node's certificate is valid now.
+
+  The checks are made on descriptors, folder by folder from `/`
+  (`ring_tracer_kernel::safe_fs::trusted_dir`): since nobody else can
+  rename or replace anything on the way, the files OTP's ssl later reads
+  by these paths are the files checked.
   """
   @spec check_dir(Path.t() | nil) :: :ok | {:error, Error.t()}
   def check_dir(nil),
@@ -127,31 +133,15 @@ defmodule RingTracer.Cluster.TLS do
         )
 
       true ->
-        with :ok <- private(dir, 0o022, "changed"),
-             :ok <- private(Path.join(dir, "node.key"), 0o077, "read") do
-          valid_now(Path.join(dir, "node.pem"))
-        end
+        with :ok <- trusted(dir), do: valid_now(Path.join(dir, "node.pem"))
     end
   end
 
-  defp private(path, bits, what) do
-    {:ok, %File.Stat{mode: mode, uid: uid}} = File.stat(path)
-    own = RingTracer.Cluster.Epmd.own_uid()
-
-    cond do
-      uid != own ->
-        tls_error(
-          "#{path} belongs to #{RingTracer.Cluster.Epmd.user_name(uid)}, not to you: " <>
-            "use a TLS folder of your own"
-        )
-
-      (mode &&& bits) != 0 ->
-        tls_error(
-          "#{path} can be #{what} by other users; fix it with: chmod #{if bits == 0o022, do: "700", else: "600"} #{path}"
-        )
-
-      true ->
-        :ok
+  defp trusted(dir) do
+    case RingTracer.Native.fs_check_trusted(dir, ["ca.pem", "node.pem"], ["node.key"]) do
+      {:ok, _} -> :ok
+      {:error, {nil, file, message}} -> tls_error("#{file} #{message}")
+      {:error, {_posix, file, message}} -> tls_error("#{file}: #{message}")
     end
   end
 

@@ -32,8 +32,16 @@ pub fn read(input: &mut impl Read) -> io::Result<Option<(u8, Vec<u8>)>> {
             format!("bad frame length {len}"),
         ));
     }
-    let mut body = vec![0u8; len];
-    input.read_exact(&mut body)?;
+    // grown as the bytes arrive (never more than about twice what came), not allocated at
+    // the declared length: a peer that declares 64 MiB and sends ten bytes costs ten
+    let mut body = Vec::new();
+    input.take(len as u64).read_to_end(&mut body)?;
+    if body.len() < len {
+        return Err(io::Error::new(
+            io::ErrorKind::UnexpectedEof,
+            format!("frame cut short: {} of {len} bytes", body.len()),
+        ));
+    }
     let data = body.split_off(1);
     Ok(Some((body[0], data)))
 }
@@ -52,6 +60,72 @@ mod tests {
         assert_eq!(read(&mut input).unwrap(), Some((b'A', b"--width".to_vec())));
         assert_eq!(read(&mut input).unwrap(), Some((b'G', vec![])));
         assert_eq!(read(&mut input).unwrap(), None);
+    }
+
+    /// The largest single allocation made on each thread since its last reset (tests run on
+    /// threads of their own, so others' allocations do not count).
+    mod peak {
+        use std::alloc::{GlobalAlloc, Layout, System};
+        use std::cell::Cell;
+
+        thread_local! {
+            static LARGEST: Cell<usize> = const { Cell::new(0) };
+        }
+
+        pub struct Counting;
+
+        // SAFETY: every call is passed to the system allocator unchanged; the thread-local
+        // `Cell` is const-initialised (no allocation, no destructor).
+        unsafe impl GlobalAlloc for Counting {
+            unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+                note(layout.size());
+                unsafe { System.alloc(layout) }
+            }
+            unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+                unsafe { System.dealloc(ptr, layout) }
+            }
+            unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+                note(new_size);
+                unsafe { System.realloc(ptr, layout, new_size) }
+            }
+        }
+
+        fn note(size: usize) {
+            let _ = LARGEST.try_with(|l| l.set(l.get().max(size)));
+        }
+
+        pub fn reset() {
+            LARGEST.with(|l| l.set(0));
+        }
+
+        pub fn largest() -> usize {
+            LARGEST.with(|l| l.get())
+        }
+    }
+
+    #[global_allocator]
+    static ALLOCATOR: peak::Counting = peak::Counting;
+
+    #[test]
+    fn a_declared_length_is_not_allocated_before_the_bytes_come() {
+        // 64 MiB declared, ten bytes sent, then the end
+        let mut input: Vec<u8> = (MAX_FRAME as u32).to_be_bytes().to_vec();
+        input.extend_from_slice(b"Ohello, wo");
+        peak::reset();
+        let e = read(&mut &input[..]).unwrap_err();
+        let largest = peak::largest();
+        assert!(largest < 64 * 1024, "allocated {largest} bytes for 10");
+        assert_eq!(e.kind(), io::ErrorKind::UnexpectedEof);
+        assert!(
+            e.to_string()
+                .contains("frame cut short: 10 of 67108864 bytes"),
+            "{e}"
+        );
+        // a whole large frame still arrives whole
+        let data = vec![7u8; 3 * 1024 * 1024];
+        let mut buf = Vec::new();
+        write(&mut buf, b'O', &data).unwrap();
+        assert_eq!(read(&mut &buf[..]).unwrap(), Some((b'O', data)));
     }
 
     #[test]

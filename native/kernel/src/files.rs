@@ -13,16 +13,19 @@
 //!   a message naming the reference as written and where it leads. The folders are held open
 //!   as descriptors, and a file is opened beneath one of them by the kernel in one call
 //!   (`openat2` with `RESOLVE_BENEATH`), so a folder swapped for a symbolic link while a scene
-//!   loads cannot lead the open outside.
+//!   loads cannot lead the open outside. The scene's own folder is the one [`open_scene`]
+//!   read the scene file in, held from that moment ([`Confinement::beneath`]): it is never
+//!   looked up again by its name, so the folder (or a parent) swapped for a link between
+//!   reading the scene and reading its meshes changes nothing.
 //!
 //! ```no_run
-//! use ring_tracer_kernel::files::{read_regular, Confinement};
+//! use ring_tracer_kernel::files::{open_scene, Confinement};
 //! use ring_tracer_kernel::limits::MAX_FILE_BYTES;
 //! use std::path::Path;
-//! let scene = read_regular(Path::new("scenes/teapot.toml"), MAX_FILE_BYTES)?;
-//! let confined = Confinement::new(["scenes"])?;
-//! let mesh = confined.read(Path::new("scenes"), "meshes/teapot.obj");
-//! assert!(confined.read(Path::new("scenes"), "../../etc/passwd").is_err());
+//! let scene = open_scene(Path::new("scenes/teapot.toml"), MAX_FILE_BYTES)?;
+//! let confined = Confinement::beneath(scene.dir, ["more_meshes"])?;
+//! let mesh = confined.read("meshes/teapot.obj");
+//! assert!(confined.read("../../etc/passwd").is_err());
 //! # Ok::<(), ring_tracer_kernel::Error>(())
 //! ```
 //!
@@ -212,17 +215,13 @@ fn open_checked(path: &Path) -> Result<(File, u64), Error> {
 /// Why a file that is not a regular file (its type from `fstat`) is refused, naming what it
 /// is where it can.
 fn not_regular(path: &Path, kind: rustix::fs::FileType) -> Error {
-    use rustix::fs::FileType as T;
-    let what = match kind {
-        T::Directory => "a directory",
-        T::Fifo => "a FIFO (named pipe)",
-        T::Socket => "a socket",
-        T::CharacterDevice => "a character device",
-        T::BlockDevice => "a block device",
-        T::Symlink => "a symbolic link",
-        _ => return io_error(path, "not a regular file"),
-    };
-    io_error(path, format!("is {what}, not a regular file"))
+    io_error(
+        path,
+        format!(
+            "is {}, not a regular file",
+            crate::safe_fs::kind_words(kind)
+        ),
+    )
 }
 
 /// Reads at most `max_bytes` of an open, checked file of `size` bytes.
@@ -280,6 +279,81 @@ pub fn read_regular_with_path(path: &Path, max_bytes: u64) -> Result<(Vec<u8>, P
     Ok((read_bounded(path, file, size, max_bytes)?, canonical))
 }
 
+/// A scene file the user named, read, and the folder it is in, held open: the root its
+/// references are confined to ([`Confinement::beneath`]).
+#[derive(Debug)]
+pub struct SceneFile {
+    /// The file's bytes.
+    pub bytes: Vec<u8>,
+    /// Its canonical absolute path, as the kernel says of the descriptor read.
+    pub path: PathBuf,
+    /// The folder it was opened in (`O_PATH`): the very folder, whatever its name leads to
+    /// later.
+    pub dir: OwnedFd,
+}
+
+/// Reads the scene file `path` as [`read_regular_with_path`] does, and keeps the folder it
+/// is in open. The folder `path` names is opened once (following the path the user gave);
+/// the file is opened beneath that descriptor with `O_NOFOLLOW`. When the file is a symbolic
+/// link, its target is taken from that descriptor (`readlinkat`) and opened the same way,
+/// from the folder the link is in (at most 40 links): the folder held at the end is the one
+/// the file read is in, reached through descriptors only, never looked up again by name.
+pub fn open_scene(path: &Path, max_bytes: u64) -> Result<SceneFile, Error> {
+    use rustix::fs::{FileType, Mode, OFlags};
+    use std::os::unix::ffi::OsStrExt;
+    let sys = |e: rustix::io::Errno| io_error(path, errno_text(e));
+    let dir_flags = OFlags::PATH | OFlags::DIRECTORY | OFlags::CLOEXEC;
+    // the folder and name of a path (`a.nff` is in `.`)
+    let split = |p: &Path| -> Result<(PathBuf, std::ffi::OsString), Error> {
+        let name = match p.components().next_back() {
+            Some(Component::Normal(n)) => n.to_os_string(),
+            _ => return Err(io_error(path, "is not a file name")),
+        };
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        Ok((dir, name))
+    };
+    let (first, mut name) = split(path)?;
+    let mut dir = rustix::fs::open(&first, dir_flags, Mode::empty()).map_err(|e| match e {
+        rustix::io::Errno::NOTDIR => io_error(path, "its folder is not a folder"),
+        e => sys(e),
+    })?;
+    let mut links = 0;
+    let found = loop {
+        let found = rustix::fs::openat(
+            &dir,
+            name.as_os_str(),
+            OFlags::PATH | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(sys)?;
+        let st = rustix::fs::fstat(&found).map_err(sys)?;
+        if FileType::from_raw_mode(st.st_mode) != FileType::Symlink {
+            break found;
+        }
+        links += 1;
+        if links > 40 {
+            return Err(sys(rustix::io::Errno::LOOP));
+        }
+        let target = rustix::fs::readlinkat(&found, "", Vec::new()).map_err(sys)?;
+        let target = PathBuf::from(std::ffi::OsStr::from_bytes(target.as_bytes()));
+        let (tdir, tname) = split(&target)?;
+        // relative to the folder the link is in (an absolute target ignores it)
+        dir = rustix::fs::openat(&dir, &tdir, dir_flags, Mode::empty()).map_err(sys)?;
+        name = tname;
+    };
+    let real = fd_path(&found).ok_or_else(|| io_error(path, "where it leads cannot be told"))?;
+    let (file, size) = open_found(path, &found, &real)?;
+    let bytes = read_bounded(path, file, size, max_bytes)?;
+    Ok(SceneFile {
+        bytes,
+        path: real,
+        dir,
+    })
+}
+
 /// `path` with `.` and `..` resolved by the text alone (no symbolic link followed).
 fn lexical(path: &Path) -> PathBuf {
     let mut out = PathBuf::new();
@@ -331,10 +405,12 @@ fn open_beneath(root: &OwnedFd, rel: &Path) -> Result<OwnedFd, rustix::io::Errno
 
 impl Confinement {
     /// The folders `roots`, the first being the scene's own (messages call it so). Each must
-    /// exist and be a directory.
+    /// exist and be a directory; each is opened once, here, following the path given.
     pub fn new<P: AsRef<Path>>(roots: impl IntoIterator<Item = P>) -> Result<Confinement, Error> {
-        let mut paths = Vec::new();
-        let mut fds = Vec::new();
+        let mut confinement = Confinement {
+            roots: Vec::new(),
+            fds: Vec::new(),
+        };
         for r in roots {
             let r = r.as_ref();
             let fd = rustix::fs::open(
@@ -348,14 +424,35 @@ impl Confinement {
                 rustix::io::Errno::NOTDIR => io_error(r, "is not a folder"),
                 e => io_error(r, std::io::Error::from(e).to_string()),
             })?;
-            let canonical = match fd_path(&fd) {
-                Some(p) => p,
-                None => std::fs::canonicalize(r).map_err(|e| io_error(r, e.to_string()))?,
-            };
-            paths.push(canonical);
-            fds.push(fd);
+            confinement.push(r, fd)?;
         }
-        Ok(Confinement { roots: paths, fds })
+        Ok(confinement)
+    }
+
+    /// The scene's folder as a descriptor already open (see [`open_scene`]: the folder the
+    /// scene file was read in), then the folders `allow` (opened here by their names).
+    pub fn beneath<P: AsRef<Path>>(
+        scene_dir: OwnedFd,
+        allow: impl IntoIterator<Item = P>,
+    ) -> Result<Confinement, Error> {
+        let mut confinement = Confinement {
+            roots: Vec::new(),
+            fds: Vec::new(),
+        };
+        confinement.push(Path::new("the scene's folder"), scene_dir)?;
+        let more = Confinement::new(allow)?;
+        confinement.roots.extend(more.roots);
+        confinement.fds.extend(more.fds);
+        Ok(confinement)
+    }
+
+    /// Adds a folder held open, known by where its descriptor leads (`named` in messages).
+    fn push(&mut self, named: &Path, fd: OwnedFd) -> Result<(), Error> {
+        let canonical =
+            fd_path(&fd).ok_or_else(|| io_error(named, "where it leads cannot be told"))?;
+        self.roots.push(canonical);
+        self.fds.push(fd);
+        Ok(())
     }
 
     /// The canonical folders, the scene's first.
@@ -401,15 +498,18 @@ impl Confinement {
 
     /// Opens a reference (see [`Confinement::resolve`]) with `O_PATH`, beneath an allowed
     /// folder; returns it and where it leads.
-    fn open(&self, base_dir: &Path, reference: &str) -> Result<(OwnedFd, PathBuf), Unreadable> {
+    fn open(&self, reference: &str) -> Result<(OwnedFd, PathBuf), Unreadable> {
         use rustix::io::Errno;
         use Unreadable::{Missing, Refused};
         let quoted = escape_bounded(reference, PATH_CHARS);
         if reference.is_empty() {
             return Err(Refused("'' is an empty file name".to_string()));
         }
-        let base = std::fs::canonicalize(base_dir)
-            .map_err(|e| Refused(format!("'{quoted}': the folder {}: {e}", shown(base_dir))))?;
+        // relative to the scene's folder: the text of where its descriptor leads, so that
+        // the part under it is opened beneath that very descriptor
+        let Some(base) = self.roots.first() else {
+            return Err(Refused(self.outside(reference, Path::new(reference), "")));
+        };
         let written = lexical(&base.join(reference));
         let missing = || Missing(format!("'{quoted}' does not exist ({})", shown(&written)));
         let other = |e: Errno| {
@@ -467,23 +567,24 @@ impl Confinement {
     }
 
     /// Where a reference written in a scene (or in a file it references) leads: relative ones
-    /// are taken from `base_dir`, absolute ones as they are; `..` and symbolic links are
-    /// resolved. The canonical path must lie inside one of the folders; the error names the
+    /// are taken from the scene's folder (the first, held open: the part of the reference
+    /// under it is opened beneath that descriptor, never by the folder's name), absolute ones
+    /// as they are; `..` and symbolic links are resolved. The canonical path must lie inside one of the folders; the error names the
     /// reference as written and why, e.g. `'../../etc/passwd' resolves to /etc/passwd,
     /// outside the scene's folder /x/y (allow it with --allow-dir)` or `'m.obj' does not
     /// exist (/x/y/m.obj)`. A reference that leaves the folders by its text alone is refused
     /// before anything on disk is looked at (so whether a file exists outside is not told).
     /// `..` is taken by the text (`a/../b` is `b`, whatever `a` is); the rest is resolved by
     /// the kernel beneath an allowed folder.
-    pub fn resolve(&self, base_dir: &Path, reference: &str) -> Result<PathBuf, Unreadable> {
-        self.open(base_dir, reference).map(|(_, path)| path)
+    pub fn resolve(&self, reference: &str) -> Result<PathBuf, Unreadable> {
+        self.open(reference).map(|(_, path)| path)
     }
 
     /// Reads a referenced file: opened as [`Confinement::resolve`] says, then read as
     /// [`read_regular`] does with [`limits::MAX_FILE_BYTES`], every check made on the file
     /// opened. Returns the bytes and the canonical path read.
-    pub fn read(&self, base_dir: &Path, reference: &str) -> Result<(Vec<u8>, PathBuf), Unreadable> {
-        let (found, real) = self.open(base_dir, reference)?;
+    pub fn read(&self, reference: &str) -> Result<(Vec<u8>, PathBuf), Unreadable> {
+        let (found, real) = self.open(reference)?;
         let refused = |e: Error| Unreadable::Refused(e.to_string());
         let (file, size) = open_found(&real, &found, &real).map_err(refused)?;
         let bytes = read_bounded(&real, file, size, limits::MAX_FILE_BYTES).map_err(refused)?;
@@ -539,17 +640,17 @@ mod tests {
     fn reads_inside_and_names_what_it_read() {
         let (_t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
-        let (bytes, path) = c.read(&scene, "m.obj").unwrap();
+        let (bytes, path) = c.read("m.obj").unwrap();
         assert_eq!(bytes, b"v 0 0 0\n");
         assert_eq!(path, canon(&scene.join("m.obj")));
         std::fs::create_dir(scene.join("sub")).unwrap();
         assert_eq!(
-            c.resolve(&scene, "sub/../m.obj").unwrap(),
+            c.resolve("sub/../m.obj").unwrap(),
             canon(&scene.join("m.obj"))
         );
         let abs = canon(&scene.join("m.obj"));
-        assert_eq!(c.resolve(&scene, abs.to_str().unwrap()).unwrap(), abs);
-        let e = missing(c.resolve(&scene, "nope.obj").unwrap_err());
+        assert_eq!(c.resolve(abs.to_str().unwrap()).unwrap(), abs);
+        let e = missing(c.resolve("nope.obj").unwrap_err());
         assert!(e.starts_with("'nope.obj' does not exist ("), "{e}");
     }
 
@@ -557,7 +658,7 @@ mod tests {
     fn dot_dot_escape_is_refused() {
         let (t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
-        let e = refused(c.resolve(&scene, "../outside.txt").unwrap_err());
+        let e = refused(c.resolve("../outside.txt").unwrap_err());
         let root = canon(t.path());
         assert_eq!(
             e,
@@ -568,20 +669,17 @@ mod tests {
                 canon(&scene).display()
             )
         );
-        let e = refused(
-            c.read(&scene, "../../../../../../../../etc/passwd")
-                .unwrap_err(),
-        );
+        let e = refused(c.read("../../../../../../../../etc/passwd").unwrap_err());
         assert!(
             e.starts_with("'../../../../../../../../etc/passwd' resolves to /etc/passwd, outside"),
             "{e}"
         );
         // whether a file exists outside is not told
-        let e = refused(c.resolve(&scene, "../no_such_file").unwrap_err());
+        let e = refused(c.resolve("../no_such_file").unwrap_err());
         assert!(e.contains("outside the scene's folder"), "{e}");
         // allowed with a second root
         let c2 = Confinement::new([scene.clone(), t.path().to_path_buf()]).unwrap();
-        assert_eq!(c2.read(&scene, "../outside.txt").unwrap().0, b"secret\n");
+        assert_eq!(c2.read("../outside.txt").unwrap().0, b"secret\n");
         let e = Confinement::new([scene.clone(), scene.join("sub_missing")]).unwrap_err();
         assert!(e.to_string().contains("sub_missing"), "{e}");
         let e = Confinement::new([scene.join("m.obj")]).unwrap_err();
@@ -593,7 +691,7 @@ mod tests {
         let (_t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
         for r in ["/etc/shadow", "/etc/passwd", "/proc/self/environ"] {
-            let e = refused(c.read(&scene, r).unwrap_err());
+            let e = refused(c.read(r).unwrap_err());
             assert!(
                 e.starts_with(&format!(
                     "'{r}' resolves to {r}, outside the scene's folder"
@@ -608,7 +706,7 @@ mod tests {
         let (t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
         symlink(t.path().join("outside.txt"), scene.join("out.obj")).unwrap();
-        let e = refused(c.read(&scene, "out.obj").unwrap_err());
+        let e = refused(c.read("out.obj").unwrap_err());
         assert!(
             e.starts_with(&format!(
                 "'out.obj' resolves to {} (through a symbolic link), outside the scene's folder",
@@ -617,7 +715,7 @@ mod tests {
             "{e}"
         );
         symlink("/etc", scene.join("etc")).unwrap();
-        let e = refused(c.read(&scene, "etc/passwd").unwrap_err());
+        let e = refused(c.read("etc/passwd").unwrap_err());
         assert!(
             e.contains("resolves to /etc/passwd (through a symbolic link)"),
             "{e}"
@@ -625,13 +723,82 @@ mod tests {
         // a link inside pointing inside is fine
         std::fs::create_dir(scene.join("meshes")).unwrap();
         symlink("../m.obj", scene.join("meshes/alias.obj")).unwrap();
-        let (bytes, path) = c.read(&scene, "meshes/alias.obj").unwrap();
+        let (bytes, path) = c.read("meshes/alias.obj").unwrap();
         assert_eq!(bytes, b"v 0 0 0\n");
         assert_eq!(path, canon(&scene.join("m.obj")));
         // the scene's folder given through a link is taken as what it points to
         symlink(&scene, t.path().join("scene_link")).unwrap();
         let c = Confinement::new([t.path().join("scene_link")]).unwrap();
-        assert!(c.read(&t.path().join("scene_link"), "m.obj").is_ok());
+        assert!(c.read("m.obj").is_ok());
+    }
+
+    #[test]
+    fn a_scene_is_read_in_the_folder_held_and_its_links_are_followed_there() {
+        let (t, scene) = tree();
+        std::fs::write(scene.join("a.toml"), "x").unwrap();
+        let got = open_scene(&scene.join("a.toml"), 1 << 20).unwrap();
+        assert_eq!(got.bytes, b"x");
+        assert_eq!(got.path, canon(&scene.join("a.toml")));
+        let c = Confinement::beneath(got.dir, [t.path()]).unwrap();
+        assert_eq!(c.roots(), [canon(&scene), canon(t.path())]);
+        assert_eq!(c.read("m.obj").unwrap().0, b"v 0 0 0\n");
+        // a scene named through links (relative, absolute, chained) is read where they lead,
+        // and its folder is the one the file is in
+        let other = t.path().join("other");
+        std::fs::create_dir(&other).unwrap();
+        symlink("../scene/a.toml", other.join("rel.toml")).unwrap();
+        symlink(scene.join("a.toml"), t.path().join("abs.toml")).unwrap();
+        symlink("other/rel.toml", t.path().join("chain.toml")).unwrap();
+        for via in ["other/rel.toml", "abs.toml", "chain.toml"] {
+            let got = open_scene(&t.path().join(via), 1 << 20).unwrap();
+            assert_eq!(got.path, canon(&scene.join("a.toml")), "{via}");
+            let c = Confinement::beneath(got.dir, Vec::<PathBuf>::new()).unwrap();
+            assert_eq!(c.roots(), [canon(&scene)], "{via}");
+            assert!(c.read("m.obj").is_ok(), "{via}");
+        }
+        symlink("loop.toml", t.path().join("loop.toml")).unwrap();
+        let e = open_scene(&t.path().join("loop.toml"), 1 << 20).unwrap_err();
+        assert!(
+            e.to_string()
+                .ends_with("loop.toml: Too many levels of symbolic links"),
+            "{e}"
+        );
+        let e = open_scene(&scene, 1 << 20).unwrap_err().to_string();
+        assert!(
+            e.ends_with("scene: is a directory, not a regular file"),
+            "{e}"
+        );
+        let e = open_scene(&scene.join("none.toml"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("none.toml: No such file or directory"), "{e}");
+        let e = open_scene(&scene.join("m.obj/x.toml"), 1 << 20)
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("x.toml: its folder is not a folder"), "{e}");
+        std::fs::write(scene.join("big.toml"), "12345").unwrap();
+        assert!(open_scene(&scene.join("big.toml"), 4).is_err());
+        // relative to the current folder
+        let cwd = std::env::current_dir().unwrap();
+        let rel = pathdiff(&scene.join("a.toml"), &cwd);
+        assert_eq!(open_scene(&rel, 1 << 20).unwrap().bytes, b"x");
+    }
+
+    /// `path` relative to `from` (both absolute), through `..` as needed.
+    fn pathdiff(path: &Path, from: &Path) -> PathBuf {
+        let common = from
+            .components()
+            .zip(path.components())
+            .take_while(|(a, b)| a == b)
+            .count();
+        let mut out = PathBuf::new();
+        for _ in from.components().skip(common) {
+            out.push("..");
+        }
+        for c in path.components().skip(common) {
+            out.push(c);
+        }
+        out
     }
 
     #[test]
@@ -643,10 +810,10 @@ mod tests {
         std::fs::write(bc.join("x.obj"), "v 0 0 0\n").unwrap();
         let c = Confinement::new([&b]).unwrap();
         assert!(!c.contains(&canon(&bc.join("x.obj"))));
-        let e = refused(c.resolve(&b, "../bc/x.obj").unwrap_err());
+        let e = refused(c.resolve("../bc/x.obj").unwrap_err());
         assert!(e.contains("outside the scene's folder"), "{e}");
         let abs = canon(&bc).join("x.obj");
-        assert!(c.resolve(&b, abs.to_str().unwrap()).is_err());
+        assert!(c.resolve(abs.to_str().unwrap()).is_err());
         assert!(Confinement::new([&bc]).unwrap().contains(&abs));
     }
 
@@ -664,7 +831,7 @@ mod tests {
             let read = read_regular(&f, 1 << 20).map(|_| ());
             // the open itself, as if the FIFO had been swapped in after the stat
             let open = open_checked(&f).map(|_| ());
-            let confined = Confinement::new([&dir]).unwrap().read(&dir, "pipe.obj");
+            let confined = Confinement::new([&dir]).unwrap().read("pipe.obj");
             let _ = tx.send((read, open, confined.map(|_| ())));
         });
         let t0 = Instant::now();
@@ -771,17 +938,17 @@ mod tests {
     fn references_are_escaped_in_messages() {
         let (_t, scene) = tree();
         let c = Confinement::new([&scene]).unwrap();
-        let e = refused(c.resolve(&scene, "../\x1b[31mred\n.obj").unwrap_err());
+        let e = refused(c.resolve("../\x1b[31mred\n.obj").unwrap_err());
         assert!(
             e.starts_with("'../\\u{1b}[31mred\\n.obj' resolves to "),
             "{e}"
         );
         assert!(!e.contains('\x1b') && !e.contains('\n'), "{e}");
         assert_eq!(
-            refused(c.resolve(&scene, "").unwrap_err()),
+            refused(c.resolve("").unwrap_err()),
             "'' is an empty file name"
         );
-        let e = refused(c.read(&scene, ".").unwrap_err());
+        let e = refused(c.read(".").unwrap_err());
         assert!(e.contains("is a directory"), "{e}");
     }
 }

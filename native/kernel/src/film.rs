@@ -149,6 +149,22 @@ pub fn write_image_mode(
     new_mode: Option<u32>,
 ) -> Result<(), Error> {
     check_len(width, height, rgb)?;
+    let (dir, name) = safe_fs::open_parent(path)?;
+    write_image_in(&dir, &name, width, height, rgb, new_mode)
+}
+
+/// [`write_image_mode`] into the folder `dir` already open, as `name` there (so that a
+/// caller that keeps what was at the name first, in the same folder, writes where it kept).
+pub fn write_image_in(
+    dir: &safe_fs::Dir,
+    name: &str,
+    width: u32,
+    height: u32,
+    rgb: &[f32],
+    new_mode: Option<u32>,
+) -> Result<(), Error> {
+    check_len(width, height, rgb)?;
+    let path = &dir.path().join(name);
     let file = path.display().to_string();
     let ext = path
         .extension()
@@ -167,10 +183,9 @@ pub fn write_image_mode(
         file: file.clone(),
         message: e.to_string(),
     };
-    let (dir, name) = safe_fs::open_parent(path)?;
-    // made 0600 in the folder opened above, given its final mode on its descriptor, renamed
-    // into place; removed on any failure
-    dir.write_file(&name, new_mode, safe_fs::Replace::Yes, |f| match &png {
+    // made 0600 in the folder held, given its final mode on its descriptor, renamed into
+    // place; removed on any failure
+    dir.write_file(name, new_mode, safe_fs::Replace::Yes, |f| match &png {
         Some(data) => f.write_all(data).map_err(io),
         None => {
             let w = width as usize;

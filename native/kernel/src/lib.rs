@@ -82,7 +82,7 @@ pub mod warning;
 pub use bvh::Scratch;
 pub use camera::Camera;
 pub use error::Error;
-pub use film::{encode_png, to_srgb8, write_image, write_image_mode};
+pub use film::{encode_png, to_srgb8, write_image, write_image_in, write_image_mode};
 pub use geometry::Aabb;
 pub use glam;
 pub use integrator::{Integrator, Whitted};

@@ -92,6 +92,11 @@ pub enum Kept {
     Link(String),
 }
 
+/// How long ago a hidden link [`Dir::keep`] made must have been made (or its name's file
+/// replaced) to be taken for one a killed write left behind ([`Dir::sweep_kept`]): far longer
+/// than any write of a render's outputs takes.
+pub const STALE_KEPT: std::time::Duration = std::time::Duration::from_secs(3600);
+
 /// A folder opened once; its files are reached through the descriptor only.
 #[derive(Debug)]
 pub struct Dir {
@@ -139,13 +144,28 @@ fn check_name(dir: &Path, name: &str) -> Result<(), Error> {
 /// The most symbolic links one path may go through (the kernel's own bound).
 const MAX_LINKS: usize = 40;
 
+/// What a walk does with a symbolic link as the path's last component.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LastLink {
+    /// Follows it (when it is this user's or root's, as every link on the way).
+    Follow,
+    /// Refuses it: the path must name the folder itself.
+    Refuse,
+}
+
+/// A check a walk makes on every folder it goes through (each one it opens something in),
+/// given the folder's descriptor and the path it was reached by.
+type FolderCheck<'a> = &'a dyn Fn(&OwnedFd, &Path) -> Result<(), Error>;
+
 /// Opens the folder `path` (`O_PATH`), one component at a time from a descriptor, following
 /// a symbolic link only when it belongs to this user or to root (and the last component's
-/// only when `follow_last`). Another local user's link on the way is refused: whoever owns
-/// a link, or can swap one into a folder of hers, would choose where the caller writes.
+/// only with [`LastLink::Follow`]). Another local user's link on the way is refused: whoever
+/// owns a link, or can swap one into a folder of hers, would choose where the caller writes.
 /// (`openat2` cannot say "only links of these owners", hence the walk; each step is one
 /// `openat` with `O_NOFOLLOW` on the folder reached, nothing is resolved by name twice.)
-fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
+/// `check`, when given, is made on every folder the walk opens something in (not on the
+/// folder it ends at), before it does.
+fn walk(path: &Path, last_link: LastLink, check: Option<FolderCheck>) -> Result<OwnedFd, Error> {
     use std::collections::VecDeque;
     use std::ffi::OsString;
     use std::os::unix::ffi::OsStrExt;
@@ -158,6 +178,12 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         rfs::open(".", dir_flags, Mode::empty())
     }
     .map_err(|e| errno_error(path, e))?;
+    // where the walk is, by the names it went through (for `check`'s messages)
+    let mut at = if path.is_absolute() {
+        PathBuf::from("/")
+    } else {
+        PathBuf::from(".")
+    };
     // what is left to walk; `true` marks the path's own last component
     let mut todo: VecDeque<(OsString, bool)> = VecDeque::new();
     let parts: Vec<Component> = path.components().collect();
@@ -169,10 +195,14 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         let bytes = part.as_bytes();
         if bytes == b"/" {
             cur = rfs::open("/", dir_flags, Mode::empty()).map_err(|e| errno_error(path, e))?;
+            at = PathBuf::from("/");
             continue;
         }
         if bytes == b"." || bytes.is_empty() {
             continue;
+        }
+        if let Some(check) = check {
+            check(&cur, &at)?;
         }
         let next = rfs::openat(
             &cur,
@@ -183,9 +213,16 @@ fn walk(path: &Path, follow_last: bool) -> Result<OwnedFd, Error> {
         .map_err(|e| errno_error(path, e))?;
         let st = rfs::fstat(&next).map_err(|e| errno_error(path, e))?;
         match rfs::FileType::from_raw_mode(st.st_mode) {
-            rfs::FileType::Directory => cur = next,
+            rfs::FileType::Directory => {
+                cur = next;
+                if bytes == b".." {
+                    at.pop();
+                } else {
+                    at.push(&part);
+                }
+            }
             rfs::FileType::Symlink => {
-                if last && !follow_last {
+                if last && last_link == LastLink::Refuse {
                     return Err(message_error(path, "is a symbolic link, not a folder"));
                 }
                 if st.st_uid != me && st.st_uid != 0 {
@@ -247,27 +284,29 @@ pub fn umask() -> u32 {
 impl Dir {
     /// Opens the folder `path` (symbolic links on the way are followed, once).
     pub fn open(path: &Path) -> Result<Dir, Error> {
-        Self::open_with(path, OFlags::empty())
+        Self::open_with(path, LastLink::Follow)
     }
 
     /// Opens the folder `path`, refusing a symbolic link as its last component.
     pub fn open_nofollow(path: &Path) -> Result<Dir, Error> {
-        Self::open_with(path, OFlags::NOFOLLOW)
+        Self::open_with(path, LastLink::Refuse)
     }
 
-    fn open_with(path: &Path, extra: OFlags) -> Result<Dir, Error> {
-        let found = walk(path, !extra.contains(OFlags::NOFOLLOW))?;
+    fn open_with(path: &Path, last_link: LastLink) -> Result<Dir, Error> {
+        let found = walk(path, last_link, None)?;
+        Self::reopen(path, &found)
+    }
+
+    /// The folder `found` (`O_PATH`) opened for reading, through its descriptor.
+    fn reopen(path: &Path, found: &OwnedFd) -> Result<Dir, Error> {
         let fd = rfs::openat(
-            &found,
+            found,
             ".",
             OFlags::RDONLY | OFlags::DIRECTORY | OFlags::CLOEXEC,
             Mode::empty(),
         )
         .map_err(|e| match e {
             Errno::NOTDIR => message_error(path, "not a folder"),
-            Errno::LOOP if extra.contains(OFlags::NOFOLLOW) => {
-                message_error(path, "is a symbolic link, not a folder")
-            }
             e => errno_error(path, e),
         })?;
         Ok(Dir {
@@ -297,11 +336,17 @@ impl Dir {
     }
 
     /// The permission bits a file replacing `name` gets: those of the regular file there now
-    /// (a symbolic link is not followed), without setuid, setgid and sticky; else `new_mode`,
-    /// else `0o666` less the umask.
+    /// when it is this user's (a symbolic link is not followed), without setuid, setgid and
+    /// sticky; else `new_mode`, else `0o666` less the umask. A file another user put at the
+    /// name (in a folder both can write in) gives nothing: its mode is hers to choose, and
+    /// copying it would open this user's output to whoever she likes.
     pub fn mode_for(&self, name: &str, new_mode: Option<u32>) -> u32 {
+        let me = rustix::process::geteuid().as_raw();
         match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
-            Ok(st) if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile => {
+            Ok(st)
+                if rfs::FileType::from_raw_mode(st.st_mode) == rfs::FileType::RegularFile
+                    && st.st_uid == me =>
+            {
                 st.st_mode & 0o777
             }
             _ => new_file_mode(new_mode),
@@ -395,10 +440,13 @@ impl Dir {
 
     /// Keeps what is at `name` now (a regular file, a symbolic link, anything) as a hard link
     /// under a hidden name, without following a link, so that [`Dir::put_back`] can restore
-    /// exactly it.
+    /// exactly it. First removes this user's hidden links for `name` older than
+    /// [`STALE_KEPT`] ([`Dir::sweep_kept`]): those a killed write left.
     pub fn keep(&self, name: &str) -> Result<Kept, Error> {
         check_name(&self.path, name)?;
         let target = self.at(name);
+        // what a killed write of this output kept and never took back
+        self.sweep_kept(name, STALE_KEPT)?;
         match rfs::statat(&self.fd, name, AtFlags::SYMLINK_NOFOLLOW) {
             Err(Errno::NOENT) => return Ok(Kept::Nothing),
             Err(e) => return Err(errno_error(&target, e)),
@@ -414,6 +462,59 @@ impl Dir {
             }
         }
         Err(message_error(&target, "could not keep it beside itself"))
+    }
+
+    /// Removes the hidden links [`Dir::keep`] made for `name` and that nothing took back: a
+    /// write of several outputs killed (`SIGKILL`) before it put back or dropped what it kept
+    /// leaves one behind. Only an entry whose name is exactly one `keep` makes for `name`
+    /// (`.NAME.` sixteen hex digits `.kept`), that belongs to this user, and whose inode last
+    /// changed (`ctime`: the link made, or the name it was kept for replaced) more than
+    /// `older_than` ago, so that a write of the same output still running elsewhere keeps its
+    /// own. Listed and removed through the folder's descriptor (`unlinkat` removes the entry,
+    /// never follows it). Returns how many were removed.
+    pub fn sweep_kept(&self, name: &str, older_than: std::time::Duration) -> Result<usize, Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        let head: String = name.chars().take(200).collect();
+        let prefix = format!(".{head}.");
+        let ours = |entry: &str| {
+            entry
+                .strip_prefix(prefix.as_str())
+                .and_then(|rest| rest.strip_suffix(".kept"))
+                .is_some_and(|hex| {
+                    hex.len() == 16 && hex.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+                })
+        };
+        let me = rustix::process::geteuid().as_raw();
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0);
+        let before = now.saturating_sub(older_than.as_secs());
+        let mut list = rfs::Dir::read_from(&self.fd).map_err(|e| errno_error(&target, e))?;
+        let mut removed = 0;
+        while let Some(entry) = list.read() {
+            let entry = entry.map_err(|e| errno_error(&target, e))?;
+            let Ok(entry) = entry.file_name().to_str() else {
+                continue;
+            };
+            if !ours(entry) {
+                continue;
+            }
+            let Ok(st) = rfs::statat(&self.fd, entry, AtFlags::SYMLINK_NOFOLLOW) else {
+                continue;
+            };
+            let changed = u64::try_from(st.st_ctime).unwrap_or(0);
+            if st.st_uid != me || changed > before {
+                continue;
+            }
+            match rfs::unlinkat(&self.fd, entry, AtFlags::empty()) {
+                Ok(()) => removed += 1,
+                Err(Errno::NOENT) => {}
+                Err(e) => return Err(errno_error(&self.at(entry), e)),
+            }
+        }
+        Ok(removed)
     }
 
     /// Puts back what [`Dir::keep`] kept at `name`: the link renamed over `name`, or `name`
@@ -502,6 +603,231 @@ pub fn private_dir(path: &Path, may_exist: bool) -> Result<Dir, Error> {
     })
 }
 
+/// What a file that is not a regular one is, in words (from its type as `fstat` gives it).
+pub(crate) fn kind_words(kind: rfs::FileType) -> &'static str {
+    use rfs::FileType as T;
+    match kind {
+        T::RegularFile => "a regular file",
+        T::Directory => "a directory",
+        T::Fifo => "a FIFO (named pipe)",
+        T::Socket => "a socket",
+        T::CharacterDevice => "a character device",
+        T::BlockDevice => "a block device",
+        T::Symlink => "a symbolic link",
+        _ => "a file of another kind",
+    }
+}
+
+/// Reads a secret file (a cookie) that must be this user's own: opened once, without following
+/// a symbolic link as its last component and without blocking (`O_NOFOLLOW | O_NONBLOCK`, so a
+/// FIFO or a device swapped in never hangs the open), then checked on that descriptor
+/// (`fstat`): a regular file, owned by this user, no bit for group or others, at most
+/// `max_bytes`; and read from that same descriptor, never more than `max_bytes + 1` bytes
+/// (a file that grows meanwhile is refused too). Nothing is looked up by name twice, so no
+/// other file can be swapped in between the checks and the read.
+pub fn read_private(path: &Path, max_bytes: u64) -> Result<Vec<u8>, Error> {
+    use std::io::Read;
+    let fd = rfs::open(
+        path,
+        OFlags::RDONLY | OFlags::NOFOLLOW | OFlags::NONBLOCK | OFlags::NOCTTY | OFlags::CLOEXEC,
+        Mode::empty(),
+    )
+    .map_err(|e| match e {
+        Errno::LOOP => fs_error(
+            path,
+            Some(e.raw_os_error()),
+            "is a symbolic link (not followed: name the file itself)".to_string(),
+        ),
+        e => errno_error(path, e),
+    })?;
+    let st = rfs::fstat(&fd).map_err(|e| errno_error(path, e))?;
+    let kind = rfs::FileType::from_raw_mode(st.st_mode);
+    if kind != rfs::FileType::RegularFile {
+        return Err(message_error(
+            path,
+            format!("is {}, not a regular file", kind_words(kind)),
+        ));
+    }
+    let me = rustix::process::geteuid().as_raw();
+    if st.st_uid != me {
+        return Err(message_error(
+            path,
+            format!("belongs to user {}, not to this user ({me})", st.st_uid),
+        ));
+    }
+    let open_bits = st.st_mode & 0o077;
+    if open_bits != 0 {
+        let what = if open_bits & 0o044 != 0 {
+            "read"
+        } else if open_bits & 0o022 != 0 {
+            "changed"
+        } else {
+            "run"
+        };
+        return Err(message_error(
+            path,
+            format!(
+                "can be {what} by other users (mode {:04o}); fix it with: chmod 600 {}",
+                st.st_mode & 0o7777,
+                path.display()
+            ),
+        ));
+    }
+    let too_large = |size: u64| {
+        message_error(
+            path,
+            format!("is too large ({size} bytes, at most {max_bytes})"),
+        )
+    };
+    let size = u64::try_from(st.st_size).unwrap_or(u64::MAX);
+    if size > max_bytes {
+        return Err(too_large(size));
+    }
+    let mut bytes = Vec::new();
+    File::from(fd)
+        .take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| io_error(e, path))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(too_large(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// How closed a file in a trusted folder must be ([`Dir::check_trusted_file`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Secrecy {
+    /// Anyone may read it (a certificate): this user's or root's, nobody else may change it.
+    Public,
+    /// Only its owner may read it (a private key): this user's, no bit for group or others.
+    Private,
+}
+
+/// Opens the folder `path` after checking every folder on the way to it, from `/` (a relative
+/// path is taken from the current folder's absolute name), and every symbolic link followed:
+/// each belongs to this user or to root and no other user can change it (no write bit for
+/// group or others), so nobody else can rename or replace anything on the way, now or later;
+/// the folder itself must be this user's and closed to changes by others. What is checked
+/// is what is opened (descriptors, `fstat`); refused otherwise, naming the folder at fault
+/// and why. Files in it are then checked with [`Dir::check_trusted_file`]: a program that
+/// later reads them by name (OTP's ssl reads a node's certificates so) reads the same files.
+pub fn trusted_dir(path: &Path) -> Result<Dir, Error> {
+    let me = rustix::process::geteuid().as_raw();
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .map_err(|e| io_error(e, path))?
+            .join(path)
+    };
+    let on_the_way = |fd: &OwnedFd, at: &Path| -> Result<(), Error> {
+        let st = rfs::fstat(fd).map_err(|e| errno_error(at, e))?;
+        if st.st_uid != me && st.st_uid != 0 {
+            return Err(message_error(
+                at,
+                format!(
+                    "is on the way to {} and belongs to user {}, who could swap what is in it; \
+                     use a folder that only you and root can change",
+                    path.display(),
+                    st.st_uid
+                ),
+            ));
+        }
+        if st.st_mode & 0o022 != 0 {
+            return Err(message_error(
+                at,
+                format!(
+                    "is on the way to {} and can be changed by other users (mode {:04o}), who \
+                     could swap what is in it; use a folder that only you and root can change",
+                    path.display(),
+                    st.st_mode & 0o7777
+                ),
+            ));
+        }
+        Ok(())
+    };
+    let found = walk(&absolute, LastLink::Follow, Some(&on_the_way))?;
+    let st = rfs::fstat(&found).map_err(|e| errno_error(path, e))?;
+    if st.st_uid != me {
+        return Err(message_error(
+            path,
+            format!(
+                "belongs to user {}, not to you: use a folder of your own",
+                st.st_uid
+            ),
+        ));
+    }
+    if st.st_mode & 0o022 != 0 {
+        return Err(message_error(
+            path,
+            format!(
+                "can be changed by other users; fix it with: chmod 700 {}",
+                path.display()
+            ),
+        ));
+    }
+    Dir::reopen(path, &found)
+}
+
+impl Dir {
+    /// Checks the file `name` in this folder, without following a symbolic link (refused):
+    /// a regular file, and as `secrecy` says. Made on the file opened (`O_PATH`, `fstat`).
+    pub fn check_trusted_file(&self, name: &str, secrecy: Secrecy) -> Result<(), Error> {
+        check_name(&self.path, name)?;
+        let target = self.at(name);
+        let fd = rfs::openat(
+            &self.fd,
+            name,
+            OFlags::PATH | OFlags::NOFOLLOW | OFlags::CLOEXEC,
+            Mode::empty(),
+        )
+        .map_err(|e| errno_error(&target, e))?;
+        let st = rfs::fstat(&fd).map_err(|e| errno_error(&target, e))?;
+        let kind = rfs::FileType::from_raw_mode(st.st_mode);
+        if kind != rfs::FileType::RegularFile {
+            return Err(message_error(
+                &target,
+                format!(
+                    "is {}, not a regular file (put the file itself in the folder)",
+                    kind_words(kind)
+                ),
+            ));
+        }
+        let me = rustix::process::geteuid().as_raw();
+        let (owners_ok, open_bits, fix) = match secrecy {
+            Secrecy::Public => (st.st_uid == me || st.st_uid == 0, 0o022, "go-w"),
+            Secrecy::Private => (st.st_uid == me, 0o077, "600"),
+        };
+        if !owners_ok {
+            return Err(message_error(
+                &target,
+                format!(
+                    "belongs to user {}, not to you: use a folder of your own",
+                    st.st_uid
+                ),
+            ));
+        }
+        let bits = st.st_mode & open_bits;
+        if bits != 0 {
+            let what = if bits & 0o044 != 0 {
+                "read"
+            } else if bits & 0o022 != 0 {
+                "changed"
+            } else {
+                "run"
+            };
+            return Err(message_error(
+                &target,
+                format!(
+                    "can be {what} by other users; fix it with: chmod {fix} {}",
+                    target.display()
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The permission bits of a new file: `new_mode`, else `0o666` less the umask (read only
 /// then).
 fn new_file_mode(new_mode: Option<u32>) -> u32 {
@@ -569,6 +895,14 @@ mod tests {
         assert_eq!(std::fs::read(&victim).unwrap(), b"keep");
         assert!(std::fs::symlink_metadata(&link).unwrap().is_file());
         assert_eq!(names(t.path()), ["a.json", "l.json", "victim"]);
+        // another user's file at the name lends it nothing
+        if rustix::process::geteuid().is_root() {
+            std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o666)).unwrap();
+            std::os::unix::fs::chown(&p, Some(65534), None).unwrap();
+            write_path(&p, b"four", Some(0o600), Replace::Yes).unwrap();
+            let m = std::fs::metadata(&p).unwrap();
+            assert_eq!((m.uid(), m.mode() & 0o7777), (0, 0o600));
+        }
     }
 
     #[test]
@@ -618,6 +952,72 @@ mod tests {
     }
 
     #[test]
+    fn a_killed_writes_kept_link_is_swept_on_the_next_write() {
+        let t = tempfile::tempdir().unwrap();
+        std::fs::write(t.path().join("out.png"), "old").unwrap();
+        // a child keeps the output, as a write of several does first, and is killed there
+        // SAFETY: the child only calls this crate's code on memory it owns, then is killed
+        // (or exits) without returning into the test harness.
+        let pid = unsafe { libc::fork() };
+        assert!(pid >= 0);
+        if pid == 0 {
+            let dir = Dir::open(t.path()).unwrap();
+            let _ = dir.keep("out.png");
+            unsafe { libc::raise(libc::SIGKILL) };
+            unsafe { libc::_exit(1) };
+        }
+        let mut status = 0;
+        // SAFETY: our own child.
+        assert_eq!(unsafe { libc::waitpid(pid, &mut status, 0) }, pid);
+        assert!(libc::WIFSIGNALED(status));
+        let left = names(t.path());
+        assert_eq!(left.len(), 2, "{left:?}");
+        assert!(left[0].starts_with(".out.png.") && left[0].ends_with(".kept"));
+        // names that only look alike, and another output's, are not touched
+        for other in [
+            ".out.png.kept",
+            ".out.png.0123456789abcdeg.kept",
+            ".a.png.0123456789abcdef.kept",
+            "x.0123456789abcdef.kept",
+        ] {
+            std::fs::write(t.path().join(other), "").unwrap();
+        }
+        let dir = Dir::open(t.path()).unwrap();
+        // too new to be taken for a killed write's: kept
+        let kept = dir.keep("out.png").unwrap();
+        assert_eq!(names(t.path()).len(), 7);
+        dir.discard(&kept).unwrap();
+        assert_eq!(
+            dir.sweep_kept("out.png", std::time::Duration::ZERO)
+                .unwrap(),
+            1
+        );
+        assert_eq!(
+            names(t.path()),
+            [
+                ".a.png.0123456789abcdef.kept",
+                ".out.png.0123456789abcdeg.kept",
+                ".out.png.kept",
+                "out.png",
+                "x.0123456789abcdef.kept"
+            ]
+        );
+        assert_eq!(std::fs::read(t.path().join("out.png")).unwrap(), b"old");
+        // another user's is not touched either
+        if rustix::process::geteuid().is_root() {
+            let theirs = t.path().join(".out.png.00000000000000ff.kept");
+            std::fs::write(&theirs, "").unwrap();
+            std::os::unix::fs::lchown(&theirs, Some(65534), None).unwrap();
+            assert_eq!(
+                dir.sweep_kept("out.png", std::time::Duration::ZERO)
+                    .unwrap(),
+                0
+            );
+            assert!(theirs.exists());
+        }
+    }
+
+    #[test]
     fn private_dir_is_made_closed_and_checked() {
         let t = tempfile::tempdir().unwrap();
         let p = t.path().join("private");
@@ -636,6 +1036,184 @@ mod tests {
         symlink(&p, &l).unwrap();
         let e = private_dir(&l, true).unwrap_err().to_string();
         assert!(e.ends_with("link: is not a folder"), "{e}");
+    }
+
+    #[test]
+    fn a_private_file_is_read_only_when_it_is_ours_closed_and_small() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("cookie");
+        std::fs::write(&p, "abc\n").unwrap();
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o600)).unwrap();
+        assert_eq!(read_private(&p, 4).unwrap(), b"abc\n");
+        let e = read_private(&p, 3).unwrap_err().to_string();
+        assert!(
+            e.ends_with("cookie: is too large (4 bytes, at most 3)"),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let e = read_private(&p, 4).unwrap_err().to_string();
+        assert!(
+            e.ends_with(&format!(
+                "cookie: can be read by other users (mode 0640); fix it with: chmod 600 {}",
+                p.display()
+            )),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o620)).unwrap();
+        let e = read_private(&p, 4).unwrap_err().to_string();
+        assert!(
+            e.contains("can be changed by other users (mode 0620)"),
+            "{e}"
+        );
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o400)).unwrap();
+        assert_eq!(read_private(&p, 4).unwrap(), b"abc\n");
+        // a symbolic link is not followed, even to a good file
+        symlink(&p, t.path().join("link")).unwrap();
+        let e = read_private(&t.path().join("link"), 4).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Fs {
+                    errno: Some(libc::ELOOP),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e
+            .to_string()
+            .ends_with("link: is a symbolic link (not followed: name the file itself)"));
+        // a FIFO is refused at once, a folder too
+        let fifo = t.path().join("fifo");
+        rustix::fs::mknodat(
+            rfs::CWD,
+            &fifo,
+            rfs::FileType::Fifo,
+            Mode::from_raw_mode(0o600),
+            0,
+        )
+        .unwrap();
+        let e = read_private(&fifo, 4).unwrap_err().to_string();
+        assert!(
+            e.ends_with("fifo: is a FIFO (named pipe), not a regular file"),
+            "{e}"
+        );
+        let e = read_private(t.path(), 4).unwrap_err().to_string();
+        assert!(e.ends_with(": is a directory, not a regular file"), "{e}");
+        let e = read_private(&t.path().join("none"), 4).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                Error::Fs {
+                    errno: Some(libc::ENOENT),
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        if rustix::process::geteuid().is_root() {
+            std::os::unix::fs::chown(&p, Some(65534), None).unwrap();
+            let e = read_private(&p, 4).unwrap_err().to_string();
+            assert!(
+                e.ends_with("cookie: belongs to user 65534, not to this user (0)"),
+                "{e}"
+            );
+        }
+    }
+
+    /// A TLS folder `tls` (0700) holding `ca.pem`, `node.pem` (0644) and `node.key` (0600).
+    fn tls_folder(parent: &Path) -> PathBuf {
+        let d = parent.join("tls");
+        std::fs::create_dir(&d).unwrap();
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+        for (name, mode) in [("ca.pem", 0o644), ("node.pem", 0o644), ("node.key", 0o600)] {
+            std::fs::write(d.join(name), name).unwrap();
+            std::fs::set_permissions(d.join(name), std::fs::Permissions::from_mode(mode)).unwrap();
+        }
+        d
+    }
+
+    fn check_tls(d: &Path) -> Result<(), Error> {
+        let dir = trusted_dir(d)?;
+        dir.check_trusted_file("ca.pem", Secrecy::Public)?;
+        dir.check_trusted_file("node.pem", Secrecy::Public)?;
+        dir.check_trusted_file("node.key", Secrecy::Private)
+    }
+
+    #[test]
+    fn a_trusted_folder_is_closed_to_others_all_the_way_from_the_root() {
+        // not under /tmp, which every user can write in
+        let t = tempfile::tempdir_in(concat!(env!("CARGO_MANIFEST_DIR"), "/../target")).unwrap();
+        std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+        let d = tls_folder(t.path());
+        check_tls(&d).unwrap();
+        // this user's links on the way are followed, and what they lead through is checked
+        symlink(&d, t.path().join("via")).unwrap();
+        check_tls(&t.path().join("via")).unwrap();
+        let shared = tempfile::tempdir().unwrap();
+        let open = tls_folder(shared.path());
+        if std::env::temp_dir().metadata().unwrap().mode() & 0o022 != 0 {
+            let e = check_tls(&open).unwrap_err().to_string();
+            assert!(
+                e.contains(" can be changed by other users (mode 1777), who could swap"),
+                "{e}"
+            );
+            symlink(&open, t.path().join("to_tmp")).unwrap();
+            let e = check_tls(&t.path().join("to_tmp")).unwrap_err().to_string();
+            assert!(e.contains("is on the way to "), "{e}");
+        }
+        // the folder, then each file
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o770)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        let shown = d.display();
+        assert_eq!(
+            e,
+            format!("{shown}: can be changed by other users; fix it with: chmod 700 {shown}")
+        );
+        std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
+        let key = d.join("node.key");
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(
+            e.ends_with(&format!(
+                "node.key: can be read by other users; fix it with: chmod 600 {}",
+                key.display()
+            )),
+            "{e}"
+        );
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        std::fs::set_permissions(d.join("ca.pem"), std::fs::Permissions::from_mode(0o666)).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(
+            e.contains("ca.pem: can be changed by other users; fix it with: chmod go-w"),
+            "{e}"
+        );
+        std::fs::set_permissions(d.join("ca.pem"), std::fs::Permissions::from_mode(0o644)).unwrap();
+        std::fs::rename(d.join("node.pem"), t.path().join("node.pem")).unwrap();
+        symlink(t.path().join("node.pem"), d.join("node.pem")).unwrap();
+        let e = check_tls(&d).unwrap_err().to_string();
+        assert!(e.ends_with("node.pem: is a symbolic link, not a regular file (put the file itself in the folder)"), "{e}");
+        std::fs::remove_file(d.join("node.pem")).unwrap();
+        std::fs::rename(t.path().join("node.pem"), d.join("node.pem")).unwrap();
+        check_tls(&d).unwrap();
+        if rustix::process::geteuid().is_root() {
+            // another user's folder on the way, another user's file
+            std::os::unix::fs::chown(t.path(), Some(65534), None).unwrap();
+            let e = check_tls(&d).unwrap_err().to_string();
+            assert!(
+                e.contains("and belongs to user 65534, who could swap what is in it"),
+                "{e}"
+            );
+            std::os::unix::fs::chown(t.path(), Some(0), None).unwrap();
+            std::os::unix::fs::chown(d.join("node.key"), Some(65534), None).unwrap();
+            let e = check_tls(&d).unwrap_err().to_string();
+            assert!(
+                e.ends_with(
+                    "node.key: belongs to user 65534, not to you: use a folder of your own"
+                ),
+                "{e}"
+            );
+        }
     }
 
     #[test]

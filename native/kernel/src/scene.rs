@@ -170,25 +170,21 @@ impl Scene {
         }
     }
 
-    /// Convenience: reads the file ([`files::read_regular`]) and the files it references,
-    /// relative to its folder and confined to it ([`files::Confinement`]).
+    /// Convenience: reads the file ([`files::open_scene`]) and the files it references,
+    /// relative to the folder it was read in and confined to it ([`files::Confinement`]).
     pub fn load(path: &Path) -> Result<Scene, Error> {
         let shown = path.display().to_string();
         let format = Format::from_path(&shown)?;
-        let bytes = files::read_regular(path, limits::MAX_FILE_BYTES)?;
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let confinement = files::Confinement::new([&dir])?;
+        let file = files::open_scene(path, limits::MAX_FILE_BYTES)?;
+        let confinement = files::Confinement::beneath(file.dir, Vec::<PathBuf>::new())?;
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or(shown);
         let resolve = move |rel: &str| -> Result<Vec<u8>, Unreadable> {
-            confinement.read(&dir, rel).map(|(bytes, _)| bytes)
+            confinement.read(rel).map(|(bytes, _)| bytes)
         };
-        Scene::parse(&bytes, format, &name, &resolve)
+        Scene::parse(&file.bytes, format, &name, &resolve)
     }
 
     /// What parsed but may not render as meant (a degenerate primitive left out, a colour

@@ -1,5 +1,11 @@
 //! Term conversions shared by the NIFs.
 
+/// A new file's permission bits as the Elixir side gives them: a negative number for none
+/// given (`0o666` less the umask is then used), else its permission bits.
+pub fn mode_arg(mode: i64) -> Option<u32> {
+    u32::try_from(mode).ok().map(|m| m & 0o777)
+}
+
 use ring_tracer_kernel::{Error, RayStats, Region, Settings};
 use rustler::{Atom, Binary, Encoder, Env, NifMap, OwnedBinary, Term};
 

@@ -7,15 +7,17 @@
 
 use std::path::Path;
 
-use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace};
+use ring_tracer_kernel::safe_fs::{self, Dir, Kept, Replace, Secrecy};
 use ring_tracer_kernel::Error;
-use rustler::{Atom, Binary, Env, ResourceArc};
+use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
+
+use crate::convert::mode_arg;
 
 rustler::atoms! { ok }
 
 /// A folder held open. Dropped (closed) when Erlang lets go of the handle.
 pub struct DirResource {
-    dir: Dir,
+    pub dir: Dir,
 }
 
 #[rustler::resource_impl]
@@ -57,10 +59,6 @@ fn fail(env: Env, e: Error) -> (Atom, String) {
     }
 }
 
-fn mode_arg(mode: i64) -> Option<u32> {
-    u32::try_from(mode).ok().map(|m| m & 0o777)
-}
-
 /// Writes `data` to `path` atomically in the folder opened once (see
 /// `safe_fs::Dir::write_file`). `mode`: the permissions of a new file (negative: `0o666` less
 /// the umask); `replace`: false refuses an existing name (`:eexist`).
@@ -74,6 +72,70 @@ fn fs_write<'a>(
 ) -> FsResult<'a, Atom> {
     let replace = if replace { Replace::Yes } else { Replace::No };
     safe_fs::write_path(Path::new(&path), data.as_slice(), mode_arg(mode), replace)
+        .map_err(|e| fail(env, e))?;
+    Ok(ok())
+}
+
+/// Reads the secret file `path` (a cookie), which must be this user's, closed to others and
+/// at most `max_bytes`: opened once without following a link or blocking, checked by `fstat`
+/// and read through that descriptor (`safe_fs::read_private`).
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_read_private<'a>(env: Env<'a>, path: String, max_bytes: u64) -> FsResult<'a, Binary<'a>> {
+    let bytes = safe_fs::read_private(Path::new(&path), max_bytes).map_err(|e| fail(env, e))?;
+    Ok(OwnedBinary::from_slice(&bytes).release(env))
+}
+
+/// Checks a folder whose files another program reads later by name (a node's TLS folder):
+/// every folder on the way and every link followed is this user's or root's and closed to
+/// changes by others, the folder is this user's, `public` files are regular files nobody
+/// else can change, `private` ones regular files of this user's closed to others
+/// (`safe_fs::trusted_dir`, `Dir::check_trusted_file`). Errors are `{posix, file, message}`,
+/// `file` the folder or file at fault.
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_check_trusted(
+    env: Env,
+    path: String,
+    public: Vec<String>,
+    private: Vec<String>,
+) -> Result<Atom, (Atom, String, String)> {
+    let checked = safe_fs::trusted_dir(Path::new(&path)).and_then(|dir| {
+        let public = public.iter().map(|n| (n, Secrecy::Public));
+        let private = private.iter().map(|n| (n, Secrecy::Private));
+        public
+            .chain(private)
+            .try_for_each(|(name, secrecy)| dir.check_trusted_file(name, secrecy))
+    });
+    checked.map_err(|e| match e {
+        Error::Fs {
+            file,
+            errno,
+            message,
+        } => (posix(env, errno), file, message),
+        other => (posix(env, None), path.clone(), other.to_string()),
+    })?;
+    Ok(ok())
+}
+
+/// `fs_write` into a folder held open (`fs_open_dir`), as `name` there.
+#[rustler::nif(schedule = "DirtyIo")]
+fn fs_write_in<'a>(
+    env: Env<'a>,
+    dir: ResourceArc<DirResource>,
+    name: String,
+    data: Binary<'a>,
+    mode: i64,
+    replace: bool,
+) -> FsResult<'a, Atom> {
+    use std::io::Write;
+    let replace = if replace { Replace::Yes } else { Replace::No };
+    let target = dir.dir.path().join(&name);
+    dir.dir
+        .write_file(&name, mode_arg(mode), replace, |f| {
+            f.write_all(data.as_slice()).map_err(|e| Error::Io {
+                file: target.display().to_string(),
+                message: e.to_string(),
+            })
+        })
         .map_err(|e| fail(env, e))?;
     Ok(ok())
 }

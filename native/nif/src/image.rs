@@ -3,11 +3,14 @@
 use std::path::Path;
 
 use ring_tracer_kernel::{
-    encode_png as kernel_encode_png, to_srgb8, write_image_mode as kernel_write,
+    encode_png as kernel_encode_png, to_srgb8, write_image_in as kernel_write_in,
+    write_image_mode as kernel_write,
 };
-use rustler::{Atom, Binary, Env, OwnedBinary};
+use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
 
-use crate::convert::{binary_to_floats, message};
+use crate::fs::DirResource;
+
+use crate::convert::{binary_to_floats, message, mode_arg};
 
 rustler::atoms! { ok }
 
@@ -34,8 +37,23 @@ fn write_image(
 ) -> Result<Atom, String> {
     let rgb = binary_to_floats(&pixels)?;
     check_size(width, height, &rgb)?;
-    let new_mode = u32::try_from(mode).ok().map(|m| m & 0o7777);
-    kernel_write(Path::new(&path), width, height, &rgb, new_mode).map_err(message)?;
+    kernel_write(Path::new(&path), width, height, &rgb, mode_arg(mode)).map_err(message)?;
+    Ok(ok())
+}
+
+/// `write_image` into a folder held open (`fs_open_dir`), as `name` there.
+#[rustler::nif(schedule = "DirtyIo")]
+fn write_image_in(
+    dir: ResourceArc<DirResource>,
+    name: String,
+    width: u32,
+    height: u32,
+    pixels: Binary,
+    mode: i64,
+) -> Result<Atom, String> {
+    let rgb = binary_to_floats(&pixels)?;
+    check_size(width, height, &rgb)?;
+    kernel_write_in(&dir.dir, &name, width, height, &rgb, mode_arg(mode)).map_err(message)?;
     Ok(ok())
 }
 

@@ -2,6 +2,7 @@
 //! parsed it: Elixir ships scene bytes between nodes and parses on each.
 
 use std::collections::HashMap;
+use std::os::fd::OwnedFd;
 use std::os::unix::ffi::OsStrExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};
@@ -36,6 +37,15 @@ impl Drop for SceneResource {
 #[rustler::resource_impl]
 impl rustler::Resource for SceneResource {}
 
+/// The folder a scene file was read in, held open (`files::open_scene`): the root its
+/// references are confined to. Closed when Erlang lets go of the handle.
+pub struct SceneDirResource {
+    fd: OwnedFd,
+}
+
+#[rustler::resource_impl]
+impl rustler::Resource for SceneDirResource {}
+
 /// What Elixir learns about a scene when it is parsed.
 #[derive(NifMap)]
 pub struct SceneInfo {
@@ -65,10 +75,11 @@ fn path_binary<'a>(env: Env<'a>, path: &Path) -> Binary<'a> {
 
 /// Parses scene bytes. `includes` holds referenced files shipped as bytes,
 /// keyed by the reference as written (used first: that is how a node parses a
-/// scene without touching its own disk). Otherwise, when `base_dir` is given,
-/// a referenced file (TOML mesh, OBJ `mtllib`) is read from there, confined to
-/// `base_dir` and the `allow_dirs` folders (`files::Confinement`), and only if
-/// it is a regular file of at most `limits::MAX_FILE_BYTES`.
+/// scene without touching its own disk). Otherwise, when `scene_dir` is given
+/// (the folder `read_scene_file` read the scene in, held open), a referenced
+/// file (TOML mesh, OBJ `mtllib`) is read relative to that very folder,
+/// confined to it and the `allow_dirs` folders (`files::Confinement::beneath`),
+/// and only if it is a regular file of at most `limits::MAX_FILE_BYTES`.
 ///
 /// Returns the resource, its info (with the parse's warnings), every referenced file's bytes keyed by its
 /// reference (to ship to other nodes), and the canonical absolute paths of the
@@ -81,7 +92,7 @@ fn scene_parse<'a>(
     bytes: Binary<'a>,
     format: String,
     name: String,
-    base_dir: Option<String>,
+    scene_dir: Option<ResourceArc<SceneDirResource>>,
     allow_dirs: Vec<String>,
     includes: HashMap<String, Binary<'a>>,
 ) -> Result<
@@ -98,11 +109,13 @@ fn scene_parse<'a>(
         .iter()
         .map(|(k, v)| (k.clone(), v.as_slice().to_vec()))
         .collect();
-    let disk = match &base_dir {
+    let disk = match &scene_dir {
         Some(dir) => {
-            let roots = std::iter::once(dir).chain(allow_dirs.iter());
-            let confinement = Confinement::new(roots).map_err(message)?;
-            Some((PathBuf::from(dir), confinement))
+            let fd = dir
+                .fd
+                .try_clone()
+                .map_err(|e| format!("the scene's folder: {e}"))?;
+            Some(Confinement::beneath(fd, &allow_dirs).map_err(message)?)
         }
         None => None,
     };
@@ -111,8 +124,8 @@ fn scene_parse<'a>(
     let resolve = |rel: &str| -> Result<Vec<u8>, Unreadable> {
         let data = if let Some(data) = shipped.get(rel) {
             data.clone()
-        } else if let Some((dir, confinement)) = &disk {
-            let (data, path) = confinement.read(dir, rel)?;
+        } else if let Some(confinement) = &disk {
+            let (data, path) = confinement.read(rel)?;
             if let Ok(mut read) = read.lock() {
                 if !read.contains(&path) {
                     read.push(path);
@@ -170,16 +183,22 @@ fn scene_parse<'a>(
 }
 
 /// Reads a top-level scene file the user named (anywhere: no confinement),
-/// with `files::read_regular`: a regular file, not on procfs/sysfs, at most
-/// `limits::MAX_FILE_BYTES` (checked before reading). Returns its bytes and its canonical
-/// absolute path.
+/// with `files::open_scene`: its folder opened once, the file opened beneath
+/// it without following a link (a link's target taken from that folder), a
+/// regular file, not on procfs/sysfs, at most `limits::MAX_FILE_BYTES`
+/// (checked before reading). Returns its bytes, its canonical absolute path
+/// and the folder it was read in, held open (for `scene_parse`).
 #[rustler::nif(schedule = "DirtyIo")]
-fn read_scene_file<'a>(env: Env<'a>, path: String) -> Result<(Binary<'a>, Binary<'a>), String> {
-    let (bytes, canonical) =
-        files::read_regular_with_path(Path::new(&path), limits::MAX_FILE_BYTES).map_err(message)?;
+#[allow(clippy::type_complexity)]
+fn read_scene_file<'a>(
+    env: Env<'a>,
+    path: String,
+) -> Result<(Binary<'a>, Binary<'a>, ResourceArc<SceneDirResource>), String> {
+    let file = files::open_scene(Path::new(&path), limits::MAX_FILE_BYTES).map_err(message)?;
     Ok((
-        OwnedBinary::from_slice(&bytes).release(env),
-        path_binary(env, &canonical),
+        OwnedBinary::from_slice(&file.bytes).release(env),
+        path_binary(env, &file.path),
+        ResourceArc::new(SceneDirResource { fd: file.dir }),
     ))
 }
 

@@ -65,6 +65,34 @@ defmodule RingTracer.Cluster.CookieTest do
     end
   end
 
+  test "a cookie is read from this user's own closed file only, never through a link", %{
+    tmp_dir: dir
+  } do
+    path = Path.join(dir, "c")
+    {:ok, ^path} = Cookie.create(path)
+    assert {:ok, _} = Cookie.read(path)
+    # a link to a good cookie is not followed (another user may own the folder it is in)
+    File.ln_s!(path, Path.join(dir, "l"))
+    assert {:error, error} = Cookie.read(Path.join(dir, "l"))
+    assert error.message =~ "l: the cookie file is a symbolic link (not followed"
+    # a FIFO is refused at once, not waited on
+    fifo = Path.join(dir, "fifo")
+    {_, 0} = System.cmd("mkfifo", ["-m", "600", fifo])
+    task = Task.async(fn -> Cookie.read(fifo) end)
+    assert {:error, error} = Task.await(task, 5_000)
+    assert error.message =~ "fifo: the cookie file is a FIFO (named pipe), not a regular file"
+    big = Path.join(dir, "big")
+    File.write!(big, String.duplicate("x", 4097))
+    File.chmod!(big, 0o600)
+    assert {:error, error} = Cookie.read(big)
+    assert error.message =~ "big: the cookie file is too large (4097 bytes, at most 4096)"
+    File.chmod!(path, 0o640)
+    assert {:error, error} = Cookie.read(path)
+
+    assert error.message =~
+             "can be read by other users (mode 0640); fix it with: chmod 600 #{path}"
+  end
+
   test "a missing or empty cookie file says how to make one", %{tmp_dir: dir} do
     assert {:error, error} = Cookie.read(Path.join(dir, "none"))
     assert error.message =~ "ringtracer cookie"

@@ -98,6 +98,40 @@ defmodule RingTracer.Cluster.TLSFilesTest do
     assert message =~ "node.key can be read by other users; fix it with: chmod 600"
   end
 
+  test "a TLS folder is refused when a folder on the way, or a file in it, is not closed", %{
+    tmp_dir: dir
+  } do
+    ca = Path.join(dir, "ca")
+    shared = Path.join(dir, "shared")
+    File.mkdir!(shared)
+    n = Path.join(shared, "n")
+    {_, 0} = launcher(["tls", "ca", ca])
+    {_, 0} = launcher(["tls", "node", ca, n, "localhost"])
+    assert TLS.check_dir(n) == :ok
+    # whoever can change a folder on the way could swap the certificates ssl reads later
+    File.chmod!(shared, 0o777)
+    assert {:error, %{message: message}} = TLS.check_dir(n)
+
+    assert message ==
+             "#{shared} is on the way to #{n} and can be changed by other users (mode 0777), " <>
+               "who could swap what is in it; use a folder that only you and root can change"
+
+    File.chmod!(shared, 0o755)
+    # a link of this user's is followed, and checked on the far side too
+    File.ln_s!(n, Path.join(dir, "via"))
+    assert TLS.check_dir(Path.join(dir, "via")) == :ok
+    # the certificate itself must be the file, not a link to one
+    File.rename!(Path.join(n, "node.pem"), Path.join(dir, "node.pem"))
+    File.ln_s!(Path.join(dir, "node.pem"), Path.join(n, "node.pem"))
+    assert {:error, %{message: message}} = TLS.check_dir(n)
+    assert message =~ "node.pem is a symbolic link, not a regular file"
+    File.rm!(Path.join(n, "node.pem"))
+    File.cp!(Path.join(dir, "node.pem"), Path.join(n, "node.pem"))
+    File.chmod!(Path.join(n, "node.pem"), 0o666)
+    assert {:error, %{message: message}} = TLS.check_dir(n)
+    assert message =~ "node.pem can be changed by other users; fix it with: chmod go-w"
+  end
+
   test "a certificate not valid yet is told apart from an expired one", %{tmp_dir: dir} do
     conf = Path.join(dir, "conf")
 
