@@ -3,7 +3,6 @@
 
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
-use crate::files;
 use crate::files::Unreadable;
 use crate::geometry::{hit_triangle, make_cone, Aabb, Geometry, Shape};
 use crate::instance::{Instance, Mesh, Tri, OWN_MATERIAL};
@@ -17,7 +16,8 @@ use crate::tri4::{RayLanes, TriBlocks};
 use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Vec3A};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::Arc;
 
 /// Scene file formats, chosen by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,19 +129,19 @@ pub struct Scene {
     pub(crate) ambient: Vec3A,
     pub(crate) lights: Vec<Light>,
     pub(crate) materials: Vec<Material>,
-    pub(crate) geom: Geometry,
-    pub(crate) info: Vec<PrimInfo>,
-    pub(crate) patch_normals: Vec<[Vec3A; 3]>,
-    pub(crate) planes: Vec<Plane>,
-    pub(crate) bvh: Bvh,
+    pub(crate) geom: Arc<Geometry>,
+    pub(crate) info: Arc<Vec<PrimInfo>>,
+    pub(crate) patch_normals: Arc<Vec<[Vec3A; 3]>>,
+    pub(crate) planes: Arc<Vec<Plane>>,
+    pub(crate) bvh: Arc<Bvh>,
     /// The triangles of `bvh`'s all-triangle leaves, four to a SIMD block.
-    pub(crate) tri_blocks: TriBlocks,
+    pub(crate) tri_blocks: Arc<TriBlocks>,
     /// Shared meshes, each stored once.
-    pub(crate) meshes: Vec<Mesh>,
+    pub(crate) meshes: Arc<Vec<Mesh>>,
     /// References to them, in the order of `instance_bvh`'s leaves.
-    pub(crate) instances: Vec<Instance>,
+    pub(crate) instances: Arc<Vec<Instance>>,
     /// The top-level BVH, over the instances' world boxes.
-    pub(crate) instance_bvh: Bvh,
+    pub(crate) instance_bvh: Arc<Bvh>,
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
     pub(crate) source_count: usize,
@@ -154,7 +154,7 @@ pub struct Scene {
 impl Scene {
     /// Parse scene bytes. `name` is used in error messages (the file name). `resolve` loads files
     /// the scene references (OBJ meshes, MTL) by the relative path written in the scene; it
-    /// returns their bytes or why it could not ([`files::Unreadable`]).
+    /// returns their bytes or why it could not ([`Unreadable`]).
     pub fn parse(
         bytes: &[u8],
         format: Format,
@@ -170,25 +170,11 @@ impl Scene {
         }
     }
 
-    /// Convenience: reads the file ([`files::read_regular`]) and the files it references,
-    /// relative to its folder and confined to it ([`files::Confinement`]).
+    /// Convenience: reads the file ([`crate::files::read_regular`]) and the files it
+    /// references, relative to its folder and confined to it ([`crate::files::Confinement`]). An animated scene
+    /// gives its first frame ([`crate::AnimatedScene::load`] gives them all).
     pub fn load(path: &Path) -> Result<Scene, Error> {
-        let shown = path.display().to_string();
-        let format = Format::from_path(&shown)?;
-        let bytes = files::read_regular(path, limits::MAX_FILE_BYTES)?;
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let confinement = files::Confinement::new([&dir])?;
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or(shown);
-        let resolve = move |rel: &str| -> Result<Vec<u8>, Unreadable> {
-            confinement.read(&dir, rel).map(|(bytes, _)| bytes)
-        };
-        Scene::parse(&bytes, format, &name, &resolve)
+        crate::AnimatedScene::load(path)?.into_first_frame()
     }
 
     /// What parsed but may not render as meant (a degenerate primitive left out, a colour
@@ -770,6 +756,32 @@ impl Scene {
         }
     }
 
+    /// Whether `self` and `other` draw the same built geometry (primitives, meshes and their
+    /// BVHs, shared and not copied): true for two frames of an animation in which only the
+    /// camera, the lights or material colours change ([`crate::AnimatedScene`]).
+    pub fn shares_geometry_with(&self, other: &Scene) -> bool {
+        Arc::ptr_eq(&self.bvh, &other.bvh)
+            && Arc::ptr_eq(&self.geom, &other.geom)
+            && Arc::ptr_eq(&self.instance_bvh, &other.instance_bvh)
+    }
+
+    /// This scene seen by `camera`, lit by `lights`, with `materials`: the geometry and its
+    /// BVH are shared, not rebuilt. The ray offset follows the camera as [`SceneBuilder::build`]
+    /// makes it, so the result is the scene that building with these values would give.
+    pub(crate) fn with_view(
+        &self,
+        camera: Camera,
+        lights: Vec<Light>,
+        materials: Vec<Material>,
+    ) -> Scene {
+        let mut s = self.clone();
+        s.camera = camera;
+        s.epsilon = epsilon_for(s.bounds, &camera);
+        s.lights = lights;
+        s.materials = materials;
+        s
+    }
+
     pub(crate) fn material(&self, index: u32) -> Material {
         self.materials
             .get(index as usize)
@@ -898,6 +910,12 @@ fn ordered_bvh(
             .filter_map(|r| src(r).and_then(|i| info.get(i as usize).copied())),
     );
     Ok((bvh, shapes, ordered_info, bounds))
+}
+
+/// The offset of secondary rays' origins: a fraction of the extent of the scene and the eye.
+fn epsilon_for(bounds: Aabb, camera: &Camera) -> f32 {
+    let extent = bounds.grow(camera.from).diagonal();
+    (extent * 1e-5).max(1e-6)
 }
 
 impl SceneBuilder {
@@ -1238,8 +1256,7 @@ impl SceneBuilder {
                 tan_half: 0.5,
             })
         });
-        let extent = bounds.grow(camera.from).diagonal();
-        let epsilon = (extent * 1e-5).max(1e-6);
+        let epsilon = epsilon_for(bounds, &camera);
         let ambient = self
             .ambient
             .unwrap_or(Vec3A::splat(crate::light::spd_intensity(self.lights.len())));
@@ -1253,15 +1270,15 @@ impl SceneBuilder {
             ambient,
             lights: self.lights,
             materials: self.materials,
-            geom: self.geom,
-            info,
-            patch_normals: self.patch_normals,
-            planes: self.planes,
-            bvh,
-            tri_blocks,
-            meshes: self.meshes,
-            instances,
-            instance_bvh,
+            geom: Arc::new(self.geom),
+            info: Arc::new(info),
+            patch_normals: Arc::new(self.patch_normals),
+            planes: Arc::new(self.planes),
+            bvh: Arc::new(bvh),
+            tri_blocks: Arc::new(tri_blocks),
+            meshes: Arc::new(self.meshes),
+            instances: Arc::new(instances),
+            instance_bvh: Arc::new(instance_bvh),
             epsilon,
             bounds,
             source_count: self.source_count,
