@@ -88,7 +88,15 @@
 //! type = "mesh"                     # the same file again: read once, drawn twice
 //! file = "meshes/teapot.obj"
 //! matrix = [[0.5, 0, 0, 2], [0, 0.5, 0, 0], [0, 0, -0.5, -3]]   # a mirror image
+//!
+//! [[objects]]
+//! type = "include"                  # the objects of an NFF file, e.g. an SPD scene; static
+//! file = "spd/balls_s1.nff"         # resolved as a mesh's file; its 'v' and 'b' left out
+//! lights = false                    # its lights too (default false)
 //! ```
+//!
+//! An `[animation]` table and `animate` key lists on the camera, lights, materials and objects
+//! make the scene a sequence of frames: see [`crate::animated`]; [`parse`] gives the first.
 //!
 //! Meshes: every distinct (`file` as written, `smooth`) is read and parsed once. If the scene
 //! references it once, its triangles are transformed into the scene (flattened, as they
@@ -957,15 +965,17 @@ mod tests {
         let resolve = |p: &str| -> Result<Vec<u8>, Unreadable> {
             if p == "meshes/teapot.obj" {
                 Ok(obj.as_bytes().to_vec())
+            } else if p == "spd/balls_s1.nff" {
+                Ok(b"l 9 9 9\nf 1 1 1 1 0 0 0 0\ns 0 0 -5 1\n".to_vec())
             } else {
                 Err(format!("no {p}").into())
             }
         };
         let s = parse(src.as_bytes(), "doc.toml", &resolve).unwrap();
         assert_eq!(s.resolution(), (640, 480));
-        // the mesh's one triangle is stored once and drawn twice
-        assert_eq!(s.primitive_count(), 8);
-        assert_eq!(s.stored_primitive_count(), 8);
+        // the mesh's one triangle is stored once and drawn twice; the include adds a sphere
+        assert_eq!(s.primitive_count(), 9);
+        assert_eq!(s.stored_primitive_count(), 9);
         assert_eq!((s.mesh_count(), s.instance_count()), (1, 2));
         assert_eq!(s.light_count(), 1);
     }
