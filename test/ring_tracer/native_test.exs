@@ -30,7 +30,8 @@ defmodule RingTracer.NativeTest do
              clock_start: 0.0,
              clock_end: 0.0,
              cyclic: false,
-             moves_objects: false
+             moves_objects: false,
+             rebuilds_primitives: false
            }
 
     assert {:ok, frame} = Native.scene_frame(ref, 0)
@@ -42,8 +43,14 @@ defmodule RingTracer.NativeTest do
   test "an animated scene gives its frame count, clock range and each frame to trace" do
     ref = parse("whitted_orbit.toml")
 
-    assert %{frames: 48, clock_start: +0.0, clock_end: 1.0, cyclic: true, moves_objects: true} =
-             Native.scene_animation(ref)
+    assert %{
+             frames: 48,
+             clock_start: +0.0,
+             clock_end: 1.0,
+             cyclic: true,
+             moves_objects: true,
+             rebuilds_primitives: true
+           } = Native.scene_animation(ref)
 
     # the scene as parsed is frame 0
     {:ok, f0} = Native.scene_frame(ref, 0)
@@ -66,7 +73,9 @@ defmodule RingTracer.NativeTest do
   test "a camera flight through an included SPD scene" do
     ref = parse("balls_flythrough.toml")
 
-    assert %{frames: 24, cyclic: false, moves_objects: false} = Native.scene_animation(ref)
+    assert %{frames: 24, cyclic: false, moves_objects: false, rebuilds_primitives: false} =
+             Native.scene_animation(ref)
+
     # the included file counts: 820 spheres and the floor
     assert Scene.load!(TestScenes.path("balls_flythrough.toml")).primitives == 821
     {:ok, last} = Native.scene_frame(ref, 23)

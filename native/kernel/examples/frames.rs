@@ -1,6 +1,6 @@
 //! What the frames of an animated scene cost to make (not to trace): `cargo run --release
-//! --example frames -- SCENE.toml`. Prints the load, then each frame's scene build time and
-//! whether it shares the first frame's BVH.
+//! --example frames -- SCENE.toml`. Prints the load, then the frames' mean and worst build
+//! time and how many share the first frame's BVH (or its primitives and mesh BVHs).
 
 use ring_tracer_kernel::AnimatedScene;
 use std::path::Path;
@@ -22,14 +22,16 @@ fn main() {
     let load = t0.elapsed().as_secs_f64();
     let a = scene.animation();
     println!(
-        "{path}: load {:.3} ms, {} frames, clock {:?}, cyclic {}, objects move: {}",
+        "{path}: load {:.3} ms, {} frames, clock {:?}, cyclic {}, objects move: {}, \
+         frames rebuild their primitives: {}",
         load * 1e3,
         a.frames(),
         a.clock_range(),
         a.cyclic(),
-        scene.moves_objects()
+        scene.moves_objects(),
+        scene.rebuilds_primitives()
     );
-    let (mut total, mut worst, mut shared) = (0.0f64, 0.0f64, 0);
+    let (mut total, mut worst, mut shared, mut primitives) = (0.0f64, 0.0f64, 0, 0);
     for n in 0..a.frames() {
         let t = Instant::now();
         let frame = match scene.frame(n) {
@@ -45,9 +47,13 @@ fn main() {
         if frame.shares_geometry_with(scene.first_frame()) {
             shared += 1;
         }
+        if frame.shares_primitives_with(scene.first_frame()) {
+            primitives += 1;
+        }
     }
     println!(
-        "frames: mean {:.1} us, worst {:.1} us; {shared} of {} share the first frame's BVH",
+        "frames: mean {:.1} us, worst {:.1} us; of {}, {shared} share the first frame's BVH, \
+         {primitives} its primitives and mesh BVHs",
         total / a.frames() as f64 * 1e6,
         worst * 1e6,
         a.frames()

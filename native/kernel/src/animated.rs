@@ -47,15 +47,19 @@
 //!
 //! Cost: when only the camera, the lights and material colours move, every frame shares the
 //! first frame's primitives and BVH ([`Scene::shares_geometry_with`]) and costs a copy of the
-//! lights and materials; when objects move, a frame is built anew from the definition (the
-//! referenced files are read once, at the parse, and kept). Either way frame `n` is a function
-//! of its clock alone, so it is the same scene, to the bit, whichever frames came before it.
+//! lights and materials. A mesh that moves (by `translate`, `rotate`, `scale`) is always an
+//! instance ([`crate::instance`], also when referenced once): when only meshes move, a frame
+//! also shares every primitive and mesh BVH ([`Scene::shares_primitives_with`]) and rebuilds
+//! only the top-level BVH over the instances. When any other object moves, a frame is built
+//! anew from the definition ([`AnimatedScene::rebuilds_primitives`]; the referenced files are
+//! read once, at the parse, and kept). Every way, frame `n` is a function of its clock alone,
+//! so it is the same scene, to the bit, whichever frames came before it.
 
 use crate::animation::{Animation, Interpolation, Track};
 use crate::error::snippet;
 use crate::files::Unreadable;
 use crate::scene::{Format, Scene};
-use crate::toml_scene::{self, Ctx, ObjectDef, SceneDef};
+use crate::toml_scene::{self, Ctx, MovingMesh, ObjectDef, SceneDef};
 use crate::warning::Warnings;
 use crate::{files, limits, Error};
 use glam::{Affine3A, Vec3A};
@@ -85,8 +89,13 @@ struct Rig {
     /// objects are built from these).
     files: BTreeMap<String, Vec<u8>>,
     moves_objects: bool,
+    /// Whether the objects that move are all meshes moved by their motion (`translate`,
+    /// `rotate`, `scale`): then a frame moves their instances only.
+    only_meshes_move: bool,
     /// The index in the scene's materials of each material whose colour moves.
     materials: Vec<(String, u32)>,
+    /// The instance of each moving mesh object, by object index.
+    moving_meshes: BTreeMap<usize, MovingMesh>,
 }
 
 impl std::fmt::Debug for Rig {
@@ -178,6 +187,15 @@ impl AnimatedScene {
         self.rig.as_ref().is_some_and(|r| r.moves_objects)
     }
 
+    /// Whether each frame builds its primitives and BVH anew: when objects other than meshes
+    /// move (a mesh moved by `translate`/`rotate`/`scale` is an instance, and a frame rebuilds
+    /// only the top-level BVH over the instances).
+    pub fn rebuilds_primitives(&self) -> bool {
+        self.rig
+            .as_ref()
+            .is_some_and(|r| r.moves_objects && !r.only_meshes_move)
+    }
+
     /// The first frame (frame 0), with the parse's warnings.
     pub fn first_frame(&self) -> &Scene {
         &self.first
@@ -227,10 +245,18 @@ impl AnimatedScene {
                     | Target::Scale(_)
             )
         });
+        let only_meshes_move = bindings.iter().all(|b| match b.target {
+            Target::Center(_) | Target::Radius(_) => false,
+            Target::Translate(i) | Target::Rotate(i) | Target::Scale(i) => matches!(
+                def.objects.get(i).map(|o| o.get_ref()),
+                Some(ObjectDef::Mesh { .. })
+            ),
+            _ => true,
+        });
         let read = RefCell::new(BTreeMap::new());
         let keeping = |rel: &str| -> Result<Vec<u8>, Unreadable> {
             let data = resolve(rel)?;
-            if moves_objects {
+            if moves_objects && !only_meshes_move {
                 read.borrow_mut().insert(rel.to_string(), data.clone());
             }
             Ok(data)
@@ -242,14 +268,20 @@ impl AnimatedScene {
             bindings,
             files: BTreeMap::new(),
             moves_objects,
+            only_meshes_move,
             materials: Vec::new(),
+            moving_meshes: BTreeMap::new(),
         };
         let clock = animation.clock_of(0)?;
         let first_def = rig.def_at(clock, true);
-        let (first, names) = toml_scene::build(&first_def, cx, &keeping, &|n| rig.moves(n))
+        let built = toml_scene::build(&first_def, cx, &keeping, &|n| rig.moves(n))
             .map_err(|e| at_clock(e, clock))?;
+        let first = built.scene;
         rig.files = read.into_inner();
-        rig.materials = names.into_iter().filter(|(n, _)| rig.moves(n)).collect();
+        rig.materials = (built.materials.into_iter())
+            .filter(|(n, _)| rig.moves(n))
+            .collect();
+        rig.moving_meshes = built.moving_meshes;
         Ok(AnimatedScene {
             animation,
             first,
@@ -266,21 +298,22 @@ impl Rig {
             .any(|b| matches!(&b.target, Target::MaterialColor(n) if n == name))
     }
 
-    /// The scene at `clock`: a new build when objects move, else `first` seen and lit as the
-    /// clock says.
+    /// The scene at `clock`: a new build when objects other than meshes move, else `first`
+    /// seen and lit as the clock says, with its moving meshes' instances moved.
     fn scene_at(&self, clock: f64, first: &Scene) -> Result<Scene, Error> {
         let cx = Ctx {
             src: &self.src,
             file: &self.file,
         };
+        let rebuild = self.moves_objects && !self.only_meshes_move;
         let frame = |def: &SceneDef| -> Result<Scene, Error> {
-            if self.moves_objects {
+            if rebuild {
                 let resolve = |rel: &str| -> Result<Vec<u8>, Unreadable> {
                     self.files.get(rel).cloned().ok_or_else(|| {
                         Unreadable::Missing("not among the files read with the scene".into())
                     })
                 };
-                return Ok(toml_scene::build(def, &cx, &resolve, &|n| self.moves(n))?.0);
+                return Ok(toml_scene::build(def, &cx, &resolve, &|n| self.moves(n))?.scene);
             }
             let (camera, _) = toml_scene::camera(def, &cx)?;
             let mut ignored = Warnings::default();
@@ -295,9 +328,49 @@ impl Rig {
                     *slot = toml_scene::material(&cx, name, m, &mut ignored)?;
                 }
             }
-            Ok(first.with_view(camera, lights, materials))
+            let seen = first.with_view(camera, lights, materials);
+            if self.moving_meshes.is_empty() {
+                return Ok(seen);
+            }
+            let motions = self.motions(clock);
+            let moved: Vec<(usize, Affine3A)> = (self.moving_meshes.iter())
+                .map(|(i, m)| {
+                    let xf = motions.get(i).map_or(m.placed, |(xf, _)| *xf * m.placed);
+                    (m.instance, xf)
+                })
+                .collect();
+            seen.with_moved_instances(&moved, &self.file)?.map_err(|k| {
+                let line = self.moving_meshes.values().nth(k).map_or(1, |m| m.line);
+                Error::parse(&self.file, line, "mesh transform is singular (zero scale?)")
+            })
         };
-        frame(&self.def_at(clock, self.moves_objects)).map_err(|e| at_clock(e, clock))
+        frame(&self.def_at(clock, rebuild)).map_err(|e| at_clock(e, clock))
+    }
+
+    /// Each moving object's motion at `clock`, and its scale (for spheres and cones, whose
+    /// scale is uniform).
+    fn motions(&self, clock: f64) -> BTreeMap<usize, (Affine3A, f32)> {
+        let mut motion: BTreeMap<usize, [[f64; 3]; 3]> = BTreeMap::new();
+        for b in &self.bindings {
+            let (i, k) = match b.target {
+                Target::Translate(i) => (i, 0),
+                Target::Rotate(i) => (i, 1),
+                Target::Scale(i) => (i, 2),
+                _ => continue,
+            };
+            motion.entry(i).or_insert(STILL_MOTION)[k] = b.track.at(clock);
+        }
+        let v3 = |v: [f64; 3]| Vec3A::from_array(v.map(|x| x as f32));
+        (motion.into_iter())
+            .map(|(i, [t, r, s])| {
+                let xf = Affine3A::from_translation(v3(t).into())
+                    * Affine3A::from_rotation_z((r[2] as f32).to_radians())
+                    * Affine3A::from_rotation_y((r[1] as f32).to_radians())
+                    * Affine3A::from_rotation_x((r[0] as f32).to_radians())
+                    * Affine3A::from_scale(v3(s).into());
+                (i, (xf, s[0] as f32))
+            })
+            .collect()
     }
 
     /// The definition with every key list's value at `clock`; without the objects unless
@@ -309,7 +382,6 @@ impl Rig {
             self.def.without_objects()
         };
         let v3 = |v: [f64; 3]| v.map(|x| x as f32);
-        let mut motion: BTreeMap<usize, [[f64; 3]; 3]> = BTreeMap::new();
         for b in &self.bindings {
             let v = b.track.at(clock);
             match &b.target {
@@ -343,19 +415,14 @@ impl Rig {
                         }
                     }
                 }
-                Target::Translate(i) => motion.entry(*i).or_insert(STILL_MOTION)[0] = v,
-                Target::Rotate(i) => motion.entry(*i).or_insert(STILL_MOTION)[1] = v,
-                Target::Scale(i) => motion.entry(*i).or_insert(STILL_MOTION)[2] = v,
+                Target::Translate(_) | Target::Rotate(_) | Target::Scale(_) => {}
             }
         }
-        for (i, [t, r, s]) in motion {
-            if let Some(o) = def.objects.get_mut(i) {
-                let xf = Affine3A::from_translation(v3(t).into())
-                    * Affine3A::from_rotation_z((r[2] as f32).to_radians())
-                    * Affine3A::from_rotation_y((r[1] as f32).to_radians())
-                    * Affine3A::from_rotation_x((r[0] as f32).to_radians())
-                    * Affine3A::from_scale(v3(s).into());
-                move_object(o.get_mut(), &xf, s[0] as f32);
+        if objects {
+            for (i, (xf, s)) in self.motions(clock) {
+                if let Some(o) = def.objects.get_mut(i) {
+                    move_object(o.get_mut(), &xf, s);
+                }
             }
         }
         def
@@ -1044,10 +1111,70 @@ keys = [{ clock = 0.5, value = [0.1, 0.1, 0.9] }]
     }
 
     #[test]
+    fn moving_meshes_move_their_instances_only() {
+        let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+        let files = |p: &str| -> Result<Vec<u8>, Unreadable> {
+            if p == "tet.obj" {
+                Ok(obj.as_bytes().to_vec())
+            } else {
+                Err(format!("no {p}").into())
+            }
+        };
+        let src = with(
+            "\n[[objects]]\ntype = \"mesh\"\nfile = \"tet.obj\"\nscale = 0.8\nmaterial = \"red\"\n\
+             [objects.animate.rotate]\ninterpolation = \"smooth\"\n\
+             keys = [{ clock = 0, value = [0, 0, 0] }, { clock = 1, value = [0, 400, 30] }]\n\
+             [objects.animate.translate]\n\
+             keys = [{ clock = 0, value = [-2, 0, 0] }, { clock = 1, value = [1, 1, 2] }]\n\
+             [animation]\nframes = 5\n",
+        );
+        let a = AnimatedScene::parse(src.as_bytes(), Format::Toml, "a.toml", &files).unwrap();
+        assert!(a.moves_objects() && !a.rebuilds_primitives());
+        // the mesh, referenced once, is an instance so that it can move
+        assert_eq!(a.first_frame().instance_count(), 1);
+        let frames: Vec<Scene> = (0..5).map(|n| a.frame(n).unwrap()).collect();
+        for f in &frames[1..] {
+            assert!(f.shares_primitives_with(a.first_frame()));
+            assert!(!f.shares_geometry_with(a.first_frame()));
+        }
+        let pictures: Vec<Vec<u32>> = frames.iter().map(pixels).collect();
+        assert_ne!(pictures[1], pictures[2]);
+        // frame 0 from the moved instances is the first frame as built
+        assert_eq!(pictures[0], pixels(a.first_frame()));
+        // each frame is the scene a full build at its clock makes, to the bit, and the same
+        // when made alone from a fresh parse
+        let rig = a.rig.as_ref().unwrap();
+        let cx = Ctx {
+            src: src.as_bytes(),
+            file: "a.toml",
+        };
+        for (n, picture) in pictures.iter().enumerate() {
+            let clock = a.animation().clock_of(n as u32).unwrap();
+            let def = rig.def_at(clock, true);
+            let built = toml_scene::build(&def, &cx, &files, &|m| rig.moves(m)).unwrap();
+            assert_eq!(pixels(&built.scene), *picture, "frame {n}");
+            let fresh = AnimatedScene::parse(src.as_bytes(), Format::Toml, "a.toml", &files);
+            assert_eq!(pixels(&fresh.unwrap().frame(n as u32).unwrap()), *picture);
+        }
+        // a scale through zero is that frame's error, at the mesh's line and clock
+        let flat = src.replace(
+            "material = \"red\"\n[objects",
+            "material = \"red\"\n[objects.animate.scale]\n\
+             keys = [{ clock = 0, value = 1 }, { clock = 1, value = -1 }]\n[objects",
+        );
+        let b = AnimatedScene::parse(flat.as_bytes(), Format::Toml, "a.toml", &files).unwrap();
+        assert!(b.frame(1).is_ok());
+        assert_eq!(
+            b.frame(2).unwrap_err().to_string(),
+            "a.toml:37: mesh transform is singular (zero scale?) (at clock 0.5)"
+        );
+    }
+
+    #[test]
     fn moving_objects_rebuild_and_move() {
         // MOVING's first table belongs to the last object of STILL (the glass sphere)
         let a = parse(&with(MOVING)).unwrap();
-        assert!(a.moves_objects());
+        assert!(a.moves_objects() && a.rebuilds_primitives());
         let f0 = a.frame(0).unwrap();
         let f2 = a.frame(2).unwrap();
         assert!(!f2.shares_geometry_with(&f0));

@@ -48,6 +48,14 @@ impl Format {
     }
 }
 
+/// A mesh instance as the scene placed it: which mesh, where, with what material.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Placement {
+    pub mesh: u32,
+    pub xf: Affine3A,
+    pub material: u32,
+}
+
 /// Per-primitive shading data, in BVH order.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PrimInfo {
@@ -142,6 +150,11 @@ pub struct Scene {
     pub(crate) instances: Arc<Vec<Instance>>,
     /// The top-level BVH, over the instances' world boxes.
     pub(crate) instance_bvh: Arc<Bvh>,
+    /// The instances as the scene placed them, in its order (not the BVH's), for
+    /// [`Scene::with_moved_instances`].
+    pub(crate) placements: Arc<Vec<Placement>>,
+    /// Bounds of the scene's own primitives (planes excluded), without the instances.
+    pub(crate) own_bounds: Aabb,
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
     pub(crate) source_count: usize,
@@ -765,6 +778,15 @@ impl Scene {
             && Arc::ptr_eq(&self.instance_bvh, &other.instance_bvh)
     }
 
+    /// Whether `self` and `other` draw the same primitives and meshes with the same BVHs
+    /// below the top level (shared, not copied): true also for two frames of an animation in
+    /// which only mesh instances move, whose top-level BVH is rebuilt.
+    pub fn shares_primitives_with(&self, other: &Scene) -> bool {
+        Arc::ptr_eq(&self.bvh, &other.bvh)
+            && Arc::ptr_eq(&self.geom, &other.geom)
+            && Arc::ptr_eq(&self.meshes, &other.meshes)
+    }
+
     /// This scene seen by `camera`, lit by `lights`, with `materials`: the geometry and its
     /// BVH are shared, not rebuilt. The ray offset follows the camera as [`SceneBuilder::build`]
     /// makes it, so the result is the scene that building with these values would give.
@@ -780,6 +802,52 @@ impl Scene {
         s.lights = lights;
         s.materials = materials;
         s
+    }
+
+    /// This scene with some mesh instances moved: `moved` gives (index in the order the scene
+    /// placed them, new transform). Only the top-level BVH over the instances is built again;
+    /// the meshes, their BVHs and the scene's own primitives are shared. `Ok(None)` names the
+    /// first move whose transform is not invertible; `name` (the scene's file) is in an
+    /// [`Error::Memory`].
+    pub(crate) fn with_moved_instances(
+        &self,
+        moved: &[(usize, Affine3A)],
+        name: &str,
+    ) -> Result<Result<Scene, usize>, Error> {
+        let mut placements: Vec<Placement> = self.placements.as_ref().clone();
+        for (k, (i, xf)) in moved.iter().enumerate() {
+            match placements.get_mut(*i) {
+                Some(p) => p.xf = *xf,
+                None => return Ok(Err(k)),
+            }
+        }
+        let mut list = Vec::with_capacity(placements.len());
+        let mut boxes = Vec::with_capacity(placements.len());
+        for (i, p) in placements.iter().enumerate() {
+            let (Some(inst), Some(mesh)) = (
+                Instance::new(p.mesh, p.xf, p.material),
+                self.meshes.get(p.mesh as usize),
+            ) else {
+                return Ok(Err(moved.iter().position(|m| m.0 == i).unwrap_or(0)));
+            };
+            list.push(inst);
+            boxes.push(mesh.bounds_under(&p.xf));
+        }
+        let (instance_bvh, order) = Bvh::try_build_with(&boxes, crate::bvh::LEAF_MIN, &|| {
+            format!("{name}: the BVH of the mesh instances")
+        })?;
+        let mut s = self.clone();
+        s.instances = Arc::new(
+            order
+                .iter()
+                .filter_map(|&i| list.get(i as usize).copied())
+                .collect(),
+        );
+        s.instance_bvh = Arc::new(instance_bvh);
+        s.placements = Arc::new(placements);
+        s.bounds = boxes.iter().fold(self.own_bounds, |a, b| a.union(*b));
+        s.epsilon = epsilon_for(s.bounds, &s.camera);
+        Ok(Ok(s))
     }
 
     pub(crate) fn material(&self, index: u32) -> Material {
@@ -837,6 +905,8 @@ pub(crate) struct SceneBuilder {
     /// Instances of them, and their world boxes.
     instances: Vec<Instance>,
     instance_bounds: Vec<Aabb>,
+    /// How each instance was placed, in the same order.
+    placements: Vec<Placement>,
     /// Primitives stored elsewhere that count towards the bound: the triangles of the shared
     /// meshes (and, in a builder from [`SceneBuilder::for_mesh`], the scene's primitives).
     stored_elsewhere: usize,
@@ -937,6 +1007,7 @@ impl SceneBuilder {
             meshes: Vec::new(),
             instances: Vec::new(),
             instance_bounds: Vec::new(),
+            placements: Vec::new(),
             stored_elsewhere: 0,
             max_primitives: limits::MAX_PRIMITIVES,
             max_instances: limits::MAX_MESH_REFERENCES,
@@ -1036,7 +1107,18 @@ impl SceneBuilder {
         self.source_count = self.source_count.saturating_add(m.tris.len());
         self.instances.push(inst);
         self.instance_bounds.push(bounds);
+        self.placements.push(Placement {
+            mesh,
+            xf,
+            material: material.unwrap_or(OWN_MATERIAL),
+        });
         Ok(true)
+    }
+
+    /// Instances placed so far: the next one placed gets this index in
+    /// [`Scene::with_moved_instances`]'s list.
+    pub fn placed_instances(&self) -> usize {
+        self.placements.len()
     }
 
     /// Adds a material, reusing the last one if identical; returns its index.
@@ -1246,6 +1328,7 @@ impl SceneBuilder {
             .iter()
             .filter_map(|&i| self.instances.get(i as usize).copied())
             .collect();
+        let own_bounds = bounds;
         let bounds = self.instance_bounds.iter().fold(bounds, |a, b| a.union(*b));
         let camera = self.camera.unwrap_or_else(|| {
             Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
@@ -1279,6 +1362,8 @@ impl SceneBuilder {
             meshes: Arc::new(self.meshes),
             instances: Arc::new(instances),
             instance_bvh: Arc::new(instance_bvh),
+            placements: Arc::new(self.placements),
+            own_bounds,
             epsilon,
             bounds,
             source_count: self.source_count,

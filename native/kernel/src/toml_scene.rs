@@ -398,8 +398,9 @@ pub(crate) fn parse_animated(
     if def.animated() {
         return AnimatedScene::from_toml(def, &cx, resolve);
     }
-    let (scene, _) = build(&def, &cx, resolve, &|_| false)?;
-    Ok(AnimatedScene::still(scene))
+    Ok(AnimatedScene::still(
+        build(&def, &cx, resolve, &|_| false)?.scene,
+    ))
 }
 
 /// Reads the text of a TOML scene into its definition: size, encoding, token lengths and
@@ -594,15 +595,34 @@ pub(crate) fn material(
     Ok(mat)
 }
 
+/// What [`build`] made: the scene, each named material's index in it, and for each mesh
+/// object that moves (has a `motion`) its instance.
+pub(crate) struct Built {
+    pub(crate) scene: Scene,
+    pub(crate) materials: BTreeMap<String, u32>,
+    pub(crate) moving_meshes: BTreeMap<usize, MovingMesh>,
+}
+
+/// A moving mesh object's instance: its index in the scene's placements
+/// ([`Scene::with_moved_instances`]), the transform of the object as written (the motion
+/// applies after it), and the object's line.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MovingMesh {
+    pub(crate) instance: usize,
+    pub(crate) placed: Affine3A,
+    pub(crate) line: usize,
+}
+
 /// Builds the scene a definition describes. `own(name)`: material `name` gets an index of its
-/// own (an animated colour must not change a material that happens to equal it). Returns the
-/// scene and each named material's index in it.
+/// own (an animated colour must not change a material that happens to equal it). A mesh with
+/// a `motion` is always an instance (also when referenced once), so that moving it moves only
+/// the instance.
 pub(crate) fn build(
     def: &SceneDef,
     cx: &Ctx,
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
     own: &dyn Fn(&str) -> bool,
-) -> Result<(Scene, BTreeMap<String, u32>), Error> {
+) -> Result<Built, Error> {
     let file = cx.file;
     let warn =
         |b: &mut SceneBuilder, span: &Range<usize>, w: String| cx.warn(&mut b.warnings, span, w);
@@ -645,7 +665,8 @@ pub(crate) fn build(
         names.insert(name.clone(), idx);
     }
 
-    for o in &def.objects {
+    let mut moving_meshes = BTreeMap::new();
+    for (index, o) in def.objects.iter().enumerate() {
         let span = o.span();
         let find = |m: &Option<String>| -> Result<u32, Error> {
             match m {
@@ -805,6 +826,7 @@ pub(crate) fn build(
                         * Affine3A::from_rotation_y(r.to_radians())
                         * Affine3A::from_scale(s.into())
                 };
+                let placed = xf;
                 let xf = motion.map_or(xf, |m| m * xf);
                 // the inverse is what an instance keeps, so it must exist whatever the count
                 if xf.matrix3.determinant() == 0.0 || !xf.inverse().is_finite() {
@@ -823,7 +845,7 @@ pub(crate) fn build(
                     crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, b)
                         .map_err(|e| cx.err(span.clone(), e.to_string()))
                 };
-                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 {
+                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 && motion.is_none() {
                     // referenced once: flattened, as it always was
                     load(xf, mat, &mut b)?;
                 } else {
@@ -839,8 +861,21 @@ pub(crate) fn build(
                             m
                         }
                     };
+                    let instance = b.placed_instances();
                     if !b.instance(mesh, xf, mat).map_err(lim)? {
                         return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
+                    }
+                    // (an empty mesh places no instance, and there is nothing to move)
+                    if motion.is_some() && b.placed_instances() > instance {
+                        let line = cx.line(&span);
+                        moving_meshes.insert(
+                            index,
+                            MovingMesh {
+                                instance,
+                                placed,
+                                line,
+                            },
+                        );
                     }
                 }
             }
@@ -871,7 +906,11 @@ pub(crate) fn build(
         }
     }
     crate::warning::scene_warnings(&mut b, file);
-    Ok((b.build(file)?, names))
+    Ok(Built {
+        scene: b.build(file)?,
+        materials: names,
+        moving_meshes,
+    })
 }
 
 /// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the

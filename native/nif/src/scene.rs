@@ -196,8 +196,12 @@ pub struct AnimationInfo {
     pub clock_start: f64,
     pub clock_end: f64,
     pub cyclic: bool,
-    /// Whether objects move (a frame then builds its own BVH; otherwise frames share it).
+    /// Whether objects move.
     pub moves_objects: bool,
+    /// Whether each frame builds its primitives and BVH anew (objects other than meshes
+    /// move); otherwise frames share the first frame's (moving meshes rebuild only the
+    /// top-level BVH over their instances).
+    pub rebuilds_primitives: bool,
 }
 
 /// The frame count and clock range of a parsed scene.
@@ -211,14 +215,15 @@ fn scene_animation(scene: ResourceArc<SceneResource>) -> AnimationInfo {
         clock_end,
         cyclic: a.cyclic(),
         moves_objects: scene.animated.moves_objects(),
+        rebuilds_primitives: scene.animated.rebuilds_primitives(),
     }
 }
 
 /// The scene of frame `frame` (from 0) of a parsed scene's animation, at the clock POV-Ray gives
 /// it (`ring_tracer_kernel::Animation::clock_of`), as a resource that `trace_atom` and the
 /// other scene calls take. Frame `n` is the same scene whichever frame's resource it is made
-/// from. Cheap when only the camera, lights or colours move (the BVH is shared); a dirty-CPU
-/// call, since moving objects rebuild theirs.
+/// from. Cheap when only the camera, lights, colours or meshes move (the primitives and their
+/// BVHs are shared); a dirty-CPU call, since other moving objects rebuild them.
 #[rustler::nif(schedule = "DirtyCpu")]
 fn scene_frame(
     scene: ResourceArc<SceneResource>,
