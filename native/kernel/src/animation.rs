@@ -208,7 +208,8 @@ impl Track {
         let (Some(&first), Some(&last)) = (self.times.first(), self.times.last()) else {
             return [0.0; 3];
         };
-        if clock <= first || n == 1 {
+        // (not after the first key, or not a number at all)
+        if !(clock > first) || n == 1 {
             return self.values[0];
         }
         if clock >= last {
@@ -368,5 +369,8 @@ mod tests {
         // one key: a constant
         let one = Track::new(&keys(&[(0.3, 2.0)]), Interpolation::Smooth, false).unwrap();
         assert_eq!(one.at(0.0), one.at(1.0));
+        // a clock that is not a number gives the first value, not a panic
+        let two = Track::new(&keys(&UNEVEN), Interpolation::Smooth, false).unwrap();
+        assert_eq!(two.at(f64::NAN), two.at(0.0));
     }
 }
