@@ -209,7 +209,7 @@ impl Track {
             return [0.0; 3];
         };
         // (not after the first key, or not a number at all)
-        if !(clock > first) || n == 1 {
+        if clock <= first || clock.is_nan() || n == 1 {
             return self.values[0];
         }
         if clock >= last {
