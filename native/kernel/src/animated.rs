@@ -181,8 +181,9 @@ impl AnimatedScene {
         self.animation
     }
 
-    /// Whether objects move (then each frame builds its own primitives and BVH); otherwise
-    /// the frames share the first frame's.
+    /// Whether objects move (key lists on objects); otherwise the frames share the first
+    /// frame's primitives and BVH ([`AnimatedScene::rebuilds_primitives`] says what moving
+    /// objects cost).
     pub fn moves_objects(&self) -> bool {
         self.rig.as_ref().is_some_and(|r| r.moves_objects)
     }
@@ -202,8 +203,8 @@ impl AnimatedScene {
     }
 
     /// The first frame, without a copy.
-    pub fn into_first_frame(self) -> Result<Scene, Error> {
-        Ok(self.first)
+    pub fn into_first_frame(self) -> Scene {
+        self.first
     }
 
     /// The scene of frame `n` (from 0) at its clock ([`Animation::clock_of`]).

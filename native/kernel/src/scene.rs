@@ -187,7 +187,7 @@ impl Scene {
     /// references, relative to its folder and confined to it ([`crate::files::Confinement`]). An animated scene
     /// gives its first frame ([`crate::AnimatedScene::load`] gives them all).
     pub fn load(path: &Path) -> Result<Scene, Error> {
-        crate::AnimatedScene::load(path)?.into_first_frame()
+        Ok(crate::AnimatedScene::load(path)?.into_first_frame())
     }
 
     /// What parsed but may not render as meant (a degenerate primitive left out, a colour

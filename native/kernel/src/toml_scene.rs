@@ -383,7 +383,7 @@ pub fn parse(
     file: &str,
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
-    parse_animated(bytes, file, resolve)?.into_first_frame()
+    Ok(parse_animated(bytes, file, resolve)?.into_first_frame())
 }
 
 /// Parses a TOML scene with its animation: a scene without `[animation]` is a still (one
