@@ -59,7 +59,7 @@ use crate::animation::{Animation, Interpolation, Track};
 use crate::error::snippet;
 use crate::files::Unreadable;
 use crate::scene::{Format, Scene};
-use crate::toml_scene::{self, Ctx, MovingMesh, ObjectDef, SceneDef};
+use crate::toml_scene::{self, line_of, Ctx, MovingMesh, ObjectDef, SceneDef};
 use crate::warning::Warnings;
 use crate::{files, limits, Error};
 use glam::{Affine3A, Vec3A};
@@ -274,7 +274,7 @@ impl AnimatedScene {
             moving_meshes: BTreeMap::new(),
         };
         let clock = animation.clock_of(0)?;
-        let first_def = rig.def_at(clock, true);
+        let first_def = rig.def_at(clock, true).map_err(|e| at_clock(e, clock))?;
         let built = toml_scene::build(&first_def, cx, &keeping, &|n| rig.moves(n))
             .map_err(|e| at_clock(e, clock))?;
         let first = built.scene;
@@ -345,7 +345,9 @@ impl Rig {
                 Error::parse(&self.file, line, "mesh transform is singular (zero scale?)")
             })
         };
-        frame(&self.def_at(clock, rebuild)).map_err(|e| at_clock(e, clock))
+        self.def_at(clock, rebuild)
+            .and_then(|def| frame(&def))
+            .map_err(|e| at_clock(e, clock))
     }
 
     /// Each moving object's motion at `clock`, and its scale (for spheres and cones, whose
@@ -376,7 +378,7 @@ impl Rig {
 
     /// The definition with every key list's value at `clock`; without the objects unless
     /// `objects`.
-    fn def_at(&self, clock: f64, objects: bool) -> SceneDef {
+    fn def_at(&self, clock: f64, objects: bool) -> Result<SceneDef, Error> {
         let mut def = if objects {
             self.def.clone()
         } else {
@@ -422,11 +424,26 @@ impl Rig {
         if objects {
             for (i, (xf, s)) in self.motions(clock) {
                 if let Some(o) = def.objects.get_mut(i) {
+                    let uniform = matches!(
+                        o.get_ref(),
+                        ObjectDef::Sphere { .. }
+                            | ObjectDef::Cone { .. }
+                            | ObjectDef::Cylinder { .. }
+                    );
+                    // keys are positive, but a smooth list can overshoot below zero
+                    if uniform && (s <= 0.0 || s.is_nan()) {
+                        let line = line_of(&self.src, o.span().start);
+                        return Err(Error::parse(
+                            &self.file,
+                            line,
+                            format!("object {} is scaled by {s}: a scale must be > 0", i + 1),
+                        ));
+                    }
                     move_object(o.get_mut(), &xf, s);
                 }
             }
         }
-        def
+        Ok(def)
     }
 }
 
@@ -1109,6 +1126,20 @@ keys = [{ clock = 0.5, value = [0.1, 0.1, 0.9] }]
             a.at_clock(1.25).unwrap_err().to_string(),
             "invalid argument: clock 1.25 is outside the animation's clock range [0, 1]"
         );
+        // a smooth scale that overshoots below zero between positive keys
+        let a = parse(&format!(
+            "{BASE}[objects.animate.scale]\ninterpolation = \"smooth\"\nkeys = [\n\
+             {{ clock = 0, value = 3 }}, {{ clock = 0.5, value = 0.1 }},\n\
+             {{ clock = 0.75, value = 0.1 }}, {{ clock = 1, value = 3 }}]\n"
+        ))
+        .unwrap();
+        assert!(a.at_clock(0.25).is_ok());
+        let e = a.at_clock(0.625).unwrap_err().to_string();
+        assert!(
+            e.starts_with("a.toml:9: object 1 is scaled by -0.")
+                && e.ends_with(": a scale must be > 0 (at clock 0.625)"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -1151,7 +1182,7 @@ keys = [{ clock = 0.5, value = [0.1, 0.1, 0.9] }]
         };
         for (n, picture) in pictures.iter().enumerate() {
             let clock = a.animation().clock_of(n as u32).unwrap();
-            let def = rig.def_at(clock, true);
+            let def = rig.def_at(clock, true).unwrap();
             let built = toml_scene::build(&def, &cx, &files, &|m| rig.moves(m)).unwrap();
             assert_eq!(pixels(&built.scene), *picture, "frame {n}");
             let fresh = AnimatedScene::parse(src.as_bytes(), Format::Toml, "a.toml", &files);

@@ -330,7 +330,7 @@ pub(crate) enum ObjectDef {
     },
 }
 
-fn line_of(src: &[u8], offset: usize) -> usize {
+pub(crate) fn line_of(src: &[u8], offset: usize) -> usize {
     1 + src
         .get(..offset.min(src.len()))
         .map_or(0, |s| s.iter().filter(|&&c| c == b'\n').count())
