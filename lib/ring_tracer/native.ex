@@ -26,6 +26,8 @@ defmodule RingTracer.Native do
   def scene_parse(_bytes, _format, _name, _scene_dir, _allow_dirs, _includes), do: err()
   def read_scene_file(_path), do: err()
   def scene_live_count, do: err()
+  def scene_animation(_scene), do: err()
+  def scene_frame(_scene, _frame), do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
   def trace_atom_short(_scene, _settings, _start, _count, _budget_us), do: err()
   def render_image(_scene, _settings, _threads), do: err()

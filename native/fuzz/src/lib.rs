@@ -3,7 +3,7 @@
 //! a tiny resolution so the BVH and the integrator see odd scenes too.
 
 use ring_tracer_kernel::files::Unreadable;
-use ring_tracer_kernel::{limits, trace_span, Format, Scene, Settings};
+use ring_tracer_kernel::{limits, trace_span, AnimatedScene, Format, Scene, Settings};
 
 /// A small fixed mesh (a quad as two triangles, with normals) that every mesh reference resolves
 /// to; files ending in `.mtl` get a small material library instead.
@@ -23,7 +23,12 @@ fn resolve(path: &str) -> Result<Vec<u8>, Unreadable> {
 }
 
 /// Parses `data` as `format`; on success traces a 4x4 image at depth 3 and a 3x2 SPD image.
+/// An animated TOML scene also traces a few pixels of its middle and last frames (whose
+/// errors, a camera that degenerates at some clock, must be short too).
 pub fn run(data: &[u8], format: Format) {
+    if format == Format::Toml {
+        frames(data);
+    }
     let scene = match Scene::parse(data, format, "fuzz", &resolve) {
         Ok(scene) => scene,
         Err(e) => {
@@ -63,4 +68,25 @@ pub fn run(data: &[u8], format: Format) {
         ..base
     };
     trace_span(&scene, &spd, 1, 4).expect("valid span traces");
+}
+
+fn frames(data: &[u8]) {
+    let Ok(animated) = AnimatedScene::parse(data, Format::Toml, "fuzz", &resolve) else {
+        return;
+    };
+    let last = animated.animation().frames() - 1;
+    for n in [last / 2, last] {
+        match animated.frame(n) {
+            Ok(scene) => {
+                let s = Settings {
+                    width: 4,
+                    height: 4,
+                    depth: 3,
+                    ..Settings::for_scene(&scene)
+                };
+                trace_span(&scene, &s, 0, 16).expect("valid span traces");
+            }
+            Err(e) => assert!(e.to_string().len() < 2048, "long error: {e}"),
+        }
+    }
 }

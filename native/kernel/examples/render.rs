@@ -1,18 +1,29 @@
 //! Renders a scene file to an image: `cargo run --release --example render -- scene.nff out.png
-//! [--spd] [--samples S] [--threads N] [--size WxH] [--depth D]`.
+//! [--spd] [--samples S] [--threads N] [--size WxH] [--depth D] [--frame N]`; `--frame`: frame N
+//! (from 0) of an animated scene (default: the first).
 
-use ring_tracer_kernel::{render_image, write_image, Scene, Settings};
+use ring_tracer_kernel::{render_image, write_image, AnimatedScene, Settings};
 use std::path::Path;
 use std::time::Instant;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 2 {
-        eprintln!("usage: render SCENE OUT.png|OUT.exr [--spd] [--samples S] [--threads N] [--size WxH] [--depth D]");
+        eprintln!("usage: render SCENE OUT.png|OUT.exr [--spd] [--samples S] [--threads N] [--size WxH] [--depth D] [--frame N]");
         std::process::exit(2);
     }
     let t0 = Instant::now();
-    let scene = match Scene::load(Path::new(&args[0])) {
+    let frame: u32 = match args.iter().position(|a| a == "--frame") {
+        Some(i) => args
+            .get(i + 1)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| {
+                eprintln!("--frame takes a frame number (from 0)");
+                std::process::exit(2);
+            }),
+        None => 0,
+    };
+    let scene = match AnimatedScene::load(Path::new(&args[0])).and_then(|a| a.frame(frame)) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("{e}");
@@ -31,6 +42,7 @@ fn main() {
                 i += 1;
                 continue;
             }
+            "--frame" => {} // read above
             "--samples" => settings.samples = val.parse().unwrap_or(1),
             "--threads" => threads = val.parse().unwrap_or(2),
             "--depth" => settings.depth = val.parse().unwrap_or(5),

@@ -24,6 +24,9 @@
 //!   address space left; [`warning`]: what parses but may not render as meant
 //!   ([`Scene::warnings`]); [`files`]: the files a scene may read (regular files only, size-checked, and
 //!   referenced files confined to the scene's folder by [`files::Confinement`]).
+//! - [`animation`]: the clock of each frame (POV-Ray's) and key lists (linear, Catmull-Rom);
+//!   [`animated`]: [`AnimatedScene`], a TOML scene's `[animation]` and the [`Scene`] of each
+//!   frame (camera, light and colour changes share the first frame's BVH).
 //! - [`scene`]: [`Scene`] (camera, lights, materials, primitives, BVH) and its queries
 //!   ([`Scene::intersect`], [`Scene::occluded`]); [`geometry`]: spheres, triangles (smooth
 //!   patches keep vertex normals), polygons, cones/cylinders, infinite planes; [`polygon`]:
@@ -50,6 +53,8 @@
 //! allocation per ray.
 #![deny(missing_docs)]
 
+pub mod animated;
+pub mod animation;
 pub mod bvh;
 pub mod camera;
 pub mod error;
@@ -79,6 +84,8 @@ pub mod toml_scene;
 mod tri4;
 pub mod warning;
 
+pub use animated::AnimatedScene;
+pub use animation::{Animation, Interpolation, Track};
 pub use bvh::Scratch;
 pub use camera::Camera;
 pub use error::Error;

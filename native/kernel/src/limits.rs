@@ -12,6 +12,7 @@
 //! | [`MAX_MESH_TRIANGLES`] | 20 000 000 | triangles of one mesh file | by a scan of the `f` lines before the OBJ reader runs, and again after |
 //! | [`MAX_MESH_REFERENCES`] | 1 000 000 | mesh references (`type = "mesh"` objects) of a TOML scene, so also its mesh instances | by a count of the references before any mesh is read, and before each instance is added |
 //! | [`MAX_LIGHTS`] | 65 536 | lights of a scene | before each light is added |
+//! | [`MAX_FRAMES`] | 1 000 000 | frames of an animation (`[animation] frames`) | when the TOML scene is read |
 //! | [`MAX_TOML_BYTES`] | 64 MiB | a TOML scene file (its reader needs about 50 bytes a byte) | before parsing |
 //! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
 //! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
@@ -73,6 +74,9 @@ pub const MAX_MESH_TRIANGLES: usize = 20_000_000;
 pub const MAX_MESH_REFERENCES: usize = 1_000_000;
 /// Largest number of lights.
 pub const MAX_LIGHTS: usize = 65_536;
+/// Largest number of frames of an animation: at 24 a second, over eleven hours; a frame
+/// costs nothing until it is asked for, so this bounds only the frame numbers.
+pub const MAX_FRAMES: u32 = 1_000_000;
 
 /// Largest TOML scene file in bytes (64 MiB). The TOML reader holds the whole document as a
 /// tree, about 50 bytes of memory per byte of file (see "Memory" in the module docs), where the NFF and OBJ

@@ -173,14 +173,45 @@ const FILL_NAMES: [&str; 5] = ["Kd", "Ks", "Shine", "T", "index of refraction"];
 /// Parses NFF bytes into a scene. What parses but may not render as meant becomes a warning of
 /// the scene ([`Scene::warnings`]); see the module docs.
 pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
+    let mut b = SceneBuilder::new();
+    b.display_referred = true;
+    read(bytes, file, &mut b, Role::Scene)?;
+    crate::warning::scene_warnings(&mut b, file);
+    b.build(file)
+}
+
+/// Adds the objects of an NFF file (and its lights when `lights`) to a scene being built from
+/// another file (a TOML scene's `include`): its view `v` and background `b` are read, checked
+/// and left out, and it need not have a view. Its lights without a colour get the SPD's
+/// intensity for the file's own light count, as when it is rendered alone.
+pub(crate) fn include(
+    bytes: &[u8],
+    file: &str,
+    b: &mut SceneBuilder,
+    lights: bool,
+) -> Result<(), Error> {
+    read(bytes, file, b, Role::Include { lights })
+}
+
+/// What an NFF file is to the scene it is read into.
+#[derive(Clone, Copy, PartialEq)]
+enum Role {
+    /// The scene itself: view, background and lights are the scene's.
+    Scene,
+    /// Objects added to another file's scene, with its lights or without them.
+    Include { lights: bool },
+}
+
+fn read(bytes: &[u8], file: &str, b: &mut SceneBuilder, role: Role) -> Result<(), Error> {
     let mut lx = Lexer {
         src: bytes,
         pos: 0,
         line: 1,
         file,
     };
-    let mut b = SceneBuilder::new();
-    b.display_referred = true;
+    let include = role != Role::Scene;
+    let keep_lights = matches!(role, Role::Scene | Role::Include { lights: true });
+    let mut file_lights = 0usize;
     let mut material = b.material(Material::default());
     let mut colourless_lights = Vec::new();
     let mut verts: Vec<Vec3A> = Vec::new();
@@ -204,7 +235,11 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     ));
                 }
                 view_line = Some(line);
-                parse_view(&mut lx, &mut b, line)?;
+                if include {
+                    parse_view(&mut lx, &mut SceneBuilder::new(), line)?;
+                } else {
+                    parse_view(&mut lx, b, line)?;
+                }
             }
             b"b" => {
                 if let Some(first) = background_line {
@@ -217,9 +252,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     ));
                 }
                 background_line = Some(line);
-                b.background = lx.vec3("background colour 'b'", line)?;
-                if let Some(w) = check_light_colour("background colour", b.background) {
-                    b.warnings.add(file, Some(line), || w);
+                let background = lx.vec3("background colour 'b'", line)?;
+                if !include {
+                    b.background = background;
+                    if let Some(w) = check_light_colour("background colour", background) {
+                        b.warnings.add(file, Some(line), || w);
+                    }
                 }
             }
             b"l" => {
@@ -231,17 +269,22 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
                     "MAX_LIGHTS",
                 )
                 .map_err(|e| lx.err(line, e.to_string()))?;
+                file_lights += 1;
                 let color = if lx.peek()?.is_some_and(is_number) {
                     let c = lx.vec3("light colour", line)?;
-                    if let Some(w) = check_light_colour("light colour", c) {
+                    if let Some(w) = check_light_colour("light colour", c).filter(|_| keep_lights) {
                         b.warnings.add(file, Some(line), || w);
                     }
                     c
                 } else {
-                    colourless_lights.push(b.lights.len());
+                    if keep_lights {
+                        colourless_lights.push(b.lights.len());
+                    }
                     Vec3A::ZERO
                 };
-                b.lights.push(Light { position, color });
+                if keep_lights {
+                    b.lights.push(Light { position, color });
+                }
             }
             b"f" => {
                 let what = "fill colour 'f'";
@@ -379,7 +422,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
             }
         }
     }
-    if b.camera.is_none() {
+    if b.camera.is_none() && !include {
         return Err(lx.err(last_line, "no viewpoint: the file has no 'v' entity"));
     }
     if let Some(unused) = unused_fill {
@@ -387,14 +430,13 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Scene, Error> {
             "fill colour 'f' is used by no object: none follows it".into()
         });
     }
-    crate::warning::scene_warnings(&mut b, file);
-    let intensity = spd_intensity(b.lights.len());
+    let intensity = spd_intensity(file_lights);
     for i in colourless_lights {
         if let Some(l) = b.lights.get_mut(i) {
             l.color = Vec3A::splat(intensity);
         }
     }
-    b.build(file)
+    Ok(())
 }
 
 /// A cone's radii must not have opposite signs: NFF.TXT makes a cone with negative radii an

@@ -3,7 +3,6 @@
 
 use crate::bvh::{Bvh, Scratch};
 use crate::camera::Camera;
-use crate::files;
 use crate::files::Unreadable;
 use crate::geometry::{hit_triangle, make_cone, Aabb, Geometry, Shape};
 use crate::instance::{Instance, Mesh, Tri, OWN_MATERIAL};
@@ -17,7 +16,8 @@ use crate::tri4::{RayLanes, TriBlocks};
 use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Vec3A};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+use std::sync::Arc;
 
 /// Scene file formats, chosen by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,6 +46,14 @@ impl Format {
             ))),
         }
     }
+}
+
+/// A mesh instance as the scene placed it: which mesh, where, with what material.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Placement {
+    pub mesh: u32,
+    pub xf: Affine3A,
+    pub material: u32,
 }
 
 /// Per-primitive shading data, in BVH order.
@@ -129,19 +137,24 @@ pub struct Scene {
     pub(crate) ambient: Vec3A,
     pub(crate) lights: Vec<Light>,
     pub(crate) materials: Vec<Material>,
-    pub(crate) geom: Geometry,
-    pub(crate) info: Vec<PrimInfo>,
-    pub(crate) patch_normals: Vec<[Vec3A; 3]>,
-    pub(crate) planes: Vec<Plane>,
-    pub(crate) bvh: Bvh,
+    pub(crate) geom: Arc<Geometry>,
+    pub(crate) info: Arc<Vec<PrimInfo>>,
+    pub(crate) patch_normals: Arc<Vec<[Vec3A; 3]>>,
+    pub(crate) planes: Arc<Vec<Plane>>,
+    pub(crate) bvh: Arc<Bvh>,
     /// The triangles of `bvh`'s all-triangle leaves, four to a SIMD block.
-    pub(crate) tri_blocks: TriBlocks,
+    pub(crate) tri_blocks: Arc<TriBlocks>,
     /// Shared meshes, each stored once.
-    pub(crate) meshes: Vec<Mesh>,
+    pub(crate) meshes: Arc<Vec<Mesh>>,
     /// References to them, in the order of `instance_bvh`'s leaves.
-    pub(crate) instances: Vec<Instance>,
+    pub(crate) instances: Arc<Vec<Instance>>,
     /// The top-level BVH, over the instances' world boxes.
-    pub(crate) instance_bvh: Bvh,
+    pub(crate) instance_bvh: Arc<Bvh>,
+    /// The instances as the scene placed them, in its order (not the BVH's), for
+    /// [`Scene::with_moved_instances`].
+    pub(crate) placements: Arc<Vec<Placement>>,
+    /// Bounds of the scene's own primitives (planes excluded), without the instances.
+    pub(crate) own_bounds: Aabb,
     pub(crate) epsilon: f32,
     pub(crate) bounds: Aabb,
     pub(crate) source_count: usize,
@@ -154,7 +167,7 @@ pub struct Scene {
 impl Scene {
     /// Parse scene bytes. `name` is used in error messages (the file name). `resolve` loads files
     /// the scene references (OBJ meshes, MTL) by the relative path written in the scene; it
-    /// returns their bytes or why it could not ([`files::Unreadable`]).
+    /// returns their bytes or why it could not ([`Unreadable`]).
     pub fn parse(
         bytes: &[u8],
         format: Format,
@@ -171,20 +184,10 @@ impl Scene {
     }
 
     /// Convenience: reads the file ([`files::open_scene`]) and the files it references,
-    /// relative to the folder it was read in and confined to it ([`files::Confinement`]).
+    /// relative to the folder it was read in and confined to it ([`files::Confinement`]). An
+    /// animated scene gives its first frame ([`crate::AnimatedScene::load`] gives them all).
     pub fn load(path: &Path) -> Result<Scene, Error> {
-        let shown = path.display().to_string();
-        let format = Format::from_path(&shown)?;
-        let file = files::open_scene(path, limits::MAX_FILE_BYTES)?;
-        let confinement = files::Confinement::beneath(file.dir, Vec::<PathBuf>::new())?;
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or(shown);
-        let resolve = move |rel: &str| -> Result<Vec<u8>, Unreadable> {
-            confinement.read(rel).map(|(bytes, _)| bytes)
-        };
-        Scene::parse(&file.bytes, format, &name, &resolve)
+        Ok(crate::AnimatedScene::load(path)?.into_first_frame())
     }
 
     /// What parsed but may not render as meant (a degenerate primitive left out, a colour
@@ -766,6 +769,87 @@ impl Scene {
         }
     }
 
+    /// Whether `self` and `other` draw the same built geometry (primitives, meshes and their
+    /// BVHs, shared and not copied): true for two frames of an animation in which only the
+    /// camera, the lights or material colours change ([`crate::AnimatedScene`]).
+    pub fn shares_geometry_with(&self, other: &Scene) -> bool {
+        Arc::ptr_eq(&self.bvh, &other.bvh)
+            && Arc::ptr_eq(&self.geom, &other.geom)
+            && Arc::ptr_eq(&self.instance_bvh, &other.instance_bvh)
+    }
+
+    /// Whether `self` and `other` draw the same primitives and meshes with the same BVHs
+    /// below the top level (shared, not copied): true also for two frames of an animation in
+    /// which only mesh instances move, whose top-level BVH is rebuilt.
+    pub fn shares_primitives_with(&self, other: &Scene) -> bool {
+        Arc::ptr_eq(&self.bvh, &other.bvh)
+            && Arc::ptr_eq(&self.geom, &other.geom)
+            && Arc::ptr_eq(&self.meshes, &other.meshes)
+    }
+
+    /// This scene seen by `camera`, lit by `lights`, with `materials`: the geometry and its
+    /// BVH are shared, not rebuilt. The ray offset follows the camera as [`SceneBuilder::build`]
+    /// makes it, so the result is the scene that building with these values would give.
+    pub(crate) fn with_view(
+        &self,
+        camera: Camera,
+        lights: Vec<Light>,
+        materials: Vec<Material>,
+    ) -> Scene {
+        let mut s = self.clone();
+        s.camera = camera;
+        s.epsilon = epsilon_for(s.bounds, &camera);
+        s.lights = lights;
+        s.materials = materials;
+        s
+    }
+
+    /// This scene with some mesh instances moved: `moved` gives (index in the order the scene
+    /// placed them, new transform). Only the top-level BVH over the instances is built again;
+    /// the meshes, their BVHs and the scene's own primitives are shared. `Ok(None)` names the
+    /// first move whose transform is not invertible; `name` (the scene's file) is in an
+    /// [`Error::Memory`].
+    pub(crate) fn with_moved_instances(
+        &self,
+        moved: &[(usize, Affine3A)],
+        name: &str,
+    ) -> Result<Result<Scene, usize>, Error> {
+        let mut placements: Vec<Placement> = self.placements.as_ref().clone();
+        for (k, (i, xf)) in moved.iter().enumerate() {
+            match placements.get_mut(*i) {
+                Some(p) => p.xf = *xf,
+                None => return Ok(Err(k)),
+            }
+        }
+        let mut list = Vec::with_capacity(placements.len());
+        let mut boxes = Vec::with_capacity(placements.len());
+        for (i, p) in placements.iter().enumerate() {
+            let (Some(inst), Some(mesh)) = (
+                Instance::new(p.mesh, p.xf, p.material),
+                self.meshes.get(p.mesh as usize),
+            ) else {
+                return Ok(Err(moved.iter().position(|m| m.0 == i).unwrap_or(0)));
+            };
+            list.push(inst);
+            boxes.push(mesh.bounds_under(&p.xf));
+        }
+        let (instance_bvh, order) = Bvh::try_build_with(&boxes, crate::bvh::LEAF_MIN, &|| {
+            format!("{name}: the BVH of the mesh instances")
+        })?;
+        let mut s = self.clone();
+        s.instances = Arc::new(
+            order
+                .iter()
+                .filter_map(|&i| list.get(i as usize).copied())
+                .collect(),
+        );
+        s.instance_bvh = Arc::new(instance_bvh);
+        s.placements = Arc::new(placements);
+        s.bounds = boxes.iter().fold(self.own_bounds, |a, b| a.union(*b));
+        s.epsilon = epsilon_for(s.bounds, &s.camera);
+        Ok(Ok(s))
+    }
+
     pub(crate) fn material(&self, index: u32) -> Material {
         self.materials
             .get(index as usize)
@@ -821,6 +905,8 @@ pub(crate) struct SceneBuilder {
     /// Instances of them, and their world boxes.
     instances: Vec<Instance>,
     instance_bounds: Vec<Aabb>,
+    /// How each instance was placed, in the same order.
+    placements: Vec<Placement>,
     /// Primitives stored elsewhere that count towards the bound: the triangles of the shared
     /// meshes (and, in a builder from [`SceneBuilder::for_mesh`], the scene's primitives).
     stored_elsewhere: usize,
@@ -896,6 +982,12 @@ fn ordered_bvh(
     Ok((bvh, shapes, ordered_info, bounds))
 }
 
+/// The offset of secondary rays' origins: a fraction of the extent of the scene and the eye.
+fn epsilon_for(bounds: Aabb, camera: &Camera) -> f32 {
+    let extent = bounds.grow(camera.from).diagonal();
+    (extent * 1e-5).max(1e-6)
+}
+
 impl SceneBuilder {
     pub fn new() -> SceneBuilder {
         SceneBuilder {
@@ -915,6 +1007,7 @@ impl SceneBuilder {
             meshes: Vec::new(),
             instances: Vec::new(),
             instance_bounds: Vec::new(),
+            placements: Vec::new(),
             stored_elsewhere: 0,
             max_primitives: limits::MAX_PRIMITIVES,
             max_instances: limits::MAX_MESH_REFERENCES,
@@ -1014,7 +1107,18 @@ impl SceneBuilder {
         self.source_count = self.source_count.saturating_add(m.tris.len());
         self.instances.push(inst);
         self.instance_bounds.push(bounds);
+        self.placements.push(Placement {
+            mesh,
+            xf,
+            material: material.unwrap_or(OWN_MATERIAL),
+        });
         Ok(true)
+    }
+
+    /// Instances placed so far: the next one placed gets this index in
+    /// [`Scene::with_moved_instances`]'s list.
+    pub fn placed_instances(&self) -> usize {
+        self.placements.len()
     }
 
     /// Adds a material, reusing the last one if identical; returns its index.
@@ -1224,6 +1328,7 @@ impl SceneBuilder {
             .iter()
             .filter_map(|&i| self.instances.get(i as usize).copied())
             .collect();
+        let own_bounds = bounds;
         let bounds = self.instance_bounds.iter().fold(bounds, |a, b| a.union(*b));
         let camera = self.camera.unwrap_or_else(|| {
             Camera::new(Vec3A::Z * 5.0, Vec3A::ZERO, Vec3A::Y, 45.0).unwrap_or(Camera {
@@ -1234,8 +1339,7 @@ impl SceneBuilder {
                 tan_half: 0.5,
             })
         });
-        let extent = bounds.grow(camera.from).diagonal();
-        let epsilon = (extent * 1e-5).max(1e-6);
+        let epsilon = epsilon_for(bounds, &camera);
         let ambient = self
             .ambient
             .unwrap_or(Vec3A::splat(crate::light::spd_intensity(self.lights.len())));
@@ -1249,15 +1353,17 @@ impl SceneBuilder {
             ambient,
             lights: self.lights,
             materials: self.materials,
-            geom: self.geom,
-            info,
-            patch_normals: self.patch_normals,
-            planes: self.planes,
-            bvh,
-            tri_blocks,
-            meshes: self.meshes,
-            instances,
-            instance_bvh,
+            geom: Arc::new(self.geom),
+            info: Arc::new(info),
+            patch_normals: Arc::new(self.patch_normals),
+            planes: Arc::new(self.planes),
+            bvh: Arc::new(bvh),
+            tri_blocks: Arc::new(tri_blocks),
+            meshes: Arc::new(self.meshes),
+            instances: Arc::new(instances),
+            instance_bvh: Arc::new(instance_bvh),
+            placements: Arc::new(self.placements),
+            own_bounds,
             epsilon,
             bounds,
             source_count: self.source_count,

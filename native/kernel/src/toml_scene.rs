@@ -88,7 +88,15 @@
 //! type = "mesh"                     # the same file again: read once, drawn twice
 //! file = "meshes/teapot.obj"
 //! matrix = [[0.5, 0, 0, 2], [0, 0.5, 0, 0], [0, 0, -0.5, -3]]   # a mirror image
+//!
+//! [[objects]]
+//! type = "include"                  # the objects of an NFF file, e.g. an SPD scene; static
+//! file = "spd/balls_s1.nff"         # resolved as a mesh's file; its 'v' and 'b' left out
+//! lights = false                    # its lights too (default false)
 //! ```
+//!
+//! An `[animation]` table and `animate` key lists on the camera, lights, materials and objects
+//! make the scene a sequence of frames: see [`crate::animated`]; [`parse`] gives the first.
 //!
 //! Meshes: every distinct (`file` as written, `smooth`) is read and parsed once. If the scene
 //! references it once, its triangles are transformed into the scene (flattened, as they
@@ -102,6 +110,7 @@
 //! (`a.obj`, `./a.obj`) are two meshes. At most [`limits::MAX_MESH_REFERENCES`] references;
 //! every transform must be invertible.
 
+use crate::animated::AnimatedScene;
 use crate::camera::Camera;
 use crate::error::{quoted_snippets, snippet};
 use crate::files::Unreadable;
@@ -109,8 +118,10 @@ use crate::light::{spd_intensity, Light};
 use crate::limits;
 use crate::material::{check_light_colour, Checker, Material};
 use crate::scene::{Scene, SceneBuilder};
+use crate::warning::Warnings;
 use crate::Error;
 use glam::{Affine3A, Mat3A, Vec3A};
+use serde::de::IgnoredAny;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -118,25 +129,28 @@ use toml::Spanned;
 
 type V3 = [f32; 3];
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
-struct SceneDef {
-    camera: Spanned<CameraDef>,
+pub(crate) struct SceneDef {
+    /// Read by [`crate::animated`] (a second pass over the text keeps the spans of the keys).
+    #[serde(default)]
+    animation: Option<IgnoredAny>,
+    pub(crate) camera: Spanned<CameraDef>,
     #[serde(default)]
     background: Option<Spanned<V3>>,
     #[serde(default)]
     ambient: Option<Spanned<Scalar3>>,
     #[serde(default)]
-    lights: Vec<Spanned<LightDef>>,
+    pub(crate) lights: Vec<Spanned<LightDef>>,
     #[serde(default)]
-    materials: BTreeMap<String, Spanned<MaterialDef>>,
+    pub(crate) materials: BTreeMap<String, Spanned<MaterialDef>>,
     #[serde(default)]
-    objects: Vec<Spanned<ObjectDef>>,
+    pub(crate) objects: Vec<Spanned<ObjectDef>>,
 }
 
 #[derive(Deserialize, Clone, Copy)]
 #[serde(untagged)]
-enum Scalar3 {
+pub(crate) enum Scalar3 {
     One(f32),
     Three(V3),
 }
@@ -175,30 +189,34 @@ fn yes() -> bool {
     true
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
-struct CameraDef {
-    from: V3,
-    at: V3,
+pub(crate) struct CameraDef {
+    pub(crate) from: V3,
+    pub(crate) at: V3,
     #[serde(default = "up_y")]
-    up: V3,
+    pub(crate) up: V3,
     #[serde(default = "fov45")]
-    fov: f32,
+    pub(crate) fov: f32,
     #[serde(default = "w640")]
     width: u32,
     #[serde(default = "h480")]
     height: u32,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LightDef {
-    position: V3,
     #[serde(default)]
-    color: Option<V3>,
+    animate: Option<IgnoredAny>,
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Clone)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct LightDef {
+    pub(crate) position: V3,
+    #[serde(default)]
+    pub(crate) color: Option<V3>,
+    #[serde(default)]
+    animate: Option<IgnoredAny>,
+}
+
+#[derive(Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
 struct CheckerDef {
     color2: V3,
@@ -206,11 +224,11 @@ struct CheckerDef {
     scale: f32,
 }
 
-#[derive(Deserialize)]
+#[derive(Deserialize, Clone)]
 #[serde(deny_unknown_fields)]
-struct MaterialDef {
+pub(crate) struct MaterialDef {
     #[serde(default = "one3")]
-    color: V3,
+    pub(crate) color: V3,
     #[serde(default = "one")]
     kd: f32,
     #[serde(default)]
@@ -223,22 +241,29 @@ struct MaterialDef {
     ior: f32,
     #[serde(default)]
     checker: Option<CheckerDef>,
+    #[serde(default)]
+    animate: Option<IgnoredAny>,
 }
 
-#[derive(Deserialize)]
+/// An object as written; `animate` (its key lists) is read by [`crate::animated`].
+#[derive(Deserialize, Clone)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-enum ObjectDef {
+pub(crate) enum ObjectDef {
     Sphere {
         center: V3,
         radius: f32,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Plane {
         point: V3,
         normal: V3,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Triangle {
         vertices: [V3; 3],
@@ -246,11 +271,15 @@ enum ObjectDef {
         normals: Option<[V3; 3]>,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Polygon {
         vertices: Vec<V3>,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Cone {
         base: V3,
@@ -259,6 +288,8 @@ enum ObjectDef {
         apex_radius: f32,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Cylinder {
         base: V3,
@@ -266,6 +297,8 @@ enum ObjectDef {
         radius: f32,
         #[serde(default)]
         material: Option<String>,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
     Mesh {
         file: String,
@@ -281,26 +314,53 @@ enum ObjectDef {
         material: Option<String>,
         #[serde(default = "yes")]
         smooth: bool,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
+        /// The animation's move at a clock, applied after the mesh's own placement.
+        #[serde(skip)]
+        motion: Option<Affine3A>,
+    },
+    /// The objects of an NFF file (its lights too with `lights = true`).
+    Include {
+        file: String,
+        #[serde(default)]
+        lights: bool,
+        #[serde(default)]
+        animate: Option<IgnoredAny>,
     },
 }
 
-fn line_of(src: &[u8], offset: usize) -> usize {
+pub(crate) fn line_of(src: &[u8], offset: usize) -> usize {
     1 + src
         .get(..offset.min(src.len()))
         .map_or(0, |s| s.iter().filter(|&&c| c == b'\n').count())
 }
 
-struct Ctx<'a> {
-    src: &'a [u8],
-    file: &'a str,
+/// The text of a TOML scene and its name, for errors and warnings with lines.
+pub(crate) struct Ctx<'a> {
+    pub(crate) src: &'a [u8],
+    pub(crate) file: &'a str,
 }
 
 impl Ctx<'_> {
-    fn err(&self, span: Range<usize>, msg: impl Into<String>) -> Error {
+    pub(crate) fn line(&self, span: &Range<usize>) -> usize {
+        line_of(self.src, span.start)
+    }
+
+    fn warn(&self, warnings: &mut Warnings, span: &Range<usize>, w: String) {
+        warnings.add(self.file, Some(self.line(span)), move || w)
+    }
+
+    pub(crate) fn err(&self, span: Range<usize>, msg: impl Into<String>) -> Error {
         Error::parse(self.file, line_of(self.src, span.start), msg)
     }
 
-    fn finite(&self, span: &Range<usize>, what: &str, vals: &[f32]) -> Result<(), Error> {
+    pub(crate) fn finite(
+        &self,
+        span: &Range<usize>,
+        what: &str,
+        vals: &[f32],
+    ) -> Result<(), Error> {
         if vals.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
@@ -317,12 +377,35 @@ impl Ctx<'_> {
     }
 }
 
-/// Parses a TOML scene.
+/// Parses a TOML scene; an animated one gives its first frame (see [`crate::animated`]).
 pub fn parse(
     bytes: &[u8],
     file: &str,
     resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
 ) -> Result<Scene, Error> {
+    Ok(parse_animated(bytes, file, resolve)?.into_first_frame())
+}
+
+/// Parses a TOML scene with its animation: a scene without `[animation]` is a still (one
+/// frame at clock 0).
+pub(crate) fn parse_animated(
+    bytes: &[u8],
+    file: &str,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
+) -> Result<AnimatedScene, Error> {
+    let def = read(bytes, file)?;
+    let cx = Ctx { src: bytes, file };
+    if def.animated() {
+        return AnimatedScene::from_toml(def, &cx, resolve);
+    }
+    Ok(AnimatedScene::still(
+        build(&def, &cx, resolve, &|_| false)?.scene,
+    ))
+}
+
+/// Reads the text of a TOML scene into its definition: size, encoding, token lengths and
+/// TOML syntax checked, every key known.
+pub(crate) fn read(bytes: &[u8], file: &str) -> Result<SceneDef, Error> {
     limits::check_with(
         format!("the size of {file}"),
         bytes.len() as u64,
@@ -331,28 +414,84 @@ pub fn parse(
         "MAX_TOML_BYTES",
         limits::MESHES,
     )?;
-    let text = std::str::from_utf8(bytes).map_err(|e| {
+    let text = text(bytes, file)?;
+    // before the TOML reader copies any key or string
+    limits::check_tokens(bytes, limits::Tokens::Toml, file)?;
+    from_toml(text, bytes, file)
+}
+
+/// The text of a TOML file; not UTF-8 is an error at the line of the first bad byte.
+pub(crate) fn text<'a>(bytes: &'a [u8], file: &str) -> Result<&'a str, Error> {
+    std::str::from_utf8(bytes).map_err(|e| {
         Error::parse(
             file,
             line_of(bytes, e.valid_up_to()),
             "the file is not valid UTF-8",
         )
-    })?;
-    // before the TOML reader copies any key or string
-    limits::check_tokens(bytes, limits::Tokens::Toml, file)?;
-    let def: SceneDef = toml::from_str(text).map_err(|e| {
+    })
+}
+
+/// Deserialises TOML text, with a TOML error at its line.
+pub(crate) fn from_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    bytes: &[u8],
+    file: &str,
+) -> Result<T, Error> {
+    toml::from_str(text).map_err(|e| {
         let line = e.span().map_or(1, |s| line_of(bytes, s.start));
         Error::parse(file, line, quoted_snippets(e.message().trim()))
-    })?;
-    let cx = Ctx { src: bytes, file };
-    let warn = |b: &mut SceneBuilder, span: &Range<usize>, w: String| {
-        b.warnings
-            .add(file, Some(line_of(bytes, span.start)), move || w)
-    };
-    let mut b = SceneBuilder::new();
+    })
+}
 
+impl SceneDef {
+    /// Whether the file has an `[animation]` table or a key list (`animate`) anywhere.
+    fn animated(&self) -> bool {
+        self.animation.is_some()
+            || self.camera.get_ref().animate.is_some()
+            || self.lights.iter().any(|l| l.get_ref().animate.is_some())
+            || self
+                .materials
+                .values()
+                .any(|m| m.get_ref().animate.is_some())
+            || self.objects.iter().any(|o| o.get_ref().animate().is_some())
+    }
+}
+
+impl SceneDef {
+    /// A copy without the objects: all that a frame needs when only the camera, the lights
+    /// and material colours move.
+    pub(crate) fn without_objects(&self) -> SceneDef {
+        SceneDef {
+            animation: self.animation,
+            camera: self.camera.clone(),
+            background: self.background.clone(),
+            ambient: self.ambient.clone(),
+            lights: self.lights.clone(),
+            materials: self.materials.clone(),
+            objects: Vec::new(),
+        }
+    }
+}
+
+impl ObjectDef {
+    fn animate(&self) -> Option<IgnoredAny> {
+        match self {
+            ObjectDef::Sphere { animate, .. }
+            | ObjectDef::Plane { animate, .. }
+            | ObjectDef::Triangle { animate, .. }
+            | ObjectDef::Polygon { animate, .. }
+            | ObjectDef::Cone { animate, .. }
+            | ObjectDef::Cylinder { animate, .. }
+            | ObjectDef::Mesh { animate, .. }
+            | ObjectDef::Include { animate, .. } => *animate,
+        }
+    }
+}
+
+/// The camera and the image size of a scene definition.
+pub(crate) fn camera(def: &SceneDef, cx: &Ctx) -> Result<(Camera, (u32, u32)), Error> {
     let cspan = def.camera.span();
-    let c = def.camera.into_inner();
+    let c = def.camera.get_ref();
     let from = cx.v3(&cspan, "camera 'from'", c.from)?;
     let at = cx.v3(&cspan, "camera 'at'", c.at)?;
     let up = cx.v3(&cspan, "camera 'up'", c.up)?;
@@ -363,30 +502,23 @@ pub fn parse(
             format!("camera 'fov' {} is not in (0, 180) degrees", c.fov),
         ));
     }
-    b.camera = Some(Camera::new(from, at, up, c.fov).ok_or_else(|| {
+    let camera = Camera::new(from, at, up, c.fov).ok_or_else(|| {
         cx.err(
             cspan.clone(),
             "degenerate camera: 'from' equals 'at', or 'up' is parallel to the view direction",
         )
-    })?);
+    })?;
     limits::check_resolution(c.width, c.height)
         .map_err(|e| cx.err(cspan.clone(), format!("camera resolution: {e}")))?;
-    b.resolution = (c.width, c.height);
+    Ok((camera, (c.width, c.height)))
+}
 
-    if let Some(bg) = def.background {
-        b.background = cx.v3(&bg.span(), "background", *bg.get_ref())?;
-        if let Some(w) = check_light_colour("background", b.background) {
-            warn(&mut b, &bg.span(), w);
-        }
-    }
-    if let Some(a) = def.ambient {
-        let v = a.get_ref().vec();
-        cx.finite(&a.span(), "ambient", &v.to_array())?;
-        if let Some(w) = check_light_colour("ambient", v) {
-            warn(&mut b, &a.span(), w);
-        }
-        b.ambient = Some(v);
-    }
+/// The lights of a scene definition; their warnings go to `warnings`.
+pub(crate) fn lights(
+    def: &SceneDef,
+    cx: &Ctx,
+    warnings: &mut Warnings,
+) -> Result<Vec<Light>, Error> {
     limits::check(
         "light count",
         def.lights.len() as u64,
@@ -401,6 +533,7 @@ pub fn parse(
         cx.err(first_extra, e.to_string())
     })?;
     let n = def.lights.len();
+    let mut out = Vec::with_capacity(n);
     for l in &def.lights {
         let span = l.span();
         let l = l.get_ref();
@@ -409,60 +542,131 @@ pub fn parse(
             Some(c) => {
                 let c = cx.v3(&span, "light 'color'", c)?;
                 if let Some(w) = check_light_colour("light 'color'", c) {
-                    warn(&mut b, &span, w);
+                    cx.warn(warnings, &span, w);
                 }
                 c
             }
             None => Vec3A::splat(spd_intensity(n)),
         };
-        b.lights.push(Light { position, color });
+        out.push(Light { position, color });
     }
+    Ok(out)
+}
+
+/// Material `name` of a scene definition; its warnings go to `warnings`.
+pub(crate) fn material(
+    cx: &Ctx,
+    name: &str,
+    m: &Spanned<MaterialDef>,
+    warnings: &mut Warnings,
+) -> Result<Material, Error> {
+    let span = m.span();
+    let m = m.get_ref();
+    let what = format!("material '{}'", snippet(name));
+    cx.finite(&span, &what, &[m.kd, m.ks, m.shine, m.t, m.ior])?;
+    let checker = match &m.checker {
+        Some(ch) => {
+            if !(ch.scale.is_finite() && ch.scale > 0.0) {
+                return Err(cx.err(span, format!("{what}: checker scale must be > 0")));
+            }
+            Some(Checker {
+                color2: cx.v3(&span, &what, ch.color2)?,
+                scale: ch.scale,
+            })
+        }
+        None => None,
+    };
+    let mat = Material {
+        color: cx.v3(&span, &what, m.color)?,
+        kd: m.kd,
+        ks: m.ks,
+        shine: m.shine,
+        t: m.t,
+        ior: m.ior,
+        checker,
+    };
+    let keys = ["'kd'", "'ks'", "'shine'", "'t'", "'ior'"];
+    for w in mat
+        .check(keys)
+        .map_err(|e| cx.err(span.clone(), format!("{what}: {e}")))?
+    {
+        cx.warn(warnings, &span, format!("{what}: {w}"));
+    }
+    Ok(mat)
+}
+
+/// What [`build`] made: the scene, each named material's index in it, and for each mesh
+/// object that moves (has a `motion`) its instance.
+pub(crate) struct Built {
+    pub(crate) scene: Scene,
+    pub(crate) materials: BTreeMap<String, u32>,
+    pub(crate) moving_meshes: BTreeMap<usize, MovingMesh>,
+}
+
+/// A moving mesh object's instance: its index in the scene's placements
+/// ([`Scene::with_moved_instances`]), the transform of the object as written (the motion
+/// applies after it), and the object's line.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MovingMesh {
+    pub(crate) instance: usize,
+    pub(crate) placed: Affine3A,
+    pub(crate) line: usize,
+}
+
+/// Builds the scene a definition describes. `own(name)`: material `name` gets an index of its
+/// own (an animated colour must not change a material that happens to equal it). A mesh with
+/// a `motion` is always an instance (also when referenced once), so that moving it moves only
+/// the instance.
+pub(crate) fn build(
+    def: &SceneDef,
+    cx: &Ctx,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
+    own: &dyn Fn(&str) -> bool,
+) -> Result<Built, Error> {
+    let file = cx.file;
+    let warn =
+        |b: &mut SceneBuilder, span: &Range<usize>, w: String| cx.warn(&mut b.warnings, span, w);
+    let mut b = SceneBuilder::new();
+    let (camera, resolution) = camera(def, cx)?;
+    b.camera = Some(camera);
+    b.resolution = resolution;
+
+    if let Some(bg) = &def.background {
+        b.background = cx.v3(&bg.span(), "background", *bg.get_ref())?;
+        if let Some(w) = check_light_colour("background", b.background) {
+            warn(&mut b, &bg.span(), w);
+        }
+    }
+    if let Some(a) = &def.ambient {
+        let v = a.get_ref().vec();
+        cx.finite(&a.span(), "ambient", &v.to_array())?;
+        if let Some(w) = check_light_colour("ambient", v) {
+            warn(&mut b, &a.span(), w);
+        }
+        b.ambient = Some(v);
+    }
+    b.lights = lights(def, cx, &mut b.warnings)?;
 
     // Mesh references by (file as written, smooth): a mesh referenced once is flattened into
     // the scene, one referenced more often is read once and instanced.
-    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, &cx)?;
+    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, cx)?;
     let mut shared: BTreeMap<(&str, bool), u32> = BTreeMap::new();
 
-    let mut names: BTreeMap<&str, u32> = BTreeMap::new();
+    let mut names: BTreeMap<String, u32> = BTreeMap::new();
     let default_mat = b.material(Material::default());
     for (name, m) in &def.materials {
-        let span = m.span();
-        let m = m.get_ref();
-        let what = format!("material '{}'", snippet(name));
-        cx.finite(&span, &what, &[m.kd, m.ks, m.shine, m.t, m.ior])?;
-        let checker = match &m.checker {
-            Some(ch) => {
-                if !(ch.scale.is_finite() && ch.scale > 0.0) {
-                    return Err(cx.err(span, format!("{what}: checker scale must be > 0")));
-                }
-                Some(Checker {
-                    color2: cx.v3(&span, &what, ch.color2)?,
-                    scale: ch.scale,
-                })
-            }
-            None => None,
+        let mat = material(cx, name, m, &mut b.warnings)?;
+        let idx = if own(name) {
+            b.materials.push(mat);
+            (b.materials.len() - 1) as u32
+        } else {
+            b.material(mat)
         };
-        let mat = Material {
-            color: cx.v3(&span, &what, m.color)?,
-            kd: m.kd,
-            ks: m.ks,
-            shine: m.shine,
-            t: m.t,
-            ior: m.ior,
-            checker,
-        };
-        let keys = ["'kd'", "'ks'", "'shine'", "'t'", "'ior'"];
-        for w in mat
-            .check(keys)
-            .map_err(|e| cx.err(span.clone(), format!("{what}: {e}")))?
-        {
-            warn(&mut b, &span, format!("{what}: {w}"));
-        }
-        let idx = b.material(mat);
-        names.insert(name.as_str(), idx);
+        names.insert(name.clone(), idx);
     }
 
-    for o in &def.objects {
+    let mut moving_meshes = BTreeMap::new();
+    for (index, o) in def.objects.iter().enumerate() {
         let span = o.span();
         let find = |m: &Option<String>| -> Result<u32, Error> {
             match m {
@@ -481,6 +685,7 @@ pub fn parse(
                 center,
                 radius,
                 material,
+                ..
             } => {
                 let c = cx.v3(&span, "sphere 'center'", *center)?;
                 cx.finite(&span, "sphere 'radius'", &[*radius])?;
@@ -491,6 +696,7 @@ pub fn parse(
                 point,
                 normal,
                 material,
+                ..
             } => {
                 let p = cx.v3(&span, "plane 'point'", *point)?;
                 let n = cx.v3(&span, "plane 'normal'", *normal)?;
@@ -502,6 +708,7 @@ pub fn parse(
                 vertices,
                 normals,
                 material,
+                ..
             } => {
                 let v = [
                     cx.v3(&span, "triangle 'vertices'", vertices[0])?,
@@ -531,7 +738,9 @@ pub fn parse(
                 b.triangle(v, n, find(material)?).map_err(lim)?;
                 degenerate = Some("triangle has zero area (its vertices are equal or on one line)");
             }
-            ObjectDef::Polygon { vertices, material } => {
+            ObjectDef::Polygon {
+                vertices, material, ..
+            } => {
                 if vertices.len() < 3 {
                     return Err(cx.err(
                         span,
@@ -558,6 +767,7 @@ pub fn parse(
                 apex,
                 apex_radius,
                 material,
+                ..
             } => {
                 let b0 = cx.v3(&span, "cone 'base'", *base)?;
                 let a0 = cx.v3(&span, "cone 'apex'", *apex)?;
@@ -573,6 +783,7 @@ pub fn parse(
                 apex,
                 radius,
                 material,
+                ..
             } => {
                 let b0 = cx.v3(&span, "cylinder 'base'", *base)?;
                 let a0 = cx.v3(&span, "cylinder 'apex'", *apex)?;
@@ -589,6 +800,8 @@ pub fn parse(
                 matrix,
                 material,
                 smooth,
+                motion,
+                ..
             } => {
                 let xf = if let Some(m) = matrix {
                     if translate.is_some() || scale.is_some() || rotate_y_degrees.is_some() {
@@ -613,6 +826,8 @@ pub fn parse(
                         * Affine3A::from_rotation_y(r.to_radians())
                         * Affine3A::from_scale(s.into())
                 };
+                let placed = xf;
+                let xf = motion.map_or(xf, |m| m * xf);
                 // the inverse is what an instance keeps, so it must exist whatever the count
                 if xf.matrix3.determinant() == 0.0 || !xf.inverse().is_finite() {
                     return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
@@ -630,7 +845,7 @@ pub fn parse(
                     crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, b)
                         .map_err(|e| cx.err(span.clone(), e.to_string()))
                 };
-                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 {
+                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 && motion.is_none() {
                     // referenced once: flattened, as it always was
                     load(xf, mat, &mut b)?;
                 } else {
@@ -646,10 +861,44 @@ pub fn parse(
                             m
                         }
                     };
+                    let instance = b.placed_instances();
                     if !b.instance(mesh, xf, mat).map_err(lim)? {
                         return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
                     }
+                    // (an empty mesh places no instance, and there is nothing to move)
+                    if motion.is_some() && b.placed_instances() > instance {
+                        let line = cx.line(&span);
+                        moving_meshes.insert(
+                            index,
+                            MovingMesh {
+                                instance,
+                                placed,
+                                line,
+                            },
+                        );
+                    }
                 }
+            }
+            ObjectDef::Include {
+                file: included,
+                lights,
+                ..
+            } => {
+                let shown = snippet(included);
+                let data = resolve(included)
+                    .map_err(|e| cx.err(span.clone(), format!("cannot include '{shown}': {e}")))?;
+                let format = crate::scene::Format::from_path(included);
+                if format != Ok(crate::scene::Format::Nff) {
+                    return Err(cx.err(
+                        span,
+                        format!(
+                            "cannot include '{shown}': only NFF files (.nff) are included; an \
+                             OBJ file is a \"mesh\""
+                        ),
+                    ));
+                }
+                let data = crate::files::without_bom(&data);
+                crate::nff::include(data, &shown, &mut b, *lights)?;
             }
         }
         if let Some(what) = degenerate.filter(|_| b.primitive_count() == before) {
@@ -657,7 +906,11 @@ pub fn parse(
         }
     }
     crate::warning::scene_warnings(&mut b, file);
-    b.build(file)
+    Ok(Built {
+        scene: b.build(file)?,
+        materials: names,
+        moving_meshes,
+    })
 }
 
 /// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the
@@ -751,15 +1004,17 @@ mod tests {
         let resolve = |p: &str| -> Result<Vec<u8>, Unreadable> {
             if p == "meshes/teapot.obj" {
                 Ok(obj.as_bytes().to_vec())
+            } else if p == "spd/balls_s1.nff" {
+                Ok(b"l 9 9 9\nf 1 1 1 1 0 0 0 0\ns 0 0 -5 1\n".to_vec())
             } else {
                 Err(format!("no {p}").into())
             }
         };
         let s = parse(src.as_bytes(), "doc.toml", &resolve).unwrap();
         assert_eq!(s.resolution(), (640, 480));
-        // the mesh's one triangle is stored once and drawn twice
-        assert_eq!(s.primitive_count(), 8);
-        assert_eq!(s.stored_primitive_count(), 8);
+        // the mesh's one triangle is stored once and drawn twice; the include adds a sphere
+        assert_eq!(s.primitive_count(), 9);
+        assert_eq!(s.stored_primitive_count(), 9);
         assert_eq!((s.mesh_count(), s.instance_count()), (1, 2));
         assert_eq!(s.light_count(), 1);
     }
@@ -792,6 +1047,62 @@ mod tests {
         assert!(e.starts_with("s.toml:5: cannot load mesh 'x.obj'"), "{e}");
         let e = err("[camera]\nfrom = [0, 0, 5\n");
         assert!(e.starts_with("s.toml:2:"), "{e}");
+    }
+
+    #[test]
+    fn includes_the_objects_of_an_nff_file() {
+        let nff = "v\nfrom 0 0 9\nat 0 0 0\nup 0 1 0\nangle 30\nhither 1\nresolution 8 8\n\
+                   b 0.1 0.2 0.3\nl 1 1 1\nl 2 2 2 0.5 0.5 0.5\nf 1 0 0 1 0 0 0 0\n\
+                   s 0 0 0 1\np 3\n0 0 0\n1 0 0\n0 1 0\n";
+        let files = |p: &str| -> Result<Vec<u8>, Unreadable> {
+            match p {
+                "spd/x.nff" => Ok(nff.as_bytes().to_vec()),
+                "bad.nff" => Ok(b"s 0 0 0 1\np 2\n".to_vec()),
+                "m.obj" => Ok(b"v 0 0 0\n".to_vec()),
+                _ => Err(format!("no {p}").into()),
+            }
+        };
+        let scene = |extra: &str| {
+            let src = format!(
+                "{CAM}[[lights]]\nposition = [0, 9, 0]\n\n[[objects]]\ntype = \"sphere\"\n\
+                 center = [3, 0, 0]\nradius = 1\n\n[[objects]]\ntype = \"include\"\n{extra}"
+            );
+            parse(src.as_bytes(), "s.toml", &files)
+        };
+        let s = scene("file = \"spd/x.nff\"\n").unwrap();
+        // the NFF's sphere and triangle, beside the TOML's sphere; its view and background
+        // are left out, its lights too unless asked for
+        assert_eq!(s.primitive_count(), 3);
+        assert_eq!(s.camera().from, Vec3A::new(0.0, 0.0, 5.0));
+        assert_eq!(s.resolution(), (640, 480));
+        assert_eq!(s.background, Vec3A::ZERO);
+        assert_eq!(s.light_count(), 1);
+        assert!(!s.display_referred());
+        let s = scene("file = \"spd/x.nff\"\nlights = true\n").unwrap();
+        assert_eq!(s.light_count(), 3);
+        // a light without a colour has the SPD's intensity for the NFF's own two lights
+        let half = spd_intensity(2);
+        assert_eq!(s.lights[1].color, Vec3A::splat(half));
+        assert_eq!(s.lights[2].color, Vec3A::splat(0.5));
+        // an error in the included file names it and its line
+        let e = scene("file = \"bad.nff\"\n").unwrap_err().to_string();
+        assert_eq!(e, "bad.nff:2: polygon needs at least 3 vertices, got 2");
+        let e = scene("file = \"gone.nff\"\n").unwrap_err().to_string();
+        assert!(
+            e.starts_with("s.toml:12: cannot include 'gone.nff': no gone.nff"),
+            "{e}"
+        );
+        let e = scene("file = \"m.obj\"\n").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "s.toml:12: cannot include 'm.obj': only NFF files (.nff) are included; an OBJ file \
+             is a \"mesh\""
+        );
+        let e = scene("lights = true\n").unwrap_err().to_string();
+        assert!(
+            e.starts_with("s.toml:") && e.contains("missing field `file`"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! Malformed input must give errors, never panics; limits are checked before allocation.
 
 use ring_tracer_kernel::files::Unreadable;
-use ring_tracer_kernel::{render_image, trace_span, Error, Format, Scene, Settings};
+use ring_tracer_kernel::{render_image, trace_span, AnimatedScene, Error, Format, Scene, Settings};
 
 fn resolve(_: &str) -> Result<Vec<u8>, Unreadable> {
     Err("no files here".into())
@@ -491,6 +491,20 @@ fn fuzz_seed_corpora_parse_and_trace() {
                 ..s
             };
             trace_span(&scene, &spd, 1, 4).unwrap();
+            if format == Format::Toml {
+                // every frame of an animated seed (a still has one, the scene itself)
+                let animated = AnimatedScene::parse(&bytes, format, "seed", &fuzz_resolve)
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                for n in 0..animated.animation().frames() {
+                    let frame = animated.frame(n).unwrap();
+                    let (rgb, _) = trace_span(&frame, &s, 0, 16).unwrap();
+                    assert!(
+                        rgb.iter().all(|v| v.is_finite()),
+                        "{} frame {n}",
+                        path.display()
+                    );
+                }
+            }
             seen += 1;
         }
     }

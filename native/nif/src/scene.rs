@@ -6,25 +6,28 @@ use std::os::fd::OwnedFd;
 use std::os::unix::ffi::OsStrExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicI64, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use ring_tracer_kernel::files::{self, Confinement, Unreadable};
-use ring_tracer_kernel::{limits, Format, Scene};
+use ring_tracer_kernel::{limits, AnimatedScene, Format, Scene};
 use rustler::{Binary, Env, NifMap, OwnedBinary, ResourceArc};
 
 use crate::convert::message;
 
 static LIVE_SCENES: AtomicI64 = AtomicI64::new(0);
 
-/// A parsed scene with its BVH, shared by every grandchild on this node.
+/// A parsed scene with its BVH, shared by every grandchild on this node: one frame of its
+/// animation (the first, as parsed; a still has only that one), and the animation, from which
+/// [`scene_frame`] makes the resource of any other frame.
 pub struct SceneResource {
     pub scene: Scene,
+    pub animated: Arc<AnimatedScene>,
 }
 
 impl SceneResource {
-    fn new(scene: Scene) -> Self {
+    fn new(scene: Scene, animated: Arc<AnimatedScene>) -> Self {
         LIVE_SCENES.fetch_add(1, Ordering::Relaxed);
-        SceneResource { scene }
+        SceneResource { scene, animated }
     }
 }
 
@@ -143,7 +146,9 @@ fn scene_parse<'a>(
         }
         Ok(data)
     };
-    let scene = Scene::parse(bytes.as_slice(), format, &name, &resolve).map_err(message)?;
+    let animated =
+        AnimatedScene::parse(bytes.as_slice(), format, &name, &resolve).map_err(message)?;
+    let scene = animated.first_frame().clone();
     let (width, height) = scene.resolution();
     let info = SceneInfo {
         width,
@@ -175,7 +180,7 @@ fn scene_parse<'a>(
         .map(|p| path_binary(env, p))
         .collect();
     Ok((
-        ResourceArc::new(SceneResource::new(scene)),
+        ResourceArc::new(SceneResource::new(scene, Arc::new(animated))),
         info,
         files,
         read,
@@ -200,6 +205,52 @@ fn read_scene_file<'a>(
         path_binary(env, &file.path),
         ResourceArc::new(SceneDirResource { fd: file.dir }),
     ))
+}
+
+/// The animation of a parsed scene ([`ring_tracer_kernel::Animation`]); a still has one frame
+/// at clock 0.
+#[derive(NifMap)]
+pub struct AnimationInfo {
+    pub frames: u32,
+    pub clock_start: f64,
+    pub clock_end: f64,
+    pub cyclic: bool,
+    /// Whether objects move.
+    pub moves_objects: bool,
+    /// Whether each frame builds its primitives and BVH anew (objects other than meshes
+    /// move); otherwise frames share the first frame's (moving meshes rebuild only the
+    /// top-level BVH over their instances).
+    pub rebuilds_primitives: bool,
+}
+
+/// The frame count and clock range of a parsed scene.
+#[rustler::nif]
+fn scene_animation(scene: ResourceArc<SceneResource>) -> AnimationInfo {
+    let a = scene.animated.animation();
+    let (clock_start, clock_end) = a.clock_range();
+    AnimationInfo {
+        frames: a.frames(),
+        clock_start,
+        clock_end,
+        cyclic: a.cyclic(),
+        moves_objects: scene.animated.moves_objects(),
+        rebuilds_primitives: scene.animated.rebuilds_primitives(),
+    }
+}
+
+/// The scene of frame `frame` (from 0) of a parsed scene's animation, at the clock POV-Ray gives
+/// it (`ring_tracer_kernel::Animation::clock_of`), as a resource that `trace_atom` and the
+/// other scene calls take. Frame `n` is the same scene whichever frame's resource it is made
+/// from. Cheap when only the camera, lights, colours or meshes move (the primitives and their
+/// BVHs are shared); a dirty-CPU call, since other moving objects rebuild them.
+#[rustler::nif(schedule = "DirtyCpu")]
+fn scene_frame(
+    scene: ResourceArc<SceneResource>,
+    frame: u32,
+) -> Result<ResourceArc<SceneResource>, String> {
+    let animated = Arc::clone(&scene.animated);
+    let frame = animated.frame(frame).map_err(message)?;
+    Ok(ResourceArc::new(SceneResource::new(frame, animated)))
 }
 
 /// How many parsed scenes are alive on this node (for leak checks).
