@@ -8,10 +8,10 @@ defmodule RingTracer.NativeTest do
   defp parse(name) do
     path = TestScenes.path(name)
     format = String.trim_leading(Path.extname(path), ".")
-    bytes = File.read!(path)
+    {:ok, {bytes, _real, dir}} = Native.read_scene_file(path)
 
     {:ok, {ref, _info, _files, _paths}} =
-      Native.scene_parse(bytes, format, Path.basename(path), Path.dirname(path), [], %{})
+      Native.scene_parse(bytes, format, Path.basename(path), dir, [], %{})
 
     ref
   end
