@@ -455,7 +455,8 @@ defmodule RingTracer.Cluster.Distribution do
   defp start_epmd(listen) do
     env =
       cond do
-        any_address?(listen) -> []
+        # asked for (--listen 0.0.0.0): every address, whatever the caller's environment says
+        any_address?(listen) -> [{"ERL_EPMD_ADDRESS", nil}]
         loopback?(listen) -> [{"ERL_EPMD_ADDRESS", "127.0.0.1"}]
         true -> [{"ERL_EPMD_ADDRESS", "127.0.0.1,#{:inet.ntoa(listen)}"}]
       end
