@@ -32,6 +32,9 @@ defmodule RingTracer do
     * `:cutoff` — adaptive cut-off: a branch whose weight falls below it is
       not traced (default #{RingTracer.Settings.shown_default(:cutoff)}; 0 disables)
     * `:samples` — S x S stratified samples per pixel (default #{RingTracer.Settings.shown_default(:samples)})
+    * `:frame` — which frame of an animated scene to render, from 1 to the
+      scene's `:frames`, at POV-Ray's clock for it (default 1; see
+      docs/scene-format.md, "Animation"). A still has one frame
     * `:spd` — SPD testing procedure: rays through pixel corners, no
       cut-off (default #{RingTracer.Settings.shown_default(:spd)})
     * `:region` — trace only part of the image, `{x0, y0, x1, y1}`: pixels
@@ -106,6 +109,7 @@ defmodule RingTracer do
   defp load_and_run(scene, opts) do
     with :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
+         :ok <- check_frame(scene, opts[:frame]),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
 
@@ -113,6 +117,16 @@ defmodule RingTracer do
         {:ok, %{result | warnings: scene.warnings, warnings_omitted: scene.warnings_omitted}}
       end
     end
+  end
+
+  defp check_frame(%Scene{frames: frames}, frame) when frame <= frames, do: :ok
+
+  defp check_frame(%Scene{frames: frames, source: source}, frame) do
+    {:error,
+     Error.new(
+       :invalid_option,
+       "option :frame must be at most #{frames} (the frames of #{source.name}), got: #{frame}"
+     )}
   end
 
   defp load(%Scene{} = scene, _opts), do: {:ok, scene}
@@ -360,7 +374,8 @@ defmodule RingTracer do
       strategy: strategy,
       kernel: kernel,
       speeds: opts[:speeds],
-      progress: opts[:progress]
+      progress: opts[:progress],
+      frame: opts[:frame] - 1
     }
 
     preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])

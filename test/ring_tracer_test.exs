@@ -165,6 +165,34 @@ defmodule RingTracerTest do
              RingTracer.render(TestScenes.path(@scene), width: 100_000, height: 100_000)
   end
 
+  describe "a frame of an animated scene" do
+    test "is the kernel's own render of that frame, and frame 1 is the default" do
+      scene = TestScenes.path("whitted_orbit.toml")
+      {:ok, first} = RingTracer.render(scene, children: 3, atoms: 4, width: 48, height: 36)
+      assert first.pixels == TestScenes.reference("whitted_orbit.toml", 48, 36)
+
+      {:ok, later} =
+        RingTracer.render(scene, children: 3, atoms: 4, width: 48, height: 36, frame: 13)
+
+      assert later.pixels == TestScenes.reference("whitted_orbit.toml", 48, 36, frame: 13)
+      assert later.pixels != first.pixels
+    end
+
+    test "past the scene's last frame is an error naming the scene, before any work" do
+      assert {:error, %RingTracer.Error{reason: :invalid_option, message: message}} =
+               RingTracer.render(TestScenes.path("whitted_orbit.toml"), frame: 49)
+
+      assert message ==
+               "option :frame must be at most 48 (the frames of whitted_orbit.toml), got: 49"
+
+      assert {:error, %RingTracer.Error{message: "option :frame must be at most 1" <> _}} =
+               RingTracer.render(TestScenes.path(@scene), frame: 2)
+
+      assert {:error, %RingTracer.Error{reason: :invalid_option}} =
+               RingTracer.render(TestScenes.path(@scene), frame: 0)
+    end
+  end
+
   test "render! raises RingTracer.Error" do
     assert_raise RingTracer.Error, ~r/no\/such/, fn -> RingTracer.render!("no/such.nff") end
   end

@@ -15,6 +15,7 @@ defmodule RingTracer.Options do
     depth: {:pos_integer, RingTracer.Settings.defaults().depth},
     cutoff: {:non_neg_number, RingTracer.Settings.defaults().cutoff},
     samples: {:pos_integer, RingTracer.Settings.defaults().samples},
+    frame: {:pos_integer, 1},
     spd: {:boolean, RingTracer.Settings.defaults().spd},
     region: {:region, nil},
     nodes: {:nodes, []},

@@ -29,6 +29,7 @@ defmodule RingTracer.Scene do
     :height,
     :primitives,
     :lights,
+    frames: 1,
     path: nil,
     files: [],
     warnings: [],
@@ -51,6 +52,7 @@ defmodule RingTracer.Scene do
           height: pos_integer(),
           primitives: non_neg_integer(),
           lights: non_neg_integer(),
+          frames: pos_integer(),
           path: Path.t() | nil,
           files: [Path.t()],
           warnings: [Warning.t()],
@@ -135,6 +137,7 @@ defmodule RingTracer.Scene do
            height: info.height,
            primitives: info.primitives,
            lights: info.lights,
+           frames: Native.scene_animation(ref).frames,
            files: paths,
            warnings: Enum.map(info.warnings, &Warning.from_native/1),
            warnings_omitted: info.warnings_omitted

@@ -7,12 +7,22 @@ defmodule RingTracer.TestScenes do
   @spec path(String.t()) :: String.t()
   def path(name), do: Path.expand(Path.join(["priv", "scenes", name]))
 
-  @doc "The single-process reference image: the kernel's own whole-image render."
+  @doc """
+  The single-process reference image: the kernel's own whole-image render
+  (of frame `:frame` of an animated scene, from 1).
+  """
   @spec reference(String.t(), pos_integer(), pos_integer(), keyword()) :: binary()
   def reference(name, width, height, opts \\ []) do
     scene = Scene.load!(path(name))
+    {frame, opts} = Keyword.pop(opts, :frame, 1)
+
+    ref =
+      if frame == 1,
+        do: scene.ref,
+        else: elem(Native.scene_frame(scene.ref, frame - 1), 1)
+
     settings = struct(%Settings{width: width, height: height}, opts)
-    {:ok, {pixels, _rays}} = Native.render_image(scene.ref, Settings.to_native(settings), 1)
+    {:ok, {pixels, _rays}} = Native.render_image(ref, Settings.to_native(settings), 1)
     pixels
   end
 

@@ -22,6 +22,7 @@ defmodule RingTracer.CLI.Render do
     depth: :integer,
     cutoff: :float,
     samples: :integer,
+    frame: :integer,
     spd: :boolean,
     strategy: :string,
     layout: :string,
@@ -51,6 +52,7 @@ defmodule RingTracer.CLI.Render do
     height: 1..16_384,
     depth: 1..64,
     samples: 1..16,
+    frame: 1..1_000_000,
     children_per_node: 1..@max.children,
     preview: 0..65_535
   ]
@@ -101,6 +103,7 @@ defmodule RingTracer.CLI.Render do
           --depth D           ray-tree depth, eye ray = 1 (1-64, default #{RingTracer.Settings.shown_default(:depth)})
           --samples S         S x S samples per pixel (1-16, default #{RingTracer.Settings.shown_default(:samples)})
           --cutoff C          adaptive cut-off weight (default #{RingTracer.Settings.shown_default(:cutoff)}, 0 disables)
+          --frame F           of an animated scene, frame F (from 1; default 1)
           --spd               the SPD testing procedure (pixel corners, no cut-off)
           --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
                               fractions (0.25,0,0.75,0.5); exactly the whole render's pixels

@@ -2,7 +2,8 @@ defmodule RingTracer.Job.Spec do
   @moduledoc """
   Everything a job's processes need to know, built once by `RingTracer.render/2`
   and handed to the parent, which hands each child its part. It holds the
-  scene's source (bytes), never a scene handle, so it can cross nodes.
+  scene's source (bytes), never a scene handle, so it can cross nodes, and
+  which frame of an animated scene to trace (`frame`, from 0).
   """
 
   alias RingTracer.{Layout, Settings}
@@ -20,6 +21,7 @@ defmodule RingTracer.Job.Spec do
     kernel: {RingTracer.Kernel.Native, []},
     speeds: [],
     progress: nil,
+    frame: 0,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -34,6 +36,7 @@ defmodule RingTracer.Job.Spec do
           kernel: {module(), keyword()},
           speeds: [number()],
           progress: pid() | nil,
+          frame: non_neg_integer(),
           liveness: pos_integer()
         }
 

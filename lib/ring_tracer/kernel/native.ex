@@ -26,9 +26,25 @@ defmodule RingTracer.Kernel.Native do
 
   @impl RingTracer.Kernel
   def prepare(spec, _opts) do
+    with {:ok, scene} <- frame_scene(spec), do: {:ok, {scene, Settings.to_native(spec.settings)}}
+  end
+
+  # The scene of the job's frame: the cached scene is its first frame; any
+  # other is made from it (sharing its geometry where only the camera,
+  # lights, colours or meshes move).
+  defp frame_scene(spec) do
     case SceneCache.fetch(spec.source) do
-      {:ok, scene} -> {:ok, {scene, Settings.to_native(spec.settings)}}
-      {:error, error} -> {:error, error.message}
+      {:ok, scene} when spec.frame == 0 ->
+        {:ok, scene}
+
+      {:ok, scene} ->
+        case Native.scene_frame(scene.ref, spec.frame) do
+          {:ok, ref} -> {:ok, %{scene | ref: ref}}
+          {:error, message} -> {:error, message}
+        end
+
+      {:error, error} ->
+        {:error, error.message}
     end
   end
 

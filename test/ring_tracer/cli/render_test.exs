@@ -60,4 +60,21 @@ defmodule RingTracer.CLI.RenderTest do
 
     refute File.exists?(Path.join(dir, "x.png"))
   end
+
+  test "--frame renders that frame of an animated scene; past the last it is a usage error", %{
+    tmp_dir: dir
+  } do
+    scene = "priv/scenes/whitted_orbit.toml"
+    args = ~w(--width 32 --children 2 -q --progress none)
+    {:ok, ""} = render(~w(#{scene} -o #{dir}/f1.png) ++ args)
+    {:ok, ""} = render(~w(#{scene} -o #{dir}/f7.png --frame 7) ++ args)
+    assert File.read!(Path.join(dir, "f1.png")) != File.read!(Path.join(dir, "f7.png"))
+
+    assert {{:error, 2, message}, _} = render(~w(#{scene} -o #{dir}/f0.png --frame 0) ++ args)
+    assert message =~ "--frame takes an integer from 1"
+
+    assert {{:error, 2, message}, _} = render(~w(#{scene} -o #{dir}/f49.png --frame 49) ++ args)
+    assert message =~ "frame must be at most 48 (the frames of whitted_orbit.toml), got: 49"
+    refute File.exists?(Path.join(dir, "f49.png"))
+  end
 end
