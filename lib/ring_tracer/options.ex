@@ -35,9 +35,8 @@ defmodule RingTracer.Options do
     preview: {:preview, nil}
   ]
 
-  # Documented maxima, checked before any work. Each has been run at full
-  # size (simulated: 16,384 children x 1 atom in 25 s; 1 child x 1,048,576
-  # atoms in 24 s on the 2-core machine).
+  # Documented maxima, checked before any work. Each is run at full size by
+  # `mix ring_tracer.bench limits` (docs/benchmarks.md).
   @max_children 16_384
   @max_atoms 1_048_576
   # A slowdown beyond this emulates no machine anyone renders on, and its

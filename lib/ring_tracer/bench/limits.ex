@@ -8,7 +8,8 @@ defmodule RingTracer.Bench.Limits do
   image size at full size (`--quick`: a sixteenth): 16,384 children,
   1,048,576 atoms (simulated on one child, and real on one child and on 64
   children: a child's cost per atom does not grow with its queue), and a 64 Mpixel
-  image, printing time, the VM's memory growth and the outcome.
+  image, printing time, the VM's memory growth and the outcome; then one
+  child's cost per atom at 65,536, 262,144 and 1,048,576 one-pixel atoms.
   """
   @moduledoc @help
   @behaviour RingTracer.Bench
@@ -83,5 +84,37 @@ defmodule RingTracer.Bench.Limits do
       end
 
     print_table(~w(maximum job seconds vm_growth outcome), rows)
+    per_atom(q)
+  end
+
+  # One child, one pixel per atom, at three sizes four times apart: the
+  # whole call's and the makespan's microseconds per atom, which stay flat
+  # when nothing a job does grows faster than its atom count.
+  defp per_atom(q) do
+    info("one child, one pixel an atom (balls_s1): microseconds per atom")
+
+    rows =
+      for side <- [256, 512, 1024] do
+        n = div(side * side, q)
+        w = div(side, if(q == 1, do: 1, else: 4))
+        :erlang.garbage_collect()
+
+        {us, {:ok, r}} =
+          :timer.tc(fn ->
+            RingTracer.render("priv/scenes/balls_s1.nff",
+              children: 1,
+              atoms: n,
+              width: w,
+              height: w
+            )
+          end)
+
+        Enum.map(
+          [n, "#{w}x#{w}", Float.round(us / n, 1), Float.round(r.elapsed_us / n, 1)],
+          &to_string/1
+        )
+      end
+
+    print_table(~w(atoms image call_us_per_atom makespan_us_per_atom), rows)
   end
 end
