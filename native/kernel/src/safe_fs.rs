@@ -706,7 +706,9 @@ pub enum Secrecy {
 /// Opens the folder `path` after checking every folder on the way to it, from `/` (a relative
 /// path is taken from the current folder's absolute name), and every symbolic link followed:
 /// each belongs to this user or to root and no other user can change it (no write bit for
-/// group or others), so nobody else can rename or replace anything on the way, now or later;
+/// group or others, or the sticky bit, as on `/tmp`: others may add names there but not
+/// rename or remove this user's or root's, and what comes next on the way is checked for its
+/// own owner), so nobody else can rename or replace anything on the way, now or later;
 /// the folder itself must be this user's and closed to changes by others. What is checked
 /// is what is opened (descriptors, `fstat`); refused otherwise, naming the folder at fault
 /// and why. Files in it are then checked with [`Dir::check_trusted_file`]: a program that
@@ -733,7 +735,10 @@ pub fn trusted_dir(path: &Path) -> Result<Dir, Error> {
                 ),
             ));
         }
-        if st.st_mode & 0o022 != 0 {
+        // A sticky folder (/tmp) lets others add names but not rename or remove what is not
+        // theirs: the next folder or link on the way is then checked for its own owner.
+        let sticky = st.st_mode & 0o1000 != 0;
+        if st.st_mode & 0o022 != 0 && !sticky {
             return Err(message_error(
                 at,
                 format!(
@@ -1142,7 +1147,7 @@ mod tests {
 
     #[test]
     fn a_trusted_folder_is_closed_to_others_all_the_way_from_the_root() {
-        // not under /tmp, which every user can write in
+        // in the build's folder: every folder above it is closed to others, or sticky (/tmp)
         let t = tempfile::tempdir_in(concat!(env!("CARGO_MANIFEST_DIR"), "/../target")).unwrap();
         std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
         let d = tls_folder(t.path());
@@ -1150,18 +1155,25 @@ mod tests {
         // this user's links on the way are followed, and what they lead through is checked
         symlink(&d, t.path().join("via")).unwrap();
         check_tls(&t.path().join("via")).unwrap();
-        let shared = tempfile::tempdir().unwrap();
-        let open = tls_folder(shared.path());
-        if std::env::temp_dir().metadata().unwrap().mode() & 0o022 != 0 {
-            let e = check_tls(&open).unwrap_err().to_string();
-            assert!(
-                e.contains(" can be changed by other users (mode 1777), who could swap"),
-                "{e}"
-            );
-            symlink(&open, t.path().join("to_tmp")).unwrap();
-            let e = check_tls(&t.path().join("to_tmp")).unwrap_err().to_string();
-            assert!(e.contains("is on the way to "), "{e}");
-        }
+        // a folder anyone can write in on the way: refused, also through a link; with the
+        // sticky bit (as /tmp) others cannot rename or remove what is not theirs: accepted
+        let shared = t.path().join("shared");
+        std::fs::create_dir(&shared).unwrap();
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let open = tls_folder(&shared);
+        let e = check_tls(&open).unwrap_err().to_string();
+        assert!(
+            e.contains(" can be changed by other users (mode 0777), who could swap"),
+            "{e}"
+        );
+        symlink(&open, t.path().join("to_shared")).unwrap();
+        let e = check_tls(&t.path().join("to_shared"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("is on the way to "), "{e}");
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777)).unwrap();
+        check_tls(&open).unwrap();
+        check_tls(&t.path().join("to_shared")).unwrap();
         // the folder, then each file
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o770)).unwrap();
         let e = check_tls(&d).unwrap_err().to_string();

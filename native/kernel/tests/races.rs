@@ -702,6 +702,39 @@ fn a_tls_folder_is_trusted_only_when_nobody_else_can_swap_it() {
 }
 
 #[test]
+fn a_tls_folder_in_a_sticky_folder_stays_roots() {
+    if !root() {
+        return;
+    }
+    // a folder both can write in, sticky (as /tmp): she may add names, not rename root's; she
+    // tries to swap root's TLS folder for hers and for her link, and to take its name first
+    let t = tempfile::tempdir_in(env!("CARGO_TARGET_TMPDIR")).unwrap();
+    std::fs::set_permissions(t.path(), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let shared = t.path().join("shared");
+    std::fs::create_dir(&shared).unwrap();
+    std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o1777)).unwrap();
+    let tls = tls_folder(&shared, "tls", 0, "root's");
+    let hers = tls_folder(&shared, "hers", THEM, "HERS");
+    their_link(&hers, &shared.join("herlink"));
+    let attacker = Attacker::start(vec![
+        Step::Exchange(cstr(&tls), cstr(&hers)),
+        Step::Exchange(cstr(&tls), cstr(&shared.join("herlink"))),
+    ]);
+    for _ in 0..ROUNDS {
+        check_tls(&tls).unwrap();
+        assert_eq!(std::fs::read(tls.join("node.key")).unwrap(), b"root's");
+        // hers, and her link, are refused every time
+        let e = check_tls(&hers)
+            .expect_err("trusted her folder")
+            .to_string();
+        assert!(e.contains("belongs to user 65534"), "{e}");
+        let e = check_tls(&shared.join("herlink")).expect_err("followed her link");
+        assert!(e.to_string().contains("belongs to user 65534"), "{e}");
+    }
+    drop(attacker);
+}
+
+#[test]
 fn an_output_replacing_her_file_does_not_take_its_mode() {
     if !root() {
         return;
