@@ -81,7 +81,16 @@ defmodule RingTracer.DistributedTest do
       {p3, n3} = Peers.start("doomed")
       {p4, n4} = Peers.start("spare")
 
-      {:ok, result} = render_then([n3, n4], fn -> p3 end, &:peer.stop/1)
+      # The node must still hold atoms when it goes, or the job may end while
+      # :peer.stop is under way on a busy machine and lose no child: its
+      # children (1 and 4, dealt round robin over this node, n3 and n4) are
+      # a thousand times slower, and are held still before it stops.
+      stop = fn peer ->
+        RingTracer.Test.Hold.children(n3)
+        :peer.stop(peer)
+      end
+
+      {:ok, result} = render_then([n3, n4], fn -> p3 end, stop, [20, 1000, 20])
       assert result.pixels == reference
       assert length(result.failures) >= 1
       assert Enum.all?(result.failures, &(&1.reason =~ "noconnection"))
@@ -183,11 +192,11 @@ defmodule RingTracer.DistributedTest do
   # Renders on `nodes` (and this node), every child slowed down 20x. At the
   # first atom `pick` chooses a victim; after a random number of atoms (at
   # most half of the 60) `kill` gets it.
-  defp render_then(nodes, pick, kill) do
+  defp render_then(nodes, pick, kill, speeds \\ [20]) do
     {:ok, job} =
       RingTracer.render_async(
         TestScenes.path(@scene),
-        [nodes: nodes, children: 6, atoms: 10, speeds: [20]] ++ @size
+        [nodes: nodes, children: 6, atoms: 10, speeds: speeds] ++ @size
       )
 
     await(job.id, Enum.random(2..30), pick, kill, nil)
