@@ -9,7 +9,10 @@ defmodule RingTracer.FailureTest do
   import RingTracer.TestScenes, only: [children: 0]
 
   @scene "balls_s2.nff"
-  @opts [children: 4, atoms: 12, width: 96, height: 72, speeds: [3]]
+  # Slow enough (an atom of 144 pixels takes tens of milliseconds) that the
+  # job is still running when the test, woken by a progress message on a
+  # busy machine, picks its victim among the children.
+  @opts [children: 4, atoms: 12, width: 96, height: 72, speeds: [50]]
 
   setup_all do
     {:ok, reference: TestScenes.reference(@scene, 96, 72)}
