@@ -875,17 +875,7 @@ keys = [{ clock = 0.0, value = [0.9, 0.1, 0.1] }, { clock = 0.5, value = [0.1, 0
 
     #[test]
     fn parses_module_doc_example() {
-        let doc = include_str!("animated.rs");
-        let start = doc.find("//! ```toml\n").unwrap() + 12;
-        let end = doc[start..].find("//! ```\n").unwrap() + start;
-        let src: String = doc[start..end]
-            .lines()
-            .map(|l| {
-                l.strip_prefix("//! ")
-                    .unwrap_or(l.trim_start_matches("//!"))
-            })
-            .collect::<Vec<_>>()
-            .join("\n");
+        let src = crate::test_support::doc_example(include_str!("animated.rs"));
         let a = parse(&src).unwrap();
         assert_eq!(a.animation().frames(), 24);
         assert_eq!(

@@ -1,4 +1,5 @@
-//! What the kernel's unit tests share: a xorshift generator for test data, and a folder's names.
+//! What the kernel's unit tests share: a xorshift generator for test data, a folder's names,
+//! and the TOML example of a module's doc.
 
 use std::path::Path;
 
@@ -18,4 +19,18 @@ pub(crate) fn names(dir: &Path) -> Vec<String> {
         .collect();
     v.sort();
     v
+}
+
+/// The ```` ```toml ```` example of the module doc (`//!` lines) in `source`, as plain TOML.
+pub(crate) fn doc_example(source: &str) -> String {
+    let start = source.find("//! ```toml\n").unwrap() + 12;
+    let end = source[start..].find("//! ```\n").unwrap() + start;
+    source[start..end]
+        .lines()
+        .map(|l| {
+            l.strip_prefix("//! ")
+                .unwrap_or(l.strip_prefix("//!").unwrap_or(l))
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
 }

@@ -989,17 +989,7 @@ mod tests {
 
     #[test]
     fn parses_module_doc_example() {
-        let doc = include_str!("toml_scene.rs");
-        let start = doc.find("//! ```toml\n").unwrap() + 12;
-        let end = doc[start..].find("//! ```\n").unwrap() + start;
-        let src: String = doc[start..end]
-            .lines()
-            .map(|l| {
-                l.strip_prefix("//! ")
-                    .unwrap_or(l.strip_prefix("//!").unwrap_or(l))
-            })
-            .collect::<Vec<_>>()
-            .join("\n");
+        let src = crate::test_support::doc_example(include_str!("toml_scene.rs"));
         let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1\n";
         let resolve = |p: &str| -> Result<Vec<u8>, Unreadable> {
             if p == "meshes/teapot.obj" {
