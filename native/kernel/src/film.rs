@@ -148,7 +148,7 @@ pub fn write_image_mode(
     rgb: &[f32],
     new_mode: Option<u32>,
 ) -> Result<(), Error> {
-    check_len(width, height, rgb)?;
+    // `write_image_in` checks the pixels before it writes anything
     let (dir, name) = safe_fs::open_parent(path)?;
     write_image_in(&dir, &name, width, height, rgb, new_mode)
 }
