@@ -107,7 +107,8 @@ defmodule RingTracer.Cluster.TLS do
   @doc """
   Checks a TLS folder: it holds the three files, every folder on the way
   to it (and every symbolic link followed) belongs to this user or to root
-  and no other user can change it, the folder is this user's, no other
+  and no other user can change it (or it is sticky, as `/tmp`, where
+  nobody can rename what is not theirs), the folder is this user's, no other
   user can change `ca.pem` or `node.pem` (this user's or root's) or read
   `node.key` (this user's), and the node's certificate is valid now.
 
