@@ -375,7 +375,7 @@ defmodule RingTracer do
       kernel: kernel,
       speeds: opts[:speeds],
       progress: opts[:progress],
-      frame: opts[:frame] - 1
+      frames: [opts[:frame] - 1]
     }
 
     preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])

@@ -19,6 +19,25 @@ defmodule RingTracer.Layout do
 
   The atoms themselves, and so the image, are the same either way.
 
+  ## Frames
+
+  A job of an animation traces several frames through one ring
+  (`with_frames/2`). Every frame is cut alike, and the atoms are numbered
+  on: atom `a` of frame `f` is `f * m + a`, so that atom numbers, pieces and
+  everything that handles them work across frames unchanged. `span/2` is
+  the pixels of an atom within its frame, `frame/2` the frame it is in, and
+  `strip/3` a child's strip in a given frame.
+
+      iex> layout = RingTracer.Layout.new(10, 1, 2, 2) |> RingTracer.Layout.with_frames(3)
+      iex> {RingTracer.Layout.atom_count(layout), RingTracer.Layout.frame_atom_count(layout)}
+      {12, 4}
+      iex> RingTracer.Layout.strip(layout, 1, 2)
+      [10, 11]
+      iex> {RingTracer.Layout.frame(layout, 10), RingTracer.Layout.span(layout, 10), RingTracer.Layout.owner(layout, 10)}
+      {2, {5, 2}, 1}
+      iex> RingTracer.Layout.frame_atoms(layout, 1)
+      4..7
+
   ## Pieces
 
   An atom can be split at run time (`split/3`): a piece `{a, lo, hi, d}` is
@@ -49,7 +68,7 @@ defmodule RingTracer.Layout do
   """
 
   @enforce_keys [:width, :height, :children, :atoms_per_child]
-  defstruct [:width, :height, :children, :atoms_per_child, order: :strips]
+  defstruct [:width, :height, :children, :atoms_per_child, order: :strips, frames: 1]
 
   @typedoc "Which atoms each child owns at the start: see the module doc."
   @type order :: :strips | :interleaved
@@ -65,7 +84,8 @@ defmodule RingTracer.Layout do
           height: pos_integer(),
           children: pos_integer(),
           atoms_per_child: pos_integer(),
-          order: order()
+          order: order(),
+          frames: pos_integer()
         }
   @typedoc "An atom's index, `0..n*k-1`, or a piece of one (see \"Pieces\")."
   @type atom_id :: non_neg_integer() | piece()
@@ -92,38 +112,63 @@ defmodule RingTracer.Layout do
     }
   end
 
-  @doc "Number of pixels."
+  @doc "The same layout for a job of `frames` frames (see \"Frames\")."
+  @spec with_frames(t(), pos_integer()) :: t()
+  def with_frames(%__MODULE__{} = layout, frames) when is_integer(frames) and frames > 0,
+    do: %{layout | frames: frames}
+
+  @doc "Number of pixels (of one frame)."
   @spec pixels(t()) :: non_neg_integer()
   def pixels(%__MODULE__{width: w, height: h}), do: w * h
 
-  @doc "Total number of atoms."
+  @doc "Total number of atoms, of every frame."
   @spec atom_count(t()) :: pos_integer()
-  def atom_count(%__MODULE__{children: n, atoms_per_child: k}), do: n * k
+  def atom_count(%__MODULE__{frames: f} = layout), do: f * frame_atom_count(layout)
 
-  @doc "Every atom index, in image order."
+  @doc "Number of atoms of one frame."
+  @spec frame_atom_count(t()) :: pos_integer()
+  def frame_atom_count(%__MODULE__{children: n, atoms_per_child: k}), do: n * k
+
+  @doc "Every atom index, frame after frame, each in image order."
   @spec atoms(t()) :: Range.t()
   def atoms(layout), do: 0..(atom_count(layout) - 1)
 
-  @doc "The atoms of child `i`'s strip, in image order."
-  @spec strip(t(), non_neg_integer()) :: [atom_id()]
-  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :strips}, i)
-      when i in 0..(n - 1)//1,
-      do: Enum.to_list((i * k)..(i * k + k - 1))
+  @doc "The atoms of frame `f` (from 0), in image order."
+  @spec frame_atoms(t(), non_neg_integer()) :: Range.t()
+  def frame_atoms(layout, f) do
+    m = frame_atom_count(layout)
+    (f * m)..(f * m + m - 1)
+  end
 
-  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :interleaved}, i)
+  @doc "The frame (from 0) atom or piece `a` belongs to."
+  @spec frame(t(), atom_id()) :: non_neg_integer()
+  def frame(layout, a), do: div(base(a), frame_atom_count(layout))
+
+  @doc "The atoms of child `i`'s strip in frame `f` (the first by default), in image order."
+  @spec strip(t(), non_neg_integer(), non_neg_integer()) :: [atom_id()]
+  def strip(layout, i, f \\ 0)
+
+  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :strips}, i, f)
       when i in 0..(n - 1)//1,
-      do: Enum.to_list(i..(i + (k - 1) * n)//n)
+      do: Enum.to_list((f * n * k + i * k)..(f * n * k + i * k + k - 1))
+
+  def strip(%__MODULE__{children: n, atoms_per_child: k, order: :interleaved}, i, f)
+      when i in 0..(n - 1)//1,
+      do: Enum.to_list((f * n * k + i)..(f * n * k + i + (k - 1) * n)//n)
 
   @doc "The child whose strip holds atom `a` (its original owner)."
   @spec owner(t(), atom_id()) :: non_neg_integer()
   def owner(layout, {a, _, _, _}), do: owner(layout, a)
-  def owner(%__MODULE__{atoms_per_child: k, order: :strips}, a), do: div(a, k)
+
+  def owner(%__MODULE__{atoms_per_child: k, order: :strips} = layout, a),
+    do: div(rem(a, frame_atom_count(layout)), k)
+
   def owner(%__MODULE__{children: n, order: :interleaved}, a), do: rem(a, n)
 
   @doc """
   Each atom's share of per-row work (`rows`: one number per image row, top
   first): from every row it covers, the row's work times the fraction of
-  the row's pixels it holds. A tuple, by atom.
+  the row's pixels it holds. A tuple, by atom of one frame.
 
       iex> layout = RingTracer.Layout.new(4, 2, 2, 2)
       iex> RingTracer.Layout.work_by_atom(layout, {8, 4})
@@ -133,7 +178,7 @@ defmodule RingTracer.Layout do
   """
   @spec work_by_atom(t(), tuple()) :: tuple()
   def work_by_atom(%__MODULE__{width: w, height: h} = layout, rows) when tuple_size(rows) == h do
-    for a <- atoms(layout) do
+    for a <- frame_atoms(layout, 0) do
       {first, count} = span(layout, a)
       last = first + count - 1
 
@@ -145,7 +190,7 @@ defmodule RingTracer.Layout do
     |> List.to_tuple()
   end
 
-  @doc "`{first_pixel, pixel_count}` of atom (or piece) `a`."
+  @doc "`{first_pixel, pixel_count}` of atom (or piece) `a` within its frame."
   @spec span(t(), atom_id()) :: {non_neg_integer(), non_neg_integer()}
   def span(layout, {a, lo, hi, d}) do
     {first, count} = span(layout, a)
@@ -153,8 +198,9 @@ defmodule RingTracer.Layout do
   end
 
   def span(layout, a) do
-    m = atom_count(layout)
+    m = frame_atom_count(layout)
     p = pixels(layout)
+    a = rem(a, m)
     first = div(a * p, m)
     {first, div((a + 1) * p, m) - first}
   end

@@ -3,7 +3,9 @@ defmodule RingTracer.Job.Spec do
   Everything a job's processes need to know, built once by `RingTracer.render/2`
   and handed to the parent, which hands each child its part. It holds the
   scene's source (bytes), never a scene handle, so it can cross nodes, and
-  which frame of an animated scene to trace (`frame`, from 0).
+  which frames of an animated scene to trace (`frames`, from 0: the scene's
+  frame for each of the layout's frames, in order; `RingTracer.Layout`,
+  "Frames").
   """
 
   alias RingTracer.{Layout, Settings}
@@ -21,7 +23,8 @@ defmodule RingTracer.Job.Spec do
     kernel: {RingTracer.Kernel.Native, []},
     speeds: [],
     progress: nil,
-    frame: 0,
+    frames: [0],
+    window: 1,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -36,7 +39,8 @@ defmodule RingTracer.Job.Spec do
           kernel: {module(), keyword()},
           speeds: [number()],
           progress: pid() | nil,
-          frame: non_neg_integer(),
+          frames: [non_neg_integer(), ...],
+          window: pos_integer(),
           liveness: pos_integer()
         }
 

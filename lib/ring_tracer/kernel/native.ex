@@ -34,11 +34,11 @@ defmodule RingTracer.Kernel.Native do
   # lights, colours or meshes move).
   defp frame_scene(spec) do
     case SceneCache.fetch(spec.source) do
-      {:ok, scene} when spec.frame == 0 ->
+      {:ok, scene} when spec.frames == [0] ->
         {:ok, scene}
 
       {:ok, scene} ->
-        case Native.scene_frame(scene.ref, spec.frame) do
+        case Native.scene_frame(scene.ref, hd(spec.frames)) do
           {:ok, ref} -> {:ok, %{scene | ref: ref}}
           {:error, message} -> {:error, message}
         end
