@@ -162,7 +162,9 @@ defmodule RingTracer.Kernel.Native do
   @doc """
   Each atom's work, estimated from a preview: the same scene and settings
   traced at about #{@preview_pixels} pixels (`preview_size/2`) in one kernel
-  call, each image row taking the work of the preview row it falls in.
+  call, each image row taking the work of the preview row it falls in. In a
+  job of several frames, the atoms of one frame, previewed in the first
+  frame listed.
   """
   @impl RingTracer.Kernel
   def atom_work(%{settings: %Settings{region: region}}, _opts) when region != nil,
