@@ -315,7 +315,8 @@ defmodule RingTracer do
          :ok <- running(),
          :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
-         {:ok, frames, window} <- RingTracer.Sequence.options(sequence, scene),
+         {:ok, frames, window} <-
+           RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
       extra = [frames: frames, window: window, sequence: true]

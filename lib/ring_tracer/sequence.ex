@@ -3,7 +3,7 @@ defmodule RingTracer.Sequence do
   # The options only a sequence has (`RingTracer.render_sequence/2`):
   # which of the scene's frames, and how many in flight at once.
 
-  alias RingTracer.{Error, Scene}
+  alias RingTracer.Error
 
   @default_window 4
   @max_window 64
@@ -14,21 +14,20 @@ defmodule RingTracer.Sequence do
 
   @doc """
   `:frames` (a range or an ascending list of the scene's frame numbers,
-  from 1; default all) and `:window` checked against `scene`: the frames
-  from 0, and the window.
+  from 1; default all) and `:window` checked against a scene of `count`
+  frames named `name`: the frames from 0, and the window.
 
-      iex> scene = %RingTracer.Scene{frames: 24, source: %{name: "fly.toml"}}
-      iex> RingTracer.Sequence.options([frames: 3..5], scene)
+      iex> RingTracer.Sequence.options([frames: 3..5], 24, "fly.toml")
       {:ok, [2, 3, 4], 4}
-      iex> RingTracer.Sequence.options([frames: [1, 24], window: 2], scene)
+      iex> RingTracer.Sequence.options([frames: [1, 24], window: 2], 24, "fly.toml")
       {:ok, [0, 23], 2}
-      iex> {:error, e} = RingTracer.Sequence.options([frames: 20..30], scene)
+      iex> {:error, e} = RingTracer.Sequence.options([frames: 20..30], 24, "fly.toml")
       iex> e.message
       "option :frames must name frames from 1 to 24 (the frames of fly.toml), got: 20..30"
   """
-  @spec options(keyword(), Scene.t()) ::
+  @spec options(keyword(), pos_integer(), String.t()) ::
           {:ok, [non_neg_integer(), ...], pos_integer()} | {:error, Error.t()}
-  def options(opts, %Scene{frames: count, source: source}) do
+  def options(opts, count, name) do
     frames = Keyword.get(opts, :frames, 1..count)
     window = Keyword.get(opts, :window, @default_window)
 
@@ -42,7 +41,7 @@ defmodule RingTracer.Sequence do
 
       Enum.min(frames) < 1 or Enum.max(frames) > count ->
         invalid(
-          ":frames must name frames from 1 to #{count} (the frames of #{source.name})",
+          ":frames must name frames from 1 to #{count} (the frames of #{name})",
           frames
         )
 
