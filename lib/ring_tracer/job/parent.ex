@@ -531,13 +531,23 @@ defmodule RingTracer.Job.Parent do
         Coverage.covered?(state.coverage, a)
 
   defp new_frame(state, f) do
+    now = Child.job_time(state)
+
     frame = %{
       results: %{},
       missing: Layout.frame_atom_count(state.spec.layout),
-      released_us: Child.job_time(state),
+      released_us: now,
       traced: %{},
       rays: RingTracer.Rays.zero()
     }
+
+    if state.spec.layout.frames > 1 or state.spec.sequence do
+      RingTracer.Telemetry.execute(
+        [:ring_tracer, :frame, :start],
+        %{at_us: now},
+        %{job: state.spec.id, frame: Enum.at(state.spec.frames, f) + 1}
+      )
+    end
 
     %{state | frames: Map.put(state.frames, f, frame), released: max(state.released, f + 1)}
   end
@@ -575,6 +585,12 @@ defmodule RingTracer.Job.Parent do
       traced: frame.traced,
       rays: frame.rays
     }
+
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :frame, :stop],
+      %{at_us: result.completed_us, elapsed_us: RingTracer.Frame.elapsed_us(result)},
+      %{job: id, frame: result}
+    )
 
     send(to || caller, {@reply_tag, id, {:frame, result.number, result}})
 
