@@ -299,8 +299,8 @@ defmodule RingTracer do
 
       iex> {:ok, job} = RingTracer.render_sequence("priv/scenes/whitted_orbit.toml", frames: 1..3, width: 16, height: 12, children: 2, atoms: 2)
       iex> id = job.id
-      iex> for _ <- 1..3, do: receive(do: ({RingTracer, ^id, {:frame, n, frame}} -> {n, byte_size(frame.pixels)}))
-      ...> |> Enum.sort()
+      iex> frames = for _ <- 1..3, do: receive(do: ({RingTracer, ^id, {:frame, n, frame}} -> {n, byte_size(frame.pixels)}))
+      iex> Enum.sort(frames)
       [{1, 2304}, {2, 2304}, {3, 2304}]
       iex> receive do {RingTracer, ^id, {:ok, result}} -> length(result.frames) end
       3
