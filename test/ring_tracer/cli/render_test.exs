@@ -77,4 +77,77 @@ defmodule RingTracer.CLI.RenderTest do
     assert message =~ "frame must be at most 48 (the frames of whitted_orbit.toml), got: 49"
     refute File.exists?(Path.join(dir, "f49.png"))
   end
+
+  describe "sequences" do
+    @scene "priv/scenes/whitted_orbit.toml"
+    @tiny ~w(--width 16 --height 12 --children 2 --atoms 2 --progress none)
+
+    test "their options are checked, naming them, before any work", %{tmp_dir: dir} do
+      pattern = Path.join(dir, "f_##.png")
+
+      for {args, text} <- [
+            {~w(-o #{pattern} --frames 40-60),
+             "--frames 40-60: whitted_orbit.toml has 48 frames (1 to 48)"},
+            {~w(-o #{pattern} --frames 0-2), "--frames takes A-B"},
+            {~w(-o #{pattern} --frame 2 --frames 1-3), "not both"},
+            {~w(-o #{dir}/f.png --frames 1-3),
+             "--out #{dir}/f.png: a sequence of 3 frames needs a run of #"},
+            {~w(-o #{dir}/f_#_#.png), "--out #{dir}/f_#_#.png: one run of #"},
+            {~w(-o #{pattern} --ownership #{dir}/o.png), "--ownership tints one frame's image"},
+            {~w(-o #{pattern} --frames 1-2 --region 0,0,4,4),
+             "--region traces part of one frame"},
+            {~w(-o #{pattern} --window 0), "--window takes an integer from 1 to 1024"},
+            {~w(-o #{dir}/f_#.jpg), "--out #{dir}/f_#.jpg: the image must end in .png or .exr"}
+          ] do
+        assert {{:error, 2, message}, _} = render([@scene | args] ++ @tiny)
+        assert message =~ text
+      end
+
+      assert File.ls!(dir) == []
+    end
+
+    test "a frame path that is a folder is refused before any work", %{tmp_dir: dir} do
+      File.mkdir!(Path.join(dir, "f_03.png"))
+
+      assert {{:error, 2, message}, _} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-4)] ++ @tiny)
+
+      assert message =~ "--out #{dir}/f_03.png: exists and is a directory"
+      assert File.ls!(dir) == ["f_03.png"]
+    end
+
+    test "--frame F with a # in --out writes frame F's file, the same as without", %{
+      tmp_dir: dir
+    } do
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_###.png --frame 7)] ++ @tiny)
+      assert out =~ "wrote #{dir}/f_007.png (16x12)"
+      {:ok, _} = render([@scene | ~w(-o #{dir}/plain.png --frame 7 -q)] ++ @tiny)
+      assert File.read!(Path.join(dir, "f_007.png")) == File.read!(Path.join(dir, "plain.png"))
+    end
+
+    test "--continue: with every frame there it renders nothing and says so", %{tmp_dir: dir} do
+      for n <- 1..3, do: :ok = RingTracer.Output.write(Path.join(dir, "f_0#{n}.png"), "whole")
+
+      assert {:ok, out} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-3 --continue)] ++ @tiny)
+
+      assert out == "--continue: all 3 frames are already written; nothing to render\n"
+
+      assert {:ok, out} = render([@scene | ~w(-o #{dir}/f_##.png --frame 2 --continue)] ++ @tiny)
+      assert out == "--continue: #{dir}/f_02.png is already written; nothing to render\n"
+
+      assert {:ok, ""} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-3 --continue -q)] ++ @tiny)
+
+      assert Enum.map(1..3, &File.read!(Path.join(dir, "f_0#{&1}.png"))) == ~w(whole whole whole)
+    end
+
+    test "--continue: one frame not there yet (empty, as a crash could not leave it) is rendered",
+         %{tmp_dir: dir} do
+      File.touch!(Path.join(dir, "f_05.png"))
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_##.png --frame 5 --continue)] ++ @tiny)
+      assert out =~ "wrote #{dir}/f_05.png (16x12)"
+      assert <<0x89, "PNG", _::binary>> = File.read!(Path.join(dir, "f_05.png"))
+    end
+  end
 end
