@@ -59,7 +59,7 @@ defmodule RingTracer.CLI.Render do
     depth: 1..64,
     samples: 1..16,
     frame: 1..1_000_000,
-    window: 1..1024,
+    window: 1..64,
     children_per_node: 1..@max.children,
     preview: 0..65_535
   ]
@@ -119,7 +119,7 @@ defmodule RingTracer.CLI.Render do
                               by the # of --out (default with a #: all of them)
           --continue          skip the frames whose file is already there (whole: files
                               are written atomically); a sequence stopped goes on
-          --window W          frames traced at once in a sequence (1-1024, default 4)
+          --window W          frames traced at once in a sequence (1-64, default 4)
           --spd               the SPD testing procedure (pixel corners, no cut-off)
           --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
                               fractions (0.25,0,0.75,0.5); exactly the whole render's pixels
@@ -504,6 +504,11 @@ defmodule RingTracer.CLI.Render do
         {:usage,
          "--region traces part of one frame, not a sequence of #{n} frames " <>
            "(give --frame F with it)"}
+
+      opts[:aim] ->
+        {:usage,
+         "--aim aims a ring's offers within one image, not a sequence of #{n} frames " <>
+           "(leave it out, or give --frame F with it)"}
 
       true ->
         :ok

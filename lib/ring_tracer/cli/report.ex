@@ -42,20 +42,20 @@ defmodule RingTracer.CLI.Report do
     do: for(k <- [:stats, :timeline, :ownership], p = opts[k], do: "wrote #{p}\n")
 
   @doc """
-  A line for a frame of a sequence: its number, the time from its first
-  atom handed out to its last atom back (frames overlap: a sequence keeps
-  several in flight), its atoms and rays, and its file.
+  A line for a frame of a sequence (a summary: `:number`, `:elapsed_us`,
+  `:atoms`, `:rays`): its number, its time from its release into the ring
+  to its last pixel (frames overlap: a sequence keeps several in flight),
+  its atoms and rays, and its file.
 
-      iex> frame = %{number: 7, started_us: 1_000_000, completed_us: 1_250_000, atoms: 64, rays: 1234}
+      iex> frame = %{number: 7, elapsed_us: 250_000, atoms: 64, rays: 1234}
       iex> IO.iodata_to_binary(RingTracer.CLI.Report.frame(frame, "f_0007.png"))
       "  frame 7: 0.250 s, 64 atoms, 1234 rays, f_0007.png\\n"
   """
   @spec frame(map(), Path.t()) :: iodata()
   def frame(frame, path) do
-    us = (frame.completed_us || 0) - (frame.started_us || 0)
+    time = if us = frame.elapsed_us, do: seconds(us / 1_000_000), else: "? s"
 
-    "  frame #{frame.number}: #{seconds(us / 1_000_000)}, #{count(frame.atoms)} atoms, " <>
-      "#{rays(frame.rays)} rays, #{path}\n"
+    "  frame #{frame.number}: #{time}, #{count(frame.atoms)} atoms, #{rays(frame.rays)} rays, #{path}\n"
   end
 
   defp count(n) when is_integer(n), do: n

@@ -28,7 +28,8 @@ defmodule RingTracer.CLI.Sequence do
   def run(scene, job, plan, numbers, dir, load_us) do
     opts =
       job.render_opts
-      |> Keyword.drop([:frame, :region, :window])
+      # --no-aim is what a sequence does (Render refuses --aim with one)
+      |> Keyword.drop([:frame, :region, :aim, :window])
       |> Keyword.merge(frames: numbers)
       |> then(&if w = job.opts[:window], do: Keyword.put(&1, :window, w), else: &1)
 
@@ -145,10 +146,9 @@ defmodule RingTracer.CLI.Sequence do
           :ok ->
             summary = %{
               number: n,
-              started_us: Map.get(frame, :started_us),
-              completed_us: Map.get(frame, :completed_us),
-              atoms: Map.get(frame, :atoms),
-              rays: Map.get(frame, :rays)
+              elapsed_us: elapsed_us(frame),
+              atoms: frame.atoms,
+              rays: frame.rays
             }
 
             frames = [summary | s.frames]
@@ -161,6 +161,12 @@ defmodule RingTracer.CLI.Sequence do
         end
     end
   end
+
+  # From the frame's release into the ring to its last pixel.
+  defp elapsed_us(%{released_us: r, completed_us: c}) when is_integer(r) and is_integer(c),
+    do: max(c - r, 0)
+
+  defp elapsed_us(_frame), do: nil
 
   defp ended({:ok, result}, s) do
     if MapSet.size(s.left) == 0,

@@ -96,7 +96,8 @@ defmodule RingTracer.CLI.RenderTest do
             {~w(-o #{pattern} --ownership #{dir}/o.png), "--ownership tints one frame's image"},
             {~w(-o #{pattern} --frames 1-2 --region 0,0,4,4),
              "--region traces part of one frame"},
-            {~w(-o #{pattern} --window 0), "--window takes an integer from 1 to 1024"},
+            {~w(-o #{pattern} --frames 1-2 --aim), "--aim aims a ring's offers within one image"},
+            {~w(-o #{pattern} --window 0), "--window takes an integer from 1 to 64"},
             {~w(-o #{dir}/f_#.jpg), "--out #{dir}/f_#.jpg: the image must end in .png or .exr"}
           ] do
         assert {{:error, 2, message}, _} = render([@scene | args] ++ @tiny)
