@@ -241,6 +241,13 @@ defmodule RingTracer do
   @spec render_async(Path.t() | Scene.t(), keyword()) ::
           {:ok, %{id: reference(), pid: pid()}}
   def render_async(path, opts \\ []) when is_binary(path) or is_struct(path, Scene) do
+    {:ok,
+     start_forwarder(fn progress -> render(path, Keyword.put(opts, :progress, progress)) end)}
+  end
+
+  # Runs `work` (given the pid progress and frames go to) in a worker, and
+  # forwards what the job sends, then the worker's result, to the caller.
+  defp start_forwarder(work) do
     caller = self()
     id = make_ref()
 
@@ -248,15 +255,132 @@ defmodule RingTracer do
       spawn(fn ->
         caller_ref = Process.monitor(caller)
         forwarder = self()
-        opts = Keyword.put(opts, :progress, forwarder)
 
         {worker, worker_ref} =
-          spawn_monitor(fn -> send(forwarder, {:result, self(), render(path, opts)}) end)
+          spawn_monitor(fn -> send(forwarder, {:result, self(), work.(forwarder)}) end)
 
         forward(%{caller: caller, id: id, caller_ref: caller_ref, worker: {worker, worker_ref}})
       end)
 
-    {:ok, %{id: id, pid: pid}}
+    %{id: id, pid: pid}
+  end
+
+  @doc """
+  Starts rendering a sequence of frames of an animated scene (see
+  docs/scene-format.md, "Animation") through one ring, and returns at once
+  with a handle, as `render_async/2` does. The job's processes start once,
+  each node parses the scene once, and a child that finishes its part of a
+  frame goes on with the next one: the ring does not drain between frames.
+  At most `:window` frames are in flight; each frame is byte for byte the
+  frame `render/2` gives with `frame: n`.
+
+  The calling process gets `{RingTracer, id, {:frame, n, %RingTracer.Frame{}}}`
+  as each frame completes (`n` is its number in the scene, from 1; frames
+  complete in about, not exactly, their order), `{RingTracer, id,
+  {:progress, done, total}}` as atoms arrive (over every frame), and finally
+  `{RingTracer, id, {:ok, %RingTracer.Result{}}}` (the whole sequence's
+  statistics, `:pixels` nil, the frames' summaries in `:frames`) or
+  `{RingTracer, id, {:error, error}}`. `cancel/1` stops it. See
+  `stream_sequence/2` for the frames as a `Stream`.
+
+  ## Options
+
+  Those of `render/2` but `:frame`, `:region`, `:aim` (which works on one
+  image) and `:progress`, and:
+
+    * `:frames` — the scene's frames to render, from 1: a range (`10..20`)
+      or an ascending list (default: every frame). A subset keeps the
+      whole sequence's clock, as POV-Ray's `+SF`/`+EF` do
+    * `:window` — how many frames may be in flight at once (default
+      #{RingTracer.Sequence.default_window()}, at most 64)
+
+  Returns `{:error, %RingTracer.Error{}}` at once for a scene or option
+  that is not valid.
+
+      iex> {:ok, job} = RingTracer.render_sequence("priv/scenes/whitted_orbit.toml", frames: 1..3, width: 16, height: 12, children: 2, atoms: 2)
+      iex> id = job.id
+      iex> for _ <- 1..3, do: receive(do: ({RingTracer, ^id, {:frame, n, frame}} -> {n, byte_size(frame.pixels)}))
+      ...> |> Enum.sort()
+      [{1, 2304}, {2, 2304}, {3, 2304}]
+      iex> receive do {RingTracer, ^id, {:ok, result}} -> length(result.frames) end
+      3
+  """
+  @spec render_sequence(Path.t() | Scene.t(), keyword()) ::
+          {:ok, %{id: reference(), pid: pid()}} | {:error, Error.t()}
+  def render_sequence(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene) do
+    {sequence, opts} = Keyword.split(opts, [:frames, :window])
+
+    with :ok <- not_for_sequences(opts),
+         {:ok, opts} <- Options.validate(Keyword.put(opts, :aim, false)),
+         :ok <- running(),
+         :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
+         {:ok, scene} <- load(scene, opts),
+         {:ok, frames, window} <-
+           RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
+         {:ok, settings} <- settings(scene, opts) do
+      :ok = SceneCache.put(scene)
+      extra = [frames: frames, window: window, sequence: true]
+
+      {:ok,
+       start_forwarder(fn progress ->
+         opts = Keyword.put(opts, :progress, progress)
+
+         within(opts[:timeout], fn ->
+           with {:ok, result} <- run(scene, settings, opts, extra) do
+             {:ok, %{result | warnings: scene.warnings, warnings_omitted: scene.warnings_omitted}}
+           end
+         end)
+       end)}
+    end
+  end
+
+  defp not_for_sequences(opts) do
+    case Enum.find([:frame, :region, :aim, :progress], &Keyword.has_key?(opts, &1)) do
+      nil ->
+        :ok
+
+      key ->
+        {:error, Error.new(:invalid_option, "option #{inspect(key)} is not one of a sequence's")}
+    end
+  end
+
+  @doc """
+  A sequence's frames as a `Stream` of `RingTracer.Frame`s, in the order
+  they complete: the sequence starts when the stream is run
+  (`render_sequence/2`, with its options) and is cancelled if the stream
+  is halted early. An error (an invalid option, a job that failed) raises
+  `RingTracer.Error`.
+
+      iex> RingTracer.stream_sequence("priv/scenes/whitted_orbit.toml", frames: [2, 5], width: 8, height: 6, children: 2)
+      ...> |> Enum.map(& &1.number) |> Enum.sort()
+      [2, 5]
+  """
+  @spec stream_sequence(Path.t() | Scene.t(), keyword()) :: Enumerable.t()
+  def stream_sequence(scene, opts \\ []) do
+    Stream.resource(
+      fn ->
+        case render_sequence(scene, opts) do
+          {:ok, job} -> job
+          {:error, error} -> raise error
+        end
+      end,
+      fn
+        nil ->
+          {:halt, nil}
+
+        %{id: id} = job ->
+          receive do
+            {RingTracer, ^id, {:frame, _n, frame}} -> {[frame], job}
+            {RingTracer, ^id, {:progress, _, _}} -> {[], job}
+            {RingTracer, ^id, {:ok, _result}} -> {:halt, nil}
+            {RingTracer, ^id, {:error, error}} -> raise error
+          end
+      end,
+      fn
+        nil -> :ok
+        job -> cancel(job)
+      end
+    )
   end
 
   # Exactly one final message reaches the caller: the result, an error if
@@ -265,6 +389,10 @@ defmodule RingTracer do
     receive do
       {RingTracer, _, {:progress, _, _} = progress} ->
         send(caller, {RingTracer, id, progress})
+        forward(f)
+
+      {RingTracer, _, {:frame, _, _} = frame} ->
+        send(caller, {RingTracer, id, frame})
         forward(f)
 
       {:result, ^worker, result} ->
@@ -349,17 +477,18 @@ defmodule RingTracer do
     end
   end
 
-  defp run(%Scene{} = scene, settings, opts) do
+  defp run(%Scene{} = scene, settings, opts, extra \\ []) do
     run(
       scene.source,
       settings,
       opts[:kernel] || {RingTracer.Kernel.Native, []},
       :erlang.system_info(:dirty_cpu_schedulers_online),
-      opts
+      opts,
+      extra
     )
   end
 
-  defp run(source, settings, kernel, capacity_cap, opts) do
+  defp run(source, settings, kernel, capacity_cap, opts, extra \\ []) do
     strategy = RingTracer.Strategies.from_options(opts)
     {width, height} = Settings.traced_size(settings)
 
@@ -377,6 +506,9 @@ defmodule RingTracer do
       progress: opts[:progress],
       frames: [opts[:frame] - 1]
     }
+
+    spec = struct!(spec, extra)
+    spec = %{spec | layout: Layout.with_frames(spec.layout, length(spec.frames))}
 
     preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])
     {:ok, parent} = Parent.start(spec)

@@ -1,9 +1,14 @@
 defmodule RingTracer.Result do
   @moduledoc """
-  A finished render: the image as linear RGB and what the job did.
+  A finished render: the image as linear RGB and what the job did; or a
+  finished sequence (`RingTracer.render_sequence/2`): what the job did, and
+  each frame without its pixels, which went to the caller as it completed.
 
     * `:pixels` — `width * height * 3` native-endian 32-bit floats, row-major
       from the top-left, linear light (write it with `RingTracer.Image`);
+      `nil` for a sequence;
+    * `:frames` — a sequence's frames (`RingTracer.Frame`, without their
+      pixels), in the order they completed; none for one image;
     * `:started_at_us` — when the job's parent started, wall clock
       (`System.system_time(:microsecond)`); the times below count from it;
     * `:elapsed_us` — the makespan: from starting the parent (children
@@ -23,7 +28,7 @@ defmodule RingTracer.Result do
       atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,
       `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`
       (its ray counters and work units: `rays.work / busy_us` is its speed);
-    * `:atoms` — one map per atom: `:atom`, `:owner` (the child whose strip
+    * `:atoms` — one map per atom (none for a sequence): `:atom`, `:owner` (the child whose strip
       it is), `:child` (who traced the copy the parent kept), `:start_us`,
       `:end_us`, `:trace_us`;
     * `:events` — protocol events in time order: `:kind` (`:offer`, `:pass`,
@@ -74,7 +79,8 @@ defmodule RingTracer.Result do
     redone: 0,
     nodes: %{},
     warnings: [],
-    warnings_omitted: 0
+    warnings_omitted: 0,
+    frames: []
   ]
 
   @typedoc "A protocol event for the timeline (an offer sent, passed, consumed...)."
@@ -131,7 +137,7 @@ defmodule RingTracer.Result do
   @type t :: %__MODULE__{
           width: pos_integer(),
           height: pos_integer(),
-          pixels: binary(),
+          pixels: binary() | nil,
           started_at_us: integer() | nil,
           elapsed_us: non_neg_integer(),
           teardown_us: non_neg_integer(),
@@ -150,7 +156,8 @@ defmodule RingTracer.Result do
           redone: non_neg_integer(),
           nodes: %{node() => node_summary()},
           warnings: [RingTracer.Scene.Warning.t()],
-          warnings_omitted: non_neg_integer()
+          warnings_omitted: non_neg_integer(),
+          frames: [RingTracer.Frame.t()]
         }
 
   @doc false
@@ -169,7 +176,7 @@ defmodule RingTracer.Result do
       started_at_us: raw.started_at_us,
       elapsed_us: raw.elapsed_us,
       teardown_us: raw.teardown_us,
-      ideal_us: ideal_us(raw.atoms, Enum.map(children, & &1.speed), capacity_cap),
+      ideal_us: ideal_us(work(raw), Enum.map(children, & &1.speed), capacity_cap),
       children: children,
       atoms: raw.atoms,
       events: raw.events,
@@ -181,9 +188,15 @@ defmodule RingTracer.Result do
       failures: raw.failures,
       redone: raw.redone,
       nodes: raw.nodes,
-      layout: raw.layout
+      layout: raw.layout,
+      frames: Map.get(raw, :frames, [])
     }
   end
+
+  # The kept atoms' trace time: from their records, or, in a sequence
+  # (whose children keep none), as the parent summed it.
+  defp work(%{atoms: [], kept_trace_us: us}), do: us
+  defp work(%{atoms: atoms}), do: atoms
 
   @doc """
   The ideal makespan: total trace work over total capacity. A child of speed
@@ -194,8 +207,15 @@ defmodule RingTracer.Result do
       200
       iex> RingTracer.Result.ideal_us([%{trace_us: 100}, %{trace_us: 300}], [1, 4], 8)
       320
+      iex> RingTracer.Result.ideal_us(400, [1, 1], 2)
+      200
   """
-  @spec ideal_us([map()], [number()], number()) :: non_neg_integer()
+  @spec ideal_us([map()] | non_neg_integer(), [number()], number()) :: non_neg_integer()
+  def ideal_us(work, speeds, cap) when is_integer(work) do
+    capacity = min(Enum.reduce(speeds, 0, &(1 / &1 + &2)), cap)
+    round(work / capacity)
+  end
+
   def ideal_us(atoms, speeds, cap) do
     work = Enum.reduce(atoms, 0, &(&1.trace_us + &2))
     capacity = min(Enum.reduce(speeds, 0, &(1 / &1 + &2)), cap)

@@ -19,20 +19,33 @@ defmodule RingTracer.SceneCache do
   scene source, references included), the least recently used *unpinned*
   scenes are dropped until they fit, or until only pinned ones are left. A
   dropped scene's memory is freed when the last process holding it lets go.
+
+  **Frames.** The scene of a frame of an animation (`fetch_frame/2`), keyed
+  by the scene's hash and the frame, is cached the same way: read from the
+  table, built on a miss by the cache process (one build at a time, so the
+  children of a job on this node build each frame once). Frame 0 is the
+  scene itself. At most `max_frames` frames of each scene are held
+  (application env `:scene_cache_frames`, default 8), the least recently
+  fetched going first, and a scene's frames go with it when it is evicted.
+  A dropped frame is freed when the last process holding it (say, a
+  grandchild tracing it) lets go.
   """
   use GenServer
 
-  alias RingTracer.Scene
+  alias RingTracer.{Error, Native, Scene}
   alias RingTracer.Scene.Source
 
   @table __MODULE__
   @default_bytes 256 * 1024 * 1024
+  @default_frames 8
 
   @typep entry :: %{size: non_neg_integer(), used: non_neg_integer(), pins: MapSet.t()}
   @typep state :: %{
            max_bytes: non_neg_integer(),
+           max_frames: non_neg_integer(),
            clock: non_neg_integer(),
            entries: %{binary() => entry()},
+           frames: %{binary() => %{non_neg_integer() => non_neg_integer()}},
            monitors: %{reference() => {binary(), pid()}}
          }
 
@@ -41,7 +54,7 @@ defmodule RingTracer.SceneCache do
   def start_link(opts), do: GenServer.start_link(__MODULE__, opts, name: __MODULE__)
 
   @doc "The parsed scene for `source` on this node, parsing it on a miss."
-  @spec fetch(Source.t()) :: {:ok, Scene.t()} | {:error, RingTracer.Error.t()}
+  @spec fetch(Source.t()) :: {:ok, Scene.t()} | {:error, Error.t()}
   def fetch(%Source{hash: hash} = source) do
     case :ets.lookup(@table, hash) do
       [{^hash, scene}] ->
@@ -51,6 +64,34 @@ defmodule RingTracer.SceneCache do
       [] ->
         GenServer.call(__MODULE__, {:fetch, source}, :infinity)
     end
+  end
+
+  @doc """
+  The handle of frame `frame` (from 0) of the scene of `source` on this
+  node, for `RingTracer.Native`'s scene calls: built on a miss (parsing the
+  scene first if it is not cached). Frame 0 is the scene's own handle. A
+  frame past the scene's last is an error.
+  """
+  @spec fetch_frame(Source.t(), non_neg_integer()) ::
+          {:ok, reference()} | {:error, Error.t()}
+  def fetch_frame(%Source{} = source, 0) do
+    with {:ok, scene} <- fetch(source), do: {:ok, scene.ref}
+  end
+
+  def fetch_frame(%Source{hash: hash} = source, frame) when is_integer(frame) and frame > 0 do
+    case :ets.lookup(@table, {hash, frame}) do
+      [{_, ref}] ->
+        GenServer.cast(__MODULE__, {:touch_frame, hash, frame})
+        {:ok, ref}
+
+      [] ->
+        GenServer.call(__MODULE__, {:fetch_frame, source, frame}, :infinity)
+    end
+  end
+
+  def fetch_frame(%Source{name: name}, frame) do
+    message = "scene #{name}: frame #{inspect(frame)} is not a frame number (from 0)"
+    {:error, Error.new(:invalid_option, message)}
   end
 
   @doc """
@@ -79,8 +120,22 @@ defmodule RingTracer.SceneCache do
   def set_max_bytes(bytes) when is_integer(bytes) and bytes >= 0,
     do: GenServer.call(__MODULE__, {:max_bytes, bytes})
 
-  @doc "The hashes of the scenes held, and for each its size and how many pins it has."
-  @spec info() :: %{binary() => %{size: non_neg_integer(), pins: non_neg_integer()}}
+  @doc "Sets how many frames of each scene are held (see the module doc), dropping the rest."
+  @spec set_max_frames(non_neg_integer()) :: :ok
+  def set_max_frames(frames) when is_integer(frames) and frames >= 0,
+    do: GenServer.call(__MODULE__, {:max_frames, frames})
+
+  @doc """
+  The hashes of the scenes held, and for each its size, how many pins it
+  has and which of its frames (but 0) are held.
+  """
+  @spec info() :: %{
+          binary() => %{
+            size: non_neg_integer(),
+            pins: non_neg_integer(),
+            frames: [pos_integer()]
+          }
+        }
   def info do
     GenServer.call(__MODULE__, :info)
   end
@@ -92,8 +147,22 @@ defmodule RingTracer.SceneCache do
         Application.get_env(:ring_tracer, :scene_cache_bytes, @default_bytes)
       end)
 
+    max_frames =
+      Keyword.get_lazy(opts, :max_frames, fn ->
+        Application.get_env(:ring_tracer, :scene_cache_frames, @default_frames)
+      end)
+
     :ets.new(@table, [:named_table, :protected, :set, read_concurrency: true])
-    {:ok, %{max_bytes: max, clock: 0, entries: %{}, monitors: %{}}}
+
+    {:ok,
+     %{
+       max_bytes: max,
+       max_frames: max_frames,
+       clock: 0,
+       entries: %{},
+       frames: %{},
+       monitors: %{}
+     }}
   end
 
   @impl GenServer
@@ -101,6 +170,30 @@ defmodule RingTracer.SceneCache do
     case load(state, source) do
       {:ok, scene, state} -> {:reply, {:ok, scene}, evict(state)}
       {:error, error, state} -> {:reply, {:error, error}, state}
+    end
+  end
+
+  def handle_call({:fetch_frame, %Source{hash: hash} = source, frame}, _from, state) do
+    case :ets.lookup(@table, {hash, frame}) do
+      [{_, ref}] ->
+        {:reply, {:ok, ref}, touch_frame(state, hash, frame)}
+
+      [] ->
+        case load(state, source) do
+          {:ok, scene, state} ->
+            case build_frame(scene, frame) do
+              {:ok, ref} ->
+                :ets.insert(@table, {{hash, frame}, ref})
+                state = state |> touch_frame(hash, frame) |> trim_frames(hash) |> evict()
+                {:reply, {:ok, ref}, state}
+
+              {:error, error} ->
+                {:reply, {:error, error}, evict(state)}
+            end
+
+          {:error, error, state} ->
+            {:reply, {:error, error}, state}
+        end
     end
   end
 
@@ -131,14 +224,24 @@ defmodule RingTracer.SceneCache do
   def handle_call({:max_bytes, bytes}, _from, state),
     do: {:reply, :ok, evict(%{state | max_bytes: bytes})}
 
+  def handle_call({:max_frames, frames}, _from, state) do
+    state = %{state | max_frames: frames}
+    {:reply, :ok, Enum.reduce(Map.keys(state.frames), state, &trim_frames(&2, &1))}
+  end
+
   def handle_call(:info, _from, state) do
     {:reply,
-     Map.new(state.entries, fn {h, e} -> {h, %{size: e.size, pins: MapSet.size(e.pins)}} end),
-     state}
+     Map.new(state.entries, fn {h, e} ->
+       frames = state.frames |> Map.get(h, %{}) |> Map.keys() |> Enum.sort()
+       {h, %{size: e.size, pins: MapSet.size(e.pins), frames: frames}}
+     end), state}
   end
 
   @impl GenServer
   def handle_cast({:touch, hash}, state), do: {:noreply, touch(state, hash)}
+
+  def handle_cast({:touch_frame, hash, frame}, state),
+    do: {:noreply, touch_frame(state, hash, frame)}
 
   @impl GenServer
   def handle_info({:DOWN, ref, :process, _, _}, state),
@@ -155,7 +258,7 @@ defmodule RingTracer.SceneCache do
         message =
           "scene #{source.name} is not cached on #{node()} and was shipped without its bytes"
 
-        {:error, RingTracer.Error.new(:invalid_scene, message), state}
+        {:error, Error.new(:invalid_scene, message), state}
 
       [] ->
         case Scene.from_source(source) do
@@ -163,6 +266,59 @@ defmodule RingTracer.SceneCache do
           {:error, error} -> {:error, error, state}
         end
     end
+  end
+
+  # The scene of `frame` made from the cached scene (`RingTracer.Native.scene_frame/2`).
+  defp build_frame(scene, frame) do
+    if frame < scene.frames do
+      case Native.scene_frame(scene.ref, frame) do
+        {:ok, ref} -> {:ok, ref}
+        {:error, message} -> {:error, Error.new(:invalid_scene, message)}
+      end
+    else
+      message =
+        "scene #{scene.source.name} has #{scene.frames} frame(s) (0 to #{scene.frames - 1}): " <>
+          "no frame #{frame}"
+
+      {:error, Error.new(:invalid_option, message)}
+    end
+  rescue
+    e in ErlangError ->
+      {:error, Error.new(:invalid_scene, "scene_frame raised: #{Exception.message(e)}")}
+  end
+
+  # Fetching a frame uses its scene too. A frame is held only while its
+  # scene is.
+  defp touch_frame(state, hash, frame) do
+    if Map.has_key?(state.entries, hash) and :ets.member(@table, {hash, frame}) do
+      %{clock: clock} = state = touch(state, hash)
+      frames = Map.update(state.frames, hash, %{frame => clock}, &Map.put(&1, frame, clock))
+      %{state | frames: frames}
+    else
+      state
+    end
+  end
+
+  # The least recently fetched frames of scene `hash` go while it holds more
+  # than `max_frames`.
+  defp trim_frames(state, hash) do
+    held = Map.get(state.frames, hash, %{})
+    excess = map_size(held) - state.max_frames
+
+    if excess > 0 do
+      gone = held |> Enum.sort_by(fn {_, used} -> used end) |> Enum.take(excess)
+      Enum.each(gone, fn {frame, _} -> :ets.delete(@table, {hash, frame}) end)
+      held = Map.drop(held, Enum.map(gone, &elem(&1, 0)))
+      %{state | frames: Map.put(state.frames, hash, held)}
+    else
+      state
+    end
+  end
+
+  defp drop_frames(state, hash) do
+    {held, frames} = Map.pop(state.frames, hash, %{})
+    Enum.each(Map.keys(held), &:ets.delete(@table, {hash, &1}))
+    %{state | frames: frames}
   end
 
   defp drop_pins(state, refs) do
@@ -216,7 +372,7 @@ defmodule RingTracer.SceneCache do
 
         {hash, _} ->
           :ets.delete(@table, hash)
-          evict(%{state | entries: Map.delete(state.entries, hash)})
+          evict(drop_frames(%{state | entries: Map.delete(state.entries, hash)}, hash))
       end
     else
       state

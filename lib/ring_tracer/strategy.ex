@@ -141,6 +141,16 @@ defmodule RingTracer.Strategy do
               result(parent_effect())
 
   @doc """
+  The parent, when frame `frame` (from 0) of a job of several frames is
+  released (`RingTracer.Layout`, "Frames"): the first frame is the initial
+  atoms', each later one comes when a frame completes and leaves room in
+  the job's window. Default: each child gets its strip of the frame (the
+  strip of a child that died is spread over the living).
+  """
+  @callback parent_frame(ParentView.t(), state(), frame :: pos_integer()) ::
+              result(parent_effect())
+
+  @doc """
   The parent, on a message it does not know itself (for instance the reply
   of a helper the strategy started in `parent_start/2`).
   """
@@ -173,6 +183,10 @@ defmodule RingTracer.Strategy do
       def parent_atom_done(_view, state, _index), do: {state, []}
 
       @impl RingTracer.Strategy
+      def parent_frame(view, state, frame),
+        do: {state, RingTracer.Strategy.strips(view, frame)}
+
+      @impl RingTracer.Strategy
       def parent_info(_message, _view, state), do: {state, []}
 
       defoverridable initial_atoms: 3,
@@ -182,8 +196,23 @@ defmodule RingTracer.Strategy do
                      handover_news: 2,
                      parent_start: 2,
                      parent_atom_done: 3,
+                     parent_frame: 3,
                      parent_info: 3
     end
+  end
+
+  @doc """
+  Every child's strip of frame `frame`, as the parent's hand-outs (those of
+  dead children too: the parent spreads them over the living).
+
+      iex> layout = RingTracer.Layout.new(8, 1, 2, 2) |> RingTracer.Layout.with_frames(3)
+      iex> view = %RingTracer.Strategy.ParentView{spec: %{layout: layout}, pid: self()}
+      iex> RingTracer.Strategy.strips(view, 2)
+      [{:hand_out, 0, [8, 9]}, {:hand_out, 1, [10, 11]}]
+  """
+  @spec strips(ParentView.t(), non_neg_integer()) :: [parent_effect()]
+  def strips(%ParentView{spec: %{layout: layout}}, frame) do
+    for i <- 0..(layout.children - 1), do: {:hand_out, i, Layout.strip(layout, i, frame)}
   end
 
   @doc """

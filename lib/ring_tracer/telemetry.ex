@@ -11,6 +11,12 @@ defmodule RingTracer.Telemetry do
     * `[:ring_tracer, :atom, :stop]` — an atom's pixels reached the parent:
       measurements `%{rays: n, trace_us: us}` (rays of every kind), metadata
       `%{job: id, atom: a, child: index, done: atoms_done, total: atoms}`
+    * `[:ring_tracer, :frame, :start]` — a job of several frames released a
+      frame: measurements `%{at_us: job_us}`, metadata `%{job: id, frame:
+      number}` (the scene's frame number, from 1)
+    * `[:ring_tracer, :frame, :stop]` — a sequence's frame is complete:
+      measurements `%{at_us: job_us, elapsed_us: us}`, metadata `%{job: id,
+      frame: %RingTracer.Frame{}}` (its pixels included)
     * `[:ring_tracer, :job, :stop]` — measurements `%{duration: native}`,
       metadata `%{job: id, outcome: :ok | :error}`
 

@@ -58,6 +58,7 @@ defmodule RingTracer.Job.Child do
     current_since: 0,
     attempts: %{},
     done: 0,
+    last_frame: 0,
     status: :waiting,
     dead: [],
     strategy_state: %{},
@@ -72,7 +73,7 @@ defmodule RingTracer.Job.Child do
   grandchild and the atoms queued for it (`queue`) or in its pipe
   (`in_flight`, the one being traced first), the atoms in its pipe traced in
   parts (`parts`: how many, or `:cut` for the piece left after a cut), tries
-  per atom, its status,
+  per atom, the latest frame it has had atoms of (`last_frame`), its status,
   its strategy's state, messages that came before the ring (`early`), and
   what it reports at the end (`traffic`, `events`, `atoms`, `stats`).
   """
@@ -94,6 +95,7 @@ defmodule RingTracer.Job.Child do
           current_since: integer(),
           attempts: %{Layout.atom_id() => pos_integer()},
           done: non_neg_integer(),
+          last_frame: non_neg_integer(),
           status: :waiting | :working | :idle | :finished,
           dead: [non_neg_integer()],
           strategy_state: RingTracer.Strategy.state(),
@@ -302,13 +304,16 @@ defmodule RingTracer.Job.Child do
   def receive_atoms(state, atoms) do
     {queue, atoms} = Queue.append(state.queue, atoms, MapSet.new(state.in_flight))
 
+    last_frame =
+      Enum.reduce(atoms, state.last_frame, &max(&2, Layout.frame(state.spec.layout, &1)))
+
     stats = %{
       state.stats
       | received: state.stats.received + length(atoms),
         handovers: state.stats.handovers + 1
     }
 
-    %{state | queue: queue, status: :working, stats: stats}
+    %{state | queue: queue, status: :working, stats: stats, last_frame: last_frame}
     |> fill_pipe()
     |> maybe_idle()
   end
@@ -368,6 +373,7 @@ defmodule RingTracer.Job.Child do
       mean_atom_us: mean_atom_us(state),
       remaining_us: if(in_flight > 0, do: expected_remaining_us(state)),
       cuttable: cuttable(state),
+      more_frames: state.last_frame < state.spec.layout.frames - 1,
       now: job_time(state)
     }
   end
@@ -555,7 +561,7 @@ defmodule RingTracer.Job.Child do
         attempts: Map.delete(state.attempts, atom),
         done: state.done + 1,
         stats: stats,
-        atoms: [record | state.atoms]
+        atoms: keep_record(state, record)
     }
 
     {:noreply, state |> fill_pipe() |> maybe_idle()}
@@ -690,6 +696,14 @@ defmodule RingTracer.Job.Child do
 
     max(state.strategy.parts(view, state.strategy_state), 1)
   end
+
+  # Each atom's record, for the timeline and ownership map of one image; a
+  # job of several frames keeps none, so that its memory does not grow
+  # with the number of frames.
+  defp keep_record(%{spec: %Spec{layout: %Layout{frames: 1}}} = state, record),
+    do: [record | state.atoms]
+
+  defp keep_record(state, _record), do: state.atoms
 
   defp maybe_idle(%{queue: %Queue{size: 0}, in_flight: [], status: :working} = state),
     do: idle(state)

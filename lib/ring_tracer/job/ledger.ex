@@ -99,6 +99,29 @@ defmodule RingTracer.Job.Ledger do
   end
 
   @doc """
+  Forgets the moves of the atoms in `atoms` (a frame's, once it is
+  complete: `RingTracer.Layout`, "Frames"), pieces included, so that the
+  ledger holds the frames in flight only. A child may then seem to hold
+  initial atoms of that frame again; they are traced, and the parent never
+  hands them out again.
+
+      iex> layout = RingTracer.Layout.new(8, 8, 2, 2) |> RingTracer.Layout.with_frames(2)
+      iex> l = RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring)
+      iex> l = RingTracer.Job.Ledger.moved(l, :parent, 1, [6, 7, {4, 1, 2, 2}])
+      iex> RingTracer.Job.Ledger.held(RingTracer.Job.Ledger.drop(l, 4..7), 1)
+      [2, 3]
+  """
+  @spec drop(t(), Range.t()) :: t()
+  def drop(ledger, atoms) do
+    moves =
+      Map.new(ledger.moves, fn {who, mine} ->
+        {who, Map.reject(mine, fn {a, _} -> Layout.base(a) in atoms end)}
+      end)
+
+    %{ledger | moves: moves}
+  end
+
+  @doc """
   Forgets child `index`'s moves (it is dead and its atoms handed out
   again; moves to it are recorded as to `:nobody` from now on).
   """

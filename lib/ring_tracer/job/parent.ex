@@ -12,6 +12,20 @@ defmodule RingTracer.Job.Parent do
   its statistics (a child kills its grandchild first), sends the result to
   the caller and stops: no process of the job outlives it.
 
+  ## Frames
+
+  A job of several frames (`RingTracer.Layout`, "Frames") keeps at most
+  its spec's `window` of frames in flight: the first frame's atoms are the
+  children's initial atoms, and each time the oldest frame in flight
+  completes, the next frame is released (`RingTracer.Strategy.parent_frame/3`:
+  by default each child gets its strip of it, queued behind what it holds).
+  A child that runs out goes on with the next frame's atoms or helps its
+  siblings, so the ring does not drain between frames. In a `sequence`,
+  the parent sends each frame to the caller as it completes
+  (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
+  their places in the ledger: memory holds the window, whatever the
+  number of frames.
+
   If the caller dies, the job stops. If a child dies, the atoms it may have
   held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
   is re-linked around it; if an atom fails for good, or every child dies,
@@ -49,7 +63,13 @@ defmodule RingTracer.Job.Parent do
     completed: nil,
     children: %{},
     monitors: %{},
-    results: %{},
+    frames: %{},
+    released: 0,
+    low: 0,
+    done_above: MapSet.new(),
+    traced_counts: %{},
+    kept_trace_us: 0,
+    summaries: [],
     coverage: %{},
     traced_by: %{},
     stopping: nil,
@@ -67,9 +87,13 @@ defmodule RingTracer.Job.Parent do
   @typedoc """
   The parent's state: its spec and strategy module, when it started and
   completed (monotonic microseconds) and the job's wall-clock start `t0`,
-  the living children and their monitors, the atoms received and who traced
-  them, how many are missing, the ledger of where atoms are, the dead
-  children, and what it reports.
+  the living children and their monitors, the frames in flight (`frames`:
+  the atoms received of each), how many frames are released, the oldest
+  frame in flight (`low`) and the later ones already complete
+  (`done_above`), who traced the atoms in flight and how many each child
+  traced, how many atoms are missing, the ledger of where atoms are, the
+  dead children, and what it reports (`summaries`: the frames sent, newest
+  first).
   """
   @type t :: %__MODULE__{
           spec: Spec.t(),
@@ -81,7 +105,13 @@ defmodule RingTracer.Job.Parent do
           completed: integer() | nil,
           children: %{non_neg_integer() => pid()},
           monitors: %{reference() => non_neg_integer()},
-          results: %{Layout.atom_id() => binary()},
+          frames: %{non_neg_integer() => frame()},
+          released: non_neg_integer(),
+          low: non_neg_integer(),
+          done_above: MapSet.t(non_neg_integer()),
+          traced_counts: %{non_neg_integer() => non_neg_integer()},
+          kept_trace_us: non_neg_integer(),
+          summaries: [RingTracer.Frame.t()],
           coverage: Coverage.t(),
           traced_by: %{Layout.atom_id() => non_neg_integer()},
           stopping: stopping() | nil,
@@ -94,6 +124,18 @@ defmodule RingTracer.Job.Parent do
           node_bytes: %{node() => non_neg_integer()},
           helpers: [{pid(), reference()}],
           reported: non_neg_integer()
+        }
+
+  @typedoc """
+  A frame in flight: the atoms received (atom or piece => pixels), how
+  many atoms are missing, and what its `RingTracer.Frame` reports.
+  """
+  @type frame :: %{
+          results: %{Layout.atom_id() => binary()},
+          missing: non_neg_integer(),
+          released_us: integer(),
+          traced: %{non_neg_integer() => non_neg_integer()},
+          rays: RingTracer.Rays.t()
         }
 
   @typedoc "A job that is stopping: its outcome, and the reports of the children so far."
@@ -110,7 +152,9 @@ defmodule RingTracer.Job.Parent do
 
   @typedoc "What the parent replies to the job's caller when the job completes."
   @type reply :: %{
-          pixels: binary(),
+          pixels: binary() | nil,
+          frames: [RingTracer.Frame.t()],
+          kept_trace_us: non_neg_integer(),
           started_at_us: integer(),
           elapsed_us: non_neg_integer(),
           teardown_us: non_neg_integer(),
@@ -181,7 +225,11 @@ defmodule RingTracer.Job.Parent do
   defp effect(state, {:send, index, kind, msg}),
     do: send_counted(state, Map.fetch!(state.children, index), kind, msg)
 
-  defp effect(state, {:hand_out, index, atoms}), do: hand_out(state, index, atoms)
+  defp effect(state, {:hand_out, index, atoms}) when is_map_key(state.children, index),
+    do: hand_out(state, index, atoms)
+
+  # A dead child's share (its strip of a new frame): spread over the living.
+  defp effect(state, {:hand_out, _index, atoms}), do: spread(state, atoms)
   defp effect(state, {:helper, fun}), do: start_helper(state, fun)
 
   @doc """
@@ -302,8 +350,13 @@ defmodule RingTracer.Job.Parent do
 
         {_, options} = state.spec.strategy
 
-        {:noreply,
-         run_strategy(state, fn view, _ -> state.strategy.parent_start(view, options) end)}
+        state =
+          state
+          |> new_frame(0)
+          |> run_strategy(fn view, _ -> state.strategy.parent_start(view, options) end)
+          |> release()
+
+        {:noreply, state}
 
       {:error, message, list} ->
         for {_i, pid} <- list, do: Process.exit(pid, :kill)
@@ -345,7 +398,7 @@ defmodule RingTracer.Job.Parent do
           strategy: state.spec.strategy,
           nodes: placement(state.spec.nodes, n),
           speeds: for(i <- 0..(n - 1), do: Spec.speed(speeds, i)),
-          results: state.results,
+          results: oldest_results(state),
           traced_by: state.traced_by
         }}, state}
     else
@@ -355,7 +408,7 @@ defmodule RingTracer.Job.Parent do
 
   @impl GenServer
   def handle_info({:atom_done, child, atom, pixels, rays, us}, state) do
-    case Coverage.add(state.coverage, atom) do
+    case add(state, atom) do
       # A second copy (an atom handed out again after a failure whose first
       # pixels were still on their way): counted, also while the job stops,
       # so that every result message sent is either kept or counted here.
@@ -411,7 +464,8 @@ defmodule RingTracer.Job.Parent do
   def handle_info(_other, state), do: {:noreply, state}
 
   defp atom_done(state, coverage, child, atom, pixels, rays, us) do
-    {_first, count} = Layout.span(state.spec.layout, atom)
+    %Spec{layout: layout} = state.spec
+    {_first, count} = Layout.span(layout, atom)
     base = Layout.base(atom)
 
     cond do
@@ -424,17 +478,29 @@ defmodule RingTracer.Job.Parent do
       true ->
         # An atom counts once all of it has arrived (pieces tile it).
         done = if Coverage.complete?(coverage, base), do: 1, else: 0
+        f = Layout.frame(layout, base)
+
+        frame =
+          state.frames
+          |> Map.fetch!(f)
+          |> Map.update!(:results, &Map.put(&1, atom, pixels))
+          |> Map.update!(:missing, &(&1 - done))
+          |> Map.update!(:traced, &Map.update(&1, child, 1, fn n -> n + 1 end))
+          |> Map.update!(:rays, &RingTracer.Rays.add(&1, rays))
 
         state = %{
           state
-          | results: Map.put(state.results, atom, pixels),
+          | frames: Map.put(state.frames, f, frame),
             coverage: coverage,
             traced_by: Map.put(state.traced_by, atom, child),
+            traced_counts: Map.update(state.traced_counts, child, 1, &(&1 + 1)),
+            kept_trace_us: state.kept_trace_us + us,
             missing: state.missing - done
         }
 
         state = if done == 1, do: progress(state), else: state
         atom_event(state, child, atom, pixels, rays, us)
+        state = if frame.missing == 0, do: frame_done(state, f), else: state
 
         cond do
           state.missing == 0 ->
@@ -443,6 +509,119 @@ defmodule RingTracer.Job.Parent do
           true ->
             {:noreply, run_strategy(state, &state.strategy.parent_atom_done(&1, &2, child))}
         end
+    end
+  end
+
+  ## Frames
+
+  # Coverage.add/2, where an atom of a frame already complete (and
+  # forgotten) is a duplicate too.
+  defp add(state, atom) do
+    if frame_done?(state, Layout.frame(state.spec.layout, atom)),
+      do: {:duplicate, state.coverage},
+      else: Coverage.add(state.coverage, atom)
+  end
+
+  defp frame_done?(state, f), do: f < state.low or MapSet.member?(state.done_above, f)
+
+  # Whether atom or piece `a` needs tracing no more.
+  defp covered?(state, a),
+    do:
+      frame_done?(state, Layout.frame(state.spec.layout, a)) or
+        Coverage.covered?(state.coverage, a)
+
+  defp new_frame(state, f) do
+    now = Child.job_time(state)
+
+    frame = %{
+      results: %{},
+      missing: Layout.frame_atom_count(state.spec.layout),
+      released_us: now,
+      traced: %{},
+      rays: RingTracer.Rays.zero()
+    }
+
+    if state.spec.layout.frames > 1 or state.spec.sequence do
+      RingTracer.Telemetry.execute(
+        [:ring_tracer, :frame, :start],
+        %{at_us: now},
+        %{job: state.spec.id, frame: Enum.at(state.spec.frames, f) + 1}
+      )
+    end
+
+    %{state | frames: Map.put(state.frames, f, frame), released: max(state.released, f + 1)}
+  end
+
+  # Releases frames while the window has room (the first one was released
+  # with the initial atoms).
+  defp release(%{spec: %Spec{layout: layout, window: window}, released: r, low: low} = state)
+       when r < layout.frames and r < low + window do
+    state
+    |> new_frame(r)
+    |> run_strategy(&state.strategy.parent_frame(&1, &2, r))
+    |> release()
+  end
+
+  defp release(state), do: state
+
+  # Frame `f` is complete. In a sequence it goes now to whoever gets the
+  # job's progress (the caller, if nobody), and the parent forgets it;
+  # otherwise (one image) it is kept for the end.
+  defp frame_done(%{spec: %Spec{sequence: false}} = state, _f), do: state
+
+  defp frame_done(state, f) do
+    %Spec{layout: layout, frames: numbers, id: id, caller: caller, progress: to} = state.spec
+    {frame, frames} = Map.pop(state.frames, f)
+    atoms = Layout.frame_atoms(layout, f)
+
+    result = %RingTracer.Frame{
+      number: Enum.at(numbers, f) + 1,
+      width: layout.width,
+      height: layout.height,
+      pixels: assemble(layout, frame.results, f),
+      released_us: frame.released_us,
+      completed_us: Child.job_time(state),
+      atoms: Range.size(atoms),
+      traced: frame.traced,
+      rays: frame.rays
+    }
+
+    RingTracer.Telemetry.execute(
+      [:ring_tracer, :frame, :stop],
+      %{at_us: result.completed_us, elapsed_us: RingTracer.Frame.elapsed_us(result)},
+      %{job: id, frame: result}
+    )
+
+    send(to || caller, {@reply_tag, id, {:frame, result.number, result}})
+
+    traced_by = Map.drop(state.traced_by, Map.keys(frame.results))
+    coverage = Map.drop(state.coverage, Enum.to_list(atoms))
+    {low, done_above} = advance(state.low, MapSet.put(state.done_above, f))
+
+    %{
+      state
+      | frames: frames,
+        traced_by: traced_by,
+        coverage: coverage,
+        ledger: Ledger.drop(state.ledger, atoms),
+        low: low,
+        done_above: done_above,
+        summaries: [RingTracer.Frame.summary(result) | state.summaries]
+    }
+    |> release()
+  end
+
+  defp advance(low, done) do
+    if MapSet.member?(done, low),
+      do: advance(low + 1, MapSet.delete(done, low)),
+      else: {low, done}
+  end
+
+  # What a preview sees of the job's pixels: the oldest frame in flight's.
+  defp oldest_results(state) do
+    case Map.get(state.frames, state.low) do
+      nil -> %{}
+      frame -> frame.results
     end
   end
 
@@ -514,23 +693,24 @@ defmodule RingTracer.Job.Parent do
   # Atoms lost with a child, less those traced since, to the live children
   # in shares that follow their speeds.
   defp reassign(state, atoms) do
-    case Enum.reject(atoms, &Coverage.covered?(state.coverage, &1)) do
-      [] ->
-        state
-
-      lost ->
-        lost
-        |> shares(traced_counts(state))
-        |> Enum.reduce(state, fn {i, share}, st -> hand_out(st, i, share) end)
-        |> Map.update!(:redone, &(&1 + length(lost)))
+    case Enum.reject(atoms, &covered?(state, &1)) do
+      [] -> state
+      lost -> state |> spread(lost) |> Map.update!(:redone, &(&1 + length(lost)))
     end
+  end
+
+  # Atoms to the live children in shares that follow their speeds.
+  defp spread(state, atoms) do
+    atoms
+    |> shares(weights(state))
+    |> Enum.reduce(state, fn {i, share}, st -> hand_out(st, i, share) end)
   end
 
   # What each live child has traced so far (plus one, so that a child yet to
   # trace an atom still gets a share): a measure of its speed.
-  defp traced_counts(state) do
-    counts = Enum.frequencies(Map.values(state.traced_by))
-    for i <- state.children |> Map.keys() |> Enum.sort(), do: {i, Map.get(counts, i, 0) + 1}
+  defp weights(state) do
+    for i <- state.children |> Map.keys() |> Enum.sort(),
+        do: {i, Map.get(state.traced_counts, i, 0) + 1}
   end
 
   @doc """
@@ -671,9 +851,9 @@ defmodule RingTracer.Job.Parent do
     do: first_copies(rest, key, [record | acc])
 
   @doc """
-  The image from the pixels received, by atom or piece (`results`): each
-  atom's pieces in pixel order, the pixels two pieces share (after a
-  failure) taken once.
+  The image of frame `frame` (the first by default) from the pixels
+  received of it, by atom or piece (`results`): each atom's pieces in pixel
+  order, the pixels two pieces share (after a failure) taken once.
 
       iex> layout = RingTracer.Layout.new(4, 1, 1, 1)
       iex> {h, t} = RingTracer.Layout.split(0, 1, 2)
@@ -682,17 +862,20 @@ defmodule RingTracer.Job.Parent do
       iex> RingTracer.Job.Parent.assemble(layout, results) == px.(1) <> px.(2) <> px.(3) <> px.(4)
       true
   """
-  @spec assemble(Layout.t(), %{Layout.atom_id() => binary()}) :: binary()
-  def assemble(layout, results) do
-    whole = if map_size(results) == Layout.atom_count(layout), do: whole_atoms(layout, results)
-    whole || assemble_pieces(layout, results)
+  @spec assemble(Layout.t(), %{Layout.atom_id() => binary()}, non_neg_integer()) :: binary()
+  def assemble(layout, results, frame \\ 0) do
+    whole =
+      if map_size(results) == Layout.frame_atom_count(layout),
+        do: whole_atoms(layout, results, frame)
+
+    whole || assemble_pieces(layout, results, frame)
   end
 
   # Every atom came back whole (as many results as atoms, each an atom's):
   # the image is their pixels in atom order.
-  defp whole_atoms(layout, results) do
+  defp whole_atoms(layout, results, frame) do
     layout
-    |> Layout.atoms()
+    |> Layout.frame_atoms(frame)
     |> Enum.reduce_while([], fn a, acc ->
       case results do
         %{^a => pixels} -> {:cont, [pixels | acc]}
@@ -705,11 +888,11 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  defp assemble_pieces(layout, results) do
+  defp assemble_pieces(layout, results, frame) do
     by_atom = Enum.group_by(results, fn {a, _} -> Layout.base(a) end)
 
     layout
-    |> Layout.atoms()
+    |> Layout.frame_atoms(frame)
     |> Enum.map(fn a ->
       {first, _} = Layout.span(layout, a)
 
@@ -758,7 +941,7 @@ defmodule RingTracer.Job.Parent do
     reply =
       case outcome do
         :ok ->
-          pixels = assemble(spec.layout, state.results)
+          pixels = if spec.sequence, do: nil, else: assemble(spec.layout, state.frames[0].results)
 
           traffic =
             Enum.reduce(reports, state.traffic, fn r, acc ->
@@ -768,6 +951,8 @@ defmodule RingTracer.Job.Parent do
           {:ok,
            %{
              pixels: pixels,
+             frames: Enum.reverse(state.summaries),
+             kept_trace_us: state.kept_trace_us,
              started_at_us: state.t0,
              elapsed_us: elapsed,
              teardown_us: now - state.completed,

@@ -5,7 +5,9 @@ defmodule RingTracer.Job.Spec do
   scene's source (bytes), never a scene handle, so it can cross nodes, and
   which frames of an animated scene to trace (`frames`, from 0: the scene's
   frame for each of the layout's frames, in order; `RingTracer.Layout`,
-  "Frames").
+  "Frames"); in a `sequence`, how many frames may be in flight at once
+  (`window`), and the caller gets each frame as it completes instead of one
+  image at the end.
   """
 
   alias RingTracer.{Layout, Settings}
@@ -25,6 +27,7 @@ defmodule RingTracer.Job.Spec do
     progress: nil,
     frames: [0],
     window: 1,
+    sequence: false,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -41,6 +44,7 @@ defmodule RingTracer.Job.Spec do
           progress: pid() | nil,
           frames: [non_neg_integer(), ...],
           window: pos_integer(),
+          sequence: boolean(),
           liveness: pos_integer()
         }
 

@@ -13,11 +13,34 @@ defmodule RingTracer.Kernel.Simulated do
       turns a list or tuple into, so that 1024 children share one copy), a
       function `atom -> microseconds`, or one integer for every atom
       (default 2000).
+
+  In a job of several frames (`RingTracer.Layout`, "Frames") every frame
+  costs alike: costs are indexed by the atom within its frame.
   """
   @behaviour RingTracer.Kernel
 
+  alias RingTracer.Layout
+
+  defmodule Frames do
+    @moduledoc false
+    # The context of a job of several frames: the costs, and the layout's
+    # atoms per frame.
+    @enforce_keys [:costs, :frame_atoms]
+    defstruct @enforce_keys
+
+    @type t :: %__MODULE__{costs: term(), frame_atoms: pos_integer()}
+  end
+
   @impl RingTracer.Kernel
-  def prepare(_spec, opts), do: {:ok, Keyword.get(opts, :costs, 2000)}
+  def prepare(%{layout: %Layout{frames: 1}}, opts), do: {:ok, Keyword.get(opts, :costs, 2000)}
+
+  def prepare(spec, opts) do
+    {:ok,
+     %Frames{
+       costs: Keyword.get(opts, :costs, 2000),
+       frame_atoms: Layout.frame_atom_count(spec.layout)
+     }}
+  end
 
   @doc """
   Costs in their shared form: a list or tuple becomes one binary (referenced,
@@ -38,18 +61,24 @@ defmodule RingTracer.Kernel.Simulated do
   @impl RingTracer.Kernel
   def prepare_node(_spec, _opts, _node), do: {:ok, 0}
 
-  @doc "Each atom's work: its cost in the model (an exact preview)."
+  @doc "Each atom's work, of one frame: its cost in the model (an exact preview)."
   @impl RingTracer.Kernel
   def atom_work(spec, opts) do
     costs = Keyword.get(opts, :costs, 2000)
-    {:ok, List.to_tuple(for a <- RingTracer.Layout.atoms(spec.layout), do: cost(costs, a))}
+    {:ok, List.to_tuple(for a <- Layout.frame_atoms(spec.layout, 0), do: cost(costs, a))}
   end
 
   @impl RingTracer.Kernel
-  def trace(costs, _first, count, atom) do
+  def trace(%Frames{costs: costs, frame_atoms: m}, _first, count, atom),
+    do: sleep(costs, rem(Layout.base(atom), m), count, atom)
+
+  def trace(costs, _first, count, atom), do: sleep(costs, Layout.base(atom), count, atom)
+
+  # Atom or piece `atom`, atom `index` of the costs, of `count` pixels.
+  defp sleep(costs, index, count, atom) do
     # A piece of an atom (`RingTracer.Layout`) costs its share of the atom.
-    {k, n} = RingTracer.Layout.fraction(atom)
-    us = div(cost(costs, RingTracer.Layout.base(atom)) * k, n)
+    {k, n} = Layout.fraction(atom)
+    us = div(cost(costs, index) * k, n)
     t0 = System.monotonic_time(:microsecond)
     Process.sleep(div(us + 500, 1000))
     elapsed = System.monotonic_time(:microsecond) - t0

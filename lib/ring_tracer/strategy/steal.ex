@@ -39,7 +39,9 @@ defmodule RingTracer.Strategy.Steal do
   # Atoms the parent hands out again after a failure: the child's sweep of
   # victims goes on where it was (restarting it would ask every sibling
   # again, most of them idle by then).
-  def handle_message({:handover, :parent, atoms}, _view, state), do: {state, [{:queue, atoms}]}
+  # Atoms from the parent (a new frame, or atoms of a dead sibling) are new
+  # work: siblings that refused before may have some to spare again.
+  def handle_message({:handover, :parent, atoms}, _view, _state), do: {%{}, [{:queue, atoms}]}
   def handle_message({:handover, _from, atoms}, _view, _state), do: {%{}, [{:queue, atoms}]}
 
   # The sibling we asked may be gone; the others still trace what they hold.

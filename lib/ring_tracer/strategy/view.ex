@@ -24,6 +24,9 @@ defmodule RingTracer.Strategy.View do
       its grandchild traces it in parts (`RingTracer.Job.Pipe.cut/3`; 0:
       none); `:next_rows` — image rows in the atom it puts in the pipe
       next (for `RingTracer.Strategy.parts/2`; 0.0 elsewhere);
+    * `:more_frames` — whether the job has frames still to come, that
+      the parent has not released yet (`RingTracer.Strategy.parent_frame/3`):
+      a finished child may then get work again;
     * `:now` — job microseconds (wall clock since the job's start, the
       same for every process of the job).
   """
@@ -49,6 +52,7 @@ defmodule RingTracer.Strategy.View do
     done: 0,
     cuttable: 0,
     next_rows: 0.0,
+    more_frames: false,
     now: 0
   ]
 
@@ -72,6 +76,7 @@ defmodule RingTracer.Strategy.View do
           remaining_us: non_neg_integer() | nil,
           cuttable: non_neg_integer(),
           next_rows: float(),
+          more_frames: boolean(),
           now: integer()
         }
 end

@@ -89,4 +89,100 @@ defmodule RingTracer.Kernel.NativeTest do
     # a span past the image is refused before anything is traced
     assert {:error, _} = RingTracer.Native.trace_atom_short(scene.ref, native, 4090, 16, 200)
   end
+
+  # A job of `frames` (scene frames, from 0), one layout frame each.
+  defp frames_spec(name, width, height, children, atoms, frames) do
+    spec = spec(name, width, height, children, atoms)
+    %{spec | layout: Layout.with_frames(spec.layout, length(frames)), frames: frames}
+  end
+
+  defp trace_all(spec, context, atoms) do
+    for a <- atoms, into: %{} do
+      {first, count} = Layout.span(spec.layout, a)
+      assert {:ok, pixels, _rays, _us} = Native.trace(context, first, count, a)
+      assert byte_size(pixels) == count * 12
+      {a, pixels}
+    end
+  end
+
+  # Every atom of every frame, frame after frame in turn (a grandchild of a
+  # job with several frames in flight moves between them), some in pieces.
+  defp round_robin(layout) do
+    0..(layout.frames - 1)
+    |> Enum.map(&Enum.to_list(Layout.frame_atoms(layout, &1)))
+    |> Enum.zip()
+    |> Enum.flat_map(&Tuple.to_list/1)
+    |> Enum.flat_map(fn a ->
+      if rem(a, 2) == 1, do: Tuple.to_list(Layout.split(a, 1, 3)), else: [a]
+    end)
+  end
+
+  for name <- ["whitted_orbit.toml", "balls_flythrough.toml"] do
+    test "a job of several frames of #{name} traces each atom in its frame's scene, byte for byte" do
+      frames = [0, 5, 11]
+
+      # atoms of 128 pixels (traced first on the grandchild's scheduler) and of 384 (dirty)
+      for {children, atoms} <- [{2, 3}, {2, 1}] do
+        spec = frames_spec(unquote(name), 32, 24, children, atoms, frames)
+        assert {:ok, context} = Native.prepare(spec, [])
+        traced = trace_all(spec, context, round_robin(spec.layout))
+
+        for {frame, i} <- Enum.with_index(frames) do
+          image =
+            traced
+            |> Enum.filter(fn {a, _} -> Layout.frame(spec.layout, a) == i end)
+            |> Enum.sort_by(fn {a, _} -> Layout.span(spec.layout, a) end)
+            |> Enum.map_join(&elem(&1, 1))
+
+          # the kernel's own render of that frame, and a job of that frame alone
+          assert image == TestScenes.reference(unquote(name), 32, 24, frame: frame + 1),
+                 "frame #{frame}, #{children}x#{atoms} atoms"
+
+          single = %{spec(unquote(name), 32, 24, children, atoms) | frames: [frame]}
+          {:ok, single_context} = Native.prepare(single, [])
+          alone = trace_all(single, single_context, Layout.atoms(single.layout))
+          assert image == Enum.map_join(Layout.atoms(single.layout), &alone[&1])
+        end
+      end
+    end
+  end
+
+  test "frames differ: the frames of a job are not all traced in one scene" do
+    spec = frames_spec("whitted_orbit.toml", 16, 12, 1, 1, [0, 5])
+    {:ok, context} = Native.prepare(spec, [])
+    {:ok, frame0, _, _} = Native.trace(context, 0, 192, 0)
+    {:ok, frame5, _, _} = Native.trace(context, 0, 192, 1)
+    assert frame0 != frame5
+  end
+
+  test "atom_work of a job of several frames is that of its first frame's atoms" do
+    spec = frames_spec("whitted_orbit.toml", 64, 48, 2, 4, [11, 0, 5])
+    single = %{spec("whitted_orbit.toml", 64, 48, 2, 4) | frames: [11]}
+    assert {:ok, work} = Native.atom_work(spec, [])
+    assert tuple_size(work) == 8
+    assert {:ok, work} == Native.atom_work(single, [])
+    assert {:ok, work} != Native.atom_work(%{single | frames: [0]}, [])
+  end
+
+  test "frames past the scene's last, or not one per layout frame, are errors, not crashes" do
+    spec = frames_spec("whitted_orbit.toml", 16, 12, 2, 2, [0, 5, 48])
+    assert {:error, message} = Native.prepare(spec, [])
+    assert message =~ "no frame 48"
+    assert {:error, ^message} = Native.atom_work(spec, [])
+
+    assert {:error, message} = Native.prepare(%{spec | frames: [0, 5]}, [])
+    assert message =~ "2 scene frame(s) for a layout of 3"
+
+    assert {:error, message} = Native.prepare(%{spec | frames: [0, -1, 2]}, [])
+    assert message =~ "no frame -1"
+
+    single = %{spec("whitted_orbit.toml", 16, 12, 2, 2) | frames: [48]}
+    assert {:error, message} = Native.prepare(single, [])
+    assert message =~ "no frame 48"
+
+    # an atom past the job's frames
+    {:ok, context} = Native.prepare(%{spec | frames: [0, 5, 11]}, [])
+    assert {:error, message} = Native.trace(context, 0, 4, 12)
+    assert message =~ "past the job's 3 frames"
+  end
 end

@@ -11,7 +11,7 @@ defmodule RingTracer.Strategy.Ring do
   offer is answered), holding (in a large ring, an offer that walked far
   waits for a child about to run out and leaves with that child's own
   offer, in one message), splicing (offers stop visiting finished
-  children) and aiming (on strips, an idle child's offer goes straight to
+  children, once a job has no frames left to come) and aiming (on strips, an idle child's offer goes straight to
   the sibling it expects to stay busy longest: `RingTracer.Strategy.Ring.Aim`).
 
   ## Options
@@ -407,7 +407,7 @@ defmodule RingTracer.Strategy.Ring do
   end
 
   # A finished child asks whoever sent it an offer to skip it from now on.
-  defp splice(%View{status: :finished} = view, %HelpOffer{via: via})
+  defp splice(%View{status: :finished, more_frames: false} = view, %HelpOffer{via: via})
        when is_pid(via) and via != view.pid,
        do: [{:send, via, :control, {:ring_skip, view.pid, view.left, view.left_index}}]
 
