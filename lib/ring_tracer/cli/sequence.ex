@@ -46,7 +46,7 @@ defmodule RingTracer.CLI.Sequence do
 
     result =
       try do
-        case start(scene, opts) do
+        case RingTracer.render_sequence(scene, opts) do
           {:ok, handle} -> collect(handle, handler, job, plan, numbers, dir)
           {:error, error} -> refused(error)
         end
@@ -61,9 +61,6 @@ defmodule RingTracer.CLI.Sequence do
       :ok
     end
   end
-
-  # `RingTracer.render_sequence/2`, called by name until it is on main.
-  defp start(scene, opts), do: apply(RingTracer, :render_sequence, [scene, opts])
 
   @doc """
   Receives the job's messages until it ends: feeds the progress display,
@@ -146,7 +143,7 @@ defmodule RingTracer.CLI.Sequence do
           :ok ->
             summary = %{
               number: n,
-              elapsed_us: elapsed_us(frame),
+              elapsed_us: RingTracer.Frame.elapsed_us(frame),
               atoms: frame.atoms,
               rays: frame.rays
             }
@@ -161,12 +158,6 @@ defmodule RingTracer.CLI.Sequence do
         end
     end
   end
-
-  # From the frame's release into the ring to its last pixel.
-  defp elapsed_us(%{released_us: r, completed_us: c}) when is_integer(r) and is_integer(c),
-    do: max(c - r, 0)
-
-  defp elapsed_us(_frame), do: nil
 
   defp ended({:ok, result}, s) do
     if MapSet.size(s.left) == 0,

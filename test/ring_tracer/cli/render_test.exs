@@ -150,5 +150,76 @@ defmodule RingTracer.CLI.RenderTest do
       assert out =~ "wrote #{dir}/f_05.png (16x12)"
       assert <<0x89, "PNG", _::binary>> = File.read!(Path.join(dir, "f_05.png"))
     end
+
+    test "one file per frame, each the same as that frame rendered alone", %{tmp_dir: dir} do
+      args = ~w(-o #{dir}/f_##.png --frames 2-4 --stats #{dir}/s.json --timeline #{dir}/t.svg)
+      {:ok, out} = render([@scene | args] ++ @tiny)
+
+      assert out =~ "wrote 3 frames (16x12), #{dir}/f_02.png to #{dir}/f_04.png\n"
+
+      for n <- 2..4,
+          do: assert(out =~ ~r/\n  frame #{n}: \d+\.\d{3} s, 4 atoms, \d+ rays, f_0#{n}.png\n/)
+
+      assert out =~ "with 2 children\n"
+      assert out =~ "wrote #{dir}/s.json\nwrote #{dir}/t.svg\n"
+      assert Enum.sort(File.ls!(dir)) == ~w(f_02.png f_03.png f_04.png s.json t.svg)
+
+      for n <- 2..4 do
+        {:ok, _} = render([@scene | ~w(-o #{dir}/alone.png --frame #{n} -q)] ++ @tiny)
+
+        assert File.read!(Path.join(dir, "f_0#{n}.png")) ==
+                 File.read!(Path.join(dir, "alone.png")),
+               "frame #{n}"
+      end
+    end
+
+    test "--continue renders only the frames not there, at the whole sequence's clock", %{
+      tmp_dir: dir
+    } do
+      {:ok, _} = render([@scene | ~w(-o #{dir}/f_#.exr --frames 1-3 -q)] ++ @tiny)
+      first = Enum.map(1..3, &File.read!(Path.join(dir, "f_#{&1}.exr")))
+      inodes = Enum.map(1..3, &File.stat!(Path.join(dir, "f_#{&1}.exr")).inode)
+      File.rm!(Path.join(dir, "f_2.exr"))
+      # an empty file is no frame (a write is atomic: never one a render left)
+      File.write!(Path.join(dir, "f_3.exr"), "")
+
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_#.exr --frames 1-3 --continue)] ++ @tiny)
+      assert out =~ "--continue: skipping 1 of 3 frames already written, rendering 2\n"
+      assert out =~ "wrote 2 frames (16x12), #{dir}/f_2.exr to #{dir}/f_3.exr\n"
+      refute out =~ "frame 1:"
+      # frame 1 untouched, 2 and 3 rendered again, as before
+      assert File.stat!(Path.join(dir, "f_1.exr")).inode == hd(inodes)
+      assert Enum.map(1..3, &File.read!(Path.join(dir, "f_#{&1}.exr"))) == first
+    end
+
+    test "an animated scene with a # and no --frames renders every frame", %{tmp_dir: dir} do
+      scene = Path.join(dir, "three.toml")
+
+      File.write!(scene, """
+      [animation]
+      frames = 3
+
+      [camera]
+      from = [0.0, 0.0, 5.0]
+      at = [0.0, 0.0, 0.0]
+
+      [camera.animate.from]
+      keys = [{ clock = 0.0, value = [0.0, 0.0, 5.0] }, { clock = 1.0, value = [0.0, 2.0, 5.0] }]
+
+      [[lights]]
+      position = [5.0, 5.0, 5.0]
+
+      [[objects]]
+      type = "sphere"
+      center = [0.0, 0.0, 0.0]
+      radius = 1.0
+      """)
+
+      {:ok, ""} = render([scene | ~w(-o #{dir}/f_##.png -q)] ++ @tiny)
+      assert Enum.sort(File.ls!(dir)) == ~w(f_01.png f_02.png f_03.png three.toml)
+      # without a #, frame 1 alone, as ever
+      {:ok, _} = render([scene | ~w(-o #{dir}/one.png -q)] ++ @tiny)
+      assert File.read!(Path.join(dir, "one.png")) == File.read!(Path.join(dir, "f_01.png"))
+    end
   end
 end

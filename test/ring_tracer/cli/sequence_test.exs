@@ -22,9 +22,8 @@ defmodule RingTracer.CLI.SequenceTest do
 
   defp job, do: %{render_opts: [children: 1, atoms: 2], mode: :quiet, opts: []}
 
-  # After the merge of the API: %RingTracer.Frame{}; its fields, meanwhile.
   defp frame(n, grey) do
-    %{
+    %RingTracer.Frame{
       number: n,
       width: 2,
       height: 1,
