@@ -293,14 +293,18 @@ defmodule RingTracer do
       whole sequence's clock, as POV-Ray's `+SF`/`+EF` do
     * `:window` — how many frames may be in flight at once (default
       #{RingTracer.Sequence.default_window()}, at most 64)
+    * `:ack` — whether a frame stays in the window until the caller
+      acknowledges it with `ack_frame/2` (default false): a caller that
+      writes frames more slowly than the ring traces them then holds the
+      ring back, instead of frames piling up in its mailbox
 
   Returns `{:error, %RingTracer.Error{}}` at once for a scene or option
   that is not valid.
 
       iex> {:ok, job} = RingTracer.render_sequence("priv/scenes/whitted_orbit.toml", frames: 1..3, width: 16, height: 12, children: 2, atoms: 2)
       iex> id = job.id
-      iex> for _ <- 1..3, do: receive(do: ({RingTracer, ^id, {:frame, n, frame}} -> {n, byte_size(frame.pixels)}))
-      ...> |> Enum.sort()
+      iex> frames = for _ <- 1..3, do: receive(do: ({RingTracer, ^id, {:frame, n, frame}} -> {n, byte_size(frame.pixels)}))
+      iex> Enum.sort(frames)
       [{1, 2304}, {2, 2304}, {3, 2304}]
       iex> receive do {RingTracer, ^id, {:ok, result}} -> length(result.frames) end
       3
@@ -308,18 +312,18 @@ defmodule RingTracer do
   @spec render_sequence(Path.t() | Scene.t(), keyword()) ::
           {:ok, %{id: reference(), pid: pid()}} | {:error, Error.t()}
   def render_sequence(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene) do
-    {sequence, opts} = Keyword.split(opts, [:frames, :window])
+    {sequence, opts} = Keyword.split(opts, [:frames, :window, :ack])
 
     with :ok <- not_for_sequences(opts),
          {:ok, opts} <- Options.validate(Keyword.put(opts, :aim, false)),
          :ok <- running(),
          :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
-         {:ok, frames, window} <-
+         {:ok, frames, window, ack} <-
            RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
-      extra = [frames: frames, window: window, sequence: true]
+      extra = [frames: frames, window: window, sequence: true, ack: ack]
 
       {:ok,
        start_forwarder(fn progress ->
@@ -345,10 +349,24 @@ defmodule RingTracer do
   end
 
   @doc """
+  Tells a sequence started with `ack: true` (`render_sequence/2`) that the
+  caller is done with frame `number` (for instance, has written it), so
+  that it leaves the window. Returns `:ok`; a number not sent yet, or
+  acknowledged already, is ignored.
+  """
+  @spec ack_frame(%{:pid => pid(), optional(atom()) => term()}, pos_integer()) :: :ok
+  def ack_frame(%{pid: pid}, number) when is_integer(number) do
+    send(pid, {:ack, number})
+    :ok
+  end
+
+  @doc """
   A sequence's frames as a `Stream` of `RingTracer.Frame`s, in the order
   they complete: the sequence starts when the stream is run
-  (`render_sequence/2`, with its options) and is cancelled if the stream
-  is halted early. An error (an invalid option, a job that failed) raises
+  (`render_sequence/2`, with its options, and `ack: true`: a frame leaves
+  the window once the stream's consumer asks for the next one, so a slow
+  consumer holds the ring back) and is cancelled if the stream is halted
+  early. An error (an invalid option, a job that failed) raises
   `RingTracer.Error`.
 
       iex> RingTracer.stream_sequence("priv/scenes/whitted_orbit.toml", frames: [2, 5], width: 8, height: 6, children: 2)
@@ -359,8 +377,8 @@ defmodule RingTracer do
   def stream_sequence(scene, opts \\ []) do
     Stream.resource(
       fn ->
-        case render_sequence(scene, opts) do
-          {:ok, job} -> job
+        case render_sequence(scene, Keyword.put(opts, :ack, true)) do
+          {:ok, job} -> {job, nil}
           {:error, error} -> raise error
         end
       end,
@@ -368,17 +386,19 @@ defmodule RingTracer do
         nil ->
           {:halt, nil}
 
-        %{id: id} = job ->
+        {%{id: id} = job, last} ->
+          if last, do: ack_frame(job, last)
+
           receive do
-            {RingTracer, ^id, {:frame, _n, frame}} -> {[frame], job}
-            {RingTracer, ^id, {:progress, _, _}} -> {[], job}
+            {RingTracer, ^id, {:frame, n, frame}} -> {[frame], {job, n}}
+            {RingTracer, ^id, {:progress, _, _}} -> {[], {job, nil}}
             {RingTracer, ^id, {:ok, _result}} -> {:halt, nil}
             {RingTracer, ^id, {:error, error}} -> raise error
           end
       end,
       fn
         nil -> :ok
-        job -> cancel(job)
+        {job, _} -> cancel(job)
       end
     )
   end
@@ -393,6 +413,13 @@ defmodule RingTracer do
 
       {RingTracer, _, {:frame, _, _} = frame} ->
         send(caller, {RingTracer, id, frame})
+        forward(f)
+
+      {RingTracer, _, {:parent, parent}} ->
+        forward(Map.put(f, :parent, parent))
+
+      {:ack, number} ->
+        if parent = f[:parent], do: send(parent, {:frame_ack, number})
         forward(f)
 
       {:result, ^worker, result} ->

@@ -11,7 +11,10 @@ defmodule RingTracer.ProtocolPropertyTest do
   atoms or pieces tiling them), no process left behind, and, after kills,
   at most twice the messages of the same job without them (no storms).
 
-  CI runs 1,000 cases (200 missed a hang that 2,000 found); `PROPER_NUMTESTS=5000 mix test
+  A third property runs sequences (`RingTracer.render_sequence/2`): every
+  frame once, each the frame rendered alone, across frame boundaries.
+
+  CI runs 1,000 cases (200 missed a hang that 2,000 found; sequences 200); `PROPER_NUMTESTS=5000 mix test
   test/ring_tracer/protocol_property_test.exs --include slow` runs more.
   """
   use ExUnit.Case, async: false
@@ -196,6 +199,116 @@ defmodule RingTracer.ProtocolPropertyTest do
 
     # The property is about cuts: they happened (13 to 20 in 50 cases).
     assert :counters.get(cuts, 1) > 0
+  end
+
+  test "property: a sequence gives every frame once, each the frame rendered alone, across frame boundaries" do
+    # Sequences of 1 to 4 frames of an animated scene whose objects and
+    # camera move, windows of 1 to 3 frames, every strategy, layout and
+    # split, with message delays and child kills: each frame comes once,
+    # equal to the frame rendered alone, the job ends and leaves nothing.
+    import :proper_types
+
+    gen =
+      {integer(1, 5), integer(1, 4), integer(1, 12), integer(1, 9), list(integer(1, 48)),
+       integer(1, 3), oneof([:ring, :static, :master, :steal]), oneof([:strips, :interleaved]),
+       boolean(), integer(0, 3), integer(0, 2), list(integer(1, 3)), integer(0, 1_000_000)}
+
+    references = :ets.new(:frame_references, [:set, :public])
+    scene = "whitted_orbit.toml"
+    numtests = div(String.to_integer(System.get_env("PROPER_NUMTESTS", "1000")), 5)
+
+    RingTracer.PropErCase.check(
+      gen,
+      fn {n, k, w, h, picks, window, strategy, layout, split, chaos, kills, speeds, seed} = case_ ->
+        if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
+        :rand.seed(:exsss, {seed, n, k})
+        numbers = picks |> Enum.take(4) |> Enum.uniq() |> Enum.sort()
+        numbers = if numbers == [], do: [1], else: numbers
+        kills = min(kills, n - 1)
+
+        job = [
+          children: n,
+          atoms: k,
+          width: w,
+          height: h,
+          speeds: speeds,
+          strategy: strategy,
+          layout: layout,
+          aim: false,
+          split: split
+        ]
+
+        opts =
+          Keyword.merge(job,
+            strategy:
+              RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
+            kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
+          )
+          |> Keyword.delete(:aim)
+
+        total = n * k * length(numbers)
+        kill_at = Enum.take_random(1..total, kills)
+
+        {:ok, job} =
+          RingTracer.render_sequence(
+            TestScenes.path(scene),
+            [frames: numbers, window: window] ++ opts
+          )
+
+        {frames, final} = await_frames(job.id, kill_at, [])
+
+        ok =
+          match?({:ok, _}, final) and Enum.map(frames, &elem(&1, 0)) |> Enum.sort() == numbers and
+            Enum.all?(frames, fn {number, frame} ->
+              reference =
+                case :ets.lookup(references, {number, w, h}) do
+                  [{_, ref}] ->
+                    ref
+
+                  [] ->
+                    ref = TestScenes.reference(scene, w, h, frame: number)
+                    tap(ref, &:ets.insert(references, {{number, w, h}, &1}))
+                end
+
+              frame.pixels == reference
+            end)
+
+        Process.sleep(5)
+        left = {children(), DynamicSupervisor.which_children(RingTracer.Jobs)}
+
+        if System.get_env("PROPER_VERBOSE") && not (ok and left == {[], []}),
+          do: IO.inspect({left, kill_at, Enum.map(frames, &elem(&1, 0)), final}, label: "failed")
+
+        ok and left == {[], []}
+      end,
+      numtests
+    )
+  end
+
+  # The frames of a sequence as they come (a number twice stays twice, for
+  # the property to see), killing a child at the atoms counted in `kill_at`.
+  defp await_frames(id, kill_at, frames) do
+    receive do
+      {RingTracer, ^id, {:frame, n, frame}} ->
+        await_frames(id, kill_at, [{n, frame} | frames])
+
+      {RingTracer, ^id, {:progress, done, _}} ->
+        if done in kill_at do
+          case children() do
+            [] -> :ok
+            kids -> Process.exit(Enum.random(kids), :kill)
+          end
+        end
+
+        await_frames(id, kill_at, frames)
+
+      {RingTracer, ^id, final} ->
+        {frames, final}
+    after
+      10_000 ->
+        for pid <- children(), do: Process.exit(pid, :kill)
+        {frames, {:error, :hung}}
+    end
   end
 
   # After kills, at most twice the messages of the same job without them

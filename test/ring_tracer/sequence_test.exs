@@ -104,6 +104,43 @@ defmodule RingTracer.SequenceTest do
     assert List.last(progress) == {8 * 4, 8 * 4}
   end
 
+  test "with ack, frames leave the window only once acknowledged", %{refs: refs} do
+    {:ok, job} =
+      RingTracer.render_sequence(TestScenes.path(@scene),
+        frames: 1..5,
+        window: 2,
+        ack: true,
+        width: @w,
+        height: @h,
+        children: 2
+      )
+
+    id = job.id
+    first = for _ <- 1..2, do: receive_frame(id)
+    assert Enum.sort(Enum.map(first, & &1.number)) == [1, 2]
+    # Nothing more is released until the caller acknowledges a frame.
+    refute_receive {RingTracer, ^id, {:frame, _, _}}, 300
+    :ok = RingTracer.ack_frame(job, 2)
+    refute_receive {RingTracer, ^id, {:frame, _, _}}, 300
+    :ok = RingTracer.ack_frame(job, 1)
+    third = receive_frame(id)
+    assert third.number == 3 and third.pixels == TestScenes.reference(@scene, @w, @h, frame: 3)
+
+    :ok = RingTracer.ack_frame(job, 3)
+    rest = for _ <- 1..2, do: tap(receive_frame(id), &RingTracer.ack_frame(job, &1.number))
+    assert Enum.sort(Enum.map(rest, & &1.number)) == [4, 5]
+    assert_receive {RingTracer, ^id, {:ok, result}}, 30_000
+    assert length(result.frames) == 5 and hd(first).pixels == refs[hd(first).number]
+  end
+
+  defp receive_frame(id) do
+    receive do
+      {RingTracer, ^id, {:frame, _, frame}} -> frame
+    after
+      30_000 -> flunk("no frame")
+    end
+  end
+
   test "a subset keeps the whole sequence's clock", %{refs: refs} do
     {frames, _, {:ok, _}} = run(frames: 47..48, width: @w, height: @h, children: 2)
     assert frames[47].pixels == refs[47] and frames[48].pixels == refs[48]

@@ -60,6 +60,10 @@ defmodule RingTracer.Test.DelayedStrategy do
     do: inner(view).parent_atom_done(inner_view(view), state, index)
 
   @impl true
+  def parent_frame(view, state, frame),
+    do: inner(view).parent_frame(inner_view(view), state, frame)
+
+  @impl true
   def parent_info(message, view, state),
     do: inner(view).parent_info(message, inner_view(view), state)
 

@@ -24,7 +24,10 @@ defmodule RingTracer.Job.Parent do
   the parent sends each frame to the caller as it completes
   (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
   their places in the ledger: memory holds the window, whatever the
-  number of frames.
+  number of frames. With the spec's `ack`, a frame sent stays in the
+  window until the caller acknowledges it (`{:frame_ack, n}`, e.g. once it
+  is written), so that a caller slower than the ring holds the frames back
+  instead of letting them pile up in its mailbox.
 
   If the caller dies, the job stops. If a child dies, the atoms it may have
   held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
@@ -67,6 +70,9 @@ defmodule RingTracer.Job.Parent do
     released: 0,
     low: 0,
     done_above: MapSet.new(),
+    kept: 0,
+    kept_above: MapSet.new(),
+    numbers: %{},
     traced_counts: %{},
     kept_trace_us: 0,
     summaries: [],
@@ -90,7 +96,9 @@ defmodule RingTracer.Job.Parent do
   the living children and their monitors, the frames in flight (`frames`:
   the atoms received of each), how many frames are released, the oldest
   frame in flight (`low`) and the later ones already complete
-  (`done_above`), who traced the atoms in flight and how many each child
+  (`done_above`), the oldest frame the caller may still hold unacknowledged
+  (`kept`) and the later ones it has acknowledged (`kept_above`), and
+  (with `ack`) each frame's index by its number in the scene (`numbers`), who traced the atoms in flight and how many each child
   traced, how many atoms are missing, the ledger of where atoms are, the
   dead children, and what it reports (`summaries`: the frames sent, newest
   first).
@@ -109,6 +117,9 @@ defmodule RingTracer.Job.Parent do
           released: non_neg_integer(),
           low: non_neg_integer(),
           done_above: MapSet.t(non_neg_integer()),
+          kept: non_neg_integer(),
+          kept_above: MapSet.t(non_neg_integer()),
+          numbers: %{pos_integer() => non_neg_integer()},
           traced_counts: %{non_neg_integer() => non_neg_integer()},
           kept_trace_us: non_neg_integer(),
           summaries: [RingTracer.Frame.t()],
@@ -247,13 +258,21 @@ defmodule RingTracer.Job.Parent do
     Process.monitor(spec.caller)
     {strategy, _} = spec.strategy
 
+    # Where acknowledgements go (before any frame, from this process).
+    if spec.ack, do: send(spec.progress || spec.caller, {@reply_tag, spec.id, {:parent, self()}})
+
     state = %__MODULE__{
       spec: spec,
       strategy: strategy,
       started: System.monotonic_time(:microsecond),
       t0: System.system_time(:microsecond),
       missing: Layout.atom_count(spec.layout),
-      ledger: Ledger.new(spec.layout, spec.strategy)
+      ledger: Ledger.new(spec.layout, spec.strategy),
+      numbers:
+        if(spec.ack,
+          do: spec.frames |> Enum.with_index() |> Map.new(fn {frame, f} -> {frame + 1, f} end),
+          else: %{}
+        )
     }
 
     {:ok, state, {:continue, :start_ring}}
@@ -443,6 +462,15 @@ defmodule RingTracer.Job.Parent do
       else: down(state, ref, reason)
   end
 
+  def handle_info({:frame_ack, number}, %{stopping: nil} = state) do
+    f = Map.get(state.numbers, number)
+
+    if is_integer(f) and frame_done?(state, f) and f >= state.kept and
+         not MapSet.member?(state.kept_above, f),
+       do: {:noreply, state |> acked(f) |> release()},
+       else: {:noreply, state}
+  end
+
   def handle_info(:relink, %{stopping: nil} = state),
     do: {:noreply, relink(%{state | relinking: false})}
 
@@ -554,8 +582,8 @@ defmodule RingTracer.Job.Parent do
 
   # Releases frames while the window has room (the first one was released
   # with the initial atoms).
-  defp release(%{spec: %Spec{layout: layout, window: window}, released: r, low: low} = state)
-       when r < layout.frames and r < low + window do
+  defp release(%{spec: %Spec{layout: layout, window: window}, released: r, kept: kept} = state)
+       when r < layout.frames and r < kept + window do
     state
     |> new_frame(r)
     |> run_strategy(&state.strategy.parent_frame(&1, &2, r))
@@ -598,6 +626,8 @@ defmodule RingTracer.Job.Parent do
     coverage = Map.drop(state.coverage, Enum.to_list(atoms))
     {low, done_above} = advance(state.low, MapSet.put(state.done_above, f))
 
+    state = if state.spec.ack, do: state, else: acked(state, f)
+
     %{
       state
       | frames: frames,
@@ -609,6 +639,12 @@ defmodule RingTracer.Job.Parent do
         summaries: [RingTracer.Frame.summary(result) | state.summaries]
     }
     |> release()
+  end
+
+  # The caller is done with frame `f`: it leaves the window.
+  defp acked(state, f) do
+    {kept, kept_above} = advance(state.kept, MapSet.put(state.kept_above, f))
+    %{state | kept: kept, kept_above: kept_above}
   end
 
   defp advance(low, done) do

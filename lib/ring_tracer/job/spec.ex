@@ -7,7 +7,8 @@ defmodule RingTracer.Job.Spec do
   frame for each of the layout's frames, in order; `RingTracer.Layout`,
   "Frames"); in a `sequence`, how many frames may be in flight at once
   (`window`), and the caller gets each frame as it completes instead of one
-  image at the end.
+  image at the end; with `ack`, a frame leaves the window only once the
+  caller acknowledges it.
   """
 
   alias RingTracer.{Layout, Settings}
@@ -28,6 +29,7 @@ defmodule RingTracer.Job.Spec do
     frames: [0],
     window: 1,
     sequence: false,
+    ack: false,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -45,6 +47,7 @@ defmodule RingTracer.Job.Spec do
           frames: [non_neg_integer(), ...],
           window: pos_integer(),
           sequence: boolean(),
+          ack: boolean(),
           liveness: pos_integer()
         }
 

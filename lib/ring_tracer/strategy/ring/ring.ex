@@ -67,7 +67,10 @@ defmodule RingTracer.Strategy.Ring do
 
   @impl true
   def parent_start(view, options) do
-    if Keyword.get(options, :aim, false) do
+    # The board is one image's (each atom's work, from a preview of it): a
+    # job of several frames goes without, its children aim by what they
+    # hear from each other.
+    if Keyword.get(options, :aim, false) and view.spec.layout.frames == 1 do
       %{spec: %{kernel: {kernel, opts}} = spec, pid: parent} = view
       {:module, _} = Code.ensure_loaded(kernel)
 
