@@ -3,7 +3,9 @@ defmodule RingTracer.CLI.Sequence do
   # `ringtracer render` of a sequence of frames: one job
   # (`RingTracer.render_sequence/2`) traces them all; each frame is written
   # to its file (`RingTracer.CLI.Frames.path/2`) as soon as it arrives,
-  # atomically, in the folder held open once. A frame that cannot be
+  # atomically, in the folder held open once, then acknowledged: a frame
+  # leaves the job's window only once written, so a disk slower than the
+  # ring holds the ring back rather than frames piling up in memory. A frame that cannot be
   # written, an interrupt or a failed job cancels the job; the frames
   # written before are whole and stay (`--continue` renders the rest).
   # Statistics, timeline: written once the job has ended, all or none.
@@ -30,7 +32,7 @@ defmodule RingTracer.CLI.Sequence do
       job.render_opts
       # --no-aim is what a sequence does (Render refuses --aim with one)
       |> Keyword.drop([:frame, :region, :aim, :window])
-      |> Keyword.merge(frames: numbers)
+      |> Keyword.merge(frames: numbers, ack: true)
       |> then(&if w = job.opts[:window], do: Keyword.put(&1, :window, w), else: &1)
 
     me = self()
@@ -141,6 +143,8 @@ defmodule RingTracer.CLI.Sequence do
                [in: s.dir] ++ s.mode
              ) do
           :ok ->
+            :ok = RingTracer.ack_frame(s.handle, n)
+
             summary = %{
               number: n,
               elapsed_us: RingTracer.Frame.elapsed_us(frame),

@@ -6,18 +6,23 @@ defmodule RingTracer.CLI.SequenceTest do
   @moduletag :tmp_dir
 
   # A job's messages, without a job: what `RingTracer.render_sequence/2`
-  # sends, to a handle whose process only waits to be cancelled.
+  # sends, to a handle whose process tells the test the frames acknowledged
+  # and waits to be cancelled.
   defp handle do
     me = self()
-
-    pid =
-      spawn(fn ->
-        receive do
-          {:cancel, _from, _ref} -> send(me, :cancelled)
-        end
-      end)
-
+    pid = spawn(fn -> job(me) end)
     %{id: make_ref(), pid: pid}
+  end
+
+  defp job(test) do
+    receive do
+      {:ack, n} ->
+        send(test, {:acked, n})
+        job(test)
+
+      {:cancel, _from, _ref} ->
+        send(test, :cancelled)
+    end
   end
 
   defp job, do: %{render_opts: [children: 1, atoms: 2], mode: :quiet, opts: []}
@@ -76,6 +81,8 @@ defmodule RingTracer.CLI.SequenceTest do
            ]
 
     for n <- [2, 3, 4], do: assert(same_as_alone(dir, n, frames[n]))
+    # each acknowledged once written, so that it leaves the job's window
+    for n <- [4, 2, 3], do: assert_receive({:acked, ^n})
     refute File.exists?(Path.join(dir, "f_01.png"))
   end
 
@@ -91,7 +98,9 @@ defmodule RingTracer.CLI.SequenceTest do
     assert {:error, message} = collect(h, dir, [1, 2, 3])
     assert message =~ "f_02.png"
     assert message =~ "the frame written is whole and kept (--continue renders the rest)"
-    assert_received :cancelled
+    assert_receive :cancelled
+    assert_received {:acked, 1}
+    refute_received {:acked, 2}
     assert same_as_alone(dir, 1, frame(1, 0.5))
     # the job's messages after the cancel are not left in the mailbox
     refute_received {RingTracer, _, _}
@@ -110,7 +119,7 @@ defmodule RingTracer.CLI.SequenceTest do
     send(self(), {RingTracer, h.id, {:frame, 4, frame(4, 0.5)}})
     assert {:error, message} = collect(h, dir, [1, 2])
     assert message =~ "frame 4, which was not asked for"
-    assert_received :cancelled
+    assert_receive :cancelled
     refute File.exists?(Path.join(dir, "f_04.png"))
   end
 end
