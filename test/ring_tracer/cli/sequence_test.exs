@@ -122,4 +122,15 @@ defmodule RingTracer.CLI.SequenceTest do
     assert_receive :cancelled
     refute File.exists?(Path.join(dir, "f_04.png"))
   end
+
+  test "an interrupt cancels the job and says how many frames were written", %{tmp_dir: dir} do
+    h = handle()
+    send(self(), {RingTracer, h.id, {:frame, 3, frame(3, 0.5)}})
+    send(self(), {RingTracer.CLI.Signals, :sigint})
+    send(self(), {RingTracer, h.id, {:frame, 1, frame(1, 0.5)}})
+
+    assert {:interrupted, :sigint, 1} = collect(h, dir, [1, 2, 3])
+    assert_receive :cancelled
+    assert File.ls!(dir) == ["f_03.png"]
+  end
 end
