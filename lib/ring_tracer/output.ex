@@ -251,6 +251,66 @@ defmodule RingTracer.Output do
     end
   end
 
+  @doc """
+  Only the rule of `check/2` about what is already there, for many paths
+  of one `kind` (the frames of a sequence): an existing path must be a
+  regular file (through symbolic links); a new name is fine. Returns `:ok`
+  or the first problem.
+  """
+  @spec check_targets(kind(), [Path.t()]) :: :ok | {:error, Error.t()}
+  def check_targets(kind, paths) do
+    Enum.find_value(paths, :ok, fn path ->
+      case target(kind, path) do
+        :ok -> nil
+        error -> error
+      end
+    end)
+  end
+
+  @doc """
+  Opens the folder `path` once, reached as `write/3` reaches it, for
+  `complete?/2` and the `:in` option of `write/3` and
+  `RingTracer.Image.write/5`: every file written or looked at through it is
+  in that very folder, whatever is swapped on the way meanwhile.
+  """
+  @spec open_dir(Path.t()) :: {:ok, dir()} | {:error, Error.t()}
+  def open_dir(path) do
+    case fs(Native.fs_open_dir(Path.expand(path))) do
+      {:ok, dir} -> {:ok, dir}
+      {:error, reason} -> {:error, file_error(path, reason)}
+    end
+  end
+
+  @doc """
+  Whether `name` in the folder `dir` (from `open_dir/1`) is a complete
+  output: a regular, non-empty file, not followed if it is a symbolic link.
+  Outputs are written atomically, so a file at an output's final name is
+  a whole one.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_complete_doc_#{System.unique_integer([:positive])}")
+      iex> File.mkdir_p!(dir)
+      iex> :ok = RingTracer.Output.write(Path.join(dir, "f_1.png"), "x")
+      iex> File.touch!(Path.join(dir, "f_2.png"))
+      iex> File.ln_s!(Path.join(dir, "f_1.png"), Path.join(dir, "f_3.png"))
+      iex> {:ok, held} = RingTracer.Output.open_dir(dir)
+      iex> Enum.map(~w(f_1.png f_2.png f_3.png f_4.png), &RingTracer.Output.complete?(held, &1))
+      [true, false, false, false]
+      iex> File.rm_rf!(dir) |> length()
+      4
+  """
+  @spec complete?(dir(), String.t()) :: boolean()
+  def complete?(dir, name) do
+    Path.basename(name) == name and regular_nonempty?(dir, name)
+  end
+
+  defp regular_nonempty?(dir, name) do
+    # the folder held open, named through /proc: the name is looked up in it, unfollowed
+    case File.lstat(Path.join(Native.fs_dir_path(dir), name)) do
+      {:ok, %File.Stat{type: :regular, size: size}} -> size > 0
+      _ -> false
+    end
+  end
+
   @doc "Only the extension rule of `check/2`, for one output."
   @spec check_extension(kind(), Path.t()) :: :ok | {:error, Error.t()}
   def check_extension(kind, path), do: extension(kind, path)

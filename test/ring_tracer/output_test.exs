@@ -160,4 +160,15 @@ defmodule RingTracer.OutputTest do
     File.ln_s!(private, Path.join(dir, "l"))
     assert {:error, :eexist} = RingTracer.Output.private_dir(Path.join(dir, "l"))
   end
+
+  test "check_targets/2: each existing path must be a regular file, new names are fine", %{
+    tmp_dir: dir
+  } do
+    [a, b, c] = for n <- 1..3, do: Path.join(dir, "f_#{n}.png")
+    :ok = RingTracer.Output.write(a, "png")
+    assert :ok = RingTracer.Output.check_targets(:image, [a, b])
+    File.mkdir!(c)
+    assert {:error, error} = RingTracer.Output.check_targets(:image, [a, b, c])
+    assert error.message == "--out #{c}: exists and is a directory, not a file"
+  end
 end

@@ -15,15 +15,22 @@ defmodule RingTracer.CLI.Progress do
   both return the text to write, if any, so the rules are tested without a
   terminal.
 
+  A sequence of frames (`frames/3`) shows frames done as well:
+  `frames 6/24, atoms 1536/6144`.
+
       iex> p = RingTracer.CLI.Progress.new(:log, 4, 0)
       iex> {p, nil} = RingTracer.CLI.Progress.atom(p, 1_000_000, 1_000)
       iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
       iex> IO.iodata_to_binary(line)
       "ringtracer: 1/4 atoms (25%), 0.2 Mrays/s, about 5 s left\\n"
+      iex> p = RingTracer.CLI.Progress.frames(p, 1, 3)
+      iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
+      iex> IO.iodata_to_binary(line)
+      "ringtracer: frames 1/3, atoms 1/4 (25%), 0.2 Mrays/s, about 5 s left\\n"
   """
 
   @enforce_keys [:mode, :total, :t0]
-  defstruct [:mode, :total, :t0, done: 0, rays: 0, last_ms: nil, printed_ms: nil]
+  defstruct [:mode, :total, :t0, done: 0, rays: 0, last_ms: nil, printed_ms: nil, frames: nil]
 
   @type mode :: :tty | :log | :quiet
   @type t :: %__MODULE__{
@@ -33,7 +40,8 @@ defmodule RingTracer.CLI.Progress do
           done: non_neg_integer(),
           rays: non_neg_integer(),
           last_ms: integer() | nil,
-          printed_ms: integer() | nil
+          printed_ms: integer() | nil,
+          frames: {non_neg_integer(), pos_integer()} | nil
         }
 
   @log_every_ms 5_000
@@ -53,6 +61,10 @@ defmodule RingTracer.CLI.Progress do
   @spec atom(t(), non_neg_integer(), integer()) :: {t(), iodata() | nil}
   def atom(p, rays, now_ms),
     do: {%{p | done: p.done + 1, rays: p.rays + rays, last_ms: now_ms}, nil}
+
+  @doc "Of a sequence: `done` of its `total` frames are done."
+  @spec frames(t(), non_neg_integer(), pos_integer()) :: t()
+  def frames(p, done, total), do: %{p | frames: {done, total}}
 
   @doc "Time passes: the text to write at `now_ms`, if any."
   @spec tick(t(), integer()) :: {t(), iodata() | nil}
@@ -89,7 +101,8 @@ defmodule RingTracer.CLI.Progress do
       String.duplicate("#", filled),
       String.duplicate("-", @width - filled),
       "] ",
-      "#{p.done}/#{p.total} atoms  ",
+      count(p),
+      "  ",
       rate_text(p, now),
       "  ",
       eta_text(p, now)
@@ -97,9 +110,12 @@ defmodule RingTracer.CLI.Progress do
   end
 
   defp line(p, now) do
-    "ringtracer: #{p.done}/#{p.total} atoms (#{div(p.done * 100, p.total)}%), " <>
+    "ringtracer: #{count(p)} (#{div(p.done * 100, p.total)}%), " <>
       "#{rate_text(p, now)}, #{eta_text(p, now)}"
   end
+
+  defp count(%{frames: nil} = p), do: "#{p.done}/#{p.total} atoms"
+  defp count(%{frames: {f, n}} = p), do: "frames #{f}/#{n}, atoms #{p.done}/#{p.total}"
 
   defp rate_text(p, now) do
     mrays = p.rays / max(now - p.t0, 1) / 1000

@@ -4,13 +4,16 @@ defmodule RingTracer.CLI.Render do
   image. Shared by the launcher (booted straight from `erl`) and `mix
   ring_tracer.render`; `help/0` is the text of `--help`.
 
-  Exit status: 0 the image was written, 1 the render failed (a bad scene, a
-  failed job, an output that could not be written), 2 a usage error (an
-  unknown option, a bad value), 130 interrupted (SIGINT), 143 terminated
-  (SIGTERM).
+  Of an animated scene it renders a sequence of frames, one file each
+  (`RingTracer.CLI.Frames`).
+
+  Exit status: 0 the image (every frame of a sequence) was written, 1 the
+  render failed (a bad scene, a failed job, an output that could not be
+  written), 2 a usage error (an unknown option, a bad value), 130
+  interrupted (SIGINT), 143 terminated (SIGTERM).
   """
 
-  alias RingTracer.CLI.{Args, Console, Paths, Progress}
+  alias RingTracer.CLI.{Args, Console, Frames, Paths, Progress}
   alias RingTracer.Cluster.Distribution
 
   @render_switches [
@@ -23,6 +26,9 @@ defmodule RingTracer.CLI.Render do
     cutoff: :float,
     samples: :integer,
     frame: :integer,
+    frames: :string,
+    continue: :boolean,
+    window: :integer,
     spd: :boolean,
     strategy: :string,
     layout: :string,
@@ -53,6 +59,7 @@ defmodule RingTracer.CLI.Render do
     depth: 1..64,
     samples: 1..16,
     frame: 1..1_000_000,
+    window: 1..64,
     children_per_node: 1..@max.children,
     preview: 0..65_535
   ]
@@ -96,14 +103,23 @@ defmodule RingTracer.CLI.Render do
     (.png, 8-bit sRGB, or .exr, linear float). Paths are relative to this folder; a
     leading ~ in one is your $HOME (also when `ringtracer serve` renders it).
 
+    Of an animated scene, a run of # in FILE's name is the frame number, zero-padded
+    (f_####.png: f_0007.png, f_12345.png): every frame is rendered, in one job, each
+    written as soon as it is done. Without a #, frame 1 (or --frame F) alone.
+
     Image:
-      -o, --out FILE          the image to write (required)
+      -o, --out FILE          the image to write (required); # is the frame number
       -w, --width W           image width; alone, keeps the scene's aspect ratio
           --height H          image height; alone, keeps the scene's aspect ratio
           --depth D           ray-tree depth, eye ray = 1 (1-64, default #{RingTracer.Settings.shown_default(:depth)})
           --samples S         S x S samples per pixel (1-16, default #{RingTracer.Settings.shown_default(:samples)})
           --cutoff C          adaptive cut-off weight (default #{RingTracer.Settings.shown_default(:cutoff)}, 0 disables)
-          --frame F           of an animated scene, frame F (from 1; default 1)
+          --frame F           of an animated scene, frame F alone (from 1; default 1)
+          --frames A-B        frames A to B (or N: frame N alone), one file each, named
+                              by the # of --out (default with a #: all of them)
+          --continue          skip the frames whose file is already there (whole: files
+                              are written atomically); a sequence stopped goes on
+          --window W          frames traced at once in a sequence (1-64, default #{RingTracer.Sequence.default_window()})
           --spd               the SPD testing procedure (pixel corners, no cut-off)
           --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
                               fractions (0.25,0,0.75,0.5); exactly the whole render's pixels
@@ -144,9 +160,11 @@ defmodule RingTracer.CLI.Render do
       ringtracer render priv/scenes/balls_s2.nff --out balls.png
       ringtracer render scene.toml -o scene.exr --width 1920 --children 8
       ringtracer render balls.nff -o b.png --speeds 1,1,4 --timeline b.svg --stats b.json
+      ringtracer render priv/scenes/whitted_orbit.toml -o frames/orbit_####.png --width 320
 
-    Exit status: 0 written, 1 render failed, 2 usage error, 130 interrupted (Ctrl-C),
-    143 terminated (SIGTERM).
+    Exit status: 0 written (or, with --continue, all there), 1 render failed, 2 usage
+    error, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM). A sequence interrupted
+    or failed keeps the frames written: each is whole.
     """
   end
 
@@ -213,7 +231,7 @@ defmodule RingTracer.CLI.Render do
 
   # Everything that can be known before the scene is read, in the order a
   # user fixes things: options, then outputs, then the cluster.
-  defp prepare(scene, opts) do
+  defp prepare(scene_arg, opts) do
     with :ok <- check_ranges(opts),
          :ok <- usage_of(Distribution.refuse_cookie(opts)),
          opts =
@@ -227,15 +245,17 @@ defmodule RingTracer.CLI.Render do
              :allow_dir
            ]),
          {:ok, out} <- required_out(opts),
+         :ok <- Frames.check_out(out),
          {:ok, render_opts} <- render_opts(opts),
          {:ok, mode} <- progress_mode(opts),
          outputs = for({key, kind} <- @outputs, path = opts[key], do: {kind, path}),
-         scene = Paths.expand(scene),
+         scene = Paths.expand(scene_arg),
          :ok <- usage_of(RingTracer.Output.check(outputs, [scene])),
          :ok <- start(opts) do
       {:ok,
        %{
          scene: scene,
+         scene_arg: scene_arg,
          out: out,
          opts: opts,
          render_opts: render_opts,
@@ -317,6 +337,9 @@ defmodule RingTracer.CLI.Render do
         :allow_dir,
         :quiet,
         :progress,
+        :frames,
+        :continue,
+        :window,
         :preview | @distribution
       ])
 
@@ -421,18 +444,106 @@ defmodule RingTracer.CLI.Render do
     with {:ok, scene} <- error_text(RingTracer.Scene.load(job.scene, allow_dirs: job.allow_dirs)),
          load_us = System.monotonic_time(:microsecond) - t_load,
          :ok <- not_interrupted(),
-         :ok <- usage_text(RingTracer.Output.check_inputs(job.outputs, scene.files)),
-         :ok <- warn(scene),
-         {:ok, result} <- render(scene, job),
+         {:ok, plan} <- Frames.plan(job.opts, job.out, scene.frames, scene.source.name),
+         :ok <- one_frame_only(plan, job.opts),
+         paths = Enum.map(plan.numbers, &Frames.path(plan, &1)),
+         :ok <- usage_text(RingTracer.Output.check_targets(:image, paths)),
+         others = Enum.reject(job.outputs, &match?({:image, _}, &1)),
+         outputs = others ++ Enum.map(paths, &{:image, &1}),
+         :ok <- usage_text(RingTracer.Output.check_inputs(outputs, scene.files)),
+         {:ok, dir} <- error_text(RingTracer.Output.open_dir(Path.dirname(hd(paths)))),
+         {:ok, numbers} <- to_render(plan, dir, job.opts),
+         :ok <- warn(scene) do
+      if plan.sequence? do
+        RingTracer.CLI.Sequence.run(scene, job, plan, numbers, dir, load_us)
+      else
+        [n] = numbers
+        render_opts = Keyword.put(job.render_opts, :frame, n)
+        one(scene, %{job | out: Frames.path(plan, n), render_opts: render_opts}, load_us)
+      end
+    end
+    |> case do
+      :ok -> :ok
+      {:done, text} -> done(text, job.opts[:quiet])
+      {:usage, message} -> usage(message)
+      {:interrupted, signal} -> interrupted(signal)
+      {:interrupted, signal, written} -> interrupted(signal, written)
+      {:error, message} -> failed(message)
+    end
+  end
+
+  defp done(text, quiet?) do
+    if !quiet?, do: IO.write(text)
+    :ok
+  end
+
+  # One frame: rendered, then its image and reports written, all or none.
+  defp one(scene, job, load_us) do
+    with {:ok, result} <- render(scene, job),
          # an interrupt while the job ended: nothing is written yet, so nothing is
          :ok <- not_interrupted(),
          :ok <- write_all(result, job) do
       if !job.opts[:quiet], do: IO.write(report(job, result, load_us))
       :ok
-    else
-      {:usage, message} -> usage(message)
-      {:interrupted, signal} -> interrupted(signal)
-      {:error, message} -> failed(message)
+    end
+  end
+
+  # What draws or traces one image cannot be asked of a sequence.
+  defp one_frame_only(%Frames{sequence?: false}, _opts), do: :ok
+
+  defp one_frame_only(plan, opts) do
+    n = length(plan.numbers)
+
+    cond do
+      opts[:ownership] ->
+        {:usage,
+         "--ownership tints one frame's image, not a sequence of #{n} frames " <>
+           "(give --frame F with it)"}
+
+      opts[:region] ->
+        {:usage,
+         "--region traces part of one frame, not a sequence of #{n} frames " <>
+           "(give --frame F with it)"}
+
+      opts[:aim] ->
+        {:usage,
+         "--aim aims a ring's offers within one image, not a sequence of #{n} frames " <>
+           "(leave it out, or give --frame F with it)"}
+
+      true ->
+        :ok
+    end
+  end
+
+  # `--continue`: the frames whose file is not there yet, whole (written
+  # atomically, a file at its final name is complete).
+  defp to_render(plan, dir, opts) do
+    if opts[:continue], do: continue(plan, dir, opts[:quiet]), else: {:ok, plan.numbers}
+  end
+
+  defp continue(plan, dir, quiet?) do
+    n = length(plan.numbers)
+    say = fn text -> if !quiet?, do: IO.write(text) end
+
+    case Frames.done(plan, dir) do
+      {[], left} ->
+        if plan.sequence?, do: say.("--continue: none of the #{n} frames written yet\n")
+        {:ok, left}
+
+      {[_ | _], []} when n == 1 ->
+        {:done,
+         "--continue: #{Frames.path(plan, hd(plan.numbers))} is already written; nothing to render\n"}
+
+      {[_ | _], []} ->
+        {:done, "--continue: all #{n} frames are already written; nothing to render\n"}
+
+      {done, left} ->
+        say.(
+          "--continue: skipping #{length(done)} of #{n} frames already written, " <>
+            "rendering #{length(left)}\n"
+        )
+
+        {:ok, left}
     end
   end
 
@@ -460,6 +571,17 @@ defmodule RingTracer.CLI.Render do
   defp interrupted(signal) do
     what = if signal == :sigint, do: "interrupted", else: "terminated"
     {:error, RingTracer.CLI.Signals.exit_status(signal), "#{what}; nothing written"}
+  end
+
+  # A sequence's frames are written as they arrive: those are whole and stay.
+  defp interrupted(signal, 0), do: interrupted(signal)
+
+  defp interrupted(signal, written) do
+    what = if signal == :sigint, do: "interrupted", else: "terminated"
+    frames = if written == 1, do: "1 frame", else: "#{written} frames"
+
+    {:error, RingTracer.CLI.Signals.exit_status(signal),
+     "#{what}; #{frames} written, whole (--continue renders the rest)"}
   end
 
   # Every output or none: one that cannot be written puts back those
@@ -561,8 +683,10 @@ defmodule RingTracer.CLI.Render do
     end
   end
 
+  @doc false
   # `:children` as the command line spells it: `--children`.
-  defp cli_names(message) do
+  @spec cli_names(String.t()) :: String.t()
+  def cli_names(message) do
     Regex.replace(~r/(?<![\w:]):([a-z][a-z_]*)\b/, message, fn _, name ->
       "--" <> String.replace(name, "_", "-")
     end)
@@ -577,56 +701,13 @@ defmodule RingTracer.CLI.Render do
   end
 
   @doc false
-  # POV-Ray-style statistics: what was written, times, rays by kind, the
-  # rate, peak memory, and a line per child.
+  # POV-Ray-style statistics: what was written, then `RingTracer.CLI.Report`'s.
   @spec report(map(), RingTracer.Result.t(), non_neg_integer()) :: iodata()
   def report(job, result, load_us) do
-    r = result.rays
-    rays = RingTracer.Rays.total(r)
-    secs = result.elapsed_us / 1_000_000
-
-    children =
-      for c <- result.children do
-        node = if c.node != node(), do: " on #{c.node}", else: ""
-
-        "  child #{c.index}#{node}: own #{c.own}, given #{c.given}, received #{c.received}, " <>
-          "traced #{c.traced}; offers sent #{c.offers_sent}, passed #{c.offers_passed}, " <>
-          "consumed #{c.offers_consumed}\n"
-      end
-
     [
       "wrote #{job.out} (#{result.width}x#{result.height})\n",
-      "parse #{seconds(load_us / 1_000_000)}, trace #{seconds(secs)} with #{length(result.children)} children\n",
-      "rays: #{rays} (eye #{r.eye}, #{r.eye_hits} hit; reflected #{r.reflected}; ",
-      "refracted #{r.refracted}; shadow #{r.shadow}), #{mrays(rays, secs)} Mrays/s\n",
-      peak_memory(),
-      children,
-      for(k <- [:stats, :timeline, :ownership], p = job.opts[k], do: "wrote #{p}\n")
+      RingTracer.CLI.Report.statistics(result, load_us),
+      RingTracer.CLI.Report.reports_written(job.opts)
     ]
-  end
-
-  defp seconds(s), do: :erlang.float_to_binary(s / 1, decimals: 3) <> " s"
-
-  defp mrays(rays, secs),
-    do: :erlang.float_to_binary(rays / max(secs, 1.0e-6) / 1.0e6, decimals: 2)
-
-  # The process's peak resident memory (Linux), else the VM's current total.
-  defp peak_memory do
-    kb =
-      case File.read("/proc/self/status") do
-        {:ok, status} ->
-          case Regex.run(~r/VmHWM:\s+(\d+) kB/, status) do
-            [_, kb] -> String.to_integer(kb)
-            _ -> nil
-          end
-
-        _ ->
-          nil
-      end
-
-    mib = if kb, do: kb / 1024, else: :erlang.memory(:total) / 1_048_576
-    # Run by `ringtracer serve`, the process is the server, which outlives the job.
-    whose = if Console.get().cwd, do: " (the server's, over all its renders)", else: ""
-    "peak memory #{:erlang.float_to_binary(mib, decimals: 1)} MiB#{whose}\n"
   end
 end

@@ -30,6 +30,25 @@ defmodule Mix.Tasks.RingTracer.RenderTest do
   end
 
   @tag :tmp_dir
+  test "takes the command's sequence options: numbered files, --frames, --continue", %{
+    tmp_dir: dir
+  } do
+    args =
+      ~w(priv/scenes/whitted_orbit.toml --out #{dir}/o_###.png --frames 47-48 --width 16 --children 2 --progress none)
+
+    output = capture_io(fn -> Mix.Tasks.RingTracer.Render.run(args) end)
+    assert output =~ "wrote 2 frames (16x12), #{dir}/o_047.png to #{dir}/o_048.png"
+    assert File.ls!(dir) |> Enum.sort() == ~w(o_047.png o_048.png)
+
+    output = capture_io(fn -> Mix.Tasks.RingTracer.Render.run(args ++ ["--continue"]) end)
+    assert output == "--continue: all 2 frames are already written; nothing to render\n"
+
+    assert_raise Mix.Error, ~r/--out .*o.png: a sequence of 2 frames needs a run of #/, fn ->
+      Mix.Tasks.RingTracer.Render.run(List.replace_at(args, 2, "#{dir}/o.png"))
+    end
+  end
+
+  @tag :tmp_dir
   test "prints the scene's warnings to stderr with file and line, then renders", %{tmp_dir: dir} do
     scene = Path.join(dir, "odd.nff")
 

@@ -77,4 +77,152 @@ defmodule RingTracer.CLI.RenderTest do
     assert message =~ "frame must be at most 48 (the frames of whitted_orbit.toml), got: 49"
     refute File.exists?(Path.join(dir, "f49.png"))
   end
+
+  describe "sequences" do
+    @scene "priv/scenes/whitted_orbit.toml"
+    @tiny ~w(--width 16 --height 12 --children 2 --atoms 2 --progress none)
+
+    test "their options are checked, naming them, before any work", %{tmp_dir: dir} do
+      pattern = Path.join(dir, "f_##.png")
+
+      for {args, text} <- [
+            {~w(-o #{pattern} --frames 40-60),
+             "--frames 40-60: whitted_orbit.toml has 48 frames (1 to 48)"},
+            {~w(-o #{pattern} --frames 0-2), "--frames takes A-B"},
+            {~w(-o #{pattern} --frame 2 --frames 1-3), "not both"},
+            {~w(-o #{dir}/f.png --frames 1-3),
+             "--out #{dir}/f.png: a sequence of 3 frames needs a run of #"},
+            {~w(-o #{dir}/f_#_#.png), "--out #{dir}/f_#_#.png: one run of #"},
+            {~w(-o #{pattern} --ownership #{dir}/o.png), "--ownership tints one frame's image"},
+            {~w(-o #{pattern} --frames 1-2 --region 0,0,4,4),
+             "--region traces part of one frame"},
+            {~w(-o #{pattern} --frames 1-2 --aim), "--aim aims a ring's offers within one image"},
+            {~w(-o #{pattern} --window 0), "--window takes an integer from 1 to 64"},
+            {~w(-o #{dir}/f_#.jpg), "--out #{dir}/f_#.jpg: the image must end in .png or .exr"}
+          ] do
+        assert {{:error, 2, message}, _} = render([@scene | args] ++ @tiny)
+        assert message =~ text
+      end
+
+      assert File.ls!(dir) == []
+    end
+
+    test "a frame path that is a folder is refused before any work", %{tmp_dir: dir} do
+      File.mkdir!(Path.join(dir, "f_03.png"))
+
+      assert {{:error, 2, message}, _} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-4)] ++ @tiny)
+
+      assert message =~ "--out #{dir}/f_03.png: exists and is a directory"
+      assert File.ls!(dir) == ["f_03.png"]
+    end
+
+    test "--frame F with a # in --out writes frame F's file, the same as without", %{
+      tmp_dir: dir
+    } do
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_###.png --frame 7)] ++ @tiny)
+      assert out =~ "wrote #{dir}/f_007.png (16x12)"
+      {:ok, _} = render([@scene | ~w(-o #{dir}/plain.png --frame 7 -q)] ++ @tiny)
+      assert File.read!(Path.join(dir, "f_007.png")) == File.read!(Path.join(dir, "plain.png"))
+    end
+
+    test "--continue: with every frame there it renders nothing and says so", %{tmp_dir: dir} do
+      for n <- 1..3, do: :ok = RingTracer.Output.write(Path.join(dir, "f_0#{n}.png"), "whole")
+
+      assert {:ok, out} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-3 --continue)] ++ @tiny)
+
+      assert out == "--continue: all 3 frames are already written; nothing to render\n"
+
+      assert {:ok, out} = render([@scene | ~w(-o #{dir}/f_##.png --frame 2 --continue)] ++ @tiny)
+      assert out == "--continue: #{dir}/f_02.png is already written; nothing to render\n"
+
+      assert {:ok, ""} =
+               render([@scene | ~w(-o #{dir}/f_##.png --frames 1-3 --continue -q)] ++ @tiny)
+
+      assert Enum.map(1..3, &File.read!(Path.join(dir, "f_0#{&1}.png"))) == ~w(whole whole whole)
+    end
+
+    test "--continue: one frame not there yet (empty, as a crash could not leave it) is rendered",
+         %{tmp_dir: dir} do
+      File.touch!(Path.join(dir, "f_05.png"))
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_##.png --frame 5 --continue)] ++ @tiny)
+      assert out =~ "wrote #{dir}/f_05.png (16x12)"
+      assert <<0x89, "PNG", _::binary>> = File.read!(Path.join(dir, "f_05.png"))
+    end
+
+    test "one file per frame, each the same as that frame rendered alone", %{tmp_dir: dir} do
+      # a window smaller than the sequence: frames leave it as the command writes them
+      args =
+        ~w(-o #{dir}/f_##.png --frames 2-4 --window 1 --stats #{dir}/s.json --timeline #{dir}/t.svg)
+
+      {:ok, out} = render([@scene | args] ++ @tiny)
+
+      assert out =~ "wrote 3 frames (16x12), #{dir}/f_02.png to #{dir}/f_04.png\n"
+
+      for n <- 2..4,
+          do: assert(out =~ ~r/\n  frame #{n}: \d+\.\d{3} s, 4 atoms, \d+ rays, f_0#{n}.png\n/)
+
+      assert out =~ "with 2 children\n"
+      assert out =~ "wrote #{dir}/s.json\nwrote #{dir}/t.svg\n"
+      assert Enum.sort(File.ls!(dir)) == ~w(f_02.png f_03.png f_04.png s.json t.svg)
+
+      for n <- 2..4 do
+        {:ok, _} = render([@scene | ~w(-o #{dir}/alone.png --frame #{n} -q)] ++ @tiny)
+
+        assert File.read!(Path.join(dir, "f_0#{n}.png")) ==
+                 File.read!(Path.join(dir, "alone.png")),
+               "frame #{n}"
+      end
+    end
+
+    test "--continue renders only the frames not there, at the whole sequence's clock", %{
+      tmp_dir: dir
+    } do
+      {:ok, _} = render([@scene | ~w(-o #{dir}/f_#.exr --frames 1-3 -q)] ++ @tiny)
+      first = Enum.map(1..3, &File.read!(Path.join(dir, "f_#{&1}.exr")))
+      inodes = Enum.map(1..3, &File.stat!(Path.join(dir, "f_#{&1}.exr")).inode)
+      File.rm!(Path.join(dir, "f_2.exr"))
+      # an empty file is no frame (a write is atomic: never one a render left)
+      File.write!(Path.join(dir, "f_3.exr"), "")
+
+      {:ok, out} = render([@scene | ~w(-o #{dir}/f_#.exr --frames 1-3 --continue)] ++ @tiny)
+      assert out =~ "--continue: skipping 1 of 3 frames already written, rendering 2\n"
+      assert out =~ "wrote 2 frames (16x12), #{dir}/f_2.exr to #{dir}/f_3.exr\n"
+      refute out =~ "frame 1:"
+      # frame 1 untouched, 2 and 3 rendered again, as before
+      assert File.stat!(Path.join(dir, "f_1.exr")).inode == hd(inodes)
+      assert Enum.map(1..3, &File.read!(Path.join(dir, "f_#{&1}.exr"))) == first
+    end
+
+    test "an animated scene with a # and no --frames renders every frame", %{tmp_dir: dir} do
+      scene = Path.join(dir, "three.toml")
+
+      File.write!(scene, """
+      [animation]
+      frames = 3
+
+      [camera]
+      from = [0.0, 0.0, 5.0]
+      at = [0.0, 0.0, 0.0]
+
+      [camera.animate.from]
+      keys = [{ clock = 0.0, value = [0.0, 0.0, 5.0] }, { clock = 1.0, value = [0.0, 2.0, 5.0] }]
+
+      [[lights]]
+      position = [5.0, 5.0, 5.0]
+
+      [[objects]]
+      type = "sphere"
+      center = [0.0, 0.0, 0.0]
+      radius = 1.0
+      """)
+
+      {:ok, ""} = render([scene | ~w(-o #{dir}/f_##.png -q)] ++ @tiny)
+      assert Enum.sort(File.ls!(dir)) == ~w(f_01.png f_02.png f_03.png three.toml)
+      # without a #, frame 1 alone, as ever
+      {:ok, _} = render([scene | ~w(-o #{dir}/one.png -q)] ++ @tiny)
+      assert File.read!(Path.join(dir, "one.png")) == File.read!(Path.join(dir, "f_01.png"))
+    end
+  end
 end
