@@ -292,7 +292,7 @@ defmodule RingTracer do
       or an ascending list (default: every frame). A subset keeps the
       whole sequence's clock, as POV-Ray's `+SF`/`+EF` do
     * `:window` — how many frames may be in flight at once (default
-      #{RingTracer.Sequence.default_window()}, at most 64)
+      #{RingTracer.Sequence.default_window()}, at most #{RingTracer.Sequence.max_window()})
     * `:ack` — whether a frame stays in the window until the caller
       acknowledges it with `ack_frame/2` (default false): a caller that
       writes frames more slowly than the ring traces them then holds the

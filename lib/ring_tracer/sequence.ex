@@ -9,6 +9,10 @@ defmodule RingTracer.Sequence do
   @default_window 4
   @max_window 64
 
+  @doc "The most frames a sequence may have in flight."
+  @spec max_window() :: pos_integer()
+  def max_window, do: @max_window
+
   @doc "The default number of frames in flight."
   @spec default_window() :: pos_integer()
   def default_window, do: @default_window

@@ -59,7 +59,7 @@ defmodule RingTracer.CLI.Render do
     depth: 1..64,
     samples: 1..16,
     frame: 1..1_000_000,
-    window: 1..64,
+    window: 1..RingTracer.Sequence.max_window(),
     children_per_node: 1..@max.children,
     preview: 0..65_535
   ]
@@ -119,7 +119,7 @@ defmodule RingTracer.CLI.Render do
                               by the # of --out (default with a #: all of them)
           --continue          skip the frames whose file is already there (whole: files
                               are written atomically); a sequence stopped goes on
-          --window W          frames traced at once in a sequence (1-64, default #{RingTracer.Sequence.default_window()})
+          --window W          frames traced at once in a sequence (1-#{RingTracer.Sequence.max_window()}, default #{RingTracer.Sequence.default_window()})
           --spd               the SPD testing procedure (pixel corners, no cut-off)
           --region X0,Y0,X1,Y1  trace only that part: pixels (X1, Y1 excluded) or
                               fractions (0.25,0,0.75,0.5); exactly the whole render's pixels
