@@ -42,21 +42,33 @@ defmodule RingTracer.CLI.Report do
     do: for(k <- [:stats, :timeline, :ownership], p = opts[k], do: "wrote #{p}\n")
 
   @doc """
-  A line for a frame of a sequence (a summary: `:number`, `:elapsed_us`,
-  `:atoms`, `:rays`): its number, its time from its release into the ring
-  to its last pixel (frames overlap: a sequence keeps several in flight),
-  its atoms and rays, and its file.
+  A line for a frame of a sequence (a summary: `:number`, `:completed_us`,
+  `:elapsed_us`, `:atoms`, `:rays`): its number, when its last pixel came
+  (from the job's start), its time in the ring from its release to then
+  (frames overlap: a sequence keeps several in flight), its atoms and rays,
+  and its file.
 
-      iex> frame = %{number: 7, elapsed_us: 250_000, atoms: 64, rays: 1234}
+      iex> frame = %{number: 7, completed_us: 1_750_000, elapsed_us: 250_000, atoms: 64, rays: 1234}
       iex> IO.iodata_to_binary(RingTracer.CLI.Report.frame(frame, "f_0007.png"))
-      "  frame 7: 0.250 s, 64 atoms, 1234 rays, f_0007.png\\n"
+      "  frame 7: done at 1.750 s (0.250 s in flight), 64 atoms, 1234 rays, f_0007.png\\n"
   """
   @spec frame(map(), Path.t()) :: iodata()
   def frame(frame, path) do
+    done = if us = frame[:completed_us], do: "done at #{seconds(us / 1_000_000)} ", else: ""
     time = if us = frame.elapsed_us, do: seconds(us / 1_000_000), else: "? s"
 
-    "  frame #{frame.number}: #{time}, #{count(frame.atoms)} atoms, #{rays(frame.rays)} rays, #{path}\n"
+    "  frame #{frame.number}: #{done}(#{time} in flight), #{count(frame.atoms)} atoms, " <>
+      "#{rays(frame.rays)} rays, #{path}\n"
   end
+
+  @doc """
+  The sequence's pace: its makespan over its frames.
+
+      iex> RingTracer.CLI.Report.pace(2_400_000, 24)
+      "0.100 s per frame"
+  """
+  @spec pace(non_neg_integer(), pos_integer()) :: String.t()
+  def pace(elapsed_us, frames), do: "#{seconds(elapsed_us / 1_000_000 / frames)} per frame"
 
   defp count(n) when is_integer(n), do: n
   defp count(list) when is_list(list), do: length(list)

@@ -147,6 +147,7 @@ defmodule RingTracer.CLI.Sequence do
 
             summary = %{
               number: n,
+              completed_us: frame.completed_us,
               elapsed_us: RingTracer.Frame.elapsed_us(frame),
               atoms: frame.atoms,
               rays: frame.rays
@@ -243,14 +244,21 @@ defmodule RingTracer.CLI.Sequence do
 
     [
       case frames do
-        [_] -> "wrote #{first} (#{w}x#{h})\n"
-        _ -> "wrote #{length(frames)} frames (#{w}x#{h}), #{first} to #{last}\n"
+        [_] ->
+          "wrote #{first} (#{w}x#{h})\n"
+
+        _ ->
+          "wrote #{length(frames)} frames (#{w}x#{h}), #{first} to #{last}, " <>
+            "#{pace(result, length(frames))}\n"
       end,
       Enum.map(frames, &Report.frame(&1, Path.basename(Frames.path(plan, &1.number)))),
       Report.statistics(result, load_us),
       Report.reports_written(job.opts)
     ]
   end
+
+  defp pace(%{elapsed_us: us}, n) when is_integer(us), do: Report.pace(us, n)
+  defp pace(_result, _n), do: "? s per frame"
 
   defp size(%{width: w, height: h}) when is_integer(w) and is_integer(h), do: {w, h}
   defp size(_result), do: {"?", "?"}

@@ -42,6 +42,6 @@ defmodule RingTracer.CLI.ReportTest do
         Report.frame(%{number: 3, elapsed_us: nil, atoms: nil, rays: nil}, "f.png")
       )
 
-    assert line == "  frame 3: ? s, ? atoms, ? rays, f.png\n"
+    assert line == "  frame 3: (? s in flight), ? atoms, ? rays, f.png\n"
   end
 end
