@@ -37,6 +37,7 @@ defmodule RingTracer.Job.Child do
   alias RingTracer.Strategy.View
 
   @pipe_depth 2
+  @sequence_events 10_000
   @max_attempts 3
 
   @enforce_keys [:spec, :index, :parent, :strategy, :stats]
@@ -65,6 +66,7 @@ defmodule RingTracer.Job.Child do
     early: [],
     traffic: %{},
     events: [],
+    events_kept: 0,
     atoms: []
   ]
 
@@ -75,7 +77,8 @@ defmodule RingTracer.Job.Child do
   parts (`parts`: how many, or `:cut` for the piece left after a cut), tries
   per atom, the latest frame it has had atoms of (`last_frame`), its status,
   its strategy's state, messages that came before the ring (`early`), and
-  what it reports at the end (`traffic`, `events`, `atoms`, `stats`).
+  what it reports at the end (`traffic`, `events` (in a job of several
+  frames, the latest ones: `events_kept` counts them), `atoms`, `stats`).
   """
   @type t :: %__MODULE__{
           spec: Spec.t(),
@@ -102,6 +105,7 @@ defmodule RingTracer.Job.Child do
           early: [term()],
           traffic: traffic(),
           events: [event()],
+          events_kept: non_neg_integer(),
           atoms: [atom_record()]
         }
 
@@ -168,7 +172,7 @@ defmodule RingTracer.Job.Child do
   defp event(state, kind, to) do
     at = job_time(state)
     RingTracer.Telemetry.child_event(state.spec.id, kind, state.index, to, at)
-    %{state | events: [%{kind: kind, from: state.index, to: to, at_us: at} | state.events]}
+    bound_events(state, [%{kind: kind, from: state.index, to: to, at_us: at} | state.events])
   end
 
   @doc """
@@ -696,6 +700,18 @@ defmodule RingTracer.Job.Child do
 
     max(state.strategy.parts(view, state.strategy_state), 1)
   end
+
+  # A job of several frames keeps its latest @sequence_events events (at
+  # most twice as many between two cuts), so that its memory does not grow
+  # with the number of frames; one image keeps them all.
+  defp bound_events(%{spec: %Spec{layout: %Layout{frames: 1}}} = state, events),
+    do: %{state | events: events}
+
+  defp bound_events(%{events_kept: n} = state, events) when n >= 2 * @sequence_events,
+    do: %{state | events: Enum.take(events, @sequence_events), events_kept: @sequence_events}
+
+  defp bound_events(state, events),
+    do: %{state | events: events, events_kept: state.events_kept + 1}
 
   # Each atom's record, for the timeline and ownership map of one image; a
   # job of several frames keeps none, so that its memory does not grow
