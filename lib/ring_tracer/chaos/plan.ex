@@ -94,7 +94,7 @@ defmodule RingTracer.Chaos.Plan do
     * `:scene_frames` — how many frames that scene has (required when
       `:sequences` is above 0: the plan reads no file)
     * `:frames` — range of how many of its frames a sequence renders
-      (default `2..5`; at most `:scene_frames`), drawn among all its frames
+      (default `2..4`; at most `:scene_frames`), drawn among all its frames
     * `:window` — range of a sequence's window (default `1..3`)
 
   Whether a job is a sequence, and its frames and window, are drawn apart
@@ -151,7 +151,7 @@ defmodule RingTracer.Chaos.Plan do
 
       percent when percent in 1..100 ->
         count = Keyword.fetch!(opts, :scene_frames)
-        first..last//_ = Keyword.get(opts, :frames, 2..5)
+        first..last//_ = Keyword.get(opts, :frames, 2..4)
 
         %{
           percent: percent,
