@@ -53,13 +53,34 @@ defmodule RingTracer.Chaos do
       computed once per scene and checked against the kernel's own
       whole-image render); for each, the atoms whose pixels differ.
     * **messages per atom** — `RingTracer.Result.per_atom/1` of each
-      completed job; the report has the median and the worst.
+      completed job (for a sequence, its messages over all its frames'
+      atoms); the report has the median and the worst.
+
+  ## What is checked, per sequence
+
+  A sequence job (`RingTracer.render_sequence/2`, a share of the jobs set
+  by `:sequences`) renders a few frames of an animated scene through one
+  ring, and meets the same faults, due at atom counts over all its frames.
+  Its atoms are checked as an image's are (lost, traced twice, messages
+  per atom; its progress and its children's counts cover every frame),
+  and its frames as they arrive:
+
+    * **frames lost** — frames asked for that never came (a completed job
+      loses none);
+    * **frames twice** — deliveries of a frame number already delivered
+      (the caller would write that frame twice): there must be none;
+    * **frames differing** — frames that are not byte-for-byte that frame's
+      clean render (this node only, no faults, computed once per frame and
+      checked against the kernel's own whole-image render of that frame),
+      with the atoms whose pixels differ; a frame not asked for counts as
+      differing.
   """
 
   alias RingTracer.Chaos.{Plan, Pool}
   alias RingTracer.{Layout, Native, Result, Scene, Settings}
 
   @default_scenes ~w(balls_s2.nff tetra_s3.nff whitted.toml spd/teapot_s6.nff)
+  @default_sequence_scene "whitted_orbit.toml"
 
   @typedoc "One job's outcome and figures."
   @type outcome :: %{
@@ -73,6 +94,10 @@ defmodule RingTracer.Chaos do
           retraced: non_neg_integer(),
           differs: boolean(),
           atoms_differing: non_neg_integer(),
+          frames: non_neg_integer(),
+          frames_lost: non_neg_integer(),
+          frames_twice: non_neg_integer(),
+          frames_differing: non_neg_integer(),
           messages_per_atom: float() | nil,
           messages: %{atom() => non_neg_integer()},
           children_lost: non_neg_integer(),
@@ -107,6 +132,11 @@ defmodule RingTracer.Chaos do
       (`300..1000`) — the plan's, see `RingTracer.Chaos.Plan.new/1`;
     * `:scenes` — file names under `priv/scenes`, or paths
       (`default_scenes/0`);
+    * `:sequences` — the percentage of jobs that are sequences (20);
+      `:sequence_scene` — their animated scene, a name under `priv/scenes`
+      or a path (`#{@default_sequence_scene}`, 48 frames); `:frames` — how
+      many of its frames a sequence renders (`2..4`), drawn among all of
+      them; `:window` — a sequence's window (`1..3`);
     * `:concurrency` — jobs at once (3);
     * `:nodes` — peer nodes (3);
     * `:width`, `:height` — the image size of every job (96 x 72);
@@ -132,6 +162,10 @@ defmodule RingTracer.Chaos do
       atoms: 4..8,
       slowdown: 300..1000,
       scenes: @default_scenes,
+      sequences: 20,
+      sequence_scene: @default_sequence_scene,
+      frames: 2..4,
+      window: 1..3,
       concurrency: 3,
       nodes: 3,
       width: 96,
@@ -155,6 +189,7 @@ defmodule RingTracer.Chaos do
     opts = Keyword.put(opts, :freeze, opts[:freeze] || 2 * opts[:liveness])
     t0 = System.monotonic_time(:millisecond)
     check_options(opts)
+    sequence = sequence_scene(opts)
     paths = Map.new(opts[:scenes], &{&1, scene_path(&1)})
     references = Map.new(paths, fn {name, path} -> {name, reference(path, opts)} end)
 
@@ -169,10 +204,22 @@ defmodule RingTracer.Chaos do
         :atoms,
         :slowdown,
         :faults_per_job,
-        :weights
+        :weights,
+        :sequences,
+        :sequence_scene,
+        :frames,
+        :window
       ])
+      |> Keyword.put(:scene_frames, sequence && sequence.scene.frames)
       |> Plan.new()
       |> Enum.filter(&(opts[:only] == nil or &1.index in opts[:only]))
+
+    # Each frame any sequence asks for, rendered clean once.
+    frame_references =
+      plan
+      |> Enum.flat_map(&(&1.frames || []))
+      |> Enum.uniq()
+      |> Map.new(&{&1, frame_reference(sequence, &1, opts)})
 
     {:ok, pool} = Pool.start_link(opts[:nodes], log_level: opts[:log_level])
 
@@ -181,6 +228,8 @@ defmodule RingTracer.Chaos do
         pool: pool,
         paths: paths,
         references: references,
+        sequence_path: sequence && sequence.path,
+        frame_references: frame_references,
         opts: opts
       }
 
@@ -243,6 +292,40 @@ defmodule RingTracer.Chaos do
       {:ok, _} -> :ok
       {:error, error} -> raise ArgumentError, "chaos soak: " <> Exception.message(error)
     end
+
+    unless opts[:sequences] in 0..100,
+      do: raise(ArgumentError, "chaos soak: :sequences must be a percentage from 0 to 100")
+  end
+
+  # The sequences' scene, loaded (for its frame count and clean renders);
+  # nil without sequences. Its frames and the largest window asked must be
+  # ones render_sequence/2 accepts.
+  defp sequence_scene(opts) do
+    if opts[:sequences] > 0 do
+      name = opts[:sequence_scene]
+      path = scene_path(name)
+
+      scene =
+        case Scene.load(path) do
+          {:ok, scene} -> scene
+          {:error, error} -> raise ArgumentError, "chaos soak: " <> Exception.message(error)
+        end
+
+      if opts[:frames].first > scene.frames,
+        do:
+          raise(
+            ArgumentError,
+            "chaos soak: sequences of at least #{opts[:frames].first} frames asked, " <>
+              "but #{name} has #{scene.frames}"
+          )
+
+      case RingTracer.Sequence.options([window: opts[:window].last], scene.frames, name) do
+        {:ok, _, _} -> :ok
+        {:error, error} -> raise ArgumentError, "chaos soak: " <> Exception.message(error)
+      end
+
+      %{path: path, scene: scene}
+    end
   end
 
   @doc """
@@ -274,6 +357,21 @@ defmodule RingTracer.Chaos do
     pixels
   end
 
+  # A frame's clean render, likewise checked against the kernel's own
+  # whole-image render of that frame.
+  defp frame_reference(%{path: path, scene: scene}, n, opts) do
+    {:ok, result} = RingTracer.render(path, frame: n, width: opts[:width], height: opts[:height])
+
+    {:ok, ref} = Native.scene_frame(scene.ref, n - 1)
+    settings = %Settings{width: opts[:width], height: opts[:height]}
+    {:ok, {pixels, _rays}} = Native.render_image(ref, Settings.to_native(settings), 1)
+
+    if pixels != result.pixels,
+      do: raise("the clean render of frame #{n} of #{path} differs from the kernel's own")
+
+    pixels
+  end
+
   ## One job
 
   defp run_job(job, ctx) do
@@ -281,37 +379,54 @@ defmodule RingTracer.Chaos do
     {ref, nodes} = Pool.checkout(ctx.pool)
     t0 = System.monotonic_time(:millisecond)
 
-    {:ok, handle} =
-      RingTracer.render_async(ctx.paths[job.scene],
-        children: job.children,
-        atoms: job.atoms,
-        width: opts[:width],
-        height: opts[:height],
-        strategy: job.strategy,
-        speeds: job.speeds,
-        nodes: nodes,
-        liveness: opts[:liveness]
-      )
-
     st = %{
       job: job,
       ctx: ctx,
       ref: ref,
-      handle: handle,
+      handle: nil,
       parent: nil,
       due: job.faults,
       done: 0,
       faults: [],
       gc_kills: %{},
       killed: MapSet.new(),
+      frames: %{},
+      frames_differing: MapSet.new(),
+      frame_atoms_differing: 0,
       deadline: t0 + opts[:timeout]
     }
 
-    {st, final} = await(st)
+    {st, final} =
+      case start(job, nodes, ctx) do
+        {:ok, handle} -> await(%{st | handle: handle})
+        {:error, error} -> {st, {:error, error}}
+      end
+
     Pool.started(ctx.pool, ref)
     skipped = Enum.map(st.due, &Map.put(&1, :result, {:skipped, "the job had ended"}))
     st = %{st | faults: Enum.reverse(st.faults) ++ skipped}
     outcome(st, final, System.monotonic_time(:millisecond) - t0)
+  end
+
+  defp start(job, nodes, ctx) do
+    opts = [
+      children: job.children,
+      atoms: job.atoms,
+      width: ctx.opts[:width],
+      height: ctx.opts[:height],
+      strategy: job.strategy,
+      speeds: job.speeds,
+      nodes: nodes,
+      liveness: ctx.opts[:liveness]
+    ]
+
+    if job.frames,
+      do:
+        RingTracer.render_sequence(
+          ctx.sequence_path,
+          opts ++ [frames: job.frames, window: job.window]
+        ),
+      else: RingTracer.render_async(ctx.paths[job.scene], opts)
   end
 
   defp await(%{handle: %{id: id}} = st) do
@@ -324,10 +439,41 @@ defmodule RingTracer.Chaos do
         {now, later} = Enum.split_while(st.due, &(&1.at <= st.done))
         await(Enum.reduce(now, %{st | due: later}, &inject/2))
 
+      {RingTracer, ^id, {:frame, n, %RingTracer.Frame{} = frame}} ->
+        await(frame(st, n, frame))
+
       {RingTracer, ^id, final} ->
         {st, final}
     after
       left -> {cancel(st), :hung}
+    end
+  end
+
+  # A sequence's frame: counted by its number (a number twice is a frame
+  # written twice) and checked against that frame's clean render at once,
+  # so that no frame's pixels are kept. A frame not asked for has none.
+  defp frame(st, n, frame) do
+    st = %{st | frames: Map.update(st.frames, n, 1, &(&1 + 1))}
+    reference = Map.get(st.ctx.frame_references, n)
+
+    cond do
+      n in (st.job.frames || []) and frame.pixels == reference ->
+        st
+
+      MapSet.member?(st.frames_differing, n) ->
+        st
+
+      true ->
+        atoms =
+          if reference,
+            do: atoms_differing(frame.pixels, reference, st.job, {frame.width, frame.height}),
+            else: 0
+
+        %{
+          st
+          | frames_differing: MapSet.put(st.frames_differing, n),
+            frame_atoms_differing: st.frame_atoms_differing + atoms
+        }
     end
   end
 
@@ -499,7 +645,8 @@ defmodule RingTracer.Chaos do
 
   defp outcome(st, final, elapsed_ms) do
     job = st.job
-    total = job.children * job.atoms
+    total = total_atoms(job)
+    asked = job.frames || []
 
     base = %{
       job: job,
@@ -511,7 +658,11 @@ defmodule RingTracer.Chaos do
       twice: 0,
       retraced: 0,
       differs: false,
-      atoms_differing: 0,
+      atoms_differing: st.frame_atoms_differing,
+      frames: length(asked),
+      frames_lost: Enum.count(asked, &(not Map.has_key?(st.frames, &1))),
+      frames_twice: st.frames |> Map.values() |> Enum.map(&(&1 - 1)) |> Enum.sum(),
+      frames_differing: MapSet.size(st.frames_differing),
       messages_per_atom: nil,
       messages: %{},
       children_lost: 0,
@@ -537,8 +688,11 @@ defmodule RingTracer.Chaos do
     end
   end
 
+  # A job's atoms: every frame's, for a sequence.
+  defp total_atoms(job), do: job.children * job.atoms * length(job.frames || [1])
+
   defp figures(result, reference, job) do
-    total = job.children * job.atoms
+    total = total_atoms(job)
     traced = Enum.sum(Enum.map(result.children, & &1.traced))
     lost_children = length(result.failures)
 
@@ -547,36 +701,49 @@ defmodule RingTracer.Chaos do
         do: {max(result.duplicates, traced - total), 0},
         else: {max(result.duplicates - result.redone, 0), min(result.duplicates, result.redone)}
 
-    differing = atoms_differing(result, reference, job)
+    image =
+      if job.frames,
+        do: %{messages_per_atom: per_atom(result, total)},
+        else: %{
+          differs: result.pixels != reference,
+          atoms_differing:
+            atoms_differing(result.pixels, reference, job, {result.width, result.height}),
+          messages_per_atom: Result.per_atom(result).messages
+        }
 
-    %{
+    Map.merge(image, %{
       twice: twice,
       retraced: retraced,
-      differs: result.pixels != reference,
-      atoms_differing: differing,
-      messages_per_atom: Result.per_atom(result).messages,
       messages: Map.new(result.messages, fn {kind, m} -> {kind, m.count} end),
       children_lost: lost_children,
       grandchild_restarts: Enum.sum(Enum.map(result.children, & &1.grandchild_restarts)),
       redone: result.redone
-    }
+    })
   end
 
-  defp atoms_differing(%Result{pixels: same}, same, _job), do: 0
+  # A sequence keeps no atom records (`Result.per_atom/1` counts those):
+  # its messages over all its frames' atoms.
+  defp per_atom(result, total) do
+    Enum.sum(Enum.map(result.messages, fn {_, m} -> m.count end)) / total
+  end
 
-  defp atoms_differing(result, reference, job) do
-    layout = Layout.new(result.width, result.height, job.children, job.atoms)
+  # The atoms (of the job's layout, in one image or frame) whose pixels differ.
+  defp atoms_differing(same, same, _job, _size), do: 0
+
+  defp atoms_differing(pixels, reference, job, {w, h}) do
+    layout = Layout.new(w, h, job.children, job.atoms)
 
     Enum.count(Layout.atoms(layout), fn atom ->
       {first, count} = Layout.span(layout, atom)
       part = fn pixels -> binary_part(pixels, first * 12, count * 12) end
-      byte_size(result.pixels) != byte_size(reference) or part.(result.pixels) != part.(reference)
+      byte_size(pixels) != byte_size(reference) or part.(pixels) != part.(reference)
     end)
   end
 
   @doc """
   The totals of a report: jobs by status, faults by kind and result,
-  atoms lost and traced twice, images differing, messages per atom.
+  atoms lost and traced twice, images differing, sequences and their
+  frames lost, delivered twice and differing, messages per atom.
   """
   @spec totals(report()) :: map()
   def totals(%{outcomes: outcomes, pool: pool} = report) do
@@ -585,6 +752,8 @@ defmodule RingTracer.Chaos do
     sum = fn key -> outcomes |> Enum.map(&Map.fetch!(&1, key)) |> Enum.sum() end
     completed = Enum.filter(outcomes, &(&1.status == :ok))
     per_atom = completed |> Enum.map(& &1.messages_per_atom) |> Enum.sort()
+    {sequences, images} = Enum.split_with(outcomes, &(&1.job.frames != nil))
+    sum_of = fn list, key -> list |> Enum.map(&Map.fetch!(&1, key)) |> Enum.sum() end
 
     %{
       jobs: length(outcomes),
@@ -614,7 +783,17 @@ defmodule RingTracer.Chaos do
       twice: sum.(:twice),
       retraced: sum.(:retraced),
       images_differing: count.(& &1.differs),
-      atoms_differing: sum.(:atoms_differing),
+      atoms_differing: sum_of.(images, :atoms_differing),
+      sequences: length(sequences),
+      sequence_faults_injected:
+        sequences
+        |> Enum.flat_map(& &1.faults)
+        |> Enum.count(&match?({:injected, _}, &1.result)),
+      frames: sum_of.(sequences, :frames),
+      frames_lost: sum_of.(sequences, :frames_lost),
+      frames_twice: sum_of.(sequences, :frames_twice),
+      frames_differing: sum_of.(sequences, :frames_differing),
+      frame_atoms_differing: sum_of.(sequences, :atoms_differing),
       median_messages_per_atom:
         if(per_atom == [], do: nil, else: Enum.at(per_atom, div(length(per_atom), 2))),
       worst: Enum.max_by(completed, & &1.messages_per_atom, fn -> nil end)
@@ -623,12 +802,15 @@ defmodule RingTracer.Chaos do
 
   @doc """
   Whether the soak passed: no atom lost or traced twice, no image
-  differing, no process of a job left behind.
+  differing, no frame lost, delivered twice or differing, no process of a
+  job left behind.
   """
   @spec passed?(report()) :: boolean()
   def passed?(report) do
     t = totals(report)
-    t.lost == 0 and t.twice == 0 and t.images_differing == 0 and t.left_behind == 0
+
+    t.lost == 0 and t.twice == 0 and t.images_differing == 0 and t.frames_lost == 0 and
+      t.frames_twice == 0 and t.frames_differing == 0 and t.left_behind == 0
   end
 
   @doc "The report as the lines the mix task prints."
@@ -647,7 +829,7 @@ defmodule RingTracer.Chaos do
       "chaos: seed #{opts[:seed]}, #{t.jobs} jobs (#{opts[:concurrency]} at once) on this node and " <>
         "#{opts[:nodes]} peer nodes, #{opts[:width]}x#{opts[:height]}, " <>
         "scenes #{Enum.join(opts[:scenes], ",")}, strategies #{Enum.join(opts[:strategies], ",")}, " <>
-        "#{opts[:faults_per_job]} faults per job, liveness #{opts[:liveness]} ms, " <>
+        "#{sequences(opts)}#{opts[:faults_per_job]} faults per job, liveness #{opts[:liveness]} ms, " <>
         "freeze #{opts[:freeze]} ms; #{div(report.elapsed_ms, 100) / 10} s"
 
     rows =
@@ -669,6 +851,11 @@ defmodule RingTracer.Chaos do
           {"atoms lost", "#{t.lost} of #{t.atoms}"},
           {"atoms traced twice", t.twice},
           {"images differing (atoms)", "#{t.images_differing} (#{t.atoms_differing})"},
+          {"sequences run (faults injected in them)",
+           "#{t.sequences} (#{t.sequence_faults_injected})"},
+          {"frames lost", "#{t.frames_lost} of #{t.frames}"},
+          {"frames delivered twice", t.frames_twice},
+          {"frames differing (atoms)", "#{t.frames_differing} (#{t.frame_atoms_differing})"},
           {"parents and children left on this node", t.left_behind},
           {"messages per atom: median / worst", messages(t)}
         ]
@@ -682,7 +869,10 @@ defmodule RingTracer.Chaos do
 
     bad =
       report.outcomes
-      |> Enum.filter(&(&1.status != :ok or &1.twice > 0 or &1.differs))
+      |> Enum.filter(
+        &(&1.status != :ok or &1.twice > 0 or &1.differs or &1.frames_lost > 0 or
+            &1.frames_twice > 0 or &1.frames_differing > 0)
+      )
       |> Enum.take(10)
       |> Enum.map(&("  job #{&1.job.index}: " <> describe(&1)))
 
@@ -703,6 +893,17 @@ defmodule RingTracer.Chaos do
     )
   end
 
+  defp sequences(opts) do
+    if opts[:sequences] > 0,
+      do:
+        "sequences #{opts[:sequences]}% of jobs (#{opts[:sequence_scene]}, " <>
+          "#{span(opts[:frames])} frames, window #{span(opts[:window])}), ",
+      else: "no sequences, "
+  end
+
+  defp span(a..a//_), do: "#{a}"
+  defp span(a..b//_), do: "#{a}-#{b}"
+
   defp messages(%{median_messages_per_atom: nil}), do: "-"
 
   defp messages(t),
@@ -710,7 +911,8 @@ defmodule RingTracer.Chaos do
       "#{fmt(t.median_messages_per_atom)} / #{fmt(t.worst.messages_per_atom)} (job #{t.worst.job.index})"
 
   @doc """
-  One line about a job: what it was, its faults, what its result says
+  One line about a job: what it was (for a sequence, its frames and
+  window), its faults, what its result says
   happened (children lost, also to other jobs' node faults; grandchildren
   restarted; atoms handed out again; messages by kind) and what went wrong.
   """
@@ -720,16 +922,24 @@ defmodule RingTracer.Chaos do
 
     messages = o.messages |> Enum.sort() |> Enum.map_join(" ", fn {kind, n} -> "#{kind} #{n}" end)
 
-    "#{o.status}, #{j.scene}, #{j.strategy}, #{j.children} children x #{j.atoms} atoms, " <>
-      "faults #{faults(o)}; children lost #{o.children_lost}, grandchildren restarted " <>
-      "#{o.grandchild_restarts}, atoms redone #{o.redone}; lost #{o.lost}, twice #{o.twice}, " <>
-      "differing atoms #{o.atoms_differing}; " <>
+    "#{o.status}, #{j.scene}#{frames(j)}, #{j.strategy}, #{j.children} children x " <>
+      "#{j.atoms} atoms, faults #{faults(o)}; children lost #{o.children_lost}, grandchildren " <>
+      "restarted #{o.grandchild_restarts}, atoms redone #{o.redone}; lost #{o.lost}, twice " <>
+      "#{o.twice}, #{frame_figures(o)}differing atoms #{o.atoms_differing}; " <>
       if(o.messages_per_atom,
         do: "messages per atom #{fmt(o.messages_per_atom)} (#{messages}), ",
         else: ""
       ) <>
       "#{o.elapsed_ms} ms" <> if(o.error, do: "; #{o.error}", else: "")
   end
+
+  defp frames(%{frames: nil}), do: ""
+  defp frames(j), do: " frames #{Enum.join(j.frames, ",")} (window #{j.window})"
+
+  defp frame_figures(%{job: %{frames: nil}}), do: ""
+
+  defp frame_figures(o),
+    do: "frames lost #{o.frames_lost}, twice #{o.frames_twice}, differing #{o.frames_differing}, "
 
   defp faults(o) do
     o.faults

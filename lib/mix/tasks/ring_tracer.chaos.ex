@@ -5,23 +5,30 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   and, by a plan fixed by the seed, kills grandchildren, children and whole
   nodes and freezes nodes at random moments; then prints jobs run, faults
   injected by kind, atoms lost or traced twice, images differing from a
-  clean render, and the median and worst messages per atom. It fails (a
-  non-zero exit) if any atom was lost or traced twice, any image differs,
-  or a parent or child of a job is still alive on this node after the last
-  job.
+  clean render, sequences run and their frames lost, delivered twice or
+  differing from that frame's clean render, and the median and worst
+  messages per atom. It fails (a non-zero exit) if any atom was lost or
+  traced twice, any image or frame differs, any frame was lost or
+  delivered twice, or a parent or child of a job is still alive on this
+  node after the last job.
 
       mix ring_tracer.chaos [--seed 1] [--jobs 100] [--concurrency 3] [--nodes 3]
                             [--scenes balls_s2.nff,tetra_s3.nff,...] [--faults-per-job 2]
                             [--weights grandchild=3,child=3,node=1,freeze=1]
                             [--strategies ring,master,steal,static]
                             [--children 3-6] [--atoms 4-8] [--slowdown 300-1000]
+                            [--sequences 20] [--sequence-scene whitted_orbit.toml]
+                            [--frames 2-4] [--window 1-3]
                             [--width 96] [--height 72] [--liveness 1500] [--freeze MS]
                             [--timeout 60000] [--only 4,17] [--verbose]
 
   `--scenes` takes names under `priv/scenes` or paths; `--children`,
   `--atoms` (per child) and `--slowdown` (each child's speed factor, see
   `RingTracer.render/2`'s `:speeds`) are ranges the plan draws from, for
-  each job; `--weights` how often
+  each job; `--sequences` is the percentage of jobs that render a sequence
+  (`RingTracer.render_sequence/2`, 0 for none) of `--sequence-scene`'s
+  frames, `--frames` how many of them (drawn among all its frames) and
+  `--window` the frames in flight, both ranges; `--weights` how often
   each fault kind is drawn (0 leaves it out); `--liveness` is the jobs'
   liveness timeout and `--freeze` how long a frozen node stays stopped
   (default twice the liveness); `--only` reruns some jobs of the seed's plan
@@ -49,6 +56,10 @@ defmodule Mix.Tasks.RingTracer.Chaos do
     children: :string,
     atoms: :string,
     slowdown: :string,
+    sequences: :integer,
+    sequence_scene: :string,
+    frames: :string,
+    window: :string,
     width: :integer,
     height: :integer,
     liveness: :integer,
@@ -93,7 +104,9 @@ defmodule Mix.Tasks.RingTracer.Chaos do
 
       Mix.raise(
         "chaos soak failed: #{t.lost} atoms lost, #{t.twice} traced twice, " <>
-          "#{t.images_differing} images differing, #{t.left_behind} processes left " <>
+          "#{t.images_differing} images differing, #{t.frames_lost} frames lost, " <>
+          "#{t.frames_twice} frames delivered twice, #{t.frames_differing} frames differing, " <>
+          "#{t.left_behind} processes left " <>
           "(seed #{report.options[:seed]})"
       )
     end
@@ -118,9 +131,15 @@ defmodule Mix.Tasks.RingTracer.Chaos do
     if n >= 0, do: {key, n}, else: Mix.raise("--#{dashed(key)} must be 0 or more, got #{n}")
   end
 
+  defp convert({:sequences, n}) do
+    if n in 0..100,
+      do: {:sequences, n},
+      else: Mix.raise("--sequences is a percentage from 0 to 100, got #{n}")
+  end
+
   defp convert({:scenes, list}), do: {:scenes, names(list)}
 
-  defp convert({key, text}) when key in [:children, :atoms, :slowdown] do
+  defp convert({key, text}) when key in [:children, :atoms, :slowdown, :frames, :window] do
     range =
       case Enum.map(String.split(text, "-"), &Integer.parse/1) do
         [{n, ""}] -> n..n

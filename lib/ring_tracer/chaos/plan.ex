@@ -7,6 +7,14 @@ defmodule RingTracer.Chaos.Plan do
   done) with a number that picks its victim among the candidates alive at
   that moment (`pick`, taken modulo the number of candidates).
 
+  A share of the jobs (`:sequences`, in percent) are sequences
+  (`RingTracer.render_sequence/2`) of an animated scene: a few of its
+  frames (`:frames`, an ascending list drawn from the scene's), through a
+  window of `:window` frames. Their faults are due at atom counts over the
+  whole sequence (the job's progress counts every frame's atoms), so they
+  land in any of its frames or between two. An image job has `frames: nil`
+  and `window: nil`.
+
   Fault kinds:
 
     * `:grandchild` — kill a child's grandchild (the child restarts it and
@@ -25,6 +33,11 @@ defmodule RingTracer.Chaos.Plan do
       true
       iex> Enum.all?(plan, &(length(&1.faults) == 2))
       true
+      iex> plan = RingTracer.Chaos.Plan.new(seed: 7, jobs: 20, scenes: ["a.nff"], sequences: 50,
+      ...>   sequence_scene: "orbit.toml", scene_frames: 48, frames: 2..5, window: 1..3)
+      iex> [job | _] = Enum.filter(plan, & &1.frames)
+      iex> {job.scene, length(job.frames) in 2..5, job.frames == Enum.sort(Enum.uniq(job.frames))}
+      {"orbit.toml", true, true}
   """
 
   @typedoc "A fault kind."
@@ -41,6 +54,8 @@ defmodule RingTracer.Chaos.Plan do
           children: pos_integer(),
           atoms: pos_integer(),
           speeds: [pos_integer()],
+          frames: [pos_integer()] | nil,
+          window: pos_integer() | nil,
           faults: [fault()]
         }
 
@@ -72,6 +87,21 @@ defmodule RingTracer.Chaos.Plan do
       enough for faults to land while the job runs)
     * `:faults_per_job` — faults planned per job (default 2)
     * `:weights` — keyword of kind to weight (default `default_weights/0`)
+    * `:sequences` — the percentage of jobs drawn as sequences, 0 to 100
+      (default 0)
+    * `:sequence_scene` — the animated scene of the sequences (required
+      when `:sequences` is above 0)
+    * `:scene_frames` — how many frames that scene has (required when
+      `:sequences` is above 0: the plan reads no file)
+    * `:frames` — range of how many of its frames a sequence renders
+      (default `2..4`; at most `:scene_frames`), drawn among all its frames
+    * `:window` — range of a sequence's window (default `1..3`)
+
+  Whether a job is a sequence, and its frames and window, are drawn apart
+  from the rest: a job that is not a sequence is the same whatever the
+  sequence options, and a sequence differs from the image job it replaces
+  only in its scene, frames, window and its faults' atom counts (their
+  kinds and picks are the same).
   """
   @spec new(keyword()) :: [job()]
   def new(opts) do
@@ -83,6 +113,7 @@ defmodule RingTracer.Chaos.Plan do
     faults = Keyword.get(opts, :faults_per_job, 2)
     weights = Keyword.get(opts, :weights, @default_weights)
     seed = Keyword.get(opts, :seed, 1)
+    sequence = sequence_options(opts)
     rand = :rand.seed_s(:exsss, {seed, 18, 9})
 
     {jobs, _} =
@@ -92,15 +123,18 @@ defmodule RingTracer.Chaos.Plan do
         {n, rand} = in_range(children, rand)
         {k, rand} = in_range(atoms, rand)
         {speeds, rand} = many(n, rand, &in_range(slowdown, &1))
-        {faults, rand} = many(faults, rand, &fault(&1, weights, n * k))
+        {frames, window} = sequence(sequence, seed, index)
+        {faults, rand} = many(faults, rand, &fault(&1, weights, n * k * length(frames || [1])))
 
         job = %{
           index: index,
-          scene: scene,
+          scene: if(frames, do: sequence.scene, else: scene),
           strategy: strategy,
           children: n,
           atoms: k,
           speeds: speeds,
+          frames: frames,
+          window: window,
           faults: Enum.sort_by(faults, & &1.at)
         }
 
@@ -108,6 +142,58 @@ defmodule RingTracer.Chaos.Plan do
       end)
 
     jobs
+  end
+
+  defp sequence_options(opts) do
+    case Keyword.get(opts, :sequences, 0) do
+      0 ->
+        nil
+
+      percent when percent in 1..100 ->
+        count = Keyword.fetch!(opts, :scene_frames)
+        first..last//_ = Keyword.get(opts, :frames, 2..4)
+
+        %{
+          percent: percent,
+          scene: Keyword.fetch!(opts, :sequence_scene),
+          count: count,
+          frames: min(first, count)..min(last, count),
+          window: Keyword.get(opts, :window, 1..3)
+        }
+
+      other ->
+        raise ArgumentError,
+              ":sequences must be a percentage from 0 to 100, got: #{inspect(other)}"
+    end
+  end
+
+  # Whether a job is a sequence, and which, is drawn from a stream of its
+  # own: the other draws (a fault's atom count takes one draw whatever its
+  # range) are those of the same seed without sequences.
+  defp sequence(nil, _seed, _index), do: {nil, nil}
+
+  defp sequence(s, seed, index) do
+    rand = :rand.seed_s(:exsss, {seed, 41, index})
+    {x, rand} = :rand.uniform_s(100, rand)
+
+    if x <= s.percent do
+      {count, rand} = in_range(s.frames, rand)
+      {frames, rand} = subset(Enum.to_list(1..s.count), count, rand)
+      {window, _} = in_range(s.window, rand)
+      {Enum.sort(frames), window}
+    else
+      {nil, nil}
+    end
+  end
+
+  # `count` distinct members of `list`.
+  defp subset(_list, 0, rand), do: {[], rand}
+
+  defp subset(list, count, rand) do
+    {i, rand} = :rand.uniform_s(length(list), rand)
+    {x, rest} = List.pop_at(list, i - 1)
+    {more, rand} = subset(rest, count - 1, rand)
+    {[x | more], rand}
   end
 
   defp fault(rand, weights, total) do
