@@ -28,6 +28,7 @@ defmodule RingTracer.Native do
   def scene_live_count, do: err()
   def scene_animation(_scene), do: err()
   def scene_frame(_scene, _frame), do: err()
+  def scene_camera(_scene), do: err()
   def trace_atom(_scene, _settings, _start, _count), do: err()
   def trace_atom_short(_scene, _settings, _start, _count, _budget_us), do: err()
   def render_image(_scene, _settings, _threads), do: err()

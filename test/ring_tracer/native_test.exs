@@ -1,6 +1,6 @@
 defmodule RingTracer.NativeTest do
   # The NIF calls of RingTracer.Native that the modules above it do not wrap (yet): the
-  # animation of a parsed scene and the scene resource of one of its frames.
+  # animation of a parsed scene, the scene resource of one of its frames and its camera.
   use ExUnit.Case, async: true
 
   alias RingTracer.{Native, Scene, Settings, TestScenes}
@@ -80,6 +80,42 @@ defmodule RingTracer.NativeTest do
     assert Scene.load!(TestScenes.path("balls_flythrough.toml")).primitives == 821
     {:ok, last} = Native.scene_frame(ref, 23)
     assert pixels(last) != pixels(ref)
+  end
+
+  test "a scene's camera and each frame's, as the kernel keeps them" do
+    ref = parse("balls_flythrough.toml")
+    close = fn {a, b, c}, {x, y, z} -> abs(a - x) + abs(b - y) + abs(c - z) < 1.0e-5 end
+
+    # the first frame's view is the NFF's: from (2.1, 1.3, 1.7) at the origin, up z, fov 45
+    cam = Native.scene_camera(ref)
+    assert close.(cam.from, {2.1, 1.3, 1.7})
+    n = :math.sqrt(2.1 * 2.1 + 1.3 * 1.3 + 1.7 * 1.7)
+    assert close.(cam.forward, {-2.1 / n, -1.3 / n, -1.7 / n})
+    # right = forward x up, normalised (here horizontal); up = right x forward
+    h = :math.sqrt(2.1 * 2.1 + 1.3 * 1.3)
+    assert close.(cam.right, {-1.3 / h, 2.1 / h, 0.0})
+    {rx, ry, rz} = cam.right
+    {fx, fy, fz} = cam.forward
+    assert close.(cam.up, {ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx})
+    assert abs(cam.fov - 45.0) < 1.0e-4
+
+    # the last frame's, at the path's last key
+    {:ok, last} = Native.scene_frame(ref, 23)
+    assert close.(Native.scene_camera(last).from, {-0.9, -0.6, 1.6})
+  end
+
+  test "the sequence benchmark's flight round tetra_s6 starts at the NFF's own view" do
+    ref = parse("tetra_flythrough.toml")
+
+    assert %{frames: 48, moves_objects: false, rebuilds_primitives: false} =
+             Native.scene_animation(ref)
+
+    assert Scene.load!(TestScenes.path("tetra_flythrough.toml")).primitives ==
+             Scene.load!(TestScenes.path("spd/tetra_s6.nff")).primitives
+
+    assert Native.scene_camera(ref) == Native.scene_camera(parse("spd/tetra_s6.nff"))
+    {:ok, last} = Native.scene_frame(ref, 47)
+    assert Native.scene_camera(last).from != Native.scene_camera(ref).from
   end
 
   test "bad animation input is an error naming file and line, not a crash" do

@@ -238,6 +238,34 @@ fn scene_animation(scene: ResourceArc<SceneResource>) -> AnimationInfo {
     }
 }
 
+/// A scene's pinhole camera as the kernel keeps it ([`ring_tracer_kernel::Camera`]): the eye,
+/// the unit view direction and the unit right and up vectors of the image (orthonormal:
+/// `right = forward x up_written`, normalised, and `up = right x forward`), and the field of
+/// view in degrees across the image's smaller side. For a frame's resource, that frame's
+/// camera.
+#[derive(NifMap)]
+pub struct CameraInfo {
+    pub from: (f64, f64, f64),
+    pub forward: (f64, f64, f64),
+    pub right: (f64, f64, f64),
+    pub up: (f64, f64, f64),
+    pub fov: f64,
+}
+
+/// The camera of a parsed scene (or of one frame of it, see [`scene_frame`]).
+#[rustler::nif]
+fn scene_camera(scene: ResourceArc<SceneResource>) -> CameraInfo {
+    let c = scene.scene.camera();
+    let t = |v: ring_tracer_kernel::glam::Vec3A| (v.x as f64, v.y as f64, v.z as f64);
+    CameraInfo {
+        from: t(c.from),
+        forward: t(c.forward),
+        right: t(c.right),
+        up: t(c.up),
+        fov: 2.0 * (c.tan_half as f64).atan().to_degrees(),
+    }
+}
+
 /// The scene of frame `frame` (from 0) of a parsed scene's animation, at the clock POV-Ray gives
 /// it (`ring_tracer_kernel::Animation::clock_of`), as a resource that `trace_atom` and the
 /// other scene calls take. Frame `n` is the same scene whichever frame's resource it is made
