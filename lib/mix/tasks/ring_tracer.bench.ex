@@ -10,7 +10,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
     {"limits", RingTracer.Bench.Limits},
     {"rays", RingTracer.Bench.Rays},
     {"network", RingTracer.Bench.Network},
-    {"preview", RingTracer.Bench.Preview}
+    {"preview", RingTracer.Bench.Preview},
+    {"sequence", RingTracer.Bench.Sequence}
   ]
 
   @moduledoc """
