@@ -8,35 +8,53 @@ use std::path::Path;
 
 /// sRGB transfer curve of one linear value, clamped to [0, 1] (NaN becomes 0), rounded to 8 bits.
 /// Fast: the number of the 255 exact decision thresholds of [`srgb8_exact`] at or below `v`,
-/// which gives identical results, counted from a table by the float's top 16 bits (the count at
-/// the bottom of `v`'s bucket) and then the thresholds between there and `v` (at most one: a
-/// bucket is narrower than a step of the curve).
+/// which gives identical results: a table gives the count at the bottom of `v`'s bucket (the
+/// floats that share its top 16 bits; negative ones in the first, those from 1.0 up in the
+/// last), and one comparison adds the threshold between there and `v`, if any (a bucket is
+/// narrower than a step of the curve, so it holds at most one: `buckets_hold_one_threshold`).
 #[inline]
 pub fn srgb8(v: f32) -> u8 {
-    if !(v > 0.0) {
-        // zero, negative or NaN
-        return 0;
-    }
-    if v >= 1.0 {
-        return 255;
-    }
-    let t = thresholds();
-    let mut k = buckets()[(v.to_bits() >> 16) as usize] as usize;
-    while k < t.len() && t[k] <= v {
-        k += 1;
-    }
-    k as u8
+    srgb8_with(buckets(), stops(), v)
 }
 
-/// For each bucket of positive floats below 1.0 that share their top 16 bits, the number of
-/// thresholds at or below the bucket's smallest float.
-fn buckets() -> &'static [u8] {
-    static B: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+#[inline(always)]
+fn srgb8_with(buckets: &[u8; TOP_BUCKET as usize + 1], stops: &[f32; 256], v: f32) -> u8 {
+    let bits = v.to_bits();
+    // negative (sign bit set) and NaN to the first bucket, whose count is 0 and whose
+    // threshold neither reaches
+    let bucket = if (bits as i32) < 0 || v.is_nan() {
+        0
+    } else {
+        (bits >> 16).min(TOP_BUCKET) as usize
+    };
+    let k = buckets[bucket];
+    k + (stops[k as usize] <= v) as u8
+}
+
+/// The bucket of 1.0 and every larger float.
+const TOP_BUCKET: u32 = 0x3F80;
+
+/// For each bucket, the number of thresholds at or below its smallest float (255 for the top
+/// bucket).
+fn buckets() -> &'static [u8; TOP_BUCKET as usize + 1] {
+    static B: std::sync::OnceLock<[u8; TOP_BUCKET as usize + 1]> = std::sync::OnceLock::new();
     B.get_or_init(|| {
         let t = thresholds();
-        (0..(1.0f32.to_bits() >> 16))
-            .map(|b| t.partition_point(|&th| th <= f32::from_bits(b << 16)) as u8)
-            .collect()
+        let mut b = [0u8; TOP_BUCKET as usize + 1];
+        for (i, slot) in b.iter_mut().enumerate() {
+            *slot = t.partition_point(|&th| th <= f32::from_bits((i as u32) << 16)) as u8;
+        }
+        b
+    })
+}
+
+/// The thresholds, and past the last a NaN, at or below which no value is.
+fn stops() -> &'static [f32; 256] {
+    static S: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    S.get_or_init(|| {
+        let mut s = [f32::NAN; 256];
+        s[..255].copy_from_slice(thresholds());
+        s
     })
 }
 
@@ -117,7 +135,8 @@ pub fn decode_srgb_in_place(values: &mut [f32]) {
 
 /// Converts linear RGB floats to 8-bit sRGB bytes (same length).
 pub fn to_srgb8(rgb: &[f32]) -> Vec<u8> {
-    rgb.iter().map(|&v| srgb8(v)).collect()
+    let (buckets, stops) = (buckets(), stops());
+    rgb.iter().map(|&v| srgb8_with(buckets, stops, v)).collect()
 }
 
 fn check_len(width: u32, height: u32, rgb: &[f32]) -> Result<(), Error> {
@@ -238,6 +257,16 @@ mod tests {
     use std::os::unix::fs::PermissionsExt;
 
     #[test]
+    fn buckets_hold_one_threshold() {
+        let t = thresholds();
+        for b in 0..TOP_BUCKET {
+            let (lo, hi) = (f32::from_bits(b << 16), f32::from_bits((b + 1) << 16));
+            let inside = t.iter().filter(|&&th| lo < th && th < hi).count();
+            assert!(inside <= 1, "bucket {b:#x} holds {inside} thresholds");
+        }
+    }
+
+    #[test]
     fn fast_srgb_matches_exact() {
         let mut v = -0.01f32;
         while v < 1.01 {
@@ -249,6 +278,16 @@ mod tests {
                 f32::from_bits(k.to_bits() - 1),
                 *k,
                 f32::from_bits(k.to_bits() + 1),
+            ] {
+                assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
+            }
+        }
+        for b in 1..=TOP_BUCKET {
+            let lo = b << 16;
+            for x in [
+                f32::from_bits(lo - 1),
+                f32::from_bits(lo),
+                f32::from_bits(lo + 1),
             ] {
                 assert_eq!(srgb8(x), srgb8_exact(x), "{x}");
             }
