@@ -297,7 +297,7 @@
     for (const b of bars) tmax = Math.max(tmax, b.end);
     // A sequence's lanes start at the first atom kept.
     let t0 = 0;
-    if (q.on && bars.length) t0 = Math.min(...bars.map((b) => b.start));
+    if (q.on && bars.length) t0 = bars.reduce((t, b) => Math.min(t, b.start), Infinity);
     const x = (t) => ((t - t0) / Math.max(1, tmax - t0)) * (W - 4) + 2;
     for (let i = 0; i < n; i++) { if (i % 2) { lctx.fillStyle = '#f6f6f6'; lctx.fillRect(0, i * laneH, W, laneH); } }
     for (const b of bars) {

@@ -38,7 +38,8 @@ defmodule RingTracer.Preview.Log do
       its frame number in the scene, `at` µs since the job's start
     * `frame` — a sequence's image is complete: `f` (`null` if unknown),
       `n`, `at`, `us` from its release to its last pixel, `completed`
-      images so far, `mean_us` their mean `us`, and its thumbnail: `tw`,
+      images so far, `mean_us` the mean `us` of those the preview saw
+      complete, and its thumbnail: `tw`,
       `th`, `px` (sRGB, base64, as an atom's; `null` when the preview was
       too far behind to keep it), `flight` the indices of the images still
       in flight (a viewer that lagged may have missed the `frame` frames,
@@ -73,17 +74,21 @@ defmodule RingTracer.Preview.Log do
             flight: %{},
             held: {0, []},
             thumbs: [],
+            unindexed: %{},
             completed: 0,
+            timed: 0,
             sum_us: 0,
             forget: []
 
   @typedoc """
   The log. For a sequence: `m` atoms an image, `images` in the job, `next`
   index to be released (nil: unknown), `flight` the log's frames of each
-  image in flight by index, `held` those of the image completed with the
+  image in flight by index (`unindexed`: by number, the `release` frames
+  of an index unknown), `held` those of the image completed with the
   highest number (and that number), `thumbs` the `frame` frames kept (at
   most `strip`, `{number, seq}`, by number), `completed` images
-  and the sum of their times, `forget` the frames to delete.
+  (`timed` of them seen complete, and the sum of their times), `forget` the
+  frames to delete.
   """
   @type t :: %__MODULE__{}
   @type frame :: {pos_integer(), binary()}
@@ -247,7 +252,10 @@ defmodule RingTracer.Preview.Log do
   def release(log, number, at) do
     f = log.next
     log = append(%{log | sequence: true}, "release", %{f: f, n: number, at: at})
-    %{in_flight(log, f) | next: f && f + 1}
+
+    if f,
+      do: %{in_flight(log, f) | next: f + 1},
+      else: %{log | unindexed: Map.put(log.unindexed, number, log.seq)}
   end
 
   @doc """
@@ -262,9 +270,12 @@ defmodule RingTracer.Preview.Log do
   def image_done(log, last, image) do
     f = if last != nil and log.m, do: image(log.m, last)
     completed = log.completed + 1
+    timed = log.timed + 1
     sum = log.sum_us + image.elapsed_us
     {tw, th, px} = thumbnail(image)
     {seqs, flight} = Map.pop(log.flight, f, [])
+    {release, unindexed} = Map.pop(log.unindexed, image.number)
+    seqs = if release, do: [release | seqs], else: seqs
 
     data =
       IO.iodata_to_binary([
@@ -279,7 +290,7 @@ defmodule RingTracer.Preview.Log do
         ~s(,"completed":),
         Integer.to_string(completed),
         ~s(,"mean_us":),
-        Integer.to_string(div(sum, completed)),
+        Integer.to_string(div(sum, timed)),
         ~s(,"tw":),
         Integer.to_string(tw),
         ~s(,"th":),
@@ -291,7 +302,13 @@ defmodule RingTracer.Preview.Log do
         "]}"
       ])
 
-    log = append(%{log | sequence: true, completed: completed, sum_us: sum}, "frame", data)
+    log =
+      append(
+        %{log | sequence: true, completed: completed, timed: timed, sum_us: sum},
+        "frame",
+        data
+      )
+
     # The strip: the `strip` highest numbers complete (images complete in
     # about their order: those completed last).
     thumbs = Enum.sort([{image.number, log.seq} | log.thumbs])
@@ -313,6 +330,7 @@ defmodule RingTracer.Preview.Log do
     %{
       log
       | flight: flight,
+        unindexed: unindexed,
         held: held,
         thumbs: thumbs,
         atoms: atoms,

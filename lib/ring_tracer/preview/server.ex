@@ -6,16 +6,22 @@ defmodule RingTracer.Preview.Server do
   (`RingTracer.Preview.Log`), kept in a protected ETS table that viewers
   read from, frame by frame.
 
-  It learns about its job from `RingTracer.Telemetry` handlers (atoms and
-  hand-overs from the parent, which runs on this node; help offers from
-  each child's node) and from the parent's description of the job
+  It learns about its job from `RingTracer.Telemetry` handlers (atoms,
+  hand-overs and a sequence's frames released and complete from the
+  parent, which runs on this node; help offers from each child's node) and
+  from the parent's description of the job
   (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
   before the preview opened. A handler only sends this process a message:
   the job never waits for the preview, nor for any viewer. While the job
   runs, the server spends at most `:cpu_share` of one core on atoms (0.01
   by default: after an atom's work the job's events wait in a queue 99
   times as long, until the job ends, while the server answers everything
-  else), and it and the viewers run at low process priority.
+  else), and it and the viewers run at low process priority. Of a
+  sequence, the queue keeps only what the log would keep: when a frame
+  completes, the queued atoms of the frames complete before it are dropped
+  (but the highest complete's), and only the last `strip` frames complete
+  keep their pixels for a thumbnail; the log's frames the sequence no
+  longer needs are deleted from the table.
   """
   use GenServer
 

@@ -317,7 +317,15 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "a sequence: a late joiner gets its last image, a bounded strip of the last frames with their times" do
-    {:ok, p} = Preview.start(strip: 3)
+    check_sequence(strip: 3)
+  end
+
+  test "a sequence the preview lags far behind (its queued atoms of images complete dropped) ends the same" do
+    check_sequence(strip: 3, cpu_share: 0.0001)
+  end
+
+  defp check_sequence(opts) do
+    {:ok, p} = Preview.start(opts)
     on_exit(fn -> Preview.stop(p, 0) end)
 
     {:ok, job} =

@@ -311,11 +311,35 @@ defmodule RingTracer.Preview.LogTest do
           traced_by: %{9 => 1, 13 => 0}
         )
 
-      {log, _} = Log.new() |> Log.job(info) |> store()
+      {log, table} = Log.new() |> Log.job(info) |> store()
       assert log.completed == 2
-      log = Log.release(log, 5, 10)
-      [{_, "release", r}] = frames(log)
-      assert r == %{"f" => nil, "n" => 5, "at" => 10}
+      {log, table} = log |> Log.release(5, 10) |> store(table)
+
+      assert [
+               {1, "job", _},
+               {2, "atom", %{"a" => 9, "at" => nil}},
+               {3, "release", %{"f" => nil, "n" => 5, "at" => 10}}
+             ] = decoded(table)
+
+      # Images 4, 5 and 6 complete (the last with no atom before it): the
+      # count goes on from 2, the mean is of those seen, and the releases of
+      # images of an unknown index are forgotten by their numbers...
+      {log, table} = log |> Log.image_done(13, image(4, 100)) |> store(table)
+
+      {log, table} =
+        log
+        |> Log.release(6, 20)
+        |> Log.image_done(16, image(5, 300))
+        |> Log.image_done(nil, image(6, 500))
+        |> store(table)
+
+      frames =
+        for {_, "frame", f} <- decoded(table), do: {f["f"], f["n"], f["completed"], f["mean_us"]}
+
+      assert frames == [{3, 4, 3, 100}, {4, 5, 4, 200}, {nil, 6, 5, 300}]
+      # (but that of the image shown at the end, the highest complete)
+      assert for({_, "release", r} <- decoded(table), do: r["n"]) == [6]
+      assert log.unindexed == %{}
     end
 
     test "hand-overs count with the events against the bound" do
