@@ -706,7 +706,7 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "the :preview option is checked" do
-    for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1]] do
+    for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1], [strip: 0]] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =
                RingTracer.render(@scene, preview: bad)
 
