@@ -396,7 +396,8 @@
   }
 
   const es = new EventSource('events');
-  const on = (name, f) => es.addEventListener(name, (e) => f(JSON.parse(e.data)));
+  // The body carries the number of the last frame read (for tests).
+  const on = (name, f) => es.addEventListener(name, (e) => { f(JSON.parse(e.data)); document.body.dataset.seq = e.lastEventId; });
   on('job', onJob); on('atom', onAtom); on('release', onRelease); on('frame', onImage); on('ev', onEvent); on('move', onMove); on('final', onFinal); on('end', onEnd);
   es.onerror = () => { if (!ended) status('connection lost; retrying…'); };
   requestAnimationFrame(frame);

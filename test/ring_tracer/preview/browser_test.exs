@@ -155,20 +155,29 @@ defmodule RingTracer.Preview.BrowserTest do
         )
 
       id = job.id
-      # Part-way (the children held once the first frame is done): the
-      # images in flight, the oldest shown, labelled with its number.
+      # Part-way: the children held once the first frame is done, and the
+      # page caught up with the preview's log (nothing comes meanwhile).
       assert_receive {RingTracer, ^id, {:frame, _, first}}, 60_000
       holder = hold_children()
 
-      cdp =
-        CDP.await(
-          cdp,
-          "document.body.dataset.state === 'running' && " <>
-            "document.querySelectorAll('#inflight .chip').length > 0 && " <>
-            "document.getElementById('showing').textContent.includes('oldest in flight') && " <>
-            "document.querySelectorAll('#strip .thumb').length > 0",
-          30_000
-        )
+      assert RingTracer.Test.Wait.eventually(fn ->
+               state = :sys.get_state(preview.pid)
+               :queue.is_empty(state.queue) and state.pacing == nil
+             end)
+
+      seq = :sys.get_state(preview.pid).log.seq
+      cdp = CDP.await(cdp, "document.body.dataset.seq === '#{seq}'", 30_000)
+
+      # The frames in flight, the oldest shown, labelled with its number,
+      # and the frames finished in the strip.
+      {showing, cdp} = CDP.eval(cdp, "document.getElementById('showing').textContent")
+      assert showing =~ ~r"\Aframe \d+, the oldest in flight: \d+ / 32 atoms\z"
+      {chips, cdp} = CDP.eval(cdp, "document.querySelectorAll('#inflight .chip').length")
+      assert chips > 0
+      {thumbs, cdp} = CDP.eval(cdp, "document.querySelectorAll('#strip .thumb').length")
+      assert thumbs > 0
+      {state, cdp} = CDP.eval(cdp, "document.body.dataset.state")
+      assert state == "running"
 
       {hidden, cdp} = CDP.eval(cdp, "document.getElementById('sequence').hidden")
       assert hidden == false
