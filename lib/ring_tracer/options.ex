@@ -222,6 +222,7 @@ defmodule RingTracer.Options do
           {:listen, a} -> match?({:ok, _}, RingTracer.Preview.address(a))
           {:max_viewers, m} -> is_integer(m) and m > 0
           {:cpu_share, c} -> is_number(c) and c > 0 and c <= 1
+          {:strip, n} -> is_integer(n) and n > 0
           {:announce, d} -> is_pid(d) or is_atom(d)
           _ -> false
         end)
@@ -233,7 +234,7 @@ defmodule RingTracer.Options do
     do:
       {:error,
        "true, a port (0 for a free one), [port: p, listen: address, max_viewers: n, " <>
-         "cpu_share: 0.01] " <>
+         "cpu_share: 0.01, strip: 12] " <>
          "or a RingTracer.Preview"}
 
   defp check(:pid, v) when is_pid(v), do: :ok

@@ -3,7 +3,10 @@ defmodule RingTracer.Preview do
   A live page of a running render, in a browser: the image filling in atom
   by atom, who traced what, one lane per child growing as it works with its
   help offers and hand-overs, and the job's counters; at the end, its final
-  statistics.
+  statistics. For a sequence (`RingTracer.render_sequence/2`, same
+  `:preview` option), the oldest frame in flight fills in (at the end, the
+  last frame), with the frames in flight, a strip of the last frames
+  finished (thumbnails, each with its time) and the mean time per frame.
 
   Three ways to open one, each serving on 127.0.0.1 (a free port unless one
   is given) and opening nothing by itself:
@@ -60,7 +63,8 @@ defmodule RingTracer.Preview do
   tuple or a string, default `{127, 0, 0, 1}`), `:max_viewers` (browsers at
   once, default 32), `:cpu_share` (the most of one core the preview spends
   on atoms while the job runs, default 0.01: on a render too light for
-  that, the page lags and catches up when the job ends).
+  that, the page lags and catches up when the job ends), `:strip` (of a
+  sequence, how many finished frames the page shows, default 12).
   """
   @spec start(keyword()) :: {:ok, t()} | {:error, RingTracer.Error.t()}
   def start(opts \\ []) do

@@ -233,13 +233,19 @@ defmodule RingTracer.Preview.HTTP do
         {Enum.reverse(acc), cursor, false}
 
       seq ->
-        [{^seq, frame, last?}] = :ets.lookup(table, seq)
-        acc = [["id: ", Integer.to_string(seq), "\n", frame] | acc]
-        bytes = bytes + byte_size(frame)
+        case :ets.lookup(table, seq) do
+          [{^seq, frame, last?}] ->
+            acc = [["id: ", Integer.to_string(seq), "\n", frame] | acc]
+            bytes = bytes + byte_size(frame)
 
-        if last? or bytes >= @chunk_bytes,
-          do: {Enum.reverse(acc), seq, last?},
-          else: read(table, seq, acc, bytes)
+            if last? or bytes >= @chunk_bytes,
+              do: {Enum.reverse(acc), seq, last?},
+              else: read(table, seq, acc, bytes)
+
+          # Forgotten meanwhile (a sequence's image complete): read on.
+          [] ->
+            read(table, seq, acc, bytes)
+        end
     end
   rescue
     ArgumentError -> :gone

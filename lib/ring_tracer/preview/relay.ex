@@ -19,6 +19,15 @@ defmodule RingTracer.Preview.Relay do
     do: send(server, {:moved, md.job, md.from, md.to, m.atoms, System.system_time(:microsecond)})
 
   @doc false
+  def frame_start(_event, m, md, server),
+    do: send(server, {:frame_start, md.job, md.frame, m.at_us})
+
+  @doc false
+  # The frame's pixels are a reference-counted binary: not copied.
+  def frame_stop(_event, m, md, server),
+    do: send(server, {:frame_stop, md.job, md.frame, m.at_us, m.elapsed_us})
+
+  @doc false
   # Also raises the flag that ends the preview's pacing at once (its
   # message may queue behind atoms).
   def job_stop(_event, _m, md, {server, ended}) do

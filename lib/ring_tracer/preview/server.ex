@@ -6,16 +6,22 @@ defmodule RingTracer.Preview.Server do
   (`RingTracer.Preview.Log`), kept in a protected ETS table that viewers
   read from, frame by frame.
 
-  It learns about its job from `RingTracer.Telemetry` handlers (atoms and
-  hand-overs from the parent, which runs on this node; help offers from
-  each child's node) and from the parent's description of the job
+  It learns about its job from `RingTracer.Telemetry` handlers (atoms,
+  hand-overs and a sequence's frames released and complete from the
+  parent, which runs on this node; help offers from each child's node) and
+  from the parent's description of the job
   (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
   before the preview opened. A handler only sends this process a message:
   the job never waits for the preview, nor for any viewer. While the job
   runs, the server spends at most `:cpu_share` of one core on atoms (0.01
   by default: after an atom's work the job's events wait in a queue 99
   times as long, until the job ends, while the server answers everything
-  else), and it and the viewers run at low process priority.
+  else), and it and the viewers run at low process priority. Of a
+  sequence, the queue keeps only what the log would keep: when a frame
+  completes, the queued atoms of the frames complete before it are dropped
+  (but the highest complete's), and only the last `strip` frames complete
+  keep their pixels for a thumbnail; the log's frames the sequence no
+  longer needs are deleted from the table.
   """
   use GenServer
 
@@ -87,7 +93,9 @@ defmodule RingTracer.Preview.Server do
         port: port,
         addr: addr,
         token: token,
-        log: Log.new(Keyword.take(opts, [:max_events])),
+        log: Log.new(Keyword.take(opts, [:max_events, :strip])),
+        last_atom: nil,
+        last_image: nil,
         parent: nil,
         handlers: [],
         waiters: MapSet.new(),
@@ -150,10 +158,13 @@ defmodule RingTracer.Preview.Server do
     do: {:reply, {:error, :already_watching}, state}
 
   def handle_call({:watch, parent, progress}, _from, state) do
+    # Expected (render/2's :preview): the handlers were there before the job.
+    from_start = state.expect != nil
     state = if state.expect, do: state, else: attach_all(state, nil, [])
 
     case describe(parent, progress) do
       {:ok, info} when state.expect in [nil, info.id] ->
+        info = Map.put(info, :from_start, from_start)
         Process.monitor(parent)
         # Opened on a running job: now its other nodes are known.
         state =
@@ -174,9 +185,9 @@ defmodule RingTracer.Preview.Server do
   end
 
   @impl GenServer
-  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
+  def handle_info({kind, job, a, _, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
       when kind == :atom,
-      do: {:noreply, %{state | pending: [msg | state.pending]}}
+      do: {:noreply, %{state | pending: [msg | state.pending], last_atom: a}}
 
   def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
       when kind in [:moved, :child_event],
@@ -185,9 +196,26 @@ defmodule RingTracer.Preview.Server do
   def handle_info({:job_stop, job, _} = msg, %{log: %{job: nil}, expect: job} = state),
     do: {:noreply, %{state | pending: [msg | state.pending]}}
 
-  def handle_info({kind, job, _, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
+  def handle_info({kind, job, a, _, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind == :atom,
-      do: {:noreply, enqueue(state, msg)}
+      do: {:noreply, enqueue(%{state | last_atom: a}, msg)}
+
+  # A sequence's images: released, and complete (after its last atom, the
+  # last one received).
+  def handle_info({:frame_start, job, _, _} = msg, %{log: %{job: nil}, expect: job} = state),
+    do: {:noreply, %{state | pending: [msg | state.pending]}}
+
+  def handle_info({:frame_start, job, _, _} = msg, %{log: %{job: job}} = state),
+    do: {:noreply, enqueue(state, msg)}
+
+  def handle_info({:frame_stop, job, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state),
+    do: {:noreply, %{state | pending: [image_done(msg, state.last_atom) | state.pending]}}
+
+  def handle_info({:frame_stop, job, _, _, _} = msg, %{log: %{job: job}} = state) do
+    msg = image_done(msg, state.last_atom)
+    {queue, last_image} = prune(state.queue, msg, state.last_image, state.log)
+    {:noreply, enqueue(%{state | queue: queue, last_image: last_image}, msg)}
+  end
 
   def handle_info({kind, job, _, _, _, _} = msg, %{log: %{job: job}} = state)
       when kind in [:moved, :child_event],
@@ -420,6 +448,12 @@ defmodule RingTracer.Preview.Server do
   defp apply_event(state, {:child_event, _job, kind, from, to, at}),
     do: update(state, &Log.event(&1, kind, from, to, at))
 
+  defp apply_event(state, {:frame_start, _job, number, at}),
+    do: update(state, &Log.release(&1, number, at))
+
+  defp apply_event(state, {:image_done, _job, last, image}),
+    do: update(state, &Log.image_done(&1, last, image))
+
   defp apply_event(state, {:job_stop, _job, reply}), do: update(state, &Log.final(&1, reply))
   defp apply_event(state, {:gone, reason}), do: update(state, &Log.gone(&1, reason))
 
@@ -451,7 +485,7 @@ defmodule RingTracer.Preview.Server do
       {:empty, _} ->
         state
 
-      {{:value, {:atom, _, _, _, _, _, _, _} = msg}, queue} ->
+      {{:value, msg}, queue} when elem(msg, 0) in [:atom, :image_done] ->
         t = System.monotonic_time(:microsecond)
         state = apply_event(%{state | queue: queue}, msg)
         work_us = System.monotonic_time(:microsecond) - t
@@ -469,6 +503,57 @@ defmodule RingTracer.Preview.Server do
     end
   end
 
+  defp image_done({:frame_stop, job, frame, at, us}, last) do
+    image = %{
+      number: frame.number,
+      width: frame.width,
+      height: frame.height,
+      pixels: frame.pixels,
+      at_us: at,
+      elapsed_us: us
+    }
+
+    {:image_done, job, last, image}
+  end
+
+  # A sequence's image is complete: the atoms still queued of the images
+  # complete need no drawing (the log would forget them at once), but those
+  # of the highest complete (what the page shows when none is in flight),
+  # and of the images queued complete only the last `strip` keep their
+  # pixels (for their thumbnails). So the queue holds at most the images in
+  # flight, one image complete and `strip` images' pixels. Returns the
+  # queue and the highest image complete (its index).
+  defp prune(queue, {:image_done, _, last, _}, highest, %Log{m: m} = log)
+       when last != nil and m != nil do
+    f = div(RingTracer.Layout.base(last), m)
+
+    case highest do
+      nil -> {prune(queue, nil, log), f}
+      h when f > h -> {prune(queue, h, log), f}
+      h -> {prune(queue, f, log), h}
+    end
+  end
+
+  defp prune(queue, _msg, highest, _log), do: {queue, highest}
+
+  defp prune(queue, drop, %Log{strip: strip, m: m}) do
+    queue
+    |> :queue.to_list()
+    |> Enum.reject(fn
+      {:atom, _, a, _, _, _, _, _} -> drop != nil and div(RingTracer.Layout.base(a), m) == drop
+      _ -> false
+    end)
+    |> Enum.reverse()
+    |> Enum.map_reduce(strip - 1, fn
+      {:image_done, job, l, image}, 0 -> {{:image_done, job, l, %{image | pixels: nil}}, 0}
+      {:image_done, _, _, _} = msg, n -> {msg, n - 1}
+      msg, n -> {msg, n}
+    end)
+    |> elem(0)
+    |> Enum.reverse()
+    |> :queue.from_list()
+  end
+
   defp ended?(state), do: :atomics.get(state.ended, 1) == 1
 
   # The parent's events (this node), and children's on `nodes` (filtered
@@ -481,6 +566,8 @@ defmodule RingTracer.Preview.Server do
         [
           {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
           {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
+          {[:ring_tracer, :frame, :start], &RingTracer.Preview.Relay.frame_start/4, me},
+          {[:ring_tracer, :frame, :stop], &RingTracer.Preview.Relay.frame_stop/4, me},
           {[:ring_tracer, :job, :stop], &RingTracer.Preview.Relay.job_stop/4, {me, state.ended}}
         ]
         |> Enum.map(&attach(node(), &1))
@@ -507,6 +594,10 @@ defmodule RingTracer.Preview.Server do
 
   defp update(state, fun) do
     {frames, log} = Log.take(fun.(state.log))
+    {forget, log} = Log.forget(log)
+    # A sequence's frames it no longer needs (a viewer reading past one
+    # just reads on: the table is ordered).
+    Enum.each(forget, &:ets.delete(state.table, &1))
 
     case frames do
       [] ->

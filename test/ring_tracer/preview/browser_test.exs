@@ -122,5 +122,142 @@ defmodule RingTracer.Preview.BrowserTest do
     end
   end
 
+  @tag :tmp_dir
+  test "a browser sees a sequence: the images in flight, a bounded strip of finished frames with their times, and the last frame",
+       %{chromium: chromium, tmp_dir: dir} do
+    if chromium == nil do
+      IO.puts(:stderr, "\nskipped: chromium is not installed and apt-get could not install it")
+    else
+      run_sequence(chromium, dir)
+    end
+  end
+
+  defp run_sequence(chromium, dir) do
+    # A strip of 3 thumbnails, for a sequence of 30 frames.
+    {:ok, preview} = RingTracer.Preview.start(strip: 3)
+
+    try do
+      cdp = CDP.start(chromium, preview.url, Path.join(dir, "profile"))
+
+      assert RingTracer.Test.Wait.eventually(
+               fn -> RingTracer.Preview.viewers(preview) == 1 end,
+               3000
+             )
+
+      {:ok, job} =
+        RingTracer.render_sequence("priv/scenes/whitted_orbit.toml",
+          frames: 1..30,
+          width: 16,
+          height: 12,
+          children: 2,
+          speeds: [50, 50],
+          preview: preview
+        )
+
+      id = job.id
+      # Part-way: the children held once the first frame is done, and the
+      # page caught up with the preview's log (nothing comes meanwhile).
+      assert_receive {RingTracer, ^id, {:frame, _, first}}, 60_000
+      holder = hold_children()
+
+      assert RingTracer.Test.Wait.eventually(fn ->
+               state = :sys.get_state(preview.pid)
+               :queue.is_empty(state.queue) and state.pacing == nil
+             end)
+
+      seq = :sys.get_state(preview.pid).log.seq
+      cdp = CDP.await(cdp, "document.body.dataset.seq === '#{seq}'", 30_000)
+
+      # The frames in flight, the oldest shown, labelled with its number,
+      # and the frames finished in the strip.
+      {showing, cdp} = CDP.eval(cdp, "document.getElementById('showing').textContent")
+      assert showing =~ ~r"\Aframe \d+, the oldest in flight: \d+ / 32 atoms\z"
+      {chips, cdp} = CDP.eval(cdp, "document.querySelectorAll('#inflight .chip').length")
+      assert chips > 0
+      {thumbs, cdp} = CDP.eval(cdp, "document.querySelectorAll('#strip .thumb').length")
+      assert thumbs > 0
+      {state, cdp} = CDP.eval(cdp, "document.body.dataset.state")
+      assert state == "running"
+
+      {hidden, cdp} = CDP.eval(cdp, "document.getElementById('sequence').hidden")
+      assert hidden == false
+      {partway, cdp} = CDP.screenshot(cdp)
+      send(holder, :release)
+
+      frames = collect(id, %{first.number => first})
+      assert Map.keys(frames) |> Enum.sort() == Enum.to_list(1..30)
+
+      cdp = CDP.await(cdp, "document.body.dataset.state === 'done'")
+      {final, cdp} = CDP.screenshot(cdp)
+
+      {strip, cdp} =
+        CDP.eval(
+          cdp,
+          "[...document.querySelectorAll('#strip .thumb')].map(e => [+e.dataset.n, +e.dataset.us, e.textContent])"
+        )
+
+      {done, cdp} = CDP.eval(cdp, "document.getElementById('framesdone').textContent")
+      {time, cdp} = CDP.eval(cdp, "document.getElementById('frametime').textContent")
+      {data_url, cdp} = CDP.eval(cdp, "document.getElementById('result').textContent")
+      CDP.stop(cdp)
+
+      if out = System.get_env("PREVIEW_SCREENSHOTS") do
+        File.write!(Path.join(out, "preview-sequence-partway.png"), partway)
+        File.write!(Path.join(out, "preview-sequence.png"), final)
+      end
+
+      # The strip: the last 3 frames, in order, each with its own time.
+      assert Enum.map(strip, &hd/1) == [28, 29, 30]
+
+      for [n, us, caption] <- strip do
+        assert us == RingTracer.Frame.elapsed_us(frames[n])
+        assert caption =~ ~r/\A#{n} · \d+\.\d (ms|s)\z/
+      end
+
+      assert done == "30 / 30 complete"
+      assert time =~ "mean "
+
+      # At the end the page shows the last frame, pixel for pixel.
+      "data:image/png;base64," <> b64 = data_url
+      {16, 12, 4, canvas} = PNG.decode(Base.decode64!(b64))
+      assert rgb(canvas) == RingTracer.Image.srgb8(frames[30].pixels)
+    after
+      RingTracer.Preview.stop(preview)
+    end
+  end
+
+  # Suspends this node's render children until the process returned is
+  # sent :release (a suspension ends with the process that made it).
+  defp hold_children do
+    me = self()
+
+    holder =
+      spawn(fn ->
+        for {_, pid, _, _} <- DynamicSupervisor.which_children(RingTracer.Children),
+            is_pid(pid),
+            do: :erlang.suspend_process(pid)
+
+        send(me, :held)
+
+        receive do
+          :release -> :ok
+        end
+      end)
+
+    assert_receive :held, 10_000
+    holder
+  end
+
+  defp collect(id, frames) do
+    receive do
+      {RingTracer, ^id, {:frame, n, frame}} -> collect(id, Map.put(frames, n, frame))
+      {RingTracer, ^id, {:progress, _, _}} -> collect(id, frames)
+      {RingTracer, ^id, {:ok, _}} -> frames
+      {RingTracer, ^id, {:error, error}} -> flunk(inspect(error))
+    after
+      120_000 -> flunk("the sequence did not end")
+    end
+  end
+
   defp rgb(rgba), do: for(<<r, g, b, _a <- rgba>>, into: <<>>, do: <<r, g, b>>)
 end

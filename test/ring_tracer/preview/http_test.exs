@@ -316,6 +316,82 @@ defmodule RingTracer.Preview.HTTPTest do
     assert Enum.map(resumed, &elem(&1, 1)) == ["final", "end"]
   end
 
+  test "a sequence: a late joiner gets its last image, a bounded strip of the last frames with their times" do
+    check_sequence(strip: 3)
+  end
+
+  test "a sequence the preview lags far behind (its queued atoms of images complete dropped) ends the same" do
+    check_sequence(strip: 3, cpu_share: 0.0001)
+  end
+
+  defp check_sequence(opts) do
+    {:ok, p} = Preview.start(opts)
+    on_exit(fn -> Preview.stop(p, 0) end)
+
+    {:ok, job} =
+      RingTracer.render_sequence("priv/scenes/whitted_orbit.toml",
+        frames: 1..20,
+        width: 16,
+        height: 12,
+        children: 2,
+        preview: p
+      )
+
+    id = job.id
+    frames = sequence_frames(id, %{})
+    assert map_size(frames) == 20
+
+    late = frames(p.url)
+    names = Enum.map(late, &elem(&1, 1))
+    assert hd(names) == "job" and Enum.take(names, -2) == ["final", "end"]
+    [{_, "job", j}] = Enum.filter(late, &(elem(&1, 1) == "job"))
+    assert {j["frames"], j["m"], j["total"], length(j["spans"])} == {20, 32, 640, 32}
+
+    # The strip: the last 3 frames (in the order they completed: about,
+    # not exactly, theirs), each with its time and its thumbnail.
+    strip = for {_, "frame", f} <- late, do: f
+    assert Enum.sort(Enum.map(strip, & &1["n"])) == [18, 19, 20]
+
+    for f <- strip do
+      assert f["us"] == RingTracer.Frame.elapsed_us(frames[f["n"]])
+      assert f["f"] == f["n"] - 1
+      assert Base.decode64!(f["px"]) == RingTracer.Image.srgb8(frames[f["n"]].pixels)
+    end
+
+    # Each: how many frames had completed, and their mean time.
+    in_order = frames |> Map.values() |> Enum.sort_by(& &1.completed_us)
+
+    for f <- strip do
+      k = Enum.find_index(in_order, &(&1.number == f["n"])) + 1
+      assert f["completed"] == k
+      times = in_order |> Enum.take(k) |> Enum.map(&RingTracer.Frame.elapsed_us/1)
+      assert f["mean_us"] == div(Enum.sum(times), k)
+    end
+
+    # The last image, whole: its release and its atoms, nothing of the others.
+    assert for({_, "release", r} <- late, do: r["n"]) == [20]
+    atoms = for {_, "atom", a} <- late, do: a
+    assert Enum.sort(Enum.map(atoms, & &1["a"])) == Enum.to_list(608..639)
+
+    assert atoms |> Enum.sort_by(& &1["a"]) |> Enum.map_join(&Base.decode64!(&1["px"])) ==
+             RingTracer.Image.srgb8(frames[20].pixels)
+
+    [{_, "final", final}] = for {_, "final", _} = f <- late, do: f
+    assert final["ok"] and final["frames"] == 20
+    assert Enum.all?(final["atoms"], &(&1["atom"] >= 17 * 32))
+  end
+
+  defp sequence_frames(id, frames) do
+    receive do
+      {RingTracer, ^id, {:frame, n, frame}} -> sequence_frames(id, Map.put(frames, n, frame))
+      {RingTracer, ^id, {:progress, _, _}} -> sequence_frames(id, frames)
+      {RingTracer, ^id, {:ok, _}} -> frames
+      {RingTracer, ^id, {:error, error}} -> flunk(inspect(error))
+    after
+      60_000 -> flunk("the sequence did not end")
+    end
+  end
+
   test "protocol events and hand-overs of a slowed ring reach the page", %{preview: p} do
     {:ok, result} =
       RingTracer.render(@scene,
@@ -637,7 +713,7 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "the :preview option is checked" do
-    for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1]] do
+    for bad <- [-1, 70_000, "yes", [port: "x"], [listen: "nowhere"], [bogus: 1], [strip: 0]] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =
                RingTracer.render(@scene, preview: bad)
 

@@ -143,4 +143,280 @@ defmodule RingTracer.Preview.LogTest do
     assert [{2, "final", %{"ok" => false, "error" => "the job ended: :killed"}}, _] =
              frames(Log.gone(log, :killed))
   end
+
+  describe "a sequence" do
+    # 2 children, 2 atoms each: 4 atoms an image, of 4x2 pixels.
+    defp seq_info(frames, opts \\ []) do
+      %{
+        info()
+        | layout: Layout.new(4, 2, 2, 2) |> Layout.with_frames(frames),
+          results: Keyword.get(opts, :results, %{}),
+          traced_by: Keyword.get(opts, :traced_by, %{})
+      }
+      |> Map.put(:from_start, Keyword.get(opts, :from_start, true))
+    end
+
+    defp image(n, elapsed, px \\ nil),
+      do: %{number: n, width: 4, height: 2, pixels: px, at_us: 1000 * n, elapsed_us: elapsed}
+
+    # What a viewer can still read: the log's frames less those forgotten.
+    defp store(log, table \\ %{}) do
+      {frames, log} = Log.take(log)
+      {forget, log} = Log.forget(log)
+      table = Map.drop(Map.merge(table, Map.new(frames)), forget)
+      {log, table}
+    end
+
+    defp decoded(table) do
+      for {seq, f} <- Enum.sort(table) do
+        [_, name, json] = Regex.run(~r/\Aevent: (\w+)\ndata: (.*)\n\n\z/s, f)
+        {seq, name, :jiffy.decode(json, [:return_maps, :use_nil])}
+      end
+    end
+
+    # Image `f` (from 0) released as frame number f + 1, all its atoms, and
+    # it complete, the last atom before it.
+    defp run_image(log, f, elapsed) do
+      log = Log.release(log, f + 1, 100 * f)
+
+      log =
+        Enum.reduce(Layout.frame_atoms(log_layout(), f), log, fn a, l ->
+          Log.atom(l, a, rem(a, 2), pixels(2, f / 100), 1, 1, 1_000_000 + a)
+        end)
+
+      Log.image_done(log, f * 4 + 3, image(f + 1, elapsed, pixels(8, f / 100)))
+    end
+
+    defp log_layout, do: Layout.new(4, 2, 2, 2) |> Layout.with_frames(1000)
+
+    test "the job frame describes one image's atoms, and the images" do
+      [{1, "job", job}] = frames(Log.job(Log.new(), seq_info(10)))
+      assert job["total"] == 40 and job["m"] == 4 and job["frames"] == 10
+      assert job["owners"] == [0, 0, 1, 1]
+      assert job["spans"] == [[0, 2], [2, 2], [4, 2], [6, 2]]
+      assert job["strip"] == 12
+    end
+
+    test "images released and complete: their indices, numbers, times and thumbnails" do
+      {log, _} = Log.new() |> Log.job(seq_info(3)) |> store()
+      log = Log.release(log, 7, 50) |> Log.release(8, 60)
+      log = Log.atom(log, 4, 1, pixels(2, 1.0), 3, 2, 1_000_070)
+      log = Log.atom(log, 1, 0, pixels(2, 0.0), 3, 2, 1_000_080)
+
+      assert [
+               {2, "release", %{"f" => 0, "n" => 7, "at" => 50}},
+               {3, "release", %{"f" => 1, "n" => 8, "at" => 60}},
+               {4, "atom", %{"a" => 4, "c" => 1}},
+               {5, "atom", %{"a" => 1, "c" => 0}}
+             ] = frames(log)
+
+      {_, log} = Log.take(log)
+      white = pixels(8, 1.0)
+      log = Log.image_done(log, 1, image(7, 3000, white))
+      [{6, "frame", f}] = frames(log)
+
+      assert Map.delete(f, "px") == %{
+               "f" => 0,
+               "n" => 7,
+               "at" => 7000,
+               "us" => 3000,
+               "completed" => 1,
+               "mean_us" => 3000,
+               "tw" => 4,
+               "th" => 2,
+               "flight" => [1]
+             }
+
+      assert Base.decode64!(f["px"]) == :binary.copy(<<255>>, 24)
+
+      {_, log} = Log.take(log)
+      log = Log.image_done(log, 4, image(8, 1000))
+      [{7, "frame", g}] = frames(log)
+      assert {g["f"], g["completed"], g["mean_us"], g["px"], g["flight"]} == {1, 2, 2000, nil, []}
+    end
+
+    test "what a viewer can read stays bounded: images in flight, one complete, the strip" do
+      {log, table} = Log.new(strip: 3) |> Log.job(seq_info(1000)) |> store()
+
+      {log, table} =
+        Enum.reduce(0..199, {log, table}, fn f, {l, t} ->
+          l |> run_image(f, 10 * f) |> store(t)
+        end)
+
+      # In flight: image 200 released, one atom of it.
+      {log, table} =
+        log
+        |> Log.release(201, 0)
+        |> Log.atom(800, 0, pixels(2, 0.5), 1, 1, 1_000_000)
+        |> store(table)
+
+      names = decoded(table) |> Enum.map(fn {_, name, d} -> {name, d["n"] || d["a"]} end)
+
+      assert names == [
+               {"job", nil},
+               # the strip: the last 3 complete
+               {"frame", 198},
+               {"frame", 199},
+               # the highest image complete: its release and atoms, for the page
+               # to show when none is in flight
+               {"release", 200},
+               {"atom", 796},
+               {"atom", 797},
+               {"atom", 798},
+               {"atom", 799},
+               {"frame", 200},
+               # in flight
+               {"release", 201},
+               {"atom", 800}
+             ]
+
+      [last] = for {_, "frame", %{"n" => 200} = d} <- decoded(table), do: d
+      assert last["completed"] == 200
+      assert last["mean_us"] == div(Enum.sum(for f <- 0..199, do: 10 * f), 200)
+      # Atoms of images complete are forgotten by the log too.
+      assert MapSet.size(log.atoms) == 1
+      assert map_size(log.flight) == 1
+    end
+
+    test "images complete out of order: the strip and the image shown keep the highest numbers" do
+      {log, table} = Log.new(strip: 2) |> Log.job(seq_info(1000)) |> store()
+
+      {log, table} =
+        Enum.reduce(0..3, {log, table}, fn f, {l, t} ->
+          Log.release(l, f + 1, 0)
+          |> then(
+            &Enum.reduce(Layout.frame_atoms(log_layout(), f), &1, fn a, l2 ->
+              Log.atom(l2, a, 0, pixels(2, 0.1), 1, 1, 1_000_000)
+            end)
+          )
+          |> store(t)
+        end)
+
+      # Complete in the order 4, 1, 3, 2.
+      {_log, table} =
+        Enum.reduce([3, 0, 2, 1], {log, table}, fn f, {l, t} ->
+          l |> Log.image_done(f * 4 + 3, image(f + 1, 10)) |> store(t)
+        end)
+
+      assert for({_, "frame", d} <- decoded(table), do: d["n"]) == [4, 3]
+      assert for({_, "atom", d} <- decoded(table), do: d["a"]) == [12, 13, 14, 15]
+      assert for({_, "release", d} <- decoded(table), do: d["n"]) == [4]
+    end
+
+    test "opened on a running sequence: images already complete are counted, indices unknown" do
+      info =
+        seq_info(10,
+          from_start: false,
+          results: %{9 => pixels(2, 0.5)},
+          traced_by: %{9 => 1, 13 => 0}
+        )
+
+      {log, table} = Log.new() |> Log.job(info) |> store()
+      assert log.completed == 2
+      {log, table} = log |> Log.release(5, 10) |> store(table)
+
+      assert [
+               {1, "job", _},
+               {2, "atom", %{"a" => 9, "at" => nil}},
+               {3, "release", %{"f" => nil, "n" => 5, "at" => 10}}
+             ] = decoded(table)
+
+      # Images 4, 5 and 6 complete (the last with no atom before it): the
+      # count goes on from 2, the mean is of those seen, and the releases of
+      # images of an unknown index are forgotten by their numbers...
+      {log, table} = log |> Log.image_done(13, image(4, 100)) |> store(table)
+
+      {log, table} =
+        log
+        |> Log.release(6, 20)
+        |> Log.image_done(16, image(5, 300))
+        |> Log.image_done(nil, image(6, 500))
+        |> store(table)
+
+      frames =
+        for {_, "frame", f} <- decoded(table), do: {f["f"], f["n"], f["completed"], f["mean_us"]}
+
+      assert frames == [{3, 4, 3, 100}, {4, 5, 4, 200}, {nil, 6, 5, 300}]
+      # (but that of the image shown at the end, the highest complete)
+      assert for({_, "release", r} <- decoded(table), do: r["n"]) == [6]
+      assert log.unindexed == %{}
+    end
+
+    test "hand-overs count with the events against the bound" do
+      {log, _} = Log.new(max_events: 2) |> Log.job(seq_info(3)) |> store()
+
+      log =
+        log
+        |> Log.event(:offer, 0, 1, 5)
+        |> Log.move(:parent, 1, 2, 1_000_400)
+        |> Log.move(0, 1, 1, 1_000_500)
+
+      assert [{2, "ev", _}, {3, "move", _}] = frames(log)
+      assert log.dropped == 1
+    end
+
+    test "a thumbnail is the image's nearest pixels, at most 96 a side" do
+      # 200x100: pixel (x, y) has red x / 1000, green y / 1000.
+      px =
+        for y <- 0..99,
+            x <- 0..199,
+            into: <<>>,
+            do: <<x / 1000::float-32-native, y / 1000::float-32-native, 0.0::float-32-native>>
+
+      {tw, th, b64} = Log.thumbnail(%{width: 200, height: 100, pixels: px})
+      assert {tw, th} == {96, 48}
+      thumb = Base.decode64!(b64)
+      assert byte_size(thumb) == 96 * 48 * 3
+      # Thumbnail pixel (tx, ty) is image pixel (⌊(2tx+1)·200/192⌋, ⌊(2ty+1)·100/96⌋).
+      for {tx, ty} <- [{0, 0}, {95, 47}, {40, 20}] do
+        {x, y} = {div((2 * tx + 1) * 200, 192), div((2 * ty + 1) * 100, 96)}
+        expected = RingTracer.Image.srgb8(binary_part(px, (y * 200 + x) * 12, 12))
+        assert binary_part(thumb, (ty * 96 + tx) * 3, 3) == expected
+      end
+
+      small = pixels(8, 0.25)
+
+      assert Log.thumbnail(%{width: 4, height: 2, pixels: small}) ==
+               {4, 2, Base.encode64(RingTracer.Image.srgb8(small))}
+
+      assert Log.thumbnail(%{width: 4, height: 2, pixels: nil}) == {4, 2, nil}
+    end
+
+    test "the final frame has the atoms and events of the strip's images, and the images' mean time" do
+      {log, _} = Log.new(strip: 2) |> Log.job(seq_info(5)) |> store()
+
+      atoms =
+        for a <- 0..19,
+            do: %{atom: a, owner: 0, child: 0, start_us: 100 * a, end_us: 100 * a + 50}
+
+      raw = %{
+        elapsed_us: 3000,
+        teardown_us: 5,
+        duplicates: 0,
+        redone: 0,
+        traffic: %{},
+        children: [],
+        atoms: atoms,
+        events: for(t <- [100, 1150, 1300, 1900], do: %{kind: :offer, from: 0, to: 1, at_us: t}),
+        frames:
+          for(
+            n <- 1..5,
+            do: %RingTracer.Frame{
+              number: n,
+              width: 4,
+              height: 2,
+              pixels: nil,
+              released_us: 0,
+              completed_us: 100 * n
+            }
+          )
+      }
+
+      [{_, "final", f}, {_, "end", _}] = frames(Log.final(log, {:ok, raw}))
+      # The last 2 images of 5: atoms 12 to 19.
+      assert Enum.map(f["atoms"], & &1["atom"]) == Enum.to_list(12..19)
+      assert Enum.map(f["events"], & &1["at_us"]) == [1300, 1900]
+      assert {f["frames"], f["mean_us"]} == {5, 300}
+    end
+  end
 end
