@@ -251,7 +251,17 @@ defmodule RingTracer.Bench.Balance do
   def floor(scene, size, n, k, speeds) do
     settings = %Settings{width: size, height: size}
     kernel = {RingTracer.Kernel.Native, {scene, Settings.to_native(settings)}}
-    layout = Layout.new(size, size, n, k)
+    floor_of(kernel, Layout.new(size, size, n, k), speeds)
+  end
+
+  @doc """
+  The floor of `layout`'s atoms (of every frame) traced by `kernel`
+  (`{module, context}`) on grandchildren of `speeds`, as `floor/5`.
+  """
+  @spec floor_of({module(), term()}, Layout.t(), [number()]) ::
+          {:ok, %{elapsed_us: non_neg_integer(), ideal_us: non_neg_integer(), tail: map()}}
+  def floor_of(kernel, layout, speeds) do
+    n = layout.children
     total = Layout.atom_count(layout)
     next = :atomics.new(1, [])
     speeds = if speeds == [], do: List.duplicate(1, n), else: speeds

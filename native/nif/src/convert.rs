@@ -8,6 +8,7 @@ pub fn mode_arg(mode: i64) -> Option<u32> {
 
 use ring_tracer_kernel::{Error, RayStats, Region, Settings};
 use rustler::{Atom, Binary, Encoder, Env, NifMap, OwnedBinary, Term};
+use std::borrow::Cow;
 
 /// Render settings as the Elixir side sends them: a map with atom keys.
 #[derive(NifMap)]
@@ -90,16 +91,21 @@ pub fn copy_floats(dst: &mut [u8], rgb: &[f32]) {
 }
 
 /// The inverse of [`floats_to_binary`].
-pub fn binary_to_floats(bin: &Binary) -> Result<Vec<f32>, String> {
+pub fn binary_to_floats<'a>(bin: &'a Binary) -> Result<Cow<'a, [f32]>, String> {
     if !bin.len().is_multiple_of(4) {
         return Err(format!(
             "pixel binary has {} bytes, not a multiple of 4",
             bin.len()
         ));
     }
-    Ok(bin
-        .as_slice()
-        .chunks_exact(4)
-        .map(|c| f32::from_ne_bytes([c[0], c[1], c[2], c[3]]))
-        .collect())
+    // the binary's own bytes where they are aligned (as a large binary's are), else a copy
+    Ok(match bytemuck::try_cast_slice(bin.as_slice()) {
+        Ok(floats) => Cow::Borrowed(floats),
+        Err(_) => Cow::Owned(
+            bin.as_slice()
+                .chunks_exact(4)
+                .map(|c| f32::from_ne_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+        ),
+    })
 }
