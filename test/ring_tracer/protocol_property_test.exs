@@ -71,17 +71,7 @@ defmodule RingTracer.ProtocolPropertyTest do
           split: split
         ]
 
-        # Delays of up to `chaos` ms, which reorder messages: on what the
-        # strategy has a child send, and on each atom's result.
-        opts =
-          Keyword.merge(job,
-            # With adaptive atoms, atoms in parts however short (`part_us`,
-            # `part_rows`), so that cuts of the atom being traced happen on
-            # these tiny jobs.
-            strategy:
-              RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
-            kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
-          )
+        opts = delayed(job, chaos)
 
         kill_at = Enum.take_random(1..(n * k), kills)
 
@@ -238,13 +228,7 @@ defmodule RingTracer.ProtocolPropertyTest do
           split: split
         ]
 
-        opts =
-          Keyword.merge(job,
-            strategy:
-              RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
-            kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
-          )
-          |> Keyword.delete(:aim)
+        opts = job |> delayed(chaos) |> Keyword.delete(:aim)
 
         total = n * k * length(numbers)
         kill_at = Enum.take_random(1..total, kills)
@@ -285,6 +269,26 @@ defmodule RingTracer.ProtocolPropertyTest do
     )
   end
 
+  # `job`'s options with delays of up to `chaos` ms, which reorder
+  # messages: on what the strategy has a child send, and on each atom's
+  # result. With adaptive atoms, atoms in parts however short (`part_us`,
+  # `part_rows`), so that cuts of the atom being traced happen on these
+  # tiny jobs.
+  defp delayed(job, chaos) do
+    Keyword.merge(job,
+      strategy:
+        RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
+      kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
+    )
+  end
+
+  defp kill_a_child do
+    case children() do
+      [] -> :ok
+      kids -> Process.exit(Enum.random(kids), :kill)
+    end
+  end
+
   # The frames of a sequence as they come (a number twice stays twice, for
   # the property to see), killing a child at the atoms counted in `kill_at`.
   defp await_frames(id, kill_at, frames) do
@@ -293,12 +297,7 @@ defmodule RingTracer.ProtocolPropertyTest do
         await_frames(id, kill_at, [{n, frame} | frames])
 
       {RingTracer, ^id, {:progress, done, _}} ->
-        if done in kill_at do
-          case children() do
-            [] -> :ok
-            kids -> Process.exit(Enum.random(kids), :kill)
-          end
-        end
+        if done in kill_at, do: kill_a_child()
 
         await_frames(id, kill_at, frames)
 
@@ -346,12 +345,7 @@ defmodule RingTracer.ProtocolPropertyTest do
   defp await(id, kill_at) do
     receive do
       {RingTracer, ^id, {:progress, done, _}} ->
-        if done in kill_at do
-          case children() do
-            [] -> :ok
-            kids -> Process.exit(Enum.random(kids), :kill)
-          end
-        end
+        if done in kill_at, do: kill_a_child()
 
         await(id, kill_at)
 
