@@ -320,7 +320,7 @@ defmodule RingTracer.Chaos do
           )
 
       case RingTracer.Sequence.options([window: opts[:window].last], scene.frames, name) do
-        {:ok, _, _} -> :ok
+        {:ok, _frames, _window, _ack} -> :ok
         {:error, error} -> raise ArgumentError, "chaos soak: " <> Exception.message(error)
       end
 
