@@ -612,7 +612,19 @@ defmodule RingTracer.Job.Child do
   defp handle(msg, %{left: nil} = state),
     do: {:noreply, %{state | early: [msg | state.early]}}
 
+  # Atoms a sibling handed over: confirmed to the parent first, so that
+  # they are no longer counted in transit with the giver
+  # (`RingTracer.Job.Ledger.received/3`).
+  defp handle({:handover, from, [_ | _] = atoms} = msg, state) when is_integer(from),
+    do: {:noreply, state |> confirm(from, atoms) |> strategy_message(msg)}
+
+  defp handle({:handover, from, [_ | _] = atoms, _news} = msg, state) when is_integer(from),
+    do: {:noreply, state |> confirm(from, atoms) |> strategy_message(msg)}
+
   defp handle(msg, state), do: {:noreply, strategy_message(state, msg)}
+
+  defp confirm(state, from, atoms),
+    do: send_counted(state, state.parent, :control, {:got, from, state.index, atoms})
 
   @impl GenServer
   def terminate(_reason, state) do

@@ -22,18 +22,27 @@ defmodule RingTracer.Job.Ledger do
   lost. A report of atoms given to a child already dead hands them out
   again too. Counting what may be held, not what is, errs only towards
   tracing an atom twice (the parent keeps the first copy).
+
+  A hand-over can also be lost on its way: when the giver's node freezes
+  or drops with the message still in its buffers towards a third node,
+  while its report, on another connection, reached the parent. So the
+  receiver confirms what it got (`{:got, from, to, atoms}`), and atoms a
+  child gave that no receiver has confirmed yet are *in transit*: when the
+  giver dies they are handed out again too (`in_transit/2`), as its own
+  are.
   """
 
   alias RingTracer.Layout
 
   @enforce_keys [:layout, :strategy]
-  defstruct [:layout, :strategy, moves: %{}]
+  defstruct [:layout, :strategy, moves: %{}, unconfirmed: %{}]
 
   @typedoc "Per child, the atoms whose count differs from the initial one, by how much."
   @type t :: %__MODULE__{
           layout: Layout.t(),
           strategy: RingTracer.Strategy.t(),
-          moves: %{non_neg_integer() => %{Layout.atom_id() => integer()}}
+          moves: %{non_neg_integer() => %{Layout.atom_id() => integer()}},
+          unconfirmed: %{non_neg_integer() => %{Layout.atom_id() => integer()}}
         }
 
   @doc """
@@ -69,18 +78,55 @@ defmodule RingTracer.Job.Ledger do
   @spec moved(t(), non_neg_integer() | :parent, non_neg_integer() | :nobody, [Layout.atom_id()]) ::
           t()
   def moved(ledger, from, to, atoms) do
-    ledger |> add(from, atoms, -1) |> add(to, atoms, 1)
+    ledger = ledger |> add(from, atoms, -1) |> add(to, atoms, 1)
+
+    if is_integer(from) and is_integer(to),
+      do: count(ledger, :unconfirmed, from, atoms, 1),
+      else: ledger
+  end
+
+  @doc """
+  Child `to` confirms it received `atoms` from child `from`: they are no
+  longer in transit. A confirmation may come before the giver's report.
+
+      iex> layout = RingTracer.Layout.new(8, 8, 3, 2)
+      iex> l = RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring)
+      iex> l = RingTracer.Job.Ledger.moved(l, 0, 2, [1])
+      iex> RingTracer.Job.Ledger.in_transit(l, 0)
+      [1]
+      iex> RingTracer.Job.Ledger.in_transit(RingTracer.Job.Ledger.received(l, 0, [1]), 0)
+      []
+      iex> early = RingTracer.Job.Ledger.received(RingTracer.Job.Ledger.new(layout, RingTracer.Strategy.Ring), 0, [1])
+      iex> RingTracer.Job.Ledger.in_transit(RingTracer.Job.Ledger.moved(early, 0, 2, [1]), 0)
+      []
+  """
+  @spec received(t(), non_neg_integer(), [Layout.atom_id()]) :: t()
+  def received(ledger, from, atoms), do: count(ledger, :unconfirmed, from, atoms, -1)
+
+  @doc """
+  The atoms child `index` gave that no receiver has confirmed yet: lost
+  with it if its node went down with the hand-over still in its buffers.
+  """
+  @spec in_transit(t(), non_neg_integer()) :: [Layout.atom_id()]
+  def in_transit(ledger, index) do
+    for {a, n} <- Map.get(ledger.unconfirmed, index, %{}), n > 0, do: a
   end
 
   defp add(ledger, who, _atoms, _d) when who in [:parent, :nobody], do: ledger
+  defp add(ledger, who, atoms, d), do: count(ledger, :moves, who, atoms, d)
 
-  defp add(ledger, who, atoms, d) do
+  # Adds `d` to `who`'s count of each atom in the ledger's `key` map,
+  # dropping counts that come back to zero.
+  defp count(ledger, key, who, atoms, d) do
     mine =
-      Enum.reduce(atoms, Map.get(ledger.moves, who, %{}), fn a, acc ->
-        Map.update(acc, a, d, &(&1 + d))
+      Enum.reduce(atoms, Map.get(Map.fetch!(ledger, key), who, %{}), fn a, acc ->
+        case Map.get(acc, a, 0) + d do
+          0 -> Map.delete(acc, a)
+          n -> Map.put(acc, a, n)
+        end
       end)
 
-    %{ledger | moves: Map.put(ledger.moves, who, mine)}
+    Map.put(ledger, key, Map.put(Map.fetch!(ledger, key), who, mine))
   end
 
   @doc "The atoms child `index` may hold (traced ones included), in order."
@@ -113,18 +159,25 @@ defmodule RingTracer.Job.Ledger do
   """
   @spec drop(t(), Range.t()) :: t()
   def drop(ledger, atoms) do
-    moves =
-      Map.new(ledger.moves, fn {who, mine} ->
+    forget_atoms = fn by ->
+      Map.new(by, fn {who, mine} ->
         {who, Map.reject(mine, fn {a, _} -> Layout.base(a) in atoms end)}
       end)
+    end
 
-    %{ledger | moves: moves}
+    %{ledger | moves: forget_atoms.(ledger.moves), unconfirmed: forget_atoms.(ledger.unconfirmed)}
   end
 
   @doc """
-  Forgets child `index`'s moves (it is dead and its atoms handed out
-  again; moves to it are recorded as to `:nobody` from now on).
+  Forgets child `index`'s moves and what it gave in transit (it is dead
+  and those atoms handed out again; moves to it are recorded as to
+  `:nobody` from now on).
   """
   @spec forget(t(), non_neg_integer()) :: t()
-  def forget(ledger, index), do: %{ledger | moves: Map.delete(ledger.moves, index)}
+  def forget(ledger, index),
+    do: %{
+      ledger
+      | moves: Map.delete(ledger.moves, index),
+        unconfirmed: Map.delete(ledger.unconfirmed, index)
+    }
 end

@@ -485,6 +485,15 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
+  # A child confirms atoms a sibling handed it: no longer in transit
+  # (`RingTracer.Job.Ledger.received/3`). From a giver already dead they
+  # were handed out again at its death: nothing to do.
+  def handle_info({:got, from, _to, atoms}, %{stopping: nil} = state) do
+    if is_map_key(state.dead, from),
+      do: {:noreply, state},
+      else: {:noreply, %{state | ledger: Ledger.received(state.ledger, from, atoms)}}
+  end
+
   # Anything else is for the strategy (`parent_info/3`).
   def handle_info(other, %{stopping: nil} = state),
     do: {:noreply, run_strategy(state, &state.strategy.parent_info(other, &1, &2))}
@@ -692,7 +701,9 @@ defmodule RingTracer.Job.Parent do
       at_us: System.monotonic_time(:microsecond) - state.started
     }
 
-    lost = Ledger.held(state.ledger, index)
+    # What it may hold, and what it gave that may have been lost on the way
+    # with its node.
+    lost = Enum.uniq(Ledger.held(state.ledger, index) ++ Ledger.in_transit(state.ledger, index))
 
     state = %{
       state

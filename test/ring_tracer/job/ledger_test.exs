@@ -76,4 +76,69 @@ defmodule RingTracer.Job.LedgerTest do
       300
     )
   end
+
+  # Hand-overs between children at random, some lost on the way (the
+  # giver's node froze with the message in its buffers): the giver's
+  # report always reaches the parent, the receiver's confirmation only
+  # when the atoms arrived, all in any order. Once every report is in, an
+  # atom that arrived is held by its holder and in transit with nobody; an
+  # atom lost on the way is in transit with its giver, to be handed out
+  # again when the giver dies.
+  test "property: a hand-over lost on the way stays in transit with its giver" do
+    import :proper_types
+
+    gen =
+      {integer(2, 6), integer(1, 4),
+       list({integer(0, 1000), integer(0, 1000), boolean(), integer(), integer()})}
+
+    RingTracer.PropErCase.check(
+      gen,
+      fn {n, k, moves} ->
+        layout = Layout.new(64, 64, n, k)
+        atoms = Layout.atom_count(layout)
+        truth = Map.new(Layout.atoms(layout), &{&1, Layout.owner(layout, &1)})
+
+        {truth, reports} =
+          Enum.reduce(moves, {truth, []}, fn {a, to, lost, k1, k2}, {truth, reports} ->
+            a = rem(a, atoms)
+            to = rem(to, n)
+
+            case truth[a] do
+              {:lost, _} ->
+                {truth, reports}
+
+              ^to ->
+                {truth, reports}
+
+              from ->
+                gave = {k1, {:gave, from, to, a}}
+
+                if lost,
+                  do: {Map.put(truth, a, {:lost, from}), [gave | reports]},
+                  else: {Map.put(truth, a, to), [gave, {k2, {:got, from, to, a}} | reports]}
+            end
+          end)
+
+        ledger =
+          reports
+          |> Enum.sort()
+          |> Enum.reduce(Ledger.new(layout, RingTracer.Strategy.Ring), fn
+            {_, {:gave, f, t, a}}, l -> Ledger.moved(l, f, t, [a])
+            {_, {:got, f, _t, a}}, l -> Ledger.received(l, f, [a])
+          end)
+
+        in_transit = Map.new(0..(n - 1), &{&1, Ledger.in_transit(ledger, &1)})
+
+        Enum.all?(truth, fn
+          {a, {:lost, from}} ->
+            a in in_transit[from]
+
+          {a, holder} ->
+            a in Ledger.held(ledger, holder) and
+              not Enum.any?(in_transit, fn {_, l} -> a in l end)
+        end)
+      end,
+      300
+    )
+  end
 end
