@@ -257,8 +257,7 @@ defmodule RingTracer.CLI.Sequence do
     ]
   end
 
-  defp pace(%{elapsed_us: us}, n) when is_integer(us), do: Report.pace(us, n)
-  defp pace(_result, _n), do: "? s per frame"
+  defp pace(%{elapsed_us: us}, n), do: Report.pace(us, n)
 
   defp size(%{width: w, height: h}) when is_integer(w) and is_integer(h), do: {w, h}
   defp size(_result), do: {"?", "?"}

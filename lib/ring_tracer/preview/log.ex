@@ -354,7 +354,12 @@ defmodule RingTracer.Preview.Log do
   An image's thumbnail, `{width, height, sRGB base64}`: its nearest pixels
   at most #{@thumb} a side (`{w, h, nil}` without pixels).
   """
-  @spec thumbnail(%{width: pos_integer(), height: pos_integer(), pixels: binary() | nil}) ::
+  @spec thumbnail(%{
+          required(:width) => pos_integer(),
+          required(:height) => pos_integer(),
+          required(:pixels) => binary() | nil,
+          optional(atom()) => term()
+        }) ::
           {pos_integer(), pos_integer(), binary() | nil}
   def thumbnail(%{width: w, height: h, pixels: px}) do
     scale = min(1.0, @thumb / max(w, h))
