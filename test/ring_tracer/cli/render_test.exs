@@ -158,10 +158,15 @@ defmodule RingTracer.CLI.RenderTest do
 
       {:ok, out} = render([@scene | args] ++ @tiny)
 
-      assert out =~ "wrote 3 frames (16x12), #{dir}/f_02.png to #{dir}/f_04.png\n"
+      assert out =~
+               ~r/wrote 3 frames \(16x12\), #{Regex.escape(dir)}\/f_02.png to #{Regex.escape(dir)}\/f_04.png, \d+\.\d{3} s per frame\n/
 
       for n <- 2..4,
-          do: assert(out =~ ~r/\n  frame #{n}: \d+\.\d{3} s, 4 atoms, \d+ rays, f_0#{n}.png\n/)
+          do:
+            assert(
+              out =~
+                ~r/\n  frame #{n}: done at \d+\.\d{3} s \(\d+\.\d{3} s in flight\), 4 atoms, \d+ rays, f_0#{n}.png\n/
+            )
 
       assert out =~ "with 2 children\n"
       assert out =~ "wrote #{dir}/s.json\nwrote #{dir}/t.svg\n"
@@ -188,7 +193,10 @@ defmodule RingTracer.CLI.RenderTest do
 
       {:ok, out} = render([@scene | ~w(-o #{dir}/f_#.exr --frames 1-3 --continue)] ++ @tiny)
       assert out =~ "--continue: skipping 1 of 3 frames already written, rendering 2\n"
-      assert out =~ "wrote 2 frames (16x12), #{dir}/f_2.exr to #{dir}/f_3.exr\n"
+
+      assert out =~
+               ~r/wrote 2 frames \(16x12\), #{Regex.escape(dir)}\/f_2.exr to #{Regex.escape(dir)}\/f_3.exr, \d+\.\d{3} s per frame\n/
+
       refute out =~ "frame 1:"
       # frame 1 untouched, 2 and 3 rendered again, as before
       assert File.stat!(Path.join(dir, "f_1.exr")).inode == hd(inodes)
