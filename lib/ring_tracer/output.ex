@@ -100,8 +100,13 @@ defmodule RingTracer.Output do
   def check_inputs(outputs, inputs) do
     inputs = Enum.map(inputs, &{&1, identity(&1)})
 
-    Enum.find_value(outputs, :ok, fn {kind, path} ->
-      case not_input(kind, path, identity(path), inputs) do
+    first_error(outputs, fn {kind, path} -> not_input(kind, path, identity(path), inputs) end)
+  end
+
+  # `check.(item)` of each item until one is not `:ok`: that one, else `:ok`.
+  defp first_error(items, check) do
+    Enum.find_value(items, :ok, fn item ->
+      case check.(item) do
         :ok -> nil
         error -> error
       end
@@ -259,12 +264,7 @@ defmodule RingTracer.Output do
   """
   @spec check_targets(kind(), [Path.t()]) :: :ok | {:error, Error.t()}
   def check_targets(kind, paths) do
-    Enum.find_value(paths, :ok, fn path ->
-      case target(kind, path) do
-        :ok -> nil
-        error -> error
-      end
-    end)
+    first_error(paths, &target(kind, &1))
   end
 
   @doc """

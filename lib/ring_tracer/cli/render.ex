@@ -662,8 +662,7 @@ defmodule RingTracer.CLI.Render do
 
       {RingTracer.CLI.Signals, signal} ->
         IO.write(Console.err(), Progress.finish(progress))
-        :ok = RingTracer.cancel(handle)
-        flush(id)
+        :ok = RingTracer.CLI.Signals.cancel(handle)
         {:interrupted, signal}
 
       {RingTracer, ^id, result} ->
@@ -690,14 +689,6 @@ defmodule RingTracer.CLI.Render do
     Regex.replace(~r/(?<![\w:]):([a-z][a-z_]*)\b/, message, fn _, name ->
       "--" <> String.replace(name, "_", "-")
     end)
-  end
-
-  defp flush(id) do
-    receive do
-      {RingTracer, ^id, _} -> flush(id)
-    after
-      0 -> :ok
-    end
   end
 
   @doc false

@@ -195,16 +195,7 @@ defmodule RingTracer.CLI.Sequence do
 
   defp stop(s) do
     IO.write(Console.err(), Progress.finish(s.progress))
-    :ok = RingTracer.cancel(s.handle)
-    flush(s.handle.id)
-  end
-
-  defp flush(id) do
-    receive do
-      {RingTracer, ^id, _} -> flush(id)
-    after
-      0 -> :ok
-    end
+    Signals.cancel(s.handle)
   end
 
   defp not_interrupted(written) do

@@ -14,6 +14,25 @@ defmodule RingTracer.CLI.Signals do
   @behaviour :gen_event
 
   @doc """
+  Cancels the command's job (`RingTracer.cancel/1`: on a signal, or when
+  the command cannot go on) and drops what the job sent that is still in
+  the mailbox.
+  """
+  @spec cancel(%{id: reference(), pid: pid()}) :: :ok
+  def cancel(%{id: id} = handle) do
+    :ok = RingTracer.cancel(handle)
+    flush(id)
+  end
+
+  defp flush(id) do
+    receive do
+      {RingTracer, ^id, _} -> flush(id)
+    after
+      0 -> :ok
+    end
+  end
+
+  @doc """
   From now on, SIGUSR2 (the launcher's SIGINT) and SIGTERM go to `pid` as
   messages (the CLI calls it once, first thing).
 
