@@ -33,9 +33,7 @@ defmodule RingTracer.Job.LedgerTest do
     RingTracer.PropErCase.check(
       gen,
       fn {n, k, moves} ->
-        layout = Layout.new(64, 64, n, k)
-        atoms = Layout.atom_count(layout)
-        truth = Map.new(Layout.atoms(layout), &{&1, Layout.owner(layout, &1)})
+        {layout, atoms, truth} = start(n, k)
 
         {truth, reports} =
           Enum.reduce(moves, {truth, []}, fn {a, to, key}, {truth, reports} ->
@@ -94,9 +92,7 @@ defmodule RingTracer.Job.LedgerTest do
     RingTracer.PropErCase.check(
       gen,
       fn {n, k, moves} ->
-        layout = Layout.new(64, 64, n, k)
-        atoms = Layout.atom_count(layout)
-        truth = Map.new(Layout.atoms(layout), &{&1, Layout.owner(layout, &1)})
+        {layout, atoms, truth} = start(n, k)
 
         {truth, reports} =
           Enum.reduce(moves, {truth, []}, fn {a, to, lost, k1, k2}, {truth, reports} ->
@@ -140,5 +136,14 @@ defmodule RingTracer.Job.LedgerTest do
       end,
       300
     )
+  end
+
+  # A ring of `n` children of `k` atoms: its layout, its atom count, and
+  # each atom's holder at the start (its strip's owner).
+  defp start(n, k) do
+    layout = Layout.new(64, 64, n, k)
+
+    {layout, Layout.atom_count(layout),
+     Map.new(Layout.atoms(layout), &{&1, Layout.owner(layout, &1)})}
   end
 end
