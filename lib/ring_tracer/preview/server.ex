@@ -596,8 +596,12 @@ defmodule RingTracer.Preview.Server do
     {frames, log} = Log.take(fun.(state.log))
     {forget, log} = Log.forget(log)
     # A sequence's frames it no longer needs (a viewer reading past one
-    # just reads on: the table is ordered).
+    # just reads on: the table is ordered), those just appended included:
+    # an image that completes after the strip's (a lower number, later)
+    # leaves the strip as it enters it, and must not be stored.
     Enum.each(forget, &:ets.delete(state.table, &1))
+    forgotten = MapSet.new(forget)
+    frames = Enum.reject(frames, fn {seq, _} -> MapSet.member?(forgotten, seq) end)
 
     case frames do
       [] ->
