@@ -20,7 +20,8 @@ defmodule RingTracer.MixProject do
       test_coverage: [summary: [threshold: 0]],
       dialyzer_ignore: [],
       # :inets (the preview's HTTP server) is started by RingTracer.Preview, like
-      # :ssl by TLS (and :public_key, which :ssl needs, for a certificate's dates), only when used.
+      # :ssl by TLS (and :public_key, which :ssl needs, for a certificate's dates), and
+      # :mnesia by a farm's head (RingTracer.Farm.Store), only when used.
       xref: [
         exclude: [
           :ssl,
@@ -31,7 +32,8 @@ defmodule RingTracer.MixProject do
           :httpd_util,
           :httpd_response,
           :httpd_connection_sup,
-          :httpc
+          :httpc,
+          :mnesia
         ]
       ],
       aliases: aliases()

@@ -19,6 +19,8 @@ defmodule RingTracer.Error do
   | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |
   | `:distribution` | this node could not become distributed (name in use, epmd, TLS set-up) |
   | `:preview` | a preview could not start (port in use) or its job is not running |
+  | `:farm` | a farm's head refused a request (no such job, a job that has ended) or could not start |
+  | `:farm_unreachable` | a farm's head could not be reached, or did not answer in time |
 
   A message never holds a control character but newlines and tabs (see
   `escape/2`): a file name from an untrusted folder cannot drive the

@@ -24,4 +24,22 @@ defmodule RingTracer.Names do
   @doc "The ETS table, on every node, where a child and its grandchild race for the queued atom."
   @spec pipe_table() :: atom()
   def pipe_table, do: :ring_tracer_pipe
+
+  @doc "A farm's head process, on the head node (`node` another one: the address to call)."
+  @spec farm_head(node()) :: atom() | {atom(), node()}
+  def farm_head(node \\ node())
+  def farm_head(node) when node == node(), do: RingTracer.Farm.Head
+  def farm_head(node), do: {RingTracer.Farm.Head, node}
+
+  @doc "The head's supervisor of its jobs' runners."
+  @spec farm_runners() :: atom()
+  def farm_runners, do: RingTracer.Farm.Runners
+
+  @doc "The supervisor of a farm's head (`RingTracer.Farm.start_head/1`)."
+  @spec farm() :: atom()
+  def farm, do: RingTracer.Farm.Supervisor
+
+  @doc "A worker's member of a farm (`RingTracer.Farm.join/2`)."
+  @spec farm_member() :: atom()
+  def farm_member, do: RingTracer.Farm.Member
 end

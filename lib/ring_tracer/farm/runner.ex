@@ -1,0 +1,156 @@
+defmodule RingTracer.Farm.Runner do
+  @moduledoc false
+  # One running farm job, on the head: parses the job's scene from its
+  # bytes, starts one ring (`RingTracer.render_sequence/2`) over the workers
+  # the head gave it for the frames not done yet, and, as each frame
+  # completes, writes its file into the head's folder (atomically), records
+  # it done (`RingTracer.Farm.Store`), tells the head and only then lets the
+  # frame leave the ring's window (`ack: true`). The head tells it of
+  # workers gained (`{:grow, node, slots}`) and let go (`{:release, node}`);
+  # it tells the head `{:runner_frame, id, n}` and, last,
+  # `{:runner_end, id, outcome}`.
+
+  use GenServer, restart: :temporary
+
+  alias RingTracer.{Error, Image, Scene}
+  alias RingTracer.Farm.{Job, Store}
+
+  # Options the farm sets itself, for the workers it chose.
+  @farm_set [:nodes, :local, :children_per_node, :children, :frames, :window, :ack]
+
+  @type outcome :: :done | {:failed, String.t()} | {:retry, String.t()}
+
+  defmodule State do
+    @moduledoc false
+    @enforce_keys [:job, :head, :dir]
+    defstruct [:job, :head, :dir, :handle, nodes: []]
+
+    @type t :: %__MODULE__{
+            job: RingTracer.Farm.Job.t(),
+            head: pid(),
+            dir: term(),
+            handle: %{id: reference(), pid: pid()} | nil,
+            nodes: [node()]
+          }
+  end
+
+  @doc false
+  @spec start_link({Job.t(), [{node(), pos_integer()}], term(), pid()}) :: GenServer.on_start()
+  def start_link(args), do: GenServer.start_link(__MODULE__, args)
+
+  @doc "The options a submission may not set: the farm sets them."
+  @spec farm_set() :: [atom()]
+  def farm_set, do: @farm_set
+
+  @impl true
+  def init({%Job{} = job, workers, dir, head}) do
+    {:ok, %State{job: job, head: head, dir: dir, nodes: Enum.map(workers, &elem(&1, 0))},
+     {:continue, {:start, workers}}}
+  end
+
+  @impl true
+  def handle_continue({:start, workers}, %State{job: job} = state) do
+    remaining = job.frames -- Store.done(job.id)
+
+    with {:remaining, [_ | _]} <- {:remaining, remaining},
+         {:ok, scene} <- Scene.from_source(job.source),
+         {:ok, handle} <- start(scene, job, workers, remaining) do
+      {:noreply, %{state | handle: handle}}
+    else
+      {:remaining, []} -> finish(state, :done)
+      {:error, %Error{} = error} -> finish(state, outcome(error))
+    end
+  end
+
+  @impl true
+  def handle_info({RingTracer, id, {:frame, n, frame}}, %State{handle: %{id: id}} = state) do
+    %State{job: job, dir: dir, handle: handle} = state
+    name = Job.frame_file(job, n)
+
+    case Image.write(name, frame.width, frame.height, frame.pixels, in: dir, mode: 0o600) do
+      :ok ->
+        :ok = Store.frame_done(job.id, n)
+        send(state.head, {:runner_frame, job.id, n})
+        RingTracer.ack_frame(handle, n)
+        {:noreply, state}
+
+      {:error, %Error{message: message}} ->
+        RingTracer.cancel(handle)
+        finish(state, {:failed, "the head could not store frame #{n}: #{message}"})
+    end
+  end
+
+  def handle_info({RingTracer, id, {:progress, _, _}}, %State{handle: %{id: id}} = state),
+    do: {:noreply, state}
+
+  def handle_info({RingTracer, id, {:ok, _result}}, %State{handle: %{id: id}} = state),
+    do: finish(state, :done)
+
+  def handle_info({RingTracer, id, {:error, error}}, %State{handle: %{id: id}} = state),
+    do: finish(state, outcome(error))
+
+  def handle_info({:grow, node, slots}, %State{} = state) do
+    state = %{state | nodes: Enum.uniq(state.nodes ++ [node])}
+    _ = grow(state.handle, node, slots)
+    {:noreply, state}
+  end
+
+  def handle_info({:release, node}, %State{} = state) do
+    state = %{state | nodes: List.delete(state.nodes, node)}
+    _ = shrink(state.handle, node)
+    {:noreply, state}
+  end
+
+  def handle_info(:stop, %State{handle: handle} = state) do
+    if handle, do: RingTracer.cancel(handle)
+    {:stop, :normal, state}
+  end
+
+  def handle_info(_other, state), do: {:noreply, state}
+
+  defp start(scene, job, workers, remaining) do
+    slots = workers |> Enum.map(&elem(&1, 1)) |> Enum.min()
+
+    opts =
+      Keyword.drop(job.options, @farm_set) ++
+        [
+          nodes: Enum.map(workers, &elem(&1, 0)),
+          local: false,
+          children_per_node: slots,
+          frames: remaining,
+          ack: true
+        ]
+
+    RingTracer.render_sequence(scene, opts)
+  end
+
+  # The elastic ring's calls, where this build has them.
+  defp grow(nil, _node, _slots), do: :ok
+
+  defp grow(handle, node, slots) do
+    if function_exported?(RingTracer, :grow, 3),
+      do: apply(RingTracer, :grow, [handle, node, slots]),
+      else: :ok
+  end
+
+  defp shrink(nil, _node), do: :ok
+
+  defp shrink(handle, node) do
+    if function_exported?(RingTracer, :shrink, 2),
+      do: apply(RingTracer, :shrink, [handle, node]),
+      else: :ok
+  end
+
+  # A scene or an option that is not valid fails the job for good; anything
+  # else (workers lost, a node refused) is worth another go.
+  defp outcome(%Error{reason: reason, message: message})
+       when reason in [:invalid_scene, :invalid_option, :file],
+       do: {:failed, message}
+
+  defp outcome(%Error{message: message}), do: {:retry, message}
+
+  defp finish(%State{job: job, head: head} = state, outcome) do
+    send(head, {:runner_end, job.id, outcome})
+    {:stop, :normal, state}
+  end
+end

@@ -1,0 +1,19 @@
+defmodule RingTracer.Farm.WorkerInfo do
+  @moduledoc """
+  A worker of a farm as `RingTracer.Farm.workers/1` shows it: its node, the
+  tags it was started with, how many children it hosts for a job
+  (`:slots`), the job it works for now (`nil`: idle) and when it joined
+  (milliseconds since the epoch).
+  """
+
+  @enforce_keys [:node]
+  defstruct [:node, :job, :joined_at, tags: [], slots: 1]
+
+  @type t :: %__MODULE__{
+          node: node(),
+          job: pos_integer() | nil,
+          joined_at: integer() | nil,
+          tags: [String.t()],
+          slots: pos_integer()
+        }
+end
