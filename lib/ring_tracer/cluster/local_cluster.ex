@@ -44,6 +44,8 @@ defmodule RingTracer.LocalCluster do
     * `:connection` — `:stdio` to control the peer through its standard I/O
       (for a peer whose distribution this node cannot join)
     * `:args` — more VM arguments (strings)
+    * `:name` — the peer's node name (default: `prefix` made unique), for
+      a node that must come back under the same name (a farm's head)
 
   Returns `{peer_pid, node}`.
   """
@@ -65,7 +67,7 @@ defmodule RingTracer.LocalCluster do
 
     unless stdio?, do: ensure_distributed()
     paths = if code?, do: Enum.flat_map(:code.get_path(), &[~c"-pa", &1]), else: []
-    name = String.to_atom(Distribution.unique_name(prefix))
+    name = opts[:name] || String.to_atom(Distribution.unique_name(prefix))
 
     args =
       [~c"-kernel", ~c"inet_dist_use_interface", ~c"{127,0,0,1}"] ++

@@ -1,0 +1,83 @@
+defmodule RingTracer.Farm.RestartTest do
+  use ExUnit.Case, async: false
+
+  @moduletag :distributed
+  @moduletag timeout: 240_000
+
+  alias RingTracer.Cluster.Distribution
+  alias RingTracer.Farm
+  alias RingTracer.LocalCluster, as: Peers
+  alias RingTracer.Test.Wait
+  alias RingTracer.TestScenes
+
+  @w 160
+  @h 120
+
+  setup do
+    Peers.ensure_distributed()
+    dir = Path.join(System.tmp_dir!(), "rt_farm_restart_#{System.unique_integer([:positive])}")
+    name = String.to_atom(Distribution.unique_name("head"))
+    workers = for w <- ["rw1", "rw2"], do: Peers.start(w)
+    on_exit(fn -> File.rm_rf!(dir) end)
+    {:ok, dir: dir, name: name, workers: workers}
+  end
+
+  defp start_head(name, dir) do
+    {peer, head} = Peers.start("head", name: name)
+    {:ok, _} = Peers.call(peer, head, Farm, :start_head, [[dir: dir]])
+    {peer, head}
+  end
+
+  defp kill9(peer, head) do
+    os_pid = Peers.call(peer, head, System, :pid, [])
+    ref = Process.monitor(peer)
+    {_, 0} = System.cmd("kill", ["-9", os_pid])
+    assert_receive {:DOWN, ^ref, _, _, _}, 10_000
+  end
+
+  defp done_at(peer, head, id) do
+    Peers.call(peer, head, :mnesia, :dirty_match_object, [{:ring_tracer_farm_frame, {id, :_}, :_}])
+    |> Map.new(fn {_, {_, n}, at} -> {n, at} end)
+  end
+
+  test "after kill -9 of the head every job resumes, workers join again by themselves, " <>
+         "no frame done is rendered again and every frame is whole",
+       %{dir: dir, name: name, workers: workers} do
+    {peer, head} = start_head(name, dir)
+    for {p, n} <- workers, do: {:ok, _} = Peers.call(p, n, Farm, :join, [head, [slots: 1]])
+    assert Wait.eventually(fn -> match?({:ok, [_, _]}, Farm.workers(head)) end, 1000)
+
+    scene = TestScenes.path("whitted_orbit.toml")
+    {:ok, id} = Farm.submit(head, scene, width: @w, height: @h, atoms: 4, user: "ann")
+    {:ok, queued} = Farm.submit(head, scene, width: 32, height: 24, frames: 1..2, user: "bob")
+
+    # Killed part way: some frames done, not all.
+    assert Wait.eventually(fn -> length(elem(Farm.status(head, id), 1).done) >= 3 end, 3000)
+    before = done_at(peer, head, id)
+    kill9(peer, head)
+    assert map_size(before) < 48
+
+    {peer, ^head} = start_head(name, dir)
+    on_exit(fn -> Peers.stop(peer) end)
+    # The workers find the head again without being told.
+    assert Wait.eventually(fn -> match?({:ok, [_, _]}, Farm.workers(head)) end, 1000)
+
+    me = self()
+
+    {:ok, info} =
+      Farm.wait(head, id, on_frame: fn n, bytes -> send(me, {:frame, n, bytes}) && :ok end)
+
+    assert {info.state, info.done} == {:done, Enum.to_list(1..48)}
+    # The frames done before the kill kept their rows: none was traced again.
+    after_ = done_at(peer, head, id)
+    for {n, at} <- before, do: assert(after_[n] == at)
+
+    for n <- [1, 24, 48] do
+      assert_received {:frame, ^n, png}
+      reference = TestScenes.reference("whitted_orbit.toml", @w, @h, frame: n)
+      assert {:ok, png} == RingTracer.Image.png(@w, @h, reference)
+    end
+
+    assert {:ok, %{state: :done, done: [1, 2]}} = Farm.wait(head, queued)
+  end
+end
