@@ -274,9 +274,15 @@ defmodule RingTracer.Farm do
   @spec workers(node(), keyword()) :: {:ok, [WorkerInfo.t()]} | {:error, Error.t()}
   def workers(head, opts \\ []), do: call(head, :workers, opts[:timeout])
 
-  @doc "Workers and jobs at once (the dashboard's view)."
+  @doc """
+  Workers and jobs at once (the dashboard's view), and `:stored_twice`, how
+  many frames were ever stored after they were done (0: the farm never
+  traced a frame twice).
+  """
   @spec overview(node(), keyword()) ::
-          {:ok, %{workers: [WorkerInfo.t()], jobs: [JobInfo.t()]}} | {:error, Error.t()}
+          {:ok,
+           %{workers: [WorkerInfo.t()], jobs: [JobInfo.t()], stored_twice: non_neg_integer()}}
+          | {:error, Error.t()}
   def overview(head, opts \\ []), do: call(head, :overview, opts[:timeout])
 
   @doc """

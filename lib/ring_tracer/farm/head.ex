@@ -101,7 +101,7 @@ defmodule RingTracer.Farm.Head do
 
   def handle_call(:overview, _from, state) do
     jobs = Enum.map(Store.all(), &info(&1, state))
-    {:reply, {:ok, %{workers: workers(state), jobs: jobs}}, state}
+    {:reply, {:ok, %{workers: workers(state), jobs: jobs, stored_twice: Store.twice()}}, state}
   end
 
   def handle_call({:cancel, id}, _from, state) do

@@ -118,11 +118,32 @@ defmodule RingTracer.Farm.Store do
     |> Enum.sort_by(& &1.id)
   end
 
-  @doc "Records frame `n` of job `id` as done (its file is on disk)."
+  @doc """
+  Records frame `n` of job `id` as done (its file is on disk). A frame
+  recorded already keeps its row and is counted as stored twice
+  (`twice/0`): the farm never traces a frame done, so that count is 0.
+  """
   @spec frame_done(pos_integer(), pos_integer()) :: :ok
   def frame_done(id, n) do
     at = System.os_time(:millisecond)
-    durable(fn -> :mnesia.write({@frames, {id, n}, at}) end)
+
+    durable(fn ->
+      case :mnesia.read(@frames, {id, n}, :write) do
+        [] -> :mnesia.write({@frames, {id, n}, at})
+        [_] -> :mnesia.write({@ids, :twice, twice_in_transaction() + 1})
+      end
+    end)
+  end
+
+  @doc "How many frames were stored again after they were done (see `frame_done/2`)."
+  @spec twice() :: non_neg_integer()
+  def twice, do: transaction(&twice_in_transaction/0)
+
+  defp twice_in_transaction do
+    case :mnesia.read(@ids, :twice) do
+      [{@ids, :twice, count}] -> count
+      [] -> 0
+    end
   end
 
   @doc "The frames of job `id` done, in order."

@@ -79,5 +79,6 @@ defmodule RingTracer.Farm.RestartTest do
     end
 
     assert {:ok, %{state: :done, done: [1, 2]}} = Farm.wait(head, queued)
+    assert {:ok, %{stored_twice: 0}} = Farm.overview(head)
   end
 end
