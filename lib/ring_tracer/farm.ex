@@ -98,13 +98,20 @@ defmodule RingTracer.Farm do
     * `:tags` — strings a job may ask its workers to have (`["big-mem"]`)
     * `:slots` — children this worker hosts for a job (default: its dirty
       CPU schedulers, one per core)
+    * `:speed` — emulates a machine this many times slower (a number >= 1,
+      default 1): each child here waits after each atom, for benchmarks and
+      soaks on one machine (`RingTracer.Job.Slowdown`)
   """
   @spec join(node(), keyword()) :: {:ok, pid()} | {:error, Error.t()}
   def join(head, opts \\ []) when is_atom(head) do
     slots = opts[:slots] || :erlang.system_info(:dirty_cpu_schedulers)
     tags = opts[:tags] || []
+    speed = Keyword.get(opts, :speed, 1)
 
     cond do
+      not (is_number(speed) and speed >= 1 and speed <= 1000) ->
+        invalid(":speed must be a number from 1 to 1000, got: #{inspect(speed)}")
+
       not (is_integer(slots) and slots > 0) ->
         invalid(":slots must be a positive integer, got: #{inspect(slots)}")
 
@@ -112,7 +119,8 @@ defmodule RingTracer.Farm do
         invalid(":tags must be a list of tags (letters, digits, - and _), got: #{inspect(tags)}")
 
       true ->
-        spec = {Member, head: head, tags: tags, slots: slots}
+        Application.put_env(:ring_tracer, :node_speed, speed)
+        spec = {Member, head: head, tags: tags, slots: slots, speed: speed}
 
         case Supervisor.start_child(RingTracer.Supervisor, spec) do
           {:ok, pid} -> {:ok, pid}

@@ -24,9 +24,13 @@ defmodule RingTracer.FarmTest do
     dir = Path.join(System.tmp_dir!(), "rt_farm_#{System.unique_integer([:positive])}")
     {:ok, _} = Farm.start_head(dir: dir)
 
-    for {p, n} <- peers, do: {:ok, _} = Peers.call(p, n, Farm, :join, [node(), [slots: 2]])
+    # The second worker emulates a machine twice as slow.
+    for {{p, n}, speed} <- Enum.zip(peers, [1, 2]),
+        do: {:ok, _} = Peers.call(p, n, Farm, :join, [node(), [slots: 2, speed: speed]])
 
     assert Wait.eventually(fn -> length(elem(Farm.workers(node()), 1)) == 2 end, 500)
+    {:ok, workers} = Farm.workers(node())
+    assert Enum.map(workers, &{&1.slots, &1.speed}) |> Enum.sort() == [{2, 1}, {2, 2}]
 
     on_exit(fn ->
       for {p, n} <- peers, do: :ok = Peers.call(p, n, Farm, :leave, [])
@@ -114,6 +118,8 @@ defmodule RingTracer.FarmTest do
              Farm.submit(node(), "/nonexistent/scene.nff", [])
 
     assert {:error, %RingTracer.Error{reason: :farm}} = Farm.status(node(), 999_999)
+
+    assert {:error, %RingTracer.Error{reason: :invalid_option}} = Farm.join(node(), speed: 0.5)
 
     assert {:error, %RingTracer.Error{reason: :farm_unreachable}} =
              Farm.jobs(:nohead@localhost, timeout: 2_000)

@@ -27,6 +27,7 @@ defmodule RingTracer.Farm.Head do
     @type worker :: %{
             tags: [String.t()],
             slots: pos_integer(),
+            speed: number(),
             joined_at: integer(),
             member: pid(),
             ref: reference(),
@@ -72,11 +73,22 @@ defmodule RingTracer.Farm.Head do
   end
 
   @impl true
-  def handle_call({:join, node, tags, slots, member}, _from, %State{} = state) do
+  def handle_call({:join, node, %{tags: tags, slots: slots} = about, member}, _from, state) do
     state = forget_worker(state, node)
     ref = Process.monitor(member)
     at = System.os_time(:millisecond)
-    worker = %{tags: tags, slots: slots, joined_at: at, member: member, ref: ref, job: nil}
+    speed = Map.get(about, :speed, 1)
+
+    worker = %{
+      tags: tags,
+      slots: slots,
+      speed: speed,
+      joined_at: at,
+      member: member,
+      ref: ref,
+      job: nil
+    }
+
     Logger.info("farm: worker #{node} joined (#{slots} slots, tags #{inspect(tags)})")
     {:reply, :ok, reassign(put_in(state.workers[node], worker))}
   end
@@ -406,7 +418,14 @@ defmodule RingTracer.Farm.Head do
   defp workers(state) do
     state.workers
     |> Enum.map(fn {node, w} ->
-      %WorkerInfo{node: node, tags: w.tags, slots: w.slots, job: w.job, joined_at: w.joined_at}
+      %WorkerInfo{
+        node: node,
+        tags: w.tags,
+        slots: w.slots,
+        speed: w.speed,
+        job: w.job,
+        joined_at: w.joined_at
+      }
     end)
     |> Enum.sort_by(& &1.node)
   end

@@ -17,12 +17,13 @@ defmodule RingTracer.Farm.Member do
   defmodule State do
     @moduledoc false
     @enforce_keys [:head, :tags, :slots]
-    defstruct [:head, :tags, :slots, ref: nil, joined: 0]
+    defstruct [:head, :tags, :slots, speed: 1, ref: nil, joined: 0]
 
     @type t :: %__MODULE__{
             head: node(),
             tags: [String.t()],
             slots: pos_integer(),
+            speed: number(),
             ref: reference() | nil,
             joined: non_neg_integer()
           }
@@ -47,7 +48,13 @@ defmodule RingTracer.Farm.Member do
 
   @impl true
   def init(opts) do
-    state = %State{head: opts[:head], tags: opts[:tags] || [], slots: opts[:slots]}
+    state = %State{
+      head: opts[:head],
+      tags: opts[:tags] || [],
+      slots: opts[:slots],
+      speed: opts[:speed] || 1
+    }
+
     {:ok, state, {:continue, :join}}
   end
 
@@ -70,7 +77,8 @@ defmodule RingTracer.Farm.Member do
 
   defp join(%State{ref: nil, head: head} = state) do
     with true <- Node.connect(head),
-         :ok <- call(head, {:join, node(), state.tags, state.slots, self()}) do
+         about = %{tags: state.tags, slots: state.slots, speed: state.speed},
+         :ok <- call(head, {:join, node(), about, self()}) do
       if state.joined == 0, do: Logger.info("farm: joined #{head}")
       %{state | ref: Process.monitor(Names.farm_head(head)), joined: state.joined + 1}
     else

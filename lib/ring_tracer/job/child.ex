@@ -32,7 +32,7 @@ defmodule RingTracer.Job.Child do
   """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Directory, Grandchild, Pipe, Queue, Spec}
+  alias RingTracer.Job.{Directory, Grandchild, Pipe, Queue, Slowdown, Spec}
   alias RingTracer.Layout
   alias RingTracer.Strategy.View
 
@@ -480,7 +480,12 @@ defmodule RingTracer.Job.Child do
       strategy_state: strategy.init(options),
       queue: Queue.new(queue),
       stats:
-        new_stats(index, node(), Spec.speed(List.to_tuple(spec.speeds), index), length(queue))
+        new_stats(
+          index,
+          node(),
+          Spec.speed(List.to_tuple(spec.speeds), index) * Slowdown.node_speed(),
+          length(queue)
+        )
     }
 
     {:ok, state, {:continue, {:prepare, kernel}}}

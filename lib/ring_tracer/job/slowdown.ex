@@ -33,6 +33,15 @@ defmodule RingTracer.Job.Slowdown do
   """
   @type t :: %__MODULE__{speed: number(), balance: integer()}
 
+  @doc """
+  This node's own speed factor, multiplied into the job's for every child
+  it hosts: 1 unless the node was started to emulate a slower machine
+  (a farm worker's `:speed`, `RingTracer.Farm.join/2`, for benchmarks and
+  soaks), which sets the application environment's `:node_speed`.
+  """
+  @spec node_speed() :: number()
+  def node_speed, do: Application.get_env(:ring_tracer, :node_speed, 1)
+
   @doc "No wait owed yet, for speed factor `speed`."
   @spec new(number()) :: t()
   def new(speed) when is_number(speed), do: %__MODULE__{speed: speed}
