@@ -10,7 +10,8 @@ defmodule RingTracer.Telemetry do
       metadata `%{job: id, children: n, atoms: total, strategy: module}`
     * `[:ring_tracer, :atom, :stop]` — an atom's pixels reached the parent:
       measurements `%{rays: n, trace_us: us}` (rays of every kind), metadata
-      `%{job: id, atom: a, child: index, done: atoms_done, total: atoms}`
+      `%{job: id, atom: a, child: index, node: the child's node, done:
+      atoms_done, total: atoms}`
     * `[:ring_tracer, :frame, :start]` — a job of several frames released a
       frame: measurements `%{at_us: job_us}`, metadata `%{job: id, frame:
       number}` (the scene's frame number, from 1)

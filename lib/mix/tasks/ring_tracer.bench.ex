@@ -11,7 +11,8 @@ defmodule Mix.Tasks.RingTracer.Bench do
     {"rays", RingTracer.Bench.Rays},
     {"network", RingTracer.Bench.Network},
     {"preview", RingTracer.Bench.Preview},
-    {"sequence", RingTracer.Bench.Sequence}
+    {"sequence", RingTracer.Bench.Sequence},
+    {"farm", RingTracer.Bench.Farm}
   ]
 
   @moduledoc """

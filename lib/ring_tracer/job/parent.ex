@@ -795,6 +795,9 @@ defmodule RingTracer.Job.Parent do
     |> Enum.reject(&(elem(&1, 1) == []))
   end
 
+  defp child_node(pid) when is_pid(pid), do: node(pid)
+  defp child_node(_), do: nil
+
   defp atom_event(state, child, atom, pixels, rays, us) do
     total = Layout.atom_count(state.spec.layout)
 
@@ -805,6 +808,7 @@ defmodule RingTracer.Job.Parent do
         job: state.spec.id,
         atom: atom,
         child: child,
+        node: child_node(state.children[child]),
         done: total - state.missing,
         total: total,
         pixels: pixels
