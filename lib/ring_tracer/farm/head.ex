@@ -182,6 +182,7 @@ defmodule RingTracer.Farm.Head do
         {{:ok, job}, :done} -> ended(state, job, :done, nil)
         {{:ok, job}, {:failed, message}} -> ended(state, job, :failed, message)
         {{:ok, job}, {:retry, message}} -> retry(state, job, message)
+        {{:ok, job}, {:lost, _message}} -> requeued(state, job)
       end
 
     {:noreply, reassign(state)}
@@ -279,6 +280,11 @@ defmodule RingTracer.Farm.Head do
   end
 
   @max_tries 3
+
+  defp requeued(state, job) do
+    :ok = Store.put(%{job | state: :queued})
+    state
+  end
 
   defp requeue(state, id) do
     state = stop_runner(state, id)

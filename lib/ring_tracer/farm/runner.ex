@@ -18,7 +18,7 @@ defmodule RingTracer.Farm.Runner do
   # Options the farm sets itself, for the workers it chose.
   @farm_set [:nodes, :local, :children_per_node, :children, :frames, :window, :ack]
 
-  @type outcome :: :done | {:failed, String.t()} | {:retry, String.t()}
+  @type outcome :: :done | {:failed, String.t()} | {:retry, String.t()} | {:lost, String.t()}
 
   defmodule State do
     @moduledoc false
@@ -141,12 +141,14 @@ defmodule RingTracer.Farm.Runner do
       else: :ok
   end
 
-  # A scene or an option that is not valid fails the job for good; anything
-  # else (workers lost, a node refused) is worth another go.
+  # A scene or an option that is not valid fails the job for good; a ring
+  # whose every child went (its workers lost) waits for others, and is no
+  # failure of the job's; anything else is worth another go or two.
   defp outcome(%Error{reason: reason, message: message})
        when reason in [:invalid_scene, :invalid_option, :file],
        do: {:failed, message}
 
+  defp outcome(%Error{message: "every child exited" <> _ = message}), do: {:lost, message}
   defp outcome(%Error{message: message}), do: {:retry, message}
 
   defp finish(%State{job: job, head: head} = state, outcome) do
