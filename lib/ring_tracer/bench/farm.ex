@@ -181,8 +181,12 @@ defmodule RingTracer.Bench.Farm do
   defp wait_workers(count) do
     Enum.reduce_while(1..500, nil, fn _, _ ->
       case Farm.workers(node()) do
-        {:ok, ws} when length(ws) >= count -> {:halt, :ok}
-        _ -> Process.sleep(10) && {:cont, nil}
+        {:ok, ws} when length(ws) >= count ->
+          {:halt, :ok}
+
+        _ ->
+          Process.sleep(10)
+          {:cont, nil}
       end
     end) || raise "workers did not join"
   end
