@@ -6,14 +6,16 @@ defmodule RingTracer.CLI do
       erl -noshell +Bi -pa ... -s Elixir.RingTracer.CLI main -extra render scene.nff -o a.png
 
   Commands: `render` (`RingTracer.CLI.Render`), `worker`
-  (`RingTracer.CLI.Worker`), `serve`, `cookie`. `--help`/`-h` works on
-  each. Exit status: 0 ok,
+  (`RingTracer.CLI.Worker`), `serve`, `cookie`, and a farm's: `farm`
+  (`RingTracer.CLI.Farm.Head`), `submit` (`RingTracer.CLI.Farm.Submit`),
+  `jobs`, `status`, `wait`, `cancel`, `fetch` (`RingTracer.CLI.Farm.Jobs`).
+  `--help`/`-h` works on each. Exit status: 0 ok,
   1 a failure, 2 a usage error, 130/143 interrupted.
   """
 
   alias RingTracer.CLI.{Args, Console, Paths}
 
-  @commands ~w(render serve worker cookie)
+  @commands ~w(render serve worker cookie farm submit jobs status wait cancel fetch)
 
   @doc "Runs the command in the VM's plain arguments (those after `-extra`) and halts."
   @spec main() :: no_return()
@@ -48,9 +50,12 @@ defmodule RingTracer.CLI do
           IO.puts(line)
 
           # Until Ctrl-C or SIGTERM: the children it hosts die with it, and
-          # their parents trace their atoms elsewhere.
+          # their parents trace their atoms elsewhere; a farm's worker leaves
+          # its farm first.
           receive do
-            {RingTracer.CLI.Signals, signal} -> RingTracer.CLI.Signals.exit_status(signal)
+            {RingTracer.CLI.Signals, signal} ->
+              :ok = RingTracer.Farm.leave()
+              RingTracer.CLI.Signals.exit_status(signal)
           end
 
         {:error, message} ->
@@ -58,6 +63,33 @@ defmodule RingTracer.CLI do
       end
     end
   end
+
+  def run(["farm" | argv]) do
+    case RingTracer.CLI.Farm.Head.start(argv) do
+      :help ->
+        IO.write(RingTracer.CLI.Farm.Head.help())
+        0
+
+      {:ok, _node, text} ->
+        IO.write(text)
+
+        # Until Ctrl-C or SIGTERM: the queue stays in the head's folder, and
+        # a head started again under the same name resumes it.
+        receive do
+          {RingTracer.CLI.Signals, signal} ->
+            :ok = RingTracer.Farm.stop_head()
+            RingTracer.CLI.Signals.exit_status(signal)
+        end
+
+      {:error, status, message} ->
+        error("farm", message, status)
+    end
+  end
+
+  def run(["submit" | argv]), do: RingTracer.CLI.Farm.Submit.run(argv)
+
+  def run([command | argv]) when command in ~w(jobs status wait cancel fetch),
+    do: RingTracer.CLI.Farm.Jobs.run(command, argv)
 
   def run(["serve" | argv]) do
     case OptionParser.parse(argv, strict: [socket: :string, help: :boolean], aliases: [h: :help]) do
@@ -184,6 +216,12 @@ defmodule RingTracer.CLI do
       worker --sname NAME       a node that hosts children of renders started elsewhere
       cookie [PATH]             make a cookie file, mode 0600 (default ~/.erlang.cookie)
       tls ca DIR | tls node CA_DIR OUT_DIR [HOST...]   certificates for a TLS cluster
+
+    A render farm (docs/farm.md):
+      farm [--sname NAME]       a farm's head: a queue of jobs that workers join
+      worker --join HEAD        a worker of that farm (joins again when the head restarts)
+      submit SCENE --out FILE --farm HEAD   queue a still or a sequence; its frames come back
+      jobs | status ID | wait ID | cancel ID | fetch ID   --farm HEAD: the queue, one job
       test                      every check and test (Rust and Elixir, dialyzer)
       setup                     install what is missing (Debian packages) and build
       mix ARGS...               any mix command, with the set-up done
@@ -192,6 +230,8 @@ defmodule RingTracer.CLI do
       ringtracer render priv/scenes/balls_s2.nff --out balls.png
       ringtracer worker --sname w1 &
       ringtracer render scene.toml -o scene.png --nodes w1@localhost
+      ringtracer farm &  ringtracer worker --join farm@localhost &
+      ringtracer submit scene.toml -o scene.png --farm farm@localhost
 
     Exit status: 0 ok, 1 failed, 2 usage error, 130 interrupted, 143 terminated.
     """
@@ -200,6 +240,7 @@ defmodule RingTracer.CLI do
   defp worker_help do
     """
     Usage: ringtracer worker --sname NAME [options]
+           ringtracer worker --join HEAD [--tags a,b] [--slots N] [--speed F] [options]
 
     A node that hosts children of renders started on other nodes, until stopped (Ctrl-C).
 
@@ -215,11 +256,20 @@ defmodule RingTracer.CLI do
                               network can read and alter everything, and run code here
       --allow-foreign-epmd    with --insecure-plain, start even when epmd is another user's
 
+    A farm's worker (see ringtracer farm --help):
+      --join HEAD             join the farm whose head is HEAD (farm@localhost), now or
+                              once it is up, and again whenever it restarts; --sname
+                              may then be left out (a name is made up)
+      --tags a,b              tags a job may ask its workers to have
+      --slots N               children hosted for a job (default: one per core)
+      --speed F               emulate a machine F times slower (1-1000, for tests)
+
     Distribution runs over TLS with mutual authentication by default, loopback included.
 
-    Example:
+    Examples:
       ringtracer worker --sname w1 &
       ringtracer render priv/scenes/balls_s2.nff -o b.png --nodes w1@localhost
+      ringtracer worker --join farm@localhost --slots 4 --tags big-mem &
     """
   end
 

@@ -25,6 +25,7 @@ defmodule RingTracer.Farm do
   alias RingTracer.Farm.{Head, Job, JobInfo, Member, Runner, WorkerInfo}
 
   @timeout 10_000
+  @rewatch_ms 500
   @farm_keys [:user, :priority, :tags, :max_workers, :format, :out, :frames, :timeout]
 
   @doc """
@@ -325,35 +326,74 @@ defmodule RingTracer.Farm do
     * `:skip` — frames not to fetch (the caller has them already)
     * `:timeout` — the longest wait for the whole job, in ms or `:infinity`
       (default); each call to the head has its own 10 s deadline
+
+  A head that goes meanwhile (restarted, `kill -9` included) is waited
+  for, and subscribed to again once it is back.
   """
   @spec wait(node(), pos_integer(), keyword()) :: {:ok, JobInfo.t()} | {:error, Error.t()}
   def wait(head, id, opts \\ []) do
     on_frame = opts[:on_frame] || fn _, _ -> :ok end
     deadline = deadline(opts[:timeout] || :infinity)
+    watch(head, id, MapSet.new(opts[:skip] || []), on_frame, deadline)
+  end
 
+  # Subscribes and watches the head: one that restarts (its subscribers
+  # gone with it) is subscribed to again once it is back.
+  defp watch(head, id, seen, on_frame, deadline) do
     with :ok <- subscribe(head, id),
+         ref = Process.monitor(Names.farm_head(head)),
          {:ok, info} <- status(head, id),
-         seen = MapSet.new(opts[:skip] || []),
          {:ok, seen} <- fetch_each(head, id, info.done, seen, on_frame) do
-      wait_loop(head, id, seen, on_frame, deadline)
+      wait_loop(head, id, ref, seen, on_frame, deadline)
     end
   end
 
-  defp wait_loop(head, id, seen, on_frame, deadline) do
+  defp wait_loop(head, id, ref, seen, on_frame, deadline) do
     receive do
       {RingTracer.Farm, ^id, {:frame, n}} ->
-        with {:ok, seen} <- fetch_each(head, id, [n], seen, on_frame),
-             do: wait_loop(head, id, seen, on_frame, deadline)
+        case fetch_each(head, id, [n], seen, on_frame) do
+          {:ok, seen} ->
+            wait_loop(head, id, ref, seen, on_frame, deadline)
+
+          {:error, %Error{reason: :farm_unreachable}} ->
+            Process.demonitor(ref, [:flush])
+            rewatch(head, id, seen, on_frame, deadline)
+
+          error ->
+            error
+        end
 
       {RingTracer.Farm, ^id, {:end, _state, _error}} ->
+        Process.demonitor(ref, [:flush])
         # Frames that completed before the subscription but after the
         # first status, if any, then the job as it ended.
         with {:ok, info} <- status(head, id),
              {:ok, _} <- fetch_each(head, id, info.done, seen, on_frame),
              do: {:ok, info}
+
+      {:DOWN, ^ref, :process, _, _} ->
+        rewatch(head, id, seen, on_frame, deadline)
     after
       remaining(deadline) ->
         {:error, Error.new(:timeout, "job #{id} did not end in time")}
+    end
+  end
+
+  defp rewatch(head, id, seen, on_frame, deadline) do
+    receive do
+    after
+      min(@rewatch_ms, remaining(deadline)) -> :ok
+    end
+
+    case remaining(deadline) do
+      0 ->
+        {:error, Error.new(:timeout, "job #{id} did not end in time")}
+
+      _ ->
+        case watch(head, id, seen, on_frame, deadline) do
+          {:error, %Error{reason: :farm_unreachable}} -> rewatch(head, id, seen, on_frame, deadline)
+          other -> other
+        end
     end
   end
 

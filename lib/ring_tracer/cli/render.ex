@@ -266,7 +266,10 @@ defmodule RingTracer.CLI.Render do
     end
   end
 
-  defp check_ranges(opts) do
+  @doc false
+  # The integer options' ranges (also `ringtracer submit`'s).
+  @spec check_ranges(keyword()) :: :ok | {:usage, String.t()}
+  def check_ranges(opts) do
     Enum.reduce_while(@ranges, :ok, fn {key, range}, :ok ->
       case Args.in_range(opts, key, range) do
         :ok -> {:cont, :ok}
@@ -327,7 +330,10 @@ defmodule RingTracer.CLI.Render do
     end
   end
 
-  defp render_opts(opts) do
+  @doc false
+  # The render's options from the command line's (also `ringtracer submit`'s).
+  @spec render_opts(keyword()) :: {:ok, keyword()} | {:usage, String.t()}
+  def render_opts(opts) do
     base =
       Keyword.drop(opts, [
         :out,
