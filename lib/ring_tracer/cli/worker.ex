@@ -66,7 +66,10 @@ defmodule RingTracer.CLI.Worker do
         opts = Paths.expand(opts, [:cookie_file, :tls])
         {join, opts} = Keyword.split(opts, Keyword.keys(@join_switches))
         # a farm's worker may go unnamed: the head knows it by what it makes up
-        opts = if join[:join], do: opts ++ [generate: true], else: opts
+        opts =
+          if join[:join] && !opts[:sname] && !opts[:name],
+            do: opts ++ [sname: Distribution.unique_name("worker")],
+            else: opts
 
         with {:ok, member} <- membership(join),
              {:ok, node} <- distribute(opts),
