@@ -400,8 +400,11 @@ defmodule RingTracer.Farm do
 
       _ ->
         case watch(head, id, seen, on_frame, deadline) do
-          {:error, %Error{reason: :farm_unreachable}} -> rewatch(head, id, seen, on_frame, deadline)
-          other -> other
+          {:error, %Error{reason: :farm_unreachable}} ->
+            rewatch(head, id, seen, on_frame, deadline)
+
+          other ->
+            other
         end
     end
   end

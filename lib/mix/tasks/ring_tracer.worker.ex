@@ -7,6 +7,7 @@ defmodule Mix.Tasks.RingTracer.Worker do
 
       mix ring_tracer.worker --sname NAME [--cookie-file PATH] [--listen ADDR]
         [--ports MIN-MAX] [--tls DIR]
+      mix ring_tracer.worker --join HEAD [--tags a,b] [--slots N] [--speed F] ...
 
   The options are `RingTracer.CLI.Worker`'s. Start workers on loopback and
   render with children on them:

@@ -57,7 +57,15 @@ defmodule RingTracer.CLI.Farm.Fetch do
         else: fn -> now(head, id, opts.skip, write) end
 
     {pid, ref} = spawn_monitor(fn -> send(me, {tag, :result, fetch.()}) end)
-    await(%{tag: tag, pid: pid, ref: ref, quiet: opts.quiet, written: 0, total: length(plan.numbers)})
+
+    await(%{
+      tag: tag,
+      pid: pid,
+      ref: ref,
+      quiet: opts.quiet,
+      written: 0,
+      total: length(plan.numbers)
+    })
   end
 
   # The frames done now, each fetched once.
@@ -117,31 +125,29 @@ defmodule RingTracer.CLI.Farm.Fetch do
   def plan(info, out) do
     ext = out |> Path.extname() |> String.downcase()
 
-    cond do
-      ext != ".#{info.format}" ->
-        {:usage,
-         "--out #{out}: job #{info.id}'s frames are #{String.upcase(to_string(info.format))} " <>
-           "files; give a .#{info.format} name"}
+    if ext != ".#{info.format}" do
+      {:usage,
+       "--out #{out}: job #{info.id}'s frames are #{String.upcase(to_string(info.format))} " <>
+         "files; give a .#{info.format} name"}
+    else
+      frames = info.frames
+      sequence? = length(frames) > 1
 
-      true ->
-        frames = info.frames
-        sequence? = length(frames) > 1
+      case RingTracer.Output.Pattern.parse(out) do
+        {:ok, pattern} ->
+          {:ok, %Frames{numbers: frames, out: out, pattern: pattern, sequence?: sequence?}}
 
-        case RingTracer.Output.Pattern.parse(out) do
-          {:ok, pattern} ->
-            {:ok, %Frames{numbers: frames, out: out, pattern: pattern, sequence?: sequence?}}
+        {:error, :none} when not sequence? ->
+          {:ok, %Frames{numbers: frames, out: out, pattern: nil, sequence?: false}}
 
-          {:error, :none} when not sequence? ->
-            {:ok, %Frames{numbers: frames, out: out, pattern: nil, sequence?: false}}
+        {:error, :none} ->
+          {:usage,
+           "--out #{out}: job #{info.id} has #{length(frames)} frames; a run of # in the " <>
+             "file name stands for the frame number (f_####.#{info.format})"}
 
-          {:error, :none} ->
-            {:usage,
-             "--out #{out}: job #{info.id} has #{length(frames)} frames; a run of # in the " <>
-               "file name stands for the frame number (f_####.#{info.format})"}
-
-          {:error, :many} ->
-            Frames.check_out(out)
-        end
+        {:error, :many} ->
+          Frames.check_out(out)
+      end
     end
   end
 end

@@ -197,7 +197,10 @@ defmodule RingTracer.CLI.Farm.Jobs do
       if !quiet? do
         left = length(info.frames) - length(info.done)
         more = if left > 0, do: ", #{left} not done", else: ""
-        IO.puts("job #{id} #{info.state}: #{written} frames written, #{length(skip)} there already#{more}")
+
+        IO.puts(
+          "job #{id} #{info.state}: #{written} frames written, #{length(skip)} there already#{more}"
+        )
       end
 
       :ok

@@ -147,7 +147,10 @@ defmodule RingTracer.CLI.Farm.Submit do
   defp not_here(argv) do
     Enum.find_value(argv, fn arg ->
       key =
-        arg |> String.split("=", parts: 2) |> hd() |> String.trim_leading("-")
+        arg
+        |> String.split("=", parts: 2)
+        |> hd()
+        |> String.trim_leading("-")
         |> String.replace("-", "_")
 
       with true <- String.starts_with?(arg, "--"),
@@ -176,7 +179,8 @@ defmodule RingTracer.CLI.Farm.Submit do
          {:ok, plan} <- Frames.plan(opts, out, scene.frames, scene.source.name),
          paths = Enum.map(plan.numbers, &Frames.path(plan, &1)),
          :ok <- usage_of(RingTracer.Output.check_targets(:image, paths)),
-         :ok <- usage_of(RingTracer.Output.check_inputs(Enum.map(paths, &{:image, &1}), scene.files)),
+         :ok <-
+           usage_of(RingTracer.Output.check_inputs(Enum.map(paths, &{:image, &1}), scene.files)),
          {:ok, dir} <- failed_of(RingTracer.Output.open_dir(Path.dirname(hd(paths)))),
          :ok <- Client.connect(opts, head),
          job_opts = render ++ farm ++ [frames: plan.numbers, out: out],
@@ -186,12 +190,18 @@ defmodule RingTracer.CLI.Farm.Submit do
 
       # a still and a sequence alike, unless --no-wait
       if Keyword.get(opts, :wait, true),
-        do: fetched(Fetch.run(head, id, plan, dir, %{wait: true, skip: [], quiet: quiet?}), id, head),
+        do:
+          fetched(
+            Fetch.run(head, id, plan, dir, %{wait: true, skip: [], quiet: quiet?}),
+            id,
+            head
+          ),
         else: :ok
     end
   end
 
-  defp render_keys, do: Keyword.keys(@render_switches) -- [:out, :frame, :frames, :allow_dir, :quiet]
+  defp render_keys,
+    do: Keyword.keys(@render_switches) -- [:out, :frame, :frames, :allow_dir, :quiet]
 
   defp farm_opts(opts) do
     tags =

@@ -12,7 +12,10 @@ defmodule RingTracer.CLI.Farm.LaunchedTest do
 
   setup do
     dir =
-      Path.join(System.tmp_dir!(), "rt_farm_cli_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
+      Path.join(
+        System.tmp_dir!(),
+        "rt_farm_cli_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}"
+      )
 
     File.mkdir_p!(dir)
     File.cp!("priv/scenes/balls_s2.nff", Path.join(dir, "mine.nff"))

@@ -74,8 +74,10 @@ defmodule RingTracer.CLI.Farm.SubmitTest do
 
     {:ok, text} =
       with_io(fn ->
-        Submit.execute([scene, "-o", out, "--width", "32", "--frames", "1-3", "--no-wait"] ++
-          ["--farm", ctx.head, "--user", "ann", "-q"])
+        Submit.execute(
+          [scene, "-o", out, "--width", "32", "--frames", "1-3", "--no-wait"] ++
+            ["--farm", ctx.head, "--user", "ann", "-q"]
+        )
       end)
 
     id = text |> String.trim() |> String.to_integer()
@@ -198,8 +200,10 @@ defmodule RingTracer.CLI.Farm.SubmitTest do
 
     assert {{:error, 1, message}, _} =
              with_io(fn ->
-               Submit.execute([TestScenes.path("balls_s2.nff"), "-o", "/tmp/x.png"] ++
-                 ["--farm", "nohead_#{System.unique_integer([:positive])}"])
+               Submit.execute(
+                 [TestScenes.path("balls_s2.nff"), "-o", "/tmp/x.png"] ++
+                   ["--farm", "nohead_#{System.unique_integer([:positive])}"]
+               )
              end)
 
     assert message =~ "cannot reach the farm head nohead_"
