@@ -183,6 +183,7 @@ defmodule RingTracer.CLI.Farm.Submit do
            usage_of(RingTracer.Output.check_inputs(Enum.map(paths, &{:image, &1}), scene.files)),
          {:ok, dir} <- failed_of(RingTracer.Output.open_dir(Path.dirname(hd(paths)))),
          :ok <- Client.connect(opts, head),
+         :ok <- not_interrupted(),
          job_opts = render ++ farm ++ [frames: plan.numbers, out: out],
          {:ok, id} <- failed_of(RingTracer.Farm.submit(head, scene, job_opts)) do
       quiet? = opts[:quiet] == true
@@ -197,6 +198,18 @@ defmodule RingTracer.CLI.Farm.Submit do
             head
           ),
         else: :ok
+    end
+  end
+
+  # An interrupt before the job is queued: nothing is.
+  defp not_interrupted do
+    case RingTracer.CLI.Signals.pending() do
+      nil ->
+        :ok
+
+      signal ->
+        what = if signal == :sigint, do: "interrupted", else: "terminated"
+        {:interrupted, {signal, "#{what}; nothing queued"}}
     end
   end
 

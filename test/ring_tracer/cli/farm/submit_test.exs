@@ -130,8 +130,16 @@ defmodule RingTracer.CLI.Farm.SubmitTest do
     out = Path.join(ctx.tmp_dir, "slow_##.png")
     slow = ["--width", "64", "--speeds", "1000", "--atoms", "4", "--farm", ctx.head]
 
-    # Ctrl-C already waiting: the command stops waiting at once, with 130.
-    send(self(), {RingTracer.CLI.Signals, :sigint})
+    # Ctrl-C once the job is queued: the command stops waiting, with 130.
+    {:ok, before} = Farm.jobs(node())
+    me = self()
+
+    spawn_link(fn ->
+      queued = fn -> length(elem(Farm.jobs(node()), 1)) > length(before) end
+      assert Wait.eventually(queued, 3000)
+      send(me, {RingTracer.CLI.Signals, :sigint})
+    end)
+
     {{:error, 130, message}, text} = with_io(fn -> Submit.execute([scene, "-o", out] ++ slow) end)
     [_, id] = Regex.run(~r/job (\d+) queued/, text)
     assert message =~ "stopped waiting; 0 frames written, whole; job #{id} goes on"
@@ -193,6 +201,30 @@ defmodule RingTracer.CLI.Farm.SubmitTest do
     end
 
     refute File.exists?(out)
+  end
+
+  test "--help on every farm command, with its usage and examples; exit 0" do
+    for command <- ~w(farm submit jobs status wait cancel fetch worker) do
+      {status, text} = with_io(fn -> RingTracer.CLI.run([command, "--help"]) end)
+      assert status == 0, command
+      assert text =~ "Usage: ringtracer #{command}"
+      assert text =~ ~r/Examples?:/
+    end
+
+    {0, text} = with_io(fn -> RingTracer.CLI.run(["--help"]) end)
+    assert text =~ "submit SCENE --out FILE --farm HEAD"
+  end
+
+  @tag :tmp_dir
+  test "an interrupt before the job is queued queues nothing", ctx do
+    {:ok, before} = Farm.jobs(node())
+    send(self(), {RingTracer.CLI.Signals, :sigterm})
+    args = [TestScenes.path("balls_s2.nff"), "-o", Path.join(ctx.tmp_dir, "i.png")]
+
+    assert {{:error, 143, "terminated; nothing queued"}, _} =
+             with_io(fn -> Submit.execute(args ++ ["--farm", ctx.head]) end)
+
+    assert Farm.jobs(node()) == {:ok, before}
   end
 
   test "a head that cannot be reached is an error within the call's deadline" do
