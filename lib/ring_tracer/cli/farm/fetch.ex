@@ -150,4 +150,35 @@ defmodule RingTracer.CLI.Farm.Fetch do
       end
     end
   end
+
+  @doc """
+  What fetching came to, as a command's outcome: `:ok` when the job ended
+  done, else why not, in words (an interrupt with its signal).
+  """
+  @spec verdict(outcome(), pos_integer(), node()) ::
+          :ok
+          | {:failed, String.t()}
+          | {:interrupted, {:sigint | :sigterm, String.t()}}
+  def verdict(outcome, id, head) do
+    case outcome do
+      {:ok, %{state: :done}, _written} ->
+        :ok
+
+      {:ok, info, written} ->
+        why = if info.error, do: ": #{info.error}", else: ""
+        {:failed, "job #{id} #{info.state}#{why}; #{frames(written)} written"}
+
+      {:error, message} ->
+        {:failed, message}
+
+      {:interrupted, signal, written} ->
+        {:interrupted,
+         {signal,
+          "stopped waiting; #{frames(written)} written, whole; job #{id} goes on " <>
+            "(ringtracer fetch #{id} --farm #{head} --continue gets the rest)"}}
+    end
+  end
+
+  defp frames(1), do: "1 frame"
+  defp frames(n), do: "#{n} frames"
 end

@@ -18,7 +18,7 @@ defmodule RingTracer.CLI.Farm.Jobs do
   """
 
   alias RingTracer.CLI.{Args, Console, Frames, Paths, Render}
-  alias RingTracer.CLI.Farm.{Client, Fetch, Show, Submit}
+  alias RingTracer.CLI.Farm.{Client, Fetch, Show}
   alias RingTracer.Farm
 
   @commands ~w(jobs status wait cancel fetch)
@@ -210,7 +210,7 @@ defmodule RingTracer.CLI.Farm.Jobs do
   # Without --wait, writing the frames done is all a fetch does, whatever
   # the job's state; with it, the job must end done, as a submission's.
   defp fetched({:ok, _info, _written}, _id, _head, false), do: :ok
-  defp fetched(outcome, id, head, _wait?), do: Submit.fetched(outcome, id, head)
+  defp fetched(outcome, id, head, _wait?), do: Fetch.verdict(outcome, id, head)
 
   defp out(info, opts) do
     case opts[:out] || info.out do

@@ -190,14 +190,12 @@ defmodule RingTracer.CLI.Farm.Submit do
       say_queued(id, head, scene, plan, quiet?)
 
       # a still and a sequence alike, unless --no-wait
-      if Keyword.get(opts, :wait, true),
-        do:
-          fetched(
-            Fetch.run(head, id, plan, dir, %{wait: true, skip: [], quiet: quiet?}),
-            id,
-            head
-          ),
-        else: :ok
+      if Keyword.get(opts, :wait, true) do
+        fetch = %{wait: true, skip: [], quiet: quiet?}
+        head |> Fetch.run(id, plan, dir, fetch) |> Fetch.verdict(id, head)
+      else
+        :ok
+      end
     end
   end
 
@@ -253,32 +251,6 @@ defmodule RingTracer.CLI.Farm.Submit do
 
     IO.puts("job #{id} queued on #{head}: #{scene.source.name}, #{what}")
   end
-
-  @doc false
-  # What a fetch came to, as the command's outcome; shared with `fetch`.
-  @spec fetched(Fetch.outcome(), pos_integer(), node()) :: :ok | {:failed | :interrupted, term()}
-  def fetched(outcome, id, head) do
-    case outcome do
-      {:ok, %{state: :done}, _written} ->
-        :ok
-
-      {:ok, info, written} ->
-        why = if info.error, do: ": #{info.error}", else: ""
-        {:failed, "job #{id} #{info.state}#{why}; #{frames(written)} written"}
-
-      {:error, message} ->
-        {:failed, message}
-
-      {:interrupted, signal, written} ->
-        {:interrupted,
-         {signal,
-          "stopped waiting; #{frames(written)} written, whole; job #{id} goes on " <>
-            "(ringtracer fetch #{id} --farm #{head} --continue gets the rest)"}}
-    end
-  end
-
-  defp frames(1), do: "1 frame"
-  defp frames(n), do: "#{n} frames"
 
   defp outcome(:ok), do: :ok
   defp outcome({:usage, message}), do: {:error, 2, Render.cli_names(message)}
