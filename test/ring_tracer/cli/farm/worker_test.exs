@@ -27,8 +27,10 @@ defmodule RingTracer.CLI.Farm.WorkerTest do
     {peer, head}
   end
 
-  test "a worker started with --join joins, and again after the head's kill -9 and restart",
-       %{dir: dir, name: name} do
+  @tag :tmp_dir
+  test "a worker started with --join joins, and again after the head's kill -9 and restart; " <>
+         "a fetch --wait goes on through the restart",
+       %{dir: dir, name: name, tmp_dir: tmp_dir} do
     {peer, head} = start_head(name, dir)
     {wp, wn} = Peers.start("cw")
     on_exit(fn -> Peers.stop(wp) end)
@@ -46,6 +48,21 @@ defmodule RingTracer.CLI.Farm.WorkerTest do
     {:ok, [info]} = Farm.workers(head)
     assert {info.slots, info.tags, info.speed} == {1, ["big-mem", "x"], 2.0}
 
+    # A sequence under way, fetched as it goes by `ringtracer fetch --wait`.
+    scene = RingTracer.TestScenes.path("whitted_orbit.toml")
+    out = Path.join(tmp_dir, "f_##.png")
+    {:ok, id} = Farm.submit(head, scene, width: 160, height: 120, atoms: 4, out: out)
+    args = ["#{id}", "--wait", "-q", "--farm", "#{head}"]
+
+    fetch =
+      Task.async(fn ->
+        ExUnit.CaptureIO.with_io(fn -> RingTracer.CLI.Farm.Jobs.execute("fetch", args) end)
+      end)
+
+    # Killed part way, once the fetch has subscribed (it has written a frame).
+    assert Wait.eventually(fn -> Path.wildcard(Path.join(tmp_dir, "f_*.png")) != [] end, 3000)
+    assert {:ok, %{state: :running}} = Farm.status(head, id)
+
     os_pid = Peers.call(peer, head, System, :pid, [])
     ref = Process.monitor(peer)
     {_, 0} = System.cmd("kill", ["-9", os_pid])
@@ -55,6 +72,14 @@ defmodule RingTracer.CLI.Farm.WorkerTest do
     on_exit(fn -> Peers.stop(peer) end)
     # Nobody tells the worker: it finds the head again by itself.
     assert Wait.eventually(joined, 1000)
+
+    # The fetch waited for the head, subscribed again and got every frame.
+    assert {:ok, _} = Task.await(fetch, 180_000)
+    assert length(Path.wildcard(Path.join(tmp_dir, "f_*.png"))) == 48
+    reference = RingTracer.TestScenes.reference("whitted_orbit.toml", 160, 120, frame: 48)
+
+    assert {:ok, File.read!(Path.join(tmp_dir, "f_48.png"))} ==
+             RingTracer.Image.png(160, 120, reference)
   end
 
   test "a farm worker's options are checked before the node starts" do
