@@ -216,21 +216,22 @@ defmodule RingTracer.CLI do
       worker --sname NAME       a node that hosts children of renders started elsewhere
       cookie [PATH]             make a cookie file, mode 0600 (default ~/.erlang.cookie)
       tls ca DIR | tls node CA_DIR OUT_DIR [HOST...]   certificates for a TLS cluster
+      test                      every check and test (Rust and Elixir, dialyzer)
+      setup                     install what is missing (Debian packages) and build
+      mix ARGS...               any mix command, with the set-up done
 
     A render farm (docs/farm.md):
       farm [--sname NAME]       a farm's head: a queue of jobs that workers join
       worker --join HEAD        a worker of that farm (joins again when the head restarts)
       submit SCENE --out FILE --farm HEAD   queue a still or a sequence; its frames come back
       jobs | status ID | wait ID | cancel ID | fetch ID   --farm HEAD: the queue, one job
-      test                      every check and test (Rust and Elixir, dialyzer)
-      setup                     install what is missing (Debian packages) and build
-      mix ARGS...               any mix command, with the set-up done
 
     Examples:
       ringtracer render priv/scenes/balls_s2.nff --out balls.png
       ringtracer worker --sname w1 &
       ringtracer render scene.toml -o scene.png --nodes w1@localhost
-      ringtracer farm &  ringtracer worker --join farm@localhost &
+      ringtracer farm &
+      ringtracer worker --join farm@localhost &
       ringtracer submit scene.toml -o scene.png --farm farm@localhost
 
     Exit status: 0 ok, 1 failed, 2 usage error, 130 interrupted, 143 terminated.
