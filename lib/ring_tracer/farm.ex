@@ -73,15 +73,12 @@ defmodule RingTracer.Farm do
         {:error, {:already_started, _}} ->
           {:error, Error.new(:farm, "a farm head runs on this node already")}
 
-        {:error, {{:shutdown, {:failed_to_start_child, Head, %Error{} = e}}, _}} ->
+        # The head's or the dashboard's own words.
+        {:error, {{:shutdown, {:failed_to_start_child, _, %Error{} = e}}, _}} ->
           Supervisor.delete_child(RingTracer.Supervisor, Names.farm())
           {:error, e}
 
-        {:error, {:shutdown, {:failed_to_start_child, Head, %Error{} = e}}} ->
-          Supervisor.delete_child(RingTracer.Supervisor, Names.farm())
-          {:error, e}
-
-        {:error, {:shutdown, {:failed_to_start_child, Dashboard, %Error{} = e}}} ->
+        {:error, {:shutdown, {:failed_to_start_child, _, %Error{} = e}}} ->
           Supervisor.delete_child(RingTracer.Supervisor, Names.farm())
           {:error, e}
 

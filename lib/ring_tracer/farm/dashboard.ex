@@ -126,8 +126,7 @@ defmodule RingTracer.Farm.Dashboard do
       {:ok, %__MODULE__{server: server, secret: secret, url: url}}
     else
       {:error, {:listen, reason}} ->
-        {:stop,
-         Error.new(:farm, "dashboard: " <> Listener.failure(reason, addr, opts[:port]))}
+        {:stop, Error.new(:farm, "dashboard: " <> Listener.failure(reason, addr, opts[:port]))}
 
       {:error, reason} ->
         {:stop, Error.new(:farm, "dashboard: could not start: #{inspect(reason)}")}

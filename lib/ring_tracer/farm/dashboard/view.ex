@@ -66,7 +66,7 @@ defmodule RingTracer.Farm.Dashboard.View do
       job: w.job,
       speed: w.speed,
       slots: w.slots,
-      tags: w.tags,
+      tags: Enum.map(w.tags, &text/1),
       joined_at: w.joined_at
     }
   end
@@ -74,11 +74,11 @@ defmodule RingTracer.Farm.Dashboard.View do
   defp job(%JobInfo{} = j) do
     %{
       id: j.id,
-      user: j.user,
-      scene: j.scene,
+      user: text(j.user),
+      scene: text(j.scene),
       state: Atom.to_string(j.state),
       priority: j.priority,
-      tags: j.tags,
+      tags: Enum.map(j.tags, &text/1),
       width: j.width,
       height: j.height,
       frames: length(j.frames),
@@ -87,11 +87,21 @@ defmodule RingTracer.Farm.Dashboard.View do
       time_left: j.time_left,
       preview: j.preview,
       workers: Enum.map(j.workers, &Atom.to_string/1),
-      error: j.error,
+      error: text(j.error),
       submitted_at: j.submitted_at,
       started_at: j.started_at,
       finished_at: j.finished_at
     }
+  end
+
+  # A string as valid UTF-8: each byte that is not becomes U+FFFD.
+  defp text(nil), do: nil
+
+  defp text(bytes) do
+    case :unicode.characters_to_binary(bytes) do
+      good when is_binary(good) -> good
+      {_, good, <<_, rest::binary>>} -> good <> "\uFFFD" <> text(rest)
+    end
   end
 
   @doc """
@@ -106,8 +116,7 @@ defmodule RingTracer.Farm.Dashboard.View do
     view
     |> Map.from_struct()
     |> Map.update!(:head, &Atom.to_string/1)
-    # force_utf8: a user's bytes need not be UTF-8
-    |> :jiffy.encode([:use_nil, :force_utf8])
+    |> :jiffy.encode([:use_nil])
     |> IO.iodata_to_binary()
     # Outside strings, JSON has none of these characters.
     |> String.replace(["<", ">", "&"], fn
