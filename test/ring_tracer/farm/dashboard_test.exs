@@ -20,9 +20,9 @@ defmodule RingTracer.Farm.DashboardTest do
   @slow [
     width: 64,
     height: 48,
-    kernel: {RingTracer.Kernel.Simulated, costs: 20_000},
+    kernel: {RingTracer.Kernel.Simulated, costs: 60_000},
     atoms: 8,
-    frames: 1..40
+    frames: 1..48
   ]
 
   setup_all do
@@ -145,7 +145,7 @@ defmodule RingTracer.Farm.DashboardTest do
     [ja, jb] = Enum.filter(view["jobs"], &(&1["id"] in [a, b]))
     assert ja["user"] == @hostile
     assert jb["user"] == "bob\uFFFD"
-    assert {ja["scene"], ja["frames"], ja["workers"]} == {"whitted_orbit.toml", 40, [w["node"]]}
+    assert {ja["scene"], ja["frames"], ja["workers"]} == {"whitted_orbit.toml", 48, [w["node"]]}
     assert ja["done"] <= ja["frames"] and ja["progress"] >= 0 and ja["progress"] <= 1
     assert {jb["state"], jb["preview"], jb["time_left"]} == {"queued", nil, nil}
     assert view["queue"] == [b]
