@@ -98,7 +98,7 @@ defmodule RingTracer.Farm.JobInfo do
     # Frames done before this ring started, then this ring's share.
     before = max(frames - run_frames, 0)
     fraction = min((before + ratio * run_frames) / frames, 1.0)
-    {max(fraction, done / frames), round(elapsed * (total - atoms) / atoms)}
+    {max(fraction, done / frames), round(elapsed * max(total - atoms, 0) / atoms)}
   end
 
   def estimate(frames, done, _run, _elapsed), do: {done / frames, nil}
