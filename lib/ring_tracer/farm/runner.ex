@@ -7,8 +7,10 @@ defmodule RingTracer.Farm.Runner do
   # it done (`RingTracer.Farm.Store`), tells the head and only then lets the
   # frame leave the ring's window (`ack: true`). The head tells it of
   # workers gained (`{:grow, node, slots}`) and let go (`{:release, node}`);
-  # it tells the head `{:runner_frame, id, n}` and, last,
-  # `{:runner_end, id, outcome}`.
+  # it tells the head `{:runner_frame, id, n}`, the ring's progress
+  # (`{:runner_progress, id, atoms_done, atoms_total}`), on a head with a
+  # dashboard its preview's address (`{:runner_preview, id, url}`) and,
+  # last, `{:runner_end, id, outcome}`.
 
   use GenServer, restart: :temporary
 
