@@ -38,7 +38,15 @@ defmodule RingTracer.Farm.Dashboard.View do
         }
 
   @doc "The view of a farm's overview on `head` at `now` (ms since the epoch)."
-  @spec new(%{workers: [WorkerInfo.t()], jobs: [JobInfo.t()]}, node(), integer()) :: t()
+  @spec new(
+          %{
+            :workers => [WorkerInfo.t()],
+            :jobs => [JobInfo.t()],
+            optional(atom()) => term()
+          },
+          node(),
+          integer()
+        ) :: t()
   def new(%{workers: workers, jobs: jobs}, head, now) do
     {ended, live} = Enum.split_with(jobs, &(&1.state in [:done, :failed, :cancelled]))
     shown = Enum.take(ended, -@ended_shown)
