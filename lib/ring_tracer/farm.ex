@@ -22,7 +22,7 @@ defmodule RingTracer.Farm do
   """
 
   alias RingTracer.{Error, Names, Options, Scene}
-  alias RingTracer.Farm.{Head, Job, JobInfo, Member, Runner, WorkerInfo}
+  alias RingTracer.Farm.{Dashboard, Head, Job, JobInfo, Member, Runner, WorkerInfo}
 
   @timeout 10_000
   @rewatch_ms 500
@@ -39,22 +39,30 @@ defmodule RingTracer.Farm do
       user's or others can change it
     * `:policy` — how workers are shared between jobs, a module of
       `RingTracer.Farm.Policy` (default `RingTracer.Farm.Policy.Fair`)
+    * `:dashboard` — a web page of the farm's workers, jobs and queue, with
+      a link to each running job's live preview
+      (`RingTracer.Farm.Dashboard`): `true` (a free port on 127.0.0.1) or
+      `[port: p, listen: address]`; its address, with a random token, is
+      `dashboard_url/1`'s, and stays the same when the head restarts
+      (default `false`: none)
   """
   @spec start_head(keyword()) :: {:ok, pid()} | {:error, Error.t()}
   def start_head(opts) do
     with {:ok, dir} <- fetch_string(opts, :dir),
          policy = opts[:policy] || RingTracer.Farm.Policy.Fair,
-         :ok <- behaviour(policy) do
+         :ok <- behaviour(policy),
+         {:ok, dashboard} <- dashboard(Keyword.get(opts, :dashboard, false)) do
       spec = %{
         id: Names.farm(),
         type: :supervisor,
         start:
           {Supervisor, :start_link,
            [
-             [
-               {DynamicSupervisor, name: Names.farm_runners(), strategy: :one_for_one},
-               {Head, dir: dir, policy: policy}
-             ],
+             dashboard ++
+               [
+                 {DynamicSupervisor, name: Names.farm_runners(), strategy: :one_for_one},
+                 {Head, dir: dir, policy: policy}
+               ],
              [strategy: :one_for_all, name: Names.farm(), max_restarts: 3, max_seconds: 5]
            ]}
       }
@@ -66,11 +74,12 @@ defmodule RingTracer.Farm do
         {:error, {:already_started, _}} ->
           {:error, Error.new(:farm, "a farm head runs on this node already")}
 
-        {:error, {{:shutdown, {:failed_to_start_child, Head, %Error{} = e}}, _}} ->
+        # The head's or the dashboard's own words.
+        {:error, {{:shutdown, {:failed_to_start_child, _, %Error{} = e}}, _}} ->
           Supervisor.delete_child(RingTracer.Supervisor, Names.farm())
           {:error, e}
 
-        {:error, {:shutdown, {:failed_to_start_child, Head, %Error{} = e}}} ->
+        {:error, {:shutdown, {:failed_to_start_child, _, %Error{} = e}}} ->
           Supervisor.delete_child(RingTracer.Supervisor, Names.farm())
           {:error, e}
 
@@ -80,6 +89,22 @@ defmodule RingTracer.Farm do
       end
     end
   end
+
+  # The dashboard's child, first: it serves before any runner starts, and
+  # runners start a job's preview only where it runs.
+  defp dashboard(false), do: {:ok, []}
+
+  defp dashboard(option) do
+    with {:ok, opts} <- Dashboard.options(option), do: {:ok, [{Dashboard, opts}]}
+  end
+
+  @doc """
+  The address of the dashboard of the head on `head` (default this node),
+  with its token: open it in a browser. An error when that head was
+  started without `:dashboard`.
+  """
+  @spec dashboard_url(node()) :: {:ok, String.t()} | {:error, Error.t()}
+  def dashboard_url(head \\ node()) when is_atom(head), do: Dashboard.url(head)
 
   @doc "Stops this node's head (its running rings stop; the queue stays in its folder)."
   @spec stop_head() :: :ok

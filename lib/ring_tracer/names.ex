@@ -39,6 +39,12 @@ defmodule RingTracer.Names do
   @spec farm() :: atom()
   def farm, do: RingTracer.Farm.Supervisor
 
+  @doc "A farm's dashboard, on the head node (`node` another one: the address to call)."
+  @spec farm_dashboard(node()) :: atom() | {atom(), node()}
+  def farm_dashboard(node \\ node())
+  def farm_dashboard(node) when node == node(), do: RingTracer.Farm.Dashboard
+  def farm_dashboard(node), do: {RingTracer.Farm.Dashboard, node}
+
   @doc "A worker's member of a farm (`RingTracer.Farm.join/2`)."
   @spec farm_member() :: atom()
   def farm_member, do: RingTracer.Farm.Member

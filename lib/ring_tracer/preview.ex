@@ -48,7 +48,7 @@ defmodule RingTracer.Preview do
   it).
   """
 
-  alias RingTracer.Preview.Server
+  alias RingTracer.Preview.{Listener, Server}
 
   @enforce_keys [:pid, :url, :port]
   defstruct [:pid, :url, :port]
@@ -72,7 +72,9 @@ defmodule RingTracer.Preview do
          {:ok, _} <- inets(),
          {:ok, pid} <- server(Keyword.put(opts, :listen, addr)) do
       {addr, port, token} = GenServer.call(pid, :address)
-      {:ok, %__MODULE__{pid: pid, port: port, url: "http://#{host(addr)}:#{port}/#{token}/"}}
+
+      {:ok,
+       %__MODULE__{pid: pid, port: port, url: "http://#{Listener.host(addr)}:#{port}/#{token}/"}}
     end
   end
 
@@ -100,29 +102,8 @@ defmodule RingTracer.Preview do
     end
   end
 
-  defp listen_failure(reason, opts) do
-    addr = host(Keyword.fetch!(opts, :listen))
-    port = Keyword.get(opts, :port, 0)
-
-    case reason do
-      :eaddrinuse ->
-        "port #{port} on #{addr} is in use (another program listens there): " <>
-          "give another port, or 0 for a free one"
-
-      :eacces ->
-        "may not listen on port #{port} on #{addr} (ports below 1024 need privileges): " <>
-          "give another port, or 0 for a free one"
-
-      :eaddrnotavail ->
-        "cannot listen on #{addr}: it is not an address of this machine"
-
-      :not_listening ->
-        "could not listen on #{addr}, port #{port} (is #{addr} an address of this machine?)"
-
-      other ->
-        "could not listen on #{addr}, port #{port}: #{:inet.format_error(other)}"
-    end
-  end
+  defp listen_failure(reason, opts),
+    do: Listener.failure(reason, Keyword.fetch!(opts, :listen), Keyword.get(opts, :port, 0))
 
   @doc "How many browsers are reading the job's stream now."
   @spec viewers(t()) :: non_neg_integer()
@@ -270,7 +251,4 @@ defmodule RingTracer.Preview do
 
   defp not_an_address(text),
     do: {:error, RingTracer.Error.new(:invalid_option, "not an IP address: #{text}")}
-
-  defp host(addr) when tuple_size(addr) == 8, do: "[#{:inet.ntoa(addr)}]"
-  defp host(addr), do: to_string(:inet.ntoa(addr))
 end

@@ -33,7 +33,17 @@ defmodule RingTracer.Farm.Head do
             ref: reference(),
             job: pos_integer() | nil
           }
-    @type run :: %{runner: pid(), ref: reference(), workers: [node()]}
+    # `since` (monotonic ms) and `frames` (how many it renders) describe the
+    # ring the runner started; `atoms` its progress, `preview` its page.
+    @type run :: %{
+            runner: pid(),
+            ref: reference(),
+            workers: [node()],
+            since: integer(),
+            frames: non_neg_integer(),
+            atoms: {non_neg_integer(), non_neg_integer()} | nil,
+            preview: String.t() | nil
+          }
     @type t :: %__MODULE__{
             policy: module(),
             dir: Path.t(),
@@ -171,6 +181,14 @@ defmodule RingTracer.Farm.Head do
 
     {:noreply, state}
   end
+
+  # What the dashboard shows of a running job, kept here only (not in Mnesia).
+  def handle_info({:runner_preview, id, url}, state) when is_map_key(state.running, id),
+    do: {:noreply, put_in(state.running[id].preview, url)}
+
+  def handle_info({:runner_progress, id, done, total}, state)
+      when is_map_key(state.running, id),
+      do: {:noreply, put_in(state.running[id].atoms, {done, total})}
 
   def handle_info({:runner_end, id, outcome}, state) do
     state = drop_run(state, id)
@@ -388,7 +406,15 @@ defmodule RingTracer.Farm.Head do
           {Runner, {job, workers, state.frames_dir, self()}}
         )
 
-      run = %{runner: runner, ref: Process.monitor(runner), workers: nodes}
+      run = %{
+        runner: runner,
+        ref: Process.monitor(runner),
+        workers: nodes,
+        since: System.monotonic_time(:millisecond),
+        frames: length(job.frames -- Store.done(id)),
+        atoms: nil,
+        preview: nil
+      }
 
       state = Enum.reduce(nodes, state, fn node, state -> put_in(state.workers[node].job, id) end)
 
@@ -399,6 +425,17 @@ defmodule RingTracer.Farm.Head do
   end
 
   defp info(%Job{} = job, state) do
+    done = Store.done(job.id)
+    run = state.running[job.id]
+
+    {progress, time_left} =
+      JobInfo.estimate(
+        length(job.frames),
+        length(done),
+        run && {run.frames, run.atoms},
+        if(run, do: System.monotonic_time(:millisecond) - run.since, else: 0)
+      )
+
     %JobInfo{
       id: job.id,
       user: job.user,
@@ -416,8 +453,11 @@ defmodule RingTracer.Farm.Head do
       tags: job.tags,
       max_workers: job.max_workers,
       frames: job.frames,
-      done: Store.done(job.id),
-      workers: get_in(state.running, [job.id, :workers]) || []
+      done: done,
+      workers: get_in(state.running, [job.id, :workers]) || [],
+      progress: progress,
+      time_left: time_left,
+      preview: run && run.preview
     }
   end
 

@@ -7,8 +7,10 @@ defmodule RingTracer.Farm.Runner do
   # it done (`RingTracer.Farm.Store`), tells the head and only then lets the
   # frame leave the ring's window (`ack: true`). The head tells it of
   # workers gained (`{:grow, node, slots}`) and let go (`{:release, node}`);
-  # it tells the head `{:runner_frame, id, n}` and, last,
-  # `{:runner_end, id, outcome}`.
+  # it tells the head `{:runner_frame, id, n}`, the ring's progress
+  # (`{:runner_progress, id, atoms_done, atoms_total}`), on a head with a
+  # dashboard its preview's address (`{:runner_preview, id, url}`) and,
+  # last, `{:runner_end, id, outcome}`.
 
   use GenServer, restart: :temporary
 
@@ -54,7 +56,7 @@ defmodule RingTracer.Farm.Runner do
 
     with {:remaining, [_ | _]} <- {:remaining, remaining},
          {:ok, scene} <- Scene.from_source(job.source),
-         {:ok, handle} <- start(scene, job, workers, remaining) do
+         {:ok, handle} <- start(scene, job, workers, remaining, preview(state)) do
       {:noreply, %{state | handle: handle}}
     else
       {:remaining, []} -> finish(state, :done)
@@ -80,8 +82,10 @@ defmodule RingTracer.Farm.Runner do
     end
   end
 
-  def handle_info({RingTracer, id, {:progress, _, _}}, %State{handle: %{id: id}} = state),
-    do: {:noreply, state}
+  def handle_info({RingTracer, id, {:progress, done, total}}, %State{handle: %{id: id}} = state) do
+    send(state.head, {:runner_progress, state.job.id, done, total})
+    {:noreply, state}
+  end
 
   def handle_info({RingTracer, id, {:ok, _result}}, %State{handle: %{id: id}} = state),
     do: finish(state, :done)
@@ -108,7 +112,20 @@ defmodule RingTracer.Farm.Runner do
 
   def handle_info(_other, state), do: {:noreply, state}
 
-  defp start(scene, job, workers, remaining) do
+  # On a head with a dashboard, the ring's live preview: on loopback, with
+  # its own token, gone with this runner (its owner).
+  defp preview(%State{job: job, head: head}) do
+    with true <- RingTracer.Farm.Dashboard.running?(),
+         {:ok, preview} <- RingTracer.Preview.start() do
+      send(preview.pid, {:owner, self()})
+      send(head, {:runner_preview, job.id, preview.url})
+      [preview: preview]
+    else
+      _ -> []
+    end
+  end
+
+  defp start(scene, job, workers, remaining, preview) do
     slots = workers |> Enum.map(&elem(&1, 1)) |> Enum.min()
 
     opts =
@@ -119,7 +136,7 @@ defmodule RingTracer.Farm.Runner do
           children_per_node: slots,
           frames: remaining,
           ack: true
-        ]
+        ] ++ preview
 
     RingTracer.render_sequence(scene, opts)
   end

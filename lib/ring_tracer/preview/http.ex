@@ -23,6 +23,8 @@ defmodule RingTracer.Preview.HTTP do
 
   require Record
 
+  alias RingTracer.Preview.Listener
+
   Record.defrecordp(:mod, Record.extract(:mod, from_lib: "inets/include/httpd.hrl"))
 
   @files %{
@@ -56,65 +58,27 @@ defmodule RingTracer.Preview.HTTP do
       :any
   """
   @spec hosts(:inet.ip_address()) :: [String.t()] | :any
-  def hosts(addr) do
-    case addr do
-      {0, 0, 0, 0} -> :any
-      {0, 0, 0, 0, 0, 0, 0, 0} -> :any
-      {127, _, _, _} -> [to_string(:inet.ntoa(addr)), "localhost", "[::1]"]
-      {0, 0, 0, 0, 0, 0, 0, 1} -> ["[::1]", "localhost", "127.0.0.1"]
-      {_, _, _, _} -> [to_string(:inet.ntoa(addr))]
-      _ -> ["[#{:inet.ntoa(addr)}]"]
-    end
-  end
+  defdelegate hosts(addr), to: Listener
 
   @doc false
   def unquote(:do)(m) do
-    {server, table, secret} = :httpd_util.lookup(mod(m, :config_db), :ring_tracer_preview)
+    {server, table, secret} = Listener.data(m)
     {token, hosts} = address(secret)
 
-    full = m |> mod(:request_uri) |> to_string() |> String.split("?", parts: 2) |> hd()
+    case Listener.check(m, token, hosts) do
+      {:error, response} ->
+        response
 
-    path =
-      case String.split(full, "/", parts: 3) do
-        ["", ^token, rest] -> "/" <> rest
-        _ -> nil
-      end
-
-    cond do
-      # Only the origin form (`GET /path`): the absolute form is for
-      # proxies, and the preview is none.
-      not origin_form?(m) ->
-        {:proceed, [{:response, {400, ~c"only a path as the request target"}}]}
-
-      not host_allowed?(m, hosts) ->
-        {:proceed, [{:response, {421, ~c"the preview answers on its own address only"}}]}
-
-      path == nil ->
-        {:proceed, [{:response, {404, ~c"not found"}}]}
-
-      mod(m, :method) != ~c"GET" ->
-        {:proceed, [{:response, {405, ~c"only GET"}}]}
-
-      path == "/events" ->
+      {:ok, "/events"} ->
         stream(m, server, table)
 
-      Map.has_key?(@files, path) ->
+      {:ok, path} when is_map_key(@files, path) ->
         {name, type} = Map.fetch!(@files, path)
-        body = File.read!(Path.join(root(), name))
+        Listener.body(File.read!(Path.join(root(), name)), type, @csp)
 
-        head = [
-          code: 200,
-          content_type: type,
-          content_length: Integer.to_charlist(byte_size(body)),
-          cache_control: ~c"no-store",
-          "x-content-type-options": ~c"nosniff",
-          "content-security-policy": @csp
-        ]
-
-        {:proceed, [{:response, {:response, head, body}}]}
-
-      true ->
-        {:proceed, [{:response, {404, ~c"not found"}}]}
+      {:ok, _} ->
+        {:error, response} = Listener.status(404, "not found")
+        response
     end
   end
 
@@ -124,28 +88,6 @@ defmodule RingTracer.Preview.HTTP do
     {token, hosts}
   rescue
     ArgumentError -> {nil, []}
-  end
-
-  defp origin_form?(m) do
-    match?(
-      [_method, "/" <> _, _version],
-      m |> mod(:request_line) |> to_string() |> String.split(" ")
-    )
-  end
-
-  defp host_allowed?(_m, :any), do: true
-
-  defp host_allowed?(m, hosts) do
-    case List.keyfind(mod(m, :parsed_header), ~c"host", 0) do
-      {_, value} ->
-        host = value |> to_string() |> String.downcase()
-        # the name without its port ("[::1]:8080" -> "[::1]")
-        name = String.replace(host, ~r/:\d+\z/, "")
-        name in hosts
-
-      nil ->
-        false
-    end
   end
 
   defp stream(m, server, table) do

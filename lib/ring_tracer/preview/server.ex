@@ -25,13 +25,11 @@ defmodule RingTracer.Preview.Server do
   """
   use GenServer
 
-  alias RingTracer.Preview.Log
+  alias RingTracer.Preview.{Listener, Log}
 
   # How long a viewer's connection may take no data, during a stop, before
   # it is dropped.
   @stall_ms 100
-  # Seconds a connection has to send its request line and headers.
-  @request_deadline_s 5
   # Connections without a stream kept at most (the oldest beyond are
   # dropped, each @sweep_ms), and httpd's backstop beyond the viewers.
   @max_waiting 64
@@ -55,79 +53,54 @@ defmodule RingTracer.Preview.Server do
     # The page's address holds a random path: another local user (anyone
     # can reach loopback) or a web page that rebinds a name of its own to
     # 127.0.0.1 cannot guess it, and only sees 404s.
-    token = Base.url_encode64(:crypto.strong_rand_bytes(16), padding: false)
+    token = Listener.token()
     secret = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
-    :ets.insert(secret, {:address, token, RingTracer.Preview.HTTP.hosts(addr)})
+    :ets.insert(secret, {:address, token, Listener.hosts(addr)})
 
-    config = [
+    listen = [
+      listen: addr,
       port: Keyword.get(opts, :port, 0),
-      server_name: ~c"ringtracer-preview",
-      server_root: String.to_charlist(RingTracer.Preview.HTTP.root()),
-      document_root: String.to_charlist(RingTracer.Preview.HTTP.root()),
-      bind_address: addr,
-      ipfamily: if(tuple_size(addr) == 8, do: :inet6, else: :inet),
-      modules: [RingTracer.Preview.HTTP],
+      name: ~c"ringtracer-preview",
+      root: RingTracer.Preview.HTTP.root(),
       # Viewers are counted by this server (`:max_viewers`); httpd's limit is
       # only a backstop: the connections without a stream are kept to
       # @max_waiting by the sweep, which drops the oldest first.
-      max_clients: max_viewers + @max_connections,
-      # No Server header: nothing to tell a prober what answers here.
-      server_tokens: :none,
-      # One deadline, from the connection (or the end of the previous
-      # response) to the end of the request's headers: httpd arms one timer
-      # and cancels it only when the request is whole, so a client that
-      # trickles its request a byte at a time is cut off at the deadline.
-      # It is also how long a kept-alive connection may idle.
-      keep_alive_timeout: @request_deadline_s,
-      # The token is not in httpd's configuration, which httpd prints when
-      # it cannot start: it is in a table of its own, read by the handler.
-      ring_tracer_preview: {self(), table, secret}
+      max_clients: max_viewers + @max_connections
     ]
 
-    with {:ok, httpd} <- :inets.start(:httpd, config, :stand_alone),
-         {:ok, port} <- port(httpd, config) do
-      state = %{
-        table: table,
-        httpd: httpd,
-        listener: listener(addr, port),
-        port: port,
-        addr: addr,
-        token: token,
-        log: Log.new(Keyword.take(opts, [:max_events, :strip])),
-        last_atom: nil,
-        last_image: nil,
-        parent: nil,
-        handlers: [],
-        waiters: MapSet.new(),
-        viewers: %{},
-        max_viewers: max_viewers,
-        expect: nil,
-        ended: :atomics.new(1, []),
-        cpu_share: Keyword.get(opts, :cpu_share, 0.01),
-        pending: [],
-        queue: :queue.new(),
-        pacing: nil,
-        drain: nil,
-        connections: :httpd_connection_sup.connection_sup(addr, port),
-        waiting: %{}
-      }
+    case Listener.start(RingTracer.Preview.HTTP, {self(), table, secret}, listen) do
+      {:ok, server} ->
+        state = %{
+          table: table,
+          server: server,
+          port: server.port,
+          addr: addr,
+          token: token,
+          log: Log.new(Keyword.take(opts, [:max_events, :strip])),
+          last_atom: nil,
+          last_image: nil,
+          parent: nil,
+          handlers: [],
+          waiters: MapSet.new(),
+          viewers: %{},
+          max_viewers: max_viewers,
+          expect: nil,
+          ended: :atomics.new(1, []),
+          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
+          pending: [],
+          queue: :queue.new(),
+          pacing: nil,
+          drain: nil,
+          waiting: %{}
+        }
 
-      Process.send_after(self(), :sweep, @sweep_ms)
-      {:ok, state}
-    else
-      {:error, reason} -> {:stop, {:listen, listen_error(reason)}}
+        Process.send_after(self(), :sweep, @sweep_ms)
+        {:ok, state}
+
+      {:error, {:listen, reason}} ->
+        {:stop, {:listen, reason}}
     end
   end
-
-  # What stopped httpd from listening (`:eaddrinuse`, `:eacces`...), out of
-  # its supervisors' reports; a port this VM already serves is in use too.
-  defp listen_error({:listen, reason}), do: reason
-
-  defp listen_error({:shutdown, {:failed_to_start_child, _, {:already_started, _}}}),
-    do: :eaddrinuse
-
-  defp listen_error({:shutdown, {:failed_to_start_child, _, inner}}), do: listen_error(inner)
-  defp listen_error(other), do: other
 
   @impl GenServer
   def handle_call(:address, _from, state),
@@ -295,39 +268,13 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info(_other, state), do: {:noreply, state}
 
-  # The connections that are not viewers (a request on its way, a page
-  # file being sent, a kept-alive connection between requests), with when
-  # this server first saw each: beyond @max_waiting, the oldest are
-  # dropped. A page's own requests are answered within milliseconds of
-  # their connection, so clients that hold connections open without the
-  # token (or many of them) cannot keep the owner from the page.
-  defp sweep(state) do
-    now = System.monotonic_time(:millisecond)
-
-    waiting =
-      for pid <- connections(state.connections),
-          not is_map_key(state.viewers, pid),
-          into: %{},
-          do: {pid, Map.get(state.waiting, pid, now)}
-
-    excess = map_size(waiting) - @max_waiting
-
-    if excess > 0 do
-      dropped =
-        waiting |> Enum.sort_by(&elem(&1, 1)) |> Enum.take(excess) |> Enum.map(&elem(&1, 0))
-
-      Enum.each(dropped, &Process.exit(&1, :kill))
-      %{state | waiting: Map.drop(waiting, dropped)}
-    else
-      %{state | waiting: waiting}
-    end
-  end
-
-  defp connections(sup) do
-    for {_, pid, _, _} <- Supervisor.which_children(sup), is_pid(pid), do: pid
-  catch
-    :exit, _ -> []
-  end
+  # Connections that are not viewers are kept to @max_waiting, the oldest
+  # dropped first (`Listener.sweep/4`).
+  defp sweep(state),
+    do: %{
+      state
+      | waiting: Listener.sweep(state.server, state.waiting, state.viewers, @max_waiting)
+    }
 
   # A stop waits for the viewers still reading the log.
   defp drained(%{drain: {from, ref, timer}, viewers: v} = state) when map_size(v) == 0 do
@@ -367,76 +314,7 @@ defmodule RingTracer.Preview.Server do
     # browser (one that does not read would hold its connection's process in
     # a send until the send's deadline).
     Enum.each(Map.keys(state.viewers), &Process.exit(&1, :kill))
-    close(state.httpd, state.listener)
-  end
-
-  # A stand-alone httpd is stopped by an exit signal, which returns at once,
-  # and its listening socket belongs to a process of its own outside its
-  # supervision tree, which closes it when it learns (by a link) that the
-  # acceptor is gone: the httpd's DOWN can come before that. So wait for
-  # the httpd, then close the socket if it is still open (nothing uses it
-  # any more) and wait for that: a stopped preview accepts no connection.
-  defp close(httpd, listener) do
-    ref = Process.monitor(httpd)
-    :inets.stop(:stand_alone, httpd)
-    await_down(ref, 5_000)
-
-    if listener do
-      ref = :erlang.monitor(:port, listener)
-      if :erlang.port_info(listener) != :undefined, do: :erlang.port_close(listener)
-      await_down(ref, 5_000)
-    end
-
-    :ok
-  catch
-    :error, :badarg -> :ok
-  end
-
-  defp await_down(ref, ms) do
-    receive do
-      {:DOWN, ^ref, _, _, _} -> :ok
-    after
-      ms -> :ok
-    end
-  end
-
-  # The httpd's listening socket: the one of this VM's TCP sockets bound to
-  # its address and port that listens (a connection accepted meanwhile has
-  # the same local address).
-  defp listener(addr, port),
-    do: Enum.find(:erlang.ports(), &listening?(&1, addr, port))
-
-  defp listening?(p, addr, port) do
-    match?({:name, ~c"tcp_inet" ++ _}, :erlang.port_info(p, :name)) and
-      :inet.sockname(p) == {:ok, {addr, port}} and
-      :listen in Map.get(:inet.info(p), :states, [])
-  catch
-    _, _ -> false
-  end
-
-  # httpd.info/2 knows only servers started under the :inets application;
-  # this one is ours (stand-alone, linked), and its instance supervisor is
-  # named by address and port.
-  defp port(httpd, config) do
-    case for {{:httpd_instance_sup, _addr, port, _}, _, _, _} <- Supervisor.which_children(httpd),
-             do: port do
-      [port] ->
-        {:ok, port}
-
-      # Started without a listener (with port 0, httpd does not report why:
-      # a listen of our own, closed at once, tells).
-      [] ->
-        :inets.stop(:stand_alone, httpd)
-
-        case :gen_tcp.listen(config[:port], ip: config[:bind_address]) do
-          {:ok, socket} ->
-            :gen_tcp.close(socket)
-            {:error, :not_listening}
-
-          {:error, reason} ->
-            {:error, {:listen, reason}}
-        end
-    end
+    Listener.close(state.server)
   end
 
   defp apply_event(state, {:atom, _job, a, child, pixels, rays, us, at}),
