@@ -13,6 +13,9 @@ defmodule RingTracer.CLI.Farm.Head do
     * `--dir DIR` — the head's folder: the queue (Mnesia) and the frames
       done. Default `$XDG_STATE_HOME/ringtracer/farm/NODE` (`~/.local/state`
       without it), every folder made mode 0700
+    * `--dashboard-port PORT` — the dashboard's port (default a free one);
+      it listens where the node does (`--listen`), behind a random token
+    * `--no-dashboard` — no dashboard
     * the distribution switches of `RingTracer.CLI.Worker` (`--name`,
       `--cookie-file`, `--listen`, `--ports`, `--tls`, `--insecure-plain`)
   """
@@ -20,7 +23,8 @@ defmodule RingTracer.CLI.Farm.Head do
   alias RingTracer.CLI.{Args, Paths}
   alias RingTracer.CLI.Worker
 
-  @switches [dir: :string] ++ Worker.switches()
+  @switches [dir: :string, dashboard_port: :integer, no_dashboard: :boolean] ++
+              Worker.switches()
 
   @doc "The text of `ringtracer farm --help`."
   @spec help() :: String.t()
@@ -43,6 +47,9 @@ defmodule RingTracer.CLI.Farm.Head do
       --ports MIN-MAX         the distribution listener's ports, for firewalls
       --tls DIR               the TLS certificates (default: your own, made on first use)
       --insecure-plain        plain TCP distribution instead of TLS (see ringtracer worker --help)
+      --dashboard-port PORT   the dashboard's port (default a free one; it listens where
+                              the node does, behind a random token in its address)
+      --no-dashboard          no dashboard
 
     Every node of a farm (head, workers, submitters) uses the same cookie file and
     certificates of one CA (ringtracer cookie, ringtracer tls).
@@ -74,14 +81,22 @@ defmodule RingTracer.CLI.Farm.Head do
       {:ok, opts, []} ->
         opts = Paths.expand(opts, [:cookie_file, :tls, :dir])
         opts = if opts[:name] || opts[:sname], do: opts, else: [sname: "farm"] ++ opts
-        worker_opts = Keyword.drop(opts, [:dir])
+        worker_opts = Keyword.drop(opts, [:dir, :dashboard_port, :no_dashboard])
 
         with {:ok, node} <- distribution(worker_opts),
              {:ok, dir} <- dir(opts[:dir], node),
-             {:ok, _} <- failed(RingTracer.Farm.start_head(dir: dir)) do
+             {:ok, _} <-
+               failed(RingTracer.Farm.start_head(dir: dir, dashboard: dashboard(opts))) do
           {:ok, node, ready(node, dir, opts)}
         end
     end
+  end
+
+  # On by default: loopback unless --listen widens the node, a random token.
+  defp dashboard(opts) do
+    if opts[:no_dashboard],
+      do: false,
+      else: [port: opts[:dashboard_port] || 0] ++ Keyword.take(opts, [:listen])
   end
 
   defp distribution(opts) do
@@ -101,12 +116,18 @@ defmodule RingTracer.CLI.Farm.Head do
         _ -> 0
       end
 
+    dashboard =
+      case RingTracer.Farm.dashboard_url(node) do
+        {:ok, url} -> "dashboard:  #{url}\n"
+        _ -> ""
+      end
+
     """
     RingTracer farm head #{node} ready (queue and frames in #{dir}; #{Worker.credentials(opts)})
     #{if queued > 0, do: "#{queued} job(s) resumed from the queue\n", else: ""}join it:    ringtracer worker --join #{node}
     submit:     ringtracer submit SCENE --out FILE --farm #{node}
     the queue:  ringtracer jobs --farm #{node}
-    """
+    #{dashboard}"""
   end
 
   @doc """
