@@ -91,13 +91,19 @@ defmodule RingTracer.Farm.Runner do
 
   def handle_info({:grow, node, slots}, %State{} = state) do
     state = %{state | nodes: Enum.uniq(state.nodes ++ [node])}
-    _ = grow(state.handle, node, slots)
+    elastic(state, :grow, node, slots)
     {:noreply, state}
   end
 
   def handle_info({:release, node}, %State{} = state) do
     state = %{state | nodes: List.delete(state.nodes, node)}
-    _ = shrink(state.handle, node)
+    elastic(state, :shrink, node, nil)
+    {:noreply, state}
+  end
+
+  # A grow that ended after the worker was let go: its children leave too.
+  def handle_info({:grown, node}, %State{} = state) do
+    if node not in state.nodes, do: elastic(state, :shrink, node, nil)
     {:noreply, state}
   end
 
@@ -124,22 +130,23 @@ defmodule RingTracer.Farm.Runner do
     RingTracer.render_sequence(scene, opts)
   end
 
-  # The elastic ring's calls, where this build has them.
-  defp grow(nil, _node, _slots), do: :ok
+  # The elastic ring's calls (`RingTracer.grow/4`, `shrink/3`), in a process
+  # of their own: the runner goes on storing frames meanwhile. A grow tells
+  # the runner when it is over, so that a worker let go in the meantime
+  # leaves the ring after all.
+  defp elastic(%State{handle: nil}, _call, _node, _slots), do: :ok
 
-  defp grow(handle, node, slots) do
-    if function_exported?(RingTracer, :grow, 3),
-      do: apply(RingTracer, :grow, [handle, node, slots]),
-      else: :ok
+  defp elastic(%State{handle: handle}, :grow, node, slots) do
+    runner = self()
+
+    spawn(fn ->
+      _ = RingTracer.grow(handle, node, slots)
+      send(runner, {:grown, node})
+    end)
   end
 
-  defp shrink(nil, _node), do: :ok
-
-  defp shrink(handle, node) do
-    if function_exported?(RingTracer, :shrink, 2),
-      do: apply(RingTracer, :shrink, [handle, node]),
-      else: :ok
-  end
+  defp elastic(%State{handle: handle}, :shrink, node, _slots),
+    do: spawn(fn -> RingTracer.shrink(handle, node) end)
 
   # A scene or an option that is not valid fails the job for good; a ring
   # whose every child went (its workers lost) waits for others, and is no
