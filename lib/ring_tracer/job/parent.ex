@@ -474,13 +474,13 @@ defmodule RingTracer.Job.Parent do
   # `RingTracer.grow/4` and `shrink/3`: `ref` is an alias of the caller's.
   def handle_info({:grow, ref, node, count}, %{stopping: nil} = state) do
     {reply, state} = grow(state, node, count)
-    send(ref, {ref, reply})
+    :erlang.send(ref, {ref, reply})
     {:noreply, state}
   end
 
   def handle_info({:shrink, ref, node}, %{stopping: nil} = state) do
     {reply, state} = shrink(state, node)
-    send(ref, {ref, reply})
+    :erlang.send(ref, {ref, reply})
     {:noreply, state}
   end
 
@@ -620,7 +620,7 @@ defmodule RingTracer.Job.Parent do
   ## An elastic ring
 
   defp ended(state, ref) do
-    send(ref, {ref, {:error, :job_ended}})
+    :erlang.send(ref, {ref, {:error, :job_ended}})
     {:noreply, state}
   end
 
