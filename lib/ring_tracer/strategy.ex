@@ -230,7 +230,7 @@ defmodule RingTracer.Strategy do
       iex> RingTracer.Strategy.strips(view, 2)
       [{:hand_out, 0, [8, 9]}, {:hand_out, 1, [10, 11]}]
       iex> RingTracer.Strategy.strips(%{view | size: 3}, 2)
-      [{:hand_out, 0, [8]}, {:hand_out, 1, [9, 10]}, {:hand_out, 2, [11]}]
+      [{:hand_out, 0, [8]}, {:hand_out, 1, [9]}, {:hand_out, 2, [10, 11]}]
   """
   @spec strips(ParentView.t(), non_neg_integer()) :: [parent_effect()]
   def strips(%ParentView{spec: %{layout: layout}, size: size}, frame)
