@@ -23,13 +23,14 @@ defmodule RingTracer.Farm.Runner do
   defmodule State do
     @moduledoc false
     @enforce_keys [:job, :head, :dir]
-    defstruct [:job, :head, :dir, :handle, nodes: []]
+    defstruct [:job, :head, :dir, :handle, :elastic, nodes: []]
 
     @type t :: %__MODULE__{
             job: RingTracer.Farm.Job.t(),
             head: pid(),
             dir: term(),
             handle: %{id: reference(), pid: pid()} | nil,
+            elastic: pid() | nil,
             nodes: [node()]
           }
   end
@@ -91,20 +92,12 @@ defmodule RingTracer.Farm.Runner do
 
   def handle_info({:grow, node, slots}, %State{} = state) do
     state = %{state | nodes: Enum.uniq(state.nodes ++ [node])}
-    elastic(state, :grow, node, slots)
-    {:noreply, state}
+    {:noreply, elastic(state, {:grow, node, slots})}
   end
 
   def handle_info({:release, node}, %State{} = state) do
     state = %{state | nodes: List.delete(state.nodes, node)}
-    elastic(state, :shrink, node, nil)
-    {:noreply, state}
-  end
-
-  # A grow that ended after the worker was let go: its children leave too.
-  def handle_info({:grown, node}, %State{} = state) do
-    if node not in state.nodes, do: elastic(state, :shrink, node, nil)
-    {:noreply, state}
+    {:noreply, elastic(state, {:shrink, node})}
   end
 
   def handle_info(:stop, %State{handle: handle} = state) do
@@ -130,23 +123,38 @@ defmodule RingTracer.Farm.Runner do
     RingTracer.render_sequence(scene, opts)
   end
 
-  # The elastic ring's calls (`RingTracer.grow/4`, `shrink/3`), in a process
-  # of their own: the runner goes on storing frames meanwhile. A grow tells
-  # the runner when it is over, so that a worker let go in the meantime
-  # leaves the ring after all.
-  defp elastic(%State{handle: nil}, _call, _node, _slots), do: :ok
+  # The elastic ring's calls (`RingTracer.grow/4`, `shrink/3`) are made by a
+  # process of the runner's, one at a time in the order the head asked, so
+  # that the runner goes on storing frames during a grow, and a worker let
+  # go while its grow runs leaves after it. It ends with the runner.
+  defp elastic(%State{handle: nil} = state, _call), do: state
 
-  defp elastic(%State{handle: handle}, :grow, node, slots) do
+  defp elastic(%State{elastic: nil, handle: handle} = state, call) do
     runner = self()
 
-    spawn(fn ->
-      _ = RingTracer.grow(handle, node, slots)
-      send(runner, {:grown, node})
-    end)
+    pid =
+      spawn(fn ->
+        ref = Process.monitor(runner)
+        elastic_loop(handle, ref)
+      end)
+
+    elastic(%{state | elastic: pid}, call)
   end
 
-  defp elastic(%State{handle: handle}, :shrink, node, _slots),
-    do: spawn(fn -> RingTracer.shrink(handle, node) end)
+  defp elastic(%State{elastic: pid} = state, call) do
+    send(pid, call)
+    state
+  end
+
+  defp elastic_loop(handle, ref) do
+    receive do
+      {:grow, node, slots} -> _ = RingTracer.grow(handle, node, slots)
+      {:shrink, node} -> _ = RingTracer.shrink(handle, node)
+      {:DOWN, ^ref, _, _, _} -> exit(:normal)
+    end
+
+    elastic_loop(handle, ref)
+  end
 
   # A scene or an option that is not valid fails the job for good; a ring
   # whose every child went (its workers lost) waits for others, and is no
