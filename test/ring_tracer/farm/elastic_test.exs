@@ -1,8 +1,9 @@
 defmodule RingTracer.Farm.ElasticTest do
   @moduledoc """
   A worker that joins a farm while a job runs gets children in that job's
-  ring within a second (`RingTracer.grow/4` from the job's runner), and
-  every frame is still the frame rendered alone.
+  ring within a second (`RingTracer.grow/4` from the job's runner), one
+  that leaves hands its work on (`RingTracer.shrink/3`), and every frame is
+  still the frame rendered alone.
   """
   use ExUnit.Case, async: false
 
@@ -83,6 +84,45 @@ defmodule RingTracer.Farm.ElasticTest do
     assert info.state == :done and info.done == Enum.to_list(@frames)
 
     for n <- @frames do
+      assert_received {:got, ^n, png}
+      reference = TestScenes.reference(@scene, @w, @h, frame: n)
+      {:ok, expected} = RingTracer.Image.png(@w, @h, reference)
+      assert png == expected, "frame #{n}"
+    end
+  end
+
+  test "a worker that leaves mid-job hands its work on; the frames are the same",
+       %{first: {p1, n1}, second: {p2, n2}} do
+    for {p, n} <- [{p1, n1}, {p2, n2}],
+        do: {:ok, _} = Peers.call(p, n, Farm, :join, [node(), [slots: 2, speed: 4]])
+
+    assert Wait.eventually(fn -> length(elem(Farm.workers(node()), 1)) == 2 end, 500)
+
+    {:ok, id} = Farm.submit(node(), TestScenes.path(@scene), width: @w, height: @h, frames: 1..12)
+
+    me = self()
+
+    waiter =
+      Task.async(fn ->
+        Farm.wait(node(), id, on_frame: fn n, bytes -> send(me, {:got, n, bytes}) && :ok end)
+      end)
+
+    assert_receive {:got, n, bytes}, 30_000
+    send(self(), {:got, n, bytes})
+    assert_receive {:atom_on_second, _}, 5_000
+    me = self()
+    handler = "farm-elastic-shrunk-#{System.unique_integer([:positive])}"
+    shrunk = fn _, _, md, _ -> send(me, {:shrunk, md.node}) end
+    :ok = RingTracer.Telemetry.attach(handler, [:ring_tracer, :job, :shrunk], shrunk, nil)
+    on_exit(fn -> RingTracer.Telemetry.detach(handler) end)
+    :ok = Peers.call(p2, n2, Farm, :leave, [])
+    # The head lets the worker go, and its children leave the ring.
+    assert_receive {:shrunk, ^n2}, 5_000
+
+    assert {:ok, info} = Task.await(waiter, 120_000)
+    assert info.state == :done and info.done == Enum.to_list(1..12)
+
+    for n <- 1..12 do
       assert_received {:got, ^n, png}
       reference = TestScenes.reference(@scene, @w, @h, frame: n)
       {:ok, expected} = RingTracer.Image.png(@w, @h, reference)
