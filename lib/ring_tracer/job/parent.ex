@@ -472,7 +472,8 @@ defmodule RingTracer.Job.Parent do
 
   @impl GenServer
   # `RingTracer.grow/4` and `shrink/3`: `ref` is an alias of the caller's.
-  def handle_info({:grow, ref, node, count}, %{stopping: nil} = state) do
+  def handle_info({:grow, ref, node, count}, %{stopping: nil} = state)
+      when is_integer(count) and count > 0 do
     {reply, state} = grow(state, node, count)
     :erlang.send(ref, {ref, reply})
     {:noreply, state}
@@ -770,7 +771,7 @@ defmodule RingTracer.Job.Parent do
       do:
         {{:error,
           {:invalid_option,
-           "every child the job has left is on #{node}: none would stay (cancel the job instead)"}},
+           "every remaining child of the job is on #{node}: none would stay (cancel the job instead)"}},
          state},
       else: leave(state, node, leaving)
   end
