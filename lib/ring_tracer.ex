@@ -17,6 +17,8 @@ defmodule RingTracer do
   alias RingTracer.{Error, Layout, Native, Options, Result, Scene, SceneCache, Settings}
   alias RingTracer.Job.{Parent, Spec}
 
+  @job_call_timeout 5_000
+
   @doc """
   Renders the scene file at `path` (`.nff`, `.toml` or `.obj`), or a scene
   already loaded with `RingTracer.Scene.load/2`, and returns the image and
@@ -99,21 +101,25 @@ defmodule RingTracer do
   the render starts.
   """
   @spec render(Path.t() | Scene.t(), keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
-  def render(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene) do
+  def render(scene, opts \\ []) when is_binary(scene) or is_struct(scene, Scene),
+    do: render(scene, opts, [])
+
+  # `extra`: fields of the job's spec the public options do not set.
+  defp render(scene, opts, extra) do
     with {:ok, opts} <- Options.validate(opts),
          :ok <- running() do
-      within(opts[:timeout], fn -> load_and_run(scene, opts) end)
+      within(opts[:timeout], fn -> load_and_run(scene, opts, extra) end)
     end
   end
 
-  defp load_and_run(scene, opts) do
+  defp load_and_run(scene, opts, extra) do
     with :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
          :ok <- check_frame(scene, opts[:frame]),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
 
-      with {:ok, result} <- run(scene, settings, opts) do
+      with {:ok, result} <- run(scene, settings, opts, extra) do
         {:ok, %{result | warnings: scene.warnings, warnings_omitted: scene.warnings_omitted}}
       end
     end
@@ -242,7 +248,9 @@ defmodule RingTracer do
           {:ok, %{id: reference(), pid: pid()}}
   def render_async(path, opts \\ []) when is_binary(path) or is_struct(path, Scene) do
     {:ok,
-     start_forwarder(fn progress -> render(path, Keyword.put(opts, :progress, progress)) end)}
+     start_forwarder(fn progress ->
+       render(path, Keyword.put(opts, :progress, progress), announce: true)
+     end)}
   end
 
   # Runs `work` (given the pid progress and frames go to) in a worker, and
@@ -323,7 +331,7 @@ defmodule RingTracer do
            RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
          {:ok, settings} <- settings(scene, opts) do
       :ok = SceneCache.put(scene)
-      extra = [frames: frames, window: window, sequence: true, ack: ack]
+      extra = [frames: frames, window: window, sequence: true, ack: ack, announce: true]
 
       {:ok,
        start_forwarder(fn progress ->
@@ -416,7 +424,19 @@ defmodule RingTracer do
         forward(f)
 
       {RingTracer, _, {:parent, parent}} ->
-        forward(Map.put(f, :parent, parent))
+        for request <- Enum.reverse(Map.get(f, :requests, [])), do: send(parent, request)
+        forward(f |> Map.put(:parent, parent) |> Map.delete(:requests))
+
+      # `grow/4`, `shrink/3`: to the parent, once it is known.
+      {:job_request, request} ->
+        case f do
+          %{parent: parent} ->
+            send(parent, request)
+            forward(f)
+
+          _ ->
+            forward(Map.update(f, :requests, [request], &[request | &1]))
+        end
 
       {:ack, number} ->
         if parent = f[:parent], do: send(parent, {:frame_ack, number})
@@ -451,6 +471,116 @@ defmodule RingTracer do
       {:DOWN, ^ref, _, _, _} -> :ok
     end
   end
+
+  @doc """
+  Adds `count` children on `node` to a running job (a handle of
+  `render_async/2` or `render_sequence/2`): the ring gains members. `node`
+  is this node or a connected node that runs `:ring_tracer`; the scene is
+  shipped there if the job has not used it yet. The new children hold no
+  atoms at first and find work through the job's strategy, as an idle
+  child does (the ring: help offers; steal: steals; master: the parent's
+  next atoms; static: none in this frame); in a sequence, later frames are
+  cut over every child. The image is the same, byte for byte. Returns the
+  new children's indices (after the job's first `:children`).
+
+  ## Options
+
+    * `:timeout` — milliseconds to wait for the job's answer (default
+      #{@job_call_timeout}); past it, `{:error, %RingTracer.Error{reason: :timeout}}`, and
+      the children may still join
+
+  Errors: `:job_ended` (the job is over, or ends before it answers),
+  `:invalid_option` (a count that is not a positive integer, more
+  children than a job may have, a bad option), `:node_unavailable` (a node
+  that cannot be reached, does not run the application, or could not
+  start the children).
+  """
+  @spec grow(%{:pid => pid(), optional(atom()) => term()}, node(), pos_integer(), keyword()) ::
+          {:ok, [non_neg_integer()]} | {:error, Error.t()}
+  def grow(%{pid: pid} = _handle, node, count, opts \\ []) when is_pid(pid) do
+    with {:ok, timeout} <- job_call_timeout(opts),
+         :ok <- check_count(count),
+         :ok <- check_node(node),
+         :ok <- RingTracer.Cluster.check([node]) do
+      job_call(pid, timeout, fn ref -> {:grow, ref, node, count} end)
+    end
+  end
+
+  @doc """
+  The children of a running job (a handle of `render_async/2` or
+  `render_sequence/2`) on `node` leave its ring: each stops, and the atoms
+  it had not traced are handed to the others, as a lost child's are (its
+  statistics stay in the result, and it is no failure). The image is the
+  same. Returns the indices of the children that leave (none when the job
+  has none on `node`). A job whose every child leaves fails, as one that
+  lost every child does.
+
+  ## Options
+
+    * `:timeout` — milliseconds to wait for the job's answer (default
+      #{@job_call_timeout})
+
+  Errors: `:job_ended`, `:invalid_option`, `:timeout`.
+  """
+  @spec shrink(%{:pid => pid(), optional(atom()) => term()}, node(), keyword()) ::
+          {:ok, [non_neg_integer()]} | {:error, Error.t()}
+  def shrink(%{pid: pid} = _handle, node, opts \\ []) when is_pid(pid) do
+    with {:ok, timeout} <- job_call_timeout(opts),
+         :ok <- check_node(node) do
+      job_call(pid, timeout, fn ref -> {:shrink, ref, node} end)
+    end
+  end
+
+  defp job_call_timeout(opts) do
+    case Keyword.get(opts, :timeout, @job_call_timeout) do
+      t when (is_integer(t) and t > 0) or t == :infinity ->
+        {:ok, t}
+
+      t ->
+        {:error,
+         Error.new(
+           :invalid_option,
+           "option :timeout must be a positive integer or :infinity, got: #{inspect(t)}"
+         )}
+    end
+  end
+
+  defp check_count(count) when is_integer(count) and count > 0, do: :ok
+
+  defp check_count(count),
+    do:
+      {:error,
+       Error.new(:invalid_option, "count must be a positive integer, got: #{inspect(count)}")}
+
+  defp check_node(node) when is_atom(node) and node not in [nil, true, false], do: :ok
+
+  defp check_node(node),
+    do: {:error, Error.new(:invalid_option, "node must be a node name, got: #{inspect(node)}")}
+
+  # A request to a job's parent, through its forwarder (which holds it until
+  # the parent is known). The reply comes to an alias of the monitor on the
+  # forwarder: once the call is over, a late reply is dropped.
+  defp job_call(forwarder, timeout, request) do
+    ref = :erlang.monitor(:process, forwarder, [{:alias, :demonitor}])
+    send(forwarder, {:job_request, request.(ref)})
+
+    receive do
+      {^ref, reply} ->
+        Process.demonitor(ref, [:flush])
+        job_reply(reply)
+
+      {:DOWN, ^ref, _, _, _} ->
+        job_reply({:error, :job_ended})
+    after
+      timeout ->
+        Process.demonitor(ref, [:flush])
+        {:error, Error.new(:timeout, "the job did not answer within #{timeout} ms")}
+    end
+  end
+
+  defp job_reply({:ok, indices}), do: {:ok, indices}
+  defp job_reply({:error, :job_ended}), do: {:error, Error.new(:job_ended, "the job has ended")}
+  defp job_reply({:error, {reason, message}}), do: {:error, Error.new(reason, message)}
 
   @doc """
   Cancels a render started with `render_async/2`: the job's parent, children
@@ -504,7 +634,7 @@ defmodule RingTracer do
     end
   end
 
-  defp run(%Scene{} = scene, settings, opts, extra \\ []) do
+  defp run(%Scene{} = scene, settings, opts, extra) do
     run(
       scene.source,
       settings,

@@ -14,6 +14,7 @@ defmodule RingTracer.Error do
   | `:render_failed` | the job could not complete (a crash, a failed atom) |
   | `:timeout` | the render did not finish within `:timeout` |
   | `:cancelled` | `RingTracer.cancel/1` stopped the render |
+  | `:job_ended` | `RingTracer.grow/4` or `shrink/3` reached a job that is over |
   | `:not_running` | the `:ring_tracer` application is not running |
   | `:node_unavailable` | a node given in `:nodes` cannot host children (the message says why) |
   | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |

@@ -122,8 +122,9 @@ defmodule RingTracer.Strategy do
   @doc """
   A message the child does not know itself, or one of the child's news:
   `{:siblings_died, dead}` once the parent has re-linked the ring around
-  dead siblings. Default: atoms handed over are queued, anything else is
-  ignored.
+  dead siblings, `{:siblings_joined, joined}` once siblings joined a
+  running job (the view's `ring_size` counts them). Default: atoms handed
+  over are queued, anything else is ignored.
   """
   @callback handle_message(term(), View.t(), state()) :: result(effect())
 
@@ -148,6 +149,17 @@ defmodule RingTracer.Strategy do
   strip of a child that died is spread over the living).
   """
   @callback parent_frame(ParentView.t(), state(), frame :: pos_integer()) ::
+              result(parent_effect())
+
+  @doc """
+  The parent, once children `joined` (indices from the view's `size`
+  before the join) have joined the running job (`RingTracer.grow/4`): they
+  are linked into the ring and hold no atoms; each is told `idle/2` as it
+  starts, and finds work through its strategy. Default: nothing (the ring
+  and steal find work through their siblings, static has none to find;
+  master hands them atoms here).
+  """
+  @callback parent_joined(ParentView.t(), state(), joined :: [non_neg_integer()]) ::
               result(parent_effect())
 
   @doc """
@@ -187,6 +199,9 @@ defmodule RingTracer.Strategy do
         do: {state, RingTracer.Strategy.strips(view, frame)}
 
       @impl RingTracer.Strategy
+      def parent_joined(_view, state, _joined), do: {state, []}
+
+      @impl RingTracer.Strategy
       def parent_info(_message, _view, state), do: {state, []}
 
       defoverridable initial_atoms: 3,
@@ -197,22 +212,49 @@ defmodule RingTracer.Strategy do
                      parent_start: 2,
                      parent_atom_done: 3,
                      parent_frame: 3,
+                     parent_joined: 3,
                      parent_info: 3
     end
   end
 
   @doc """
   Every child's strip of frame `frame`, as the parent's hand-outs (those of
-  dead children too: the parent spreads them over the living).
+  dead children too: the parent spreads them over the living). In a ring
+  that children joined (the view's `size` above the layout's children),
+  the frame is cut alike into `size` strips (contiguous, or interleaved as
+  the layout's order is), so that the children that joined trace later
+  frames too.
 
       iex> layout = RingTracer.Layout.new(8, 1, 2, 2) |> RingTracer.Layout.with_frames(3)
       iex> view = %RingTracer.Strategy.ParentView{spec: %{layout: layout}, pid: self()}
       iex> RingTracer.Strategy.strips(view, 2)
       [{:hand_out, 0, [8, 9]}, {:hand_out, 1, [10, 11]}]
+      iex> RingTracer.Strategy.strips(%{view | size: 3}, 2)
+      [{:hand_out, 0, [8]}, {:hand_out, 1, [9]}, {:hand_out, 2, [10, 11]}]
   """
   @spec strips(ParentView.t(), non_neg_integer()) :: [parent_effect()]
-  def strips(%ParentView{spec: %{layout: layout}}, frame) do
+  def strips(%ParentView{spec: %{layout: layout}, size: size}, frame)
+      when size <= layout.children do
     for i <- 0..(layout.children - 1), do: {:hand_out, i, Layout.strip(layout, i, frame)}
+  end
+
+  def strips(%ParentView{spec: %{layout: layout}, size: size}, frame) do
+    atoms = Layout.frame_atoms(layout, frame)
+    m = Range.size(atoms)
+
+    for i <- 0..(size - 1) do
+      share =
+        case layout.order do
+          :strips ->
+            Enum.slice(atoms, div(i * m, size), div((i + 1) * m, size) - div(i * m, size))
+
+          :interleaved ->
+            Enum.to_list((atoms.first + i)..atoms.last//size)
+        end
+
+      {:hand_out, i, share}
+    end
+    |> Enum.reject(&(elem(&1, 2) == []))
   end
 
   @doc """

@@ -18,6 +18,12 @@ defmodule RingTracer.Telemetry do
     * `[:ring_tracer, :frame, :stop]` — a sequence's frame is complete:
       measurements `%{at_us: job_us, elapsed_us: us}`, metadata `%{job: id,
       frame: %RingTracer.Frame{}}` (its pixels included)
+    * `[:ring_tracer, :job, :grown]` — children joined the running job
+      (`RingTracer.grow/4`): measurements `%{children: count, system_time:
+      native}`, metadata `%{job: id, node: node, joined: [index], size:
+      children_now}`; `[:ring_tracer, :job, :shrunk]` — a node's children
+      leave it (`RingTracer.shrink/3`): metadata `%{job: id, node: node,
+      leaving: [index]}`
     * `[:ring_tracer, :job, :stop]` — measurements `%{duration: native}`,
       metadata `%{job: id, outcome: :ok | :error}`
 

@@ -6,13 +6,15 @@ defmodule RingTracer.ProtocolPropertyTest do
   parts) or not, message delays (which reorder messages: `RingTracer.Test.DelayedStrategy`
   and `RingTracer.Test.FaultyKernel`), child kills and
   how soon offers may wait at a child (`:hold_after`), against the real
-  parent, children and kernel. Every job ends with the single-process
+  parent, children and kernel, and children that join the running job
+  (`RingTracer.grow/4`) at random points. Every job ends with the single-process
   image, every pixel traced once in the records the parent kept (whole
   atoms or pieces tiling them), no process left behind, and, after kills,
   at most twice the messages of the same job without them (no storms).
 
-  A third property runs sequences (`RingTracer.render_sequence/2`): every
-  frame once, each the frame rendered alone, across frame boundaries.
+  A third property runs sequences (`RingTracer.render_sequence/2`), with
+  children that join too: every frame once, each the frame rendered
+  alone, across frame boundaries.
 
   CI runs 1,000 cases (200 missed a hang that 2,000 found; sequences 200); `PROPER_NUMTESTS=5000 mix test
   test/ring_tracer/protocol_property_test.exs --include slow` runs more.
@@ -33,16 +35,18 @@ defmodule RingTracer.ProtocolPropertyTest do
     {integer(1, 7), integer(1, 6), integer(1, 20), integer(1, 14), list(integer(1, 3)),
      oneof([:ring, :static, :master, :steal]), integer(0, 4), integer(0, 2),
      integer(0, 1_000_000), integer(1, 3), oneof([:strips, :interleaved]),
-     oneof([nil, true, false]), boolean()}
+     oneof([nil, true, false]), boolean(), integer(0, 2)}
   end
 
   test "property: every schedule ends with the single-process image and no process left" do
     numtests = String.to_integer(System.get_env("PROPER_NUMTESTS", "1000"))
     references = :ets.new(:references, [:set, :public])
+    # Children that joined a job and traced atoms of it, over every case.
+    joined = :counters.new(1, [])
 
     RingTracer.PropErCase.check(
       gen(),
-      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout, aim, split} =
+      fn {n, k, w, h, speeds, strategy, chaos, kills, seed, hold_after, layout, aim, split, joins} =
            case_ ->
         if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
         :rand.seed(:exsss, {seed, n, k})
@@ -74,16 +78,20 @@ defmodule RingTracer.ProtocolPropertyTest do
         opts = delayed(job, chaos)
 
         kill_at = Enum.take_random(1..(n * k), kills)
+        # Children join at random points: before the first atom (0) or as
+        # an atom arrives.
+        join_at = Enum.take_random(0..(n * k), joins)
 
-        # The same job without kills, for the bound on messages.
+        # The same job without kills or joins, for the bound on messages.
         clean =
-          if kill_at != [] do
+          if kill_at != [] or join_at != [] do
             {:ok, job} = RingTracer.render_async(TestScenes.path(@scene), opts)
-            await(job.id, [])
+            await(job, [], [])
           end
 
         {:ok, job} = RingTracer.render_async(TestScenes.path(@scene), opts)
-        result = await(job.id, kill_at)
+        if 0 in join_at, do: join(job, 0)
+        result = await(job, kill_at, join_at)
 
         ok =
           case result do
@@ -94,8 +102,10 @@ defmodule RingTracer.ProtocolPropertyTest do
               ids = Enum.map(r.atoms, & &1.atom)
               layout = RingTracer.Layout.new(w, h, n, k)
               lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
+              :counters.add(joined, 1, Enum.count(r.children, &(&1.index >= n and &1.traced > 0)))
 
               r.pixels == reference and length(r.failures) <= length(kill_at) and
+                length(r.children) <= n + 2 * length(join_at) and
                 ids == Enum.uniq(ids) and
                 (lost_records or RingTracer.Job.Coverage.tiles?(layout, ids)) and
                 (split or not Enum.any?(ids, &is_tuple/1)) and
@@ -127,6 +137,9 @@ defmodule RingTracer.ProtocolPropertyTest do
       end,
       numtests
     )
+
+    # The property is about joins too: children joined and traced atoms.
+    assert :counters.get(joined, 1) > 0
   end
 
   test "property: cuts of atoms being traced in parts tile the image, with message delays and kills" do
@@ -201,7 +214,8 @@ defmodule RingTracer.ProtocolPropertyTest do
     gen =
       {integer(1, 5), integer(1, 4), integer(1, 12), integer(1, 9), list(integer(1, 48)),
        integer(1, 3), oneof([:ring, :static, :master, :steal]), oneof([:strips, :interleaved]),
-       boolean(), integer(0, 3), integer(0, 2), list(integer(1, 3)), integer(0, 1_000_000)}
+       boolean(), integer(0, 3), integer(0, 2), list(integer(1, 3)), integer(0, 1_000_000),
+       integer(0, 2)}
 
     references = :ets.new(:frame_references, [:set, :public])
     scene = "whitted_orbit.toml"
@@ -209,7 +223,8 @@ defmodule RingTracer.ProtocolPropertyTest do
 
     RingTracer.PropErCase.check(
       gen,
-      fn {n, k, w, h, picks, window, strategy, layout, split, chaos, kills, speeds, seed} = case_ ->
+      fn {n, k, w, h, picks, window, strategy, layout, split, chaos, kills, speeds, seed, joins} =
+           case_ ->
         if System.get_env("PROPER_VERBOSE"), do: IO.inspect(case_)
         :rand.seed(:exsss, {seed, n, k})
         numbers = picks |> Enum.take(4) |> Enum.uniq() |> Enum.sort()
@@ -232,6 +247,7 @@ defmodule RingTracer.ProtocolPropertyTest do
 
         total = n * k * length(numbers)
         kill_at = Enum.take_random(1..total, kills)
+        join_at = Enum.take_random(0..total, joins)
 
         {:ok, job} =
           RingTracer.render_sequence(
@@ -239,7 +255,8 @@ defmodule RingTracer.ProtocolPropertyTest do
             [frames: numbers, window: window] ++ opts
           )
 
-        {frames, final} = await_frames(job.id, kill_at, [])
+        if 0 in join_at, do: join(job, 0)
+        {frames, final} = await_frames(job, kill_at, join_at, [])
 
         ok =
           match?({:ok, _}, final) and Enum.map(frames, &elem(&1, 0)) |> Enum.sort() == numbers and
@@ -289,17 +306,28 @@ defmodule RingTracer.ProtocolPropertyTest do
     end
   end
 
+  # One or two children join the running job on this node; a job that has
+  # just ended answers :job_ended.
+  defp join(job, done) do
+    case RingTracer.grow(job, node(), 1 + rem(done, 2)) do
+      {:ok, _} -> :ok
+      {:error, %RingTracer.Error{reason: :job_ended}} -> :ok
+    end
+  end
+
   # The frames of a sequence as they come (a number twice stays twice, for
-  # the property to see), killing a child at the atoms counted in `kill_at`.
-  defp await_frames(id, kill_at, frames) do
+  # the property to see), killing a child at the atoms counted in `kill_at`
+  # and adding children at those in `join_at`.
+  defp await_frames(%{id: id} = job, kill_at, join_at, frames) do
     receive do
       {RingTracer, ^id, {:frame, n, frame}} ->
-        await_frames(id, kill_at, [{n, frame} | frames])
+        await_frames(job, kill_at, join_at, [{n, frame} | frames])
 
       {RingTracer, ^id, {:progress, done, _}} ->
         if done in kill_at, do: kill_a_child()
+        if done in join_at, do: join(job, done)
 
-        await_frames(id, kill_at, frames)
+        await_frames(job, kill_at, join_at, frames)
 
       {RingTracer, ^id, final} ->
         {frames, final}
@@ -322,17 +350,22 @@ defmodule RingTracer.ProtocolPropertyTest do
   # the last offer of each of the N children may walk N hops: N * N on top.
   defp no_storm?(_result, nil, _strategy, _n), do: true
 
+  #
+  # Children that joined (`grow/4`) count in N, and each costs the parent's
+  # news to every child and its own first offers or steals: 4 N more.
   defp no_storm?(result, {:ok, clean}, strategy, n) do
     total = fn r -> r.messages |> Map.values() |> Enum.map(& &1.count) |> Enum.sum() end
+    all = length(result.children)
+    joined = all - n
 
     sweeps =
       case strategy do
-        :steal -> 2 * n * (n - 1)
-        :ring -> n * n
+        :steal -> 2 * all * (all - 1)
+        :ring -> all * all
         _ -> 0
       end
 
-    ok = total.(result) <= 2 * total.(clean) + sweeps
+    ok = total.(result) <= 2 * total.(clean) + sweeps + 4 * all * joined
 
     if System.get_env("PROPER_VERBOSE") && not ok,
       do: IO.inspect({result.messages, clean.messages}, label: "storm")
@@ -342,12 +375,13 @@ defmodule RingTracer.ProtocolPropertyTest do
 
   defp no_storm?(_result, _clean, _strategy, _n), do: false
 
-  defp await(id, kill_at) do
+  defp await(%{id: id} = job, kill_at, join_at) do
     receive do
       {RingTracer, ^id, {:progress, done, _}} ->
         if done in kill_at, do: kill_a_child()
+        if done in join_at, do: join(job, done)
 
-        await(id, kill_at)
+        await(job, kill_at, join_at)
 
       {RingTracer, ^id, result} ->
         result

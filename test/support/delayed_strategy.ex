@@ -64,6 +64,10 @@ defmodule RingTracer.Test.DelayedStrategy do
     do: inner(view).parent_frame(inner_view(view), state, frame)
 
   @impl true
+  def parent_joined(view, state, joined),
+    do: inner(view).parent_joined(inner_view(view), state, joined)
+
+  @impl true
   def parent_info(message, view, state),
     do: inner(view).parent_info(message, inner_view(view), state)
 

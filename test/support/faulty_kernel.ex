@@ -4,7 +4,8 @@ defmodule RingTracer.Test.FaultyKernel do
   `:fail_pixel` fails as a kernel panic does (`RingTracer.Kernel.Native`
   turns a panic into `{:error, "kernel raised: ..."}`), every time it is
   traced; and, with `:jitter`, each atom's result waits up to that many
-  milliseconds more, drawn at random, before it goes to its child; and, with
+  milliseconds more, drawn at random, before it goes to its child (and
+  `:delay` milliseconds more, always); and, with
   `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) just
   before the parent prepares it, as a node that hangs while a job starts.
   """
@@ -43,6 +44,8 @@ defmodule RingTracer.Test.FaultyKernel do
       0 -> :ok
       max -> Process.sleep(:rand.uniform(max + 1) - 1)
     end
+
+    Process.sleep(Keyword.get(opts, :delay, 0))
 
     result
   end

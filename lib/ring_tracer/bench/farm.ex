@@ -124,7 +124,7 @@ defmodule RingTracer.Bench.Farm do
 
     first =
       for n <- joined do
-        Enum.find_value(Enum.reverse(atoms), fn {at, _, _, node} -> if node == n, do: at end)
+        Enum.find_value(Enum.reverse(atoms), fn {:atom, at, _, node} -> if node == n, do: at end)
       end
 
     join_ms = if Enum.all?(first, & &1), do: Enum.max(first) - t_join, else: nil

@@ -25,13 +25,14 @@ defmodule RingTracer.Farm.Runner do
   defmodule State do
     @moduledoc false
     @enforce_keys [:job, :head, :dir]
-    defstruct [:job, :head, :dir, :handle, nodes: []]
+    defstruct [:job, :head, :dir, :handle, :elastic, nodes: []]
 
     @type t :: %__MODULE__{
             job: RingTracer.Farm.Job.t(),
             head: pid(),
             dir: term(),
             handle: %{id: reference(), pid: pid()} | nil,
+            elastic: pid() | nil,
             nodes: [node()]
           }
   end
@@ -95,14 +96,12 @@ defmodule RingTracer.Farm.Runner do
 
   def handle_info({:grow, node, slots}, %State{} = state) do
     state = %{state | nodes: Enum.uniq(state.nodes ++ [node])}
-    _ = grow(state.handle, node, slots)
-    {:noreply, state}
+    {:noreply, elastic(state, {:grow, node, slots})}
   end
 
   def handle_info({:release, node}, %State{} = state) do
     state = %{state | nodes: List.delete(state.nodes, node)}
-    _ = shrink(state.handle, node)
-    {:noreply, state}
+    {:noreply, elastic(state, {:shrink, node})}
   end
 
   def handle_info(:stop, %State{handle: handle} = state) do
@@ -141,21 +140,37 @@ defmodule RingTracer.Farm.Runner do
     RingTracer.render_sequence(scene, opts)
   end
 
-  # The elastic ring's calls, where this build has them.
-  defp grow(nil, _node, _slots), do: :ok
+  # The elastic ring's calls (`RingTracer.grow/4`, `shrink/3`) are made by a
+  # process of the runner's, one at a time in the order the head asked, so
+  # that the runner goes on storing frames during a grow, and a worker let
+  # go while its grow runs leaves after it. It ends with the runner.
+  defp elastic(%State{handle: nil} = state, _call), do: state
 
-  defp grow(handle, node, slots) do
-    if function_exported?(RingTracer, :grow, 3),
-      do: apply(RingTracer, :grow, [handle, node, slots]),
-      else: :ok
+  defp elastic(%State{elastic: nil, handle: handle} = state, call) do
+    runner = self()
+
+    pid =
+      spawn(fn ->
+        ref = Process.monitor(runner)
+        elastic_loop(handle, ref)
+      end)
+
+    elastic(%{state | elastic: pid}, call)
   end
 
-  defp shrink(nil, _node), do: :ok
+  defp elastic(%State{elastic: pid} = state, call) do
+    send(pid, call)
+    state
+  end
 
-  defp shrink(handle, node) do
-    if function_exported?(RingTracer, :shrink, 2),
-      do: apply(RingTracer, :shrink, [handle, node]),
-      else: :ok
+  defp elastic_loop(handle, ref) do
+    receive do
+      {:grow, node, slots} -> _ = RingTracer.grow(handle, node, slots)
+      {:shrink, node} -> _ = RingTracer.shrink(handle, node)
+      {:DOWN, ^ref, _, _, _} -> exit(:normal)
+    end
+
+    elastic_loop(handle, ref)
   end
 
   # A scene or an option that is not valid fails the job for good; a ring

@@ -470,7 +470,8 @@ defmodule RingTracer.Job.Child do
     Process.monitor(parent)
     {kernel, _} = spec.kernel
     {strategy, options} = spec.strategy
-    queue = strategy.initial_atoms(spec.layout, index, options)
+    # A child that joins a running job (`RingTracer.grow/4`) starts with none.
+    queue = RingTracer.Job.Ledger.initial_atoms({spec.layout, spec.strategy}, index)
 
     state = %__MODULE__{
       spec: spec,
@@ -612,6 +613,16 @@ defmodule RingTracer.Job.Child do
   defp handle({:ring_changed, ring}, %{left: left} = state) when left != nil do
     state = %{state | left: ring.left, left_index: ring.left_index, dead: ring.dead}
     {:noreply, strategy_message(state, {:siblings_died, ring.dead})}
+  end
+
+  # Siblings joined the ring (`RingTracer.grow/4`): the ring is larger, and
+  # the lowest child's left sibling is now the highest that joined.
+  defp handle({:ring_grown, ring}, %{left: left} = state) when left != nil do
+    state = %{state | ring_size: ring.size}
+
+    state = if ring.left, do: %{state | left: ring.left, left_index: ring.left_index}, else: state
+
+    {:noreply, strategy_message(state, {:siblings_joined, ring.joined})}
   end
 
   defp handle(msg, %{left: nil} = state),

@@ -129,11 +129,14 @@ defmodule RingTracer.Job.Ledger do
     Map.put(ledger, key, Map.put(Map.fetch!(ledger, key), who, mine))
   end
 
-  @doc "The atoms child `index` may hold (traced ones included), in order."
+  @doc """
+  The atoms child `index` may hold (traced ones included), in order. A
+  child that joined the running job (an index beyond the layout's
+  children) started with none.
+  """
   @spec held(t(), non_neg_integer()) :: [Layout.atom_id()]
   def held(ledger, index) do
-    {strategy, options} = ledger.strategy
-    initial = MapSet.new(strategy.initial_atoms(ledger.layout, index, options))
+    initial = MapSet.new(initial_atoms(ledger, index))
     moves = Map.get(ledger.moves, index, %{})
 
     initial
@@ -143,6 +146,20 @@ defmodule RingTracer.Job.Ledger do
     end)
     |> Enum.sort()
   end
+
+  @doc """
+  The atoms child `index` holds at the start: its strategy's initial atoms,
+  none for a child that joined the running job (`RingTracer.grow/4`).
+  """
+  @spec initial_atoms(t() | {Layout.t(), RingTracer.Strategy.t()}, non_neg_integer()) ::
+          [Layout.atom_id()]
+  def initial_atoms(%__MODULE__{layout: layout, strategy: strategy}, index),
+    do: initial_atoms({layout, strategy}, index)
+
+  def initial_atoms({%Layout{children: n}, _strategy}, index) when index >= n, do: []
+
+  def initial_atoms({layout, {strategy, options}}, index),
+    do: strategy.initial_atoms(layout, index, options)
 
   @doc """
   Forgets the moves of the atoms in `atoms` (a frame's, once it is

@@ -33,6 +33,22 @@ defmodule RingTracer.Job.Parent do
   held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
   is re-linked around it; if an atom fails for good, or every child dies,
   the job fails with the reason.
+
+  ## An elastic ring
+
+  Children can join a running job (`{:grow, from, ref, node, count}`, from
+  `RingTracer.grow/4`): the parent prepares the node if the job has not
+  used it yet (the scene shipped and pinned there), starts the children
+  with the next indices and no atoms, publishes the larger ring on every
+  node, sends each new child `{:ring, ...}` with the highest child before
+  it as its left sibling, and tells the others `{:ring_grown, ...}` (the
+  lowest child's left sibling is now the highest that joined). A new
+  child starts idle and finds work through its strategy
+  (`RingTracer.Strategy.parent_joined/3` for the parent's side); later
+  frames are cut over every child. Children leave (`{:shrink, from, ref,
+  node}`, from `RingTracer.shrink/3`) by the stop message: each reports
+  and stops, and the atoms it may have held are handed out again as a
+  dead child's are, without counting as a failure.
   """
   use GenServer, restart: :temporary
 
@@ -87,7 +103,13 @@ defmodule RingTracer.Job.Parent do
     redone: 0,
     node_bytes: %{},
     helpers: [],
-    reported: 0
+    reported: 0,
+    size: 0,
+    pids: %{},
+    placement: %{},
+    watched: MapSet.new(),
+    leaving: MapSet.new(),
+    departed: %{}
   ]
 
   @typedoc """
@@ -101,7 +123,11 @@ defmodule RingTracer.Job.Parent do
   (with `ack`) each frame's index by its number in the scene (`numbers`), who traced the atoms in flight and how many each child
   traced, how many atoms are missing, the ledger of where atoms are, the
   dead children, and what it reports (`summaries`: the frames sent, newest
-  first).
+  first). `size` is how many children the job has started (indices
+  `0..size - 1`, those that joined included), `pids` and `placement`
+  every one's pid and node, `watched` the nodes the liveness watch covers,
+  `leaving` the children asked to leave and `departed` the reports of
+  those that left.
   """
   @type t :: %__MODULE__{
           spec: Spec.t(),
@@ -134,7 +160,13 @@ defmodule RingTracer.Job.Parent do
           redone: non_neg_integer(),
           node_bytes: %{node() => non_neg_integer()},
           helpers: [{pid(), reference()}],
-          reported: non_neg_integer()
+          reported: non_neg_integer(),
+          size: non_neg_integer(),
+          pids: %{non_neg_integer() => pid()},
+          placement: %{non_neg_integer() => node()},
+          watched: MapSet.t(node()),
+          leaving: MapSet.t(non_neg_integer()),
+          departed: %{non_neg_integer() => Child.report()}
         }
 
   @typedoc """
@@ -223,6 +255,7 @@ defmodule RingTracer.Job.Parent do
       options: options,
       pid: self(),
       children: state.children,
+      size: state.size,
       traced_by: state.traced_by,
       now: Child.job_time(state)
     }
@@ -259,7 +292,8 @@ defmodule RingTracer.Job.Parent do
     {strategy, _} = spec.strategy
 
     # Where acknowledgements go (before any frame, from this process).
-    if spec.ack, do: send(spec.progress || spec.caller, {@reply_tag, spec.id, {:parent, self()}})
+    if spec.ack or spec.announce,
+      do: send(spec.progress || spec.caller, {@reply_tag, spec.id, {:parent, self()}})
 
     state = %__MODULE__{
       spec: spec,
@@ -310,6 +344,7 @@ defmodule RingTracer.Job.Parent do
     # timeout, so that preparing it or starting a child there fails then,
     # not after distribution's minute.
     _ = RingTracer.Cluster.Liveness.start(placement, state.spec.liveness)
+    state = %{state | watched: MapSet.new(placement)}
 
     prepared =
       placement
@@ -350,8 +385,17 @@ defmodule RingTracer.Job.Parent do
       {:ok, list} ->
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
-        state = %{state | children: children, monitors: monitors}
-        publish(state, placement)
+
+        state = %{
+          state
+          | children: children,
+            monitors: monitors,
+            size: n,
+            pids: children,
+            placement: placement |> Enum.with_index() |> Map.new(fn {node, i} -> {i, node} end)
+        }
+
+        publish(state)
 
         state =
           Enum.reduce(children, state, fn {i, pid}, st ->
@@ -384,16 +428,17 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  # The ring, once per node its children run on (`RingTracer.Job.Directory`).
-  # A node that does not answer within the liveness timeout loses its
-  # children: they are killed, and the job goes on as after any death.
-  defp publish(state, placement) do
-    n = map_size(state.children)
-    pids = List.to_tuple(for i <- 0..(n - 1), do: Map.fetch!(state.children, i))
+  # The ring, once per node its living children run on
+  # (`RingTracer.Job.Directory`): every child's pid by index, those of dead
+  # children included. A node that does not answer within the liveness
+  # timeout loses its children: they are killed, and the job goes on as
+  # after any death.
+  defp publish(state) do
+    pids = List.to_tuple(for i <- 0..(state.size - 1), do: Map.fetch!(state.pids, i))
 
-    placement
-    |> Enum.with_index()
-    |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
+    state.children
+    |> Map.keys()
+    |> Enum.group_by(&Map.fetch!(state.placement, &1))
     |> Enum.each(fn {node, indices} ->
       case Directory.publish(node, state.spec.id, self(), pids, state.spec.liveness) do
         :ok -> :ok
@@ -426,6 +471,30 @@ defmodule RingTracer.Job.Parent do
   end
 
   @impl GenServer
+  # `RingTracer.grow/4` and `shrink/3`: `ref` is an alias of the caller's.
+  def handle_info({:grow, ref, node, count}, %{stopping: nil} = state)
+      when is_integer(count) and count > 0 do
+    {reply, state} = grow(state, node, count)
+    :erlang.send(ref, {ref, reply})
+    {:noreply, state}
+  end
+
+  def handle_info({:shrink, ref, node}, %{stopping: nil} = state) do
+    {reply, state} = shrink(state, node)
+    :erlang.send(ref, {ref, reply})
+    {:noreply, state}
+  end
+
+  def handle_info({:grow, ref, _node, _count}, state), do: ended(state, ref)
+  def handle_info({:shrink, ref, _node}, state), do: ended(state, ref)
+
+  # A child that was asked to leave reports as it stops.
+  def handle_info({:child_stopped, index, report}, %{stopping: nil} = state) do
+    if MapSet.member?(state.leaving, index),
+      do: {:noreply, %{state | departed: Map.put(state.departed, index, report)}},
+      else: {:noreply, state}
+  end
+
   def handle_info({:atom_done, child, atom, pixels, rays, us}, state) do
     case add(state, atom) do
       # A second copy (an atom handed out again after a failure whose first
@@ -547,6 +616,183 @@ defmodule RingTracer.Job.Parent do
             {:noreply, run_strategy(state, &state.strategy.parent_atom_done(&1, &2, child))}
         end
     end
+  end
+
+  ## An elastic ring
+
+  defp ended(state, ref) do
+    :erlang.send(ref, {ref, {:error, :job_ended}})
+    {:noreply, state}
+  end
+
+  defp check_size(size, count) do
+    case RingTracer.Job.Elastic.check_size(size, count) do
+      :ok -> :ok
+      {:error, message} -> {:error, {:invalid_option, message}}
+    end
+  end
+
+  # `count` children join the ring on `node`, with the next indices.
+  defp grow(state, node, count) do
+    first = state.size
+    joined = Enum.to_list(first..(first + count - 1))
+
+    with :ok <- check_size(first, count),
+         {:ok, state} <- prepare_node(state, node),
+         {:ok, started} <- start_joined(state, node, joined) do
+      state = state |> watch(node) |> splice(node, started)
+
+      RingTracer.Telemetry.execute(
+        [:ring_tracer, :job, :grown],
+        %{children: length(joined), system_time: System.system_time()},
+        %{job: state.spec.id, node: node, joined: joined, size: state.size}
+      )
+
+      {{:ok, joined}, run_strategy(state, &state.strategy.parent_joined(&1, &2, joined))}
+    else
+      {:error, message} -> {{:error, message}, state}
+    end
+  end
+
+  defp prepare_node(state, node) do
+    %Spec{kernel: {kernel, kernel_opts}} = state.spec
+
+    if Map.has_key?(state.node_bytes, node) do
+      {:ok, state}
+    else
+      case kernel.prepare_node(state.spec, kernel_opts, node) do
+        {:ok, bytes} ->
+          {:ok, %{state | node_bytes: Map.put(state.node_bytes, node, bytes)}}
+
+        {:error, message} ->
+          {:error, {:node_unavailable, "could not prepare #{node}: #{message}"}}
+      end
+    end
+  end
+
+  defp start_joined(state, node, joined) do
+    speeds = List.to_tuple(state.spec.speeds)
+
+    child_spec = %{
+      state.spec
+      | source: RingTracer.Scene.Source.strip(state.spec.source),
+        nodes: []
+    }
+
+    Enum.reduce_while(joined, {:ok, []}, fn i, {:ok, acc} ->
+      case Child.start(node, %{child_spec | speeds: [Spec.speed(speeds, i)]}, i, self()) do
+        {:ok, pid} ->
+          {:cont, {:ok, acc ++ [{i, pid}]}}
+
+        other ->
+          for {_, pid} <- acc, do: Process.exit(pid, :kill)
+
+          why =
+            case other do
+              {:error, {:exit, reason}} ->
+                RingTracer.Cluster.call_failure(node, reason, :infinity)
+
+              other ->
+                inspect(other)
+            end
+
+          {:halt, {:error, {:node_unavailable, "could not start child #{i} on #{node}: #{why}"}}}
+      end
+    end)
+  end
+
+  # The liveness watch, on a node the job had not used.
+  defp watch(state, node) do
+    if MapSet.member?(state.watched, node) do
+      state
+    else
+      _ = RingTracer.Cluster.Liveness.start([node], state.spec.liveness)
+      %{state | watched: MapSet.put(state.watched, node)}
+    end
+  end
+
+  # The new children into the ring: published on every node, linked after
+  # the highest living child, the lowest one's left sibling now the
+  # highest new one, everybody told the ring's new size.
+  defp splice(state, node, started) do
+    old = state.children |> Map.keys() |> Enum.sort()
+    joined = Enum.map(started, &elem(&1, 0))
+
+    state = %{
+      state
+      | children: Map.merge(state.children, Map.new(started)),
+        pids: Map.merge(state.pids, Map.new(started)),
+        monitors:
+          Map.merge(
+            state.monitors,
+            Map.new(started, fn {i, pid} -> {Process.monitor(pid), i} end)
+          ),
+        placement: Map.merge(state.placement, Map.new(joined, &{&1, node})),
+        size: state.size + length(started)
+    }
+
+    publish(state)
+    lefts = RingTracer.Job.Elastic.lefts(old, joined)
+
+    state =
+      Enum.reduce(joined, state, fn i, st ->
+        left = Map.fetch!(lefts, i)
+        ring = %{left: Map.fetch!(st.pids, left), left_index: left, size: st.size, t0: st.t0}
+        send_counted(st, Map.fetch!(st.children, i), :control, {:ring, ring})
+      end)
+
+    Enum.reduce(old, state, fn i, st ->
+      {left, left_index} =
+        case lefts do
+          %{^i => left} -> {Map.fetch!(st.pids, left), left}
+          _ -> {nil, nil}
+        end
+
+      ring = %{left: left, left_index: left_index, size: st.size, joined: joined}
+      send_counted(st, Map.fetch!(st.children, i), :control, {:ring_grown, ring})
+    end)
+  end
+
+  # The living children on `node` leave: each gets the stop message,
+  # reports and stops; its atoms are handed out again when it is gone, as
+  # a dead child's (`child_lost/3`).
+  defp shrink(state, node) do
+    leaving =
+      for {i, pid} <- Enum.sort(state.children),
+          Map.fetch!(state.placement, i) == node,
+          not MapSet.member?(state.leaving, i),
+          do: {i, pid}
+
+    staying =
+      Enum.count(state.children, fn {i, _} -> not MapSet.member?(state.leaving, i) end) -
+        length(leaving)
+
+    if leaving != [] and staying <= 0,
+      do:
+        {{:error,
+          {:invalid_option,
+           "every remaining child of the job is on #{node}: none would stay (cancel the job instead)"}},
+         state},
+      else: leave(state, node, leaving)
+  end
+
+  defp leave(state, node, leaving) do
+    state =
+      Enum.reduce(leaving, state, fn {_i, pid}, st ->
+        send_counted(st, pid, :control, {:stop, self()})
+      end)
+
+    indices = Enum.map(leaving, &elem(&1, 0))
+
+    if indices != [] do
+      RingTracer.Telemetry.execute(
+        [:ring_tracer, :job, :shrunk],
+        %{children: length(indices), system_time: System.system_time()},
+        %{job: state.spec.id, node: node, leaving: indices}
+      )
+    end
+
+    {{:ok, indices}, %{state | leaving: MapSet.union(state.leaving, MapSet.new(indices))}}
   end
 
   ## Frames
@@ -860,9 +1106,8 @@ defmodule RingTracer.Job.Parent do
   defp placement(nodes, n) when length(nodes) == n, do: nodes
 
   defp node_summary(state, reports) do
-    placement = placement(state.spec.nodes, state.spec.layout.children)
-
-    placement
+    0..(state.size - 1)
+    |> Enum.map(&Map.fetch!(state.placement, &1))
     |> Enum.zip(reports)
     |> Enum.group_by(&elem(&1, 0), &elem(&1, 1))
     |> Map.new(fn {node, rs} ->
@@ -970,9 +1215,10 @@ defmodule RingTracer.Job.Parent do
     elapsed = (state.completed || now) - state.started
 
     reports =
-      for i <- 0..(spec.layout.children - 1) do
-        case state.dead do
-          %{^i => failure} -> dead_report(i, failure)
+      for i <- 0..(state.size - 1) do
+        case {state.departed, state.dead} do
+          {%{^i => report}, _} -> report
+          {_, %{^i => failure}} -> dead_report(i, failure)
           _ -> Map.get(stopping.reports, i)
         end
       end
@@ -1012,7 +1258,11 @@ defmodule RingTracer.Job.Parent do
              events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
              traffic: traffic,
              duplicates: state.duplicates,
-             failures: state.dead |> Map.values() |> Enum.sort_by(& &1.child),
+             failures:
+               state.dead
+               |> Map.drop(MapSet.to_list(state.leaving))
+               |> Map.values()
+               |> Enum.sort_by(& &1.child),
              redone: state.redone,
              nodes: node_summary(state, reports),
              layout: state.spec.layout.order

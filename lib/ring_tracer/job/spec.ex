@@ -8,7 +8,10 @@ defmodule RingTracer.Job.Spec do
   "Frames"); in a `sequence`, how many frames may be in flight at once
   (`window`), and the caller gets each frame as it completes instead of one
   image at the end; with `ack`, a frame leaves the window only once the
-  caller acknowledges it.
+  caller acknowledges it. With `announce` (jobs started through a handle,
+  `RingTracer.render_async/2` and `RingTracer.render_sequence/2`) the
+  parent tells the progress pid its own pid, so that the handle reaches
+  it (`RingTracer.grow/4`, `RingTracer.ack_frame/2`).
   """
 
   alias RingTracer.{Layout, Settings}
@@ -30,6 +33,7 @@ defmodule RingTracer.Job.Spec do
     window: 1,
     sequence: false,
     ack: false,
+    announce: false,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -48,6 +52,7 @@ defmodule RingTracer.Job.Spec do
           window: pos_integer(),
           sequence: boolean(),
           ack: boolean(),
+          announce: boolean(),
           liveness: pos_integer()
         }
 

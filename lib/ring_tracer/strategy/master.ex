@@ -5,7 +5,8 @@ defmodule RingTracer.Strategy.Master do
   atom result it sends doubles as the request for the next one. In a job
   of several frames, the parent queues each frame's atoms as it is
   released, and a child that asked while the queue was empty gets the new
-  frame's first atoms.
+  frame's first atoms. A child that joins a running job asks for two
+  atoms as the first ones did.
   """
   use RingTracer.Strategy
 
@@ -31,6 +32,11 @@ defmodule RingTracer.Strategy.Master do
 
   @impl true
   def parent_atom_done(view, state, index), do: serve(state, [index], view)
+
+  # Children that joined ask, as the first ones did, for two atoms each.
+  @impl true
+  def parent_joined(view, state, joined),
+    do: serve(state, for(_ <- 1..@ahead, i <- joined, do: i), view)
 
   @impl true
   def parent_frame(view, state, frame) do

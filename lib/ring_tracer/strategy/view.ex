@@ -5,8 +5,10 @@ defmodule RingTracer.Strategy.View do
 
     * `:job` — the job's id; `:options` — the strategy's options;
     * `:index`, `:pid` — the child's place in the ring and its pid;
-      `:ring_size` — children at the start; `:left`, `:left_index` — its
-      left sibling now; `:dead` — siblings known to be dead;
+      `:ring_size` — children in the ring so far, at the start and joined
+      since (`RingTracer.grow/4`; indices `0..ring_size - 1`);
+      `:left`, `:left_index` — its left sibling now; `:dead` — siblings
+      known to be dead or gone;
     * `:status` — `:working` (atoms queued or in its pipe), `:idle` (its
       strategy was told it ran out, and has not made it finish) or
       `:finished`;

@@ -106,7 +106,11 @@ defmodule RingTracer.Strategy.Ring do
   def parent_info(_message, _view, state), do: {state, []}
 
   defp board(view, %{work: work, heard_from: from} = board) when work != nil do
-    if Enum.all?(Map.keys(view.children), &MapSet.member?(from, &1)) do
+    # The children the layout has strips for: one that joined later
+    # (`RingTracer.grow/4`) may never trace an atom.
+    first = for i <- Map.keys(view.children), i < view.spec.layout.children, do: i
+
+    if Enum.all?(first, &MapSet.member?(from, &1)) do
       {loads, to} = Aim.board(view.spec.layout, work, view.traced_by, view.now)
 
       effects =
