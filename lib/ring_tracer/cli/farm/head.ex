@@ -127,7 +127,7 @@ defmodule RingTracer.CLI.Farm.Head do
     #{if queued > 0, do: "#{queued} job(s) resumed from the queue\n", else: ""}join it:    ringtracer worker --join #{node}
     submit:     ringtracer submit SCENE --out FILE --farm #{node}
     the queue:  ringtracer jobs --farm #{node}
-    #{dashboard}"""
+    """ <> dashboard
   end
 
   @doc """
