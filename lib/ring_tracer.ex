@@ -198,7 +198,7 @@ defmodule RingTracer do
   """
   @spec settings(Scene.t(), keyword()) :: {:ok, Settings.t()} | {:error, Error.t()}
   def settings(%Scene{} = scene, opts) do
-    {width, height} = size(scene, opts[:width], opts[:height])
+    {width, height} = Scene.image_size(scene, opts[:width], opts[:height])
 
     settings = %Settings{
       width: width,
@@ -226,12 +226,6 @@ defmodule RingTracer do
   end
 
   defp region({x0, y0, x1, y1}, _w, _h), do: {x0, y0, x1 - x0, y1 - y0}
-
-  # One side given: the other follows the scene's aspect ratio.
-  defp size(scene, nil, nil), do: {scene.width, scene.height}
-  defp size(scene, w, nil), do: {w, max(1, round(w * scene.height / scene.width))}
-  defp size(scene, nil, h), do: {max(1, round(h * scene.width / scene.height)), h}
-  defp size(_scene, w, h), do: {w, h}
 
   @doc """
   Starts a render and returns at once with a handle. The calling process then

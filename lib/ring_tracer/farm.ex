@@ -238,7 +238,7 @@ defmodule RingTracer.Farm do
          {:ok, priority} <- integer(farm, :priority, 0),
          {:ok, tags} <- tags(farm[:tags] || []),
          {:ok, max} <- max_workers(farm[:max_workers]) do
-      {width, height} = size(scene, render[:width], render[:height])
+      {width, height} = Scene.image_size(scene, render[:width], render[:height])
 
       {:ok,
        %Job{
@@ -257,13 +257,6 @@ defmodule RingTracer.Farm do
        }}
     end
   end
-
-  # The image's size as the render makes it (`RingTracer.render/2`): one
-  # side given, the other follows the scene's aspect ratio.
-  defp size(scene, nil, nil), do: {scene.width, scene.height}
-  defp size(scene, w, nil), do: {w, max(1, round(w * scene.height / scene.width))}
-  defp size(scene, nil, h), do: {max(1, round(h * scene.width / scene.height)), h}
-  defp size(_scene, w, h), do: {w, h}
 
   defp format(farm) do
     case {farm[:format], farm[:out] && String.downcase(Path.extname(farm[:out]))} do

@@ -61,6 +61,17 @@ defmodule RingTracer.Scene do
 
   @formats %{".nff" => "nff", ".toml" => "toml", ".obj" => "obj"}
 
+  @doc false
+  # The image's size a render makes of `scene` given `:width` and `:height`
+  # (either may be nil): one side given, the other follows the scene's
+  # aspect ratio.
+  @spec image_size(t(), pos_integer() | nil, pos_integer() | nil) ::
+          {pos_integer(), pos_integer()}
+  def image_size(scene, nil, nil), do: {scene.width, scene.height}
+  def image_size(scene, w, nil), do: {w, max(1, round(w * scene.height / scene.width))}
+  def image_size(scene, nil, h), do: {max(1, round(h * scene.width / scene.height)), h}
+  def image_size(_scene, w, h), do: {w, h}
+
   @doc """
   Reads and parses the scene file at `path`.
 
