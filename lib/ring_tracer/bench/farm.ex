@@ -7,8 +7,8 @@ defmodule RingTracer.Bench.Farm do
   A head in this VM (`RingTracer.Farm.start_head/1`, a folder of its own),
   one worker peer per `--speeds` factor (each emulating a machine that many
   times slower, one child a job) and a queue of 10 jobs from two users:
-  five sequences (`priv/scenes/whitted_orbit.toml`, frames 1-6, 160x120)
-  and five stills (`balls_s2.nff`, 256x256). Once the first frame is done,
+  five sequences (`priv/scenes/whitted_orbit.toml`, frames 1-6, 320x240)
+  and five stills (`balls_s2.nff`, 512x512). Once the first frame is done,
   one worker per `--joiners` factor joins (its VM started before, so its
   boot is not counted). Rows:
 
@@ -48,7 +48,7 @@ defmodule RingTracer.Bench.Farm do
     Peers.ensure_distributed()
 
     info(
-      "farm: 10 jobs (5 x 6 frames of whitted_orbit at 160x120, 5 stills of balls_s2 at 256x256) " <>
+      "farm: 10 jobs (5 x 6 frames of whitted_orbit at 320x240, 5 stills of balls_s2 at 512x512) " <>
         "from 2 users on #{length(speeds)} workers (speeds #{Enum.join(speeds, ",")}), " <>
         "#{length(joiners)} joining after the first frame (speeds #{Enum.join(joiners, ",")}); " <>
         "median of #{runs}; #{vm()}"
@@ -151,8 +151,8 @@ defmodule RingTracer.Bench.Farm do
 
       {:ok, id} =
         if i <= 5,
-          do: Farm.submit(node(), orbit, width: 160, height: 120, frames: 1..6, user: user),
-          else: Farm.submit(node(), balls, width: 256, height: 256, user: user)
+          do: Farm.submit(node(), orbit, width: 320, height: 240, frames: 1..6, user: user),
+          else: Farm.submit(node(), balls, width: 512, height: 512, user: user)
 
       id
     end
