@@ -45,8 +45,10 @@ defmodule RingTracer.CLI.Farm.LaunchedTest do
   test "a head, a worker joined, a submission that writes a PNG, and Ctrl-C ends them", ctx do
     head = "fhead_#{System.unique_integer([:positive])}"
     {head_port, head_pid} = start(ctx.dir, ["farm", "--sname", head])
-    out = until(head_port, "the queue:")
+    out = until(head_port, "dashboard:")
     assert out =~ "RingTracer farm head #{head}@localhost ready"
+    # The dashboard, on loopback by default, behind a token.
+    assert [_, url] = Regex.run(~r{dashboard:  (http://127\.0\.0\.1:\d+/[\w-]+/)\n}, out)
     assert out =~ "join it:    ringtracer worker --join #{head}@localhost"
 
     # The default folder, under the state folder, closed to others.
@@ -68,6 +70,15 @@ defmodule RingTracer.CLI.Farm.LaunchedTest do
     {0, text} = collect(jobs)
     assert text =~ ~r/^\s+1  done\s+1\/1 .* mine.nff$/m
     assert text =~ "workers (1):"
+
+    {:ok, _} = Application.ensure_all_started(:inets)
+
+    {:ok, {{_, 200, _}, _, json}} =
+      :httpc.request(:get, {String.to_charlist(url <> "state.json"), []}, [timeout: 5_000], [])
+
+    state = :jiffy.decode(json, [:return_maps])
+    assert [%{"state" => "done", "scene" => "mine.nff"}] = state["jobs"]
+    assert [%{"node" => "worker_" <> _}] = state["workers"]
 
     for {pid, port} <- [{worker_pid, worker_port}, {head_pid, head_port}] do
       {_, 0} = System.cmd("kill", ["-INT", "#{pid}"])
