@@ -10,7 +10,7 @@ defmodule RingTracer.Farm.Runner do
   # it tells the head `{:runner_frame, id, n}`, the ring's progress
   # (`{:runner_progress, id, atoms_done, atoms_total}`), on a head with a
   # dashboard its preview's address (`{:runner_preview, id, url}`) and,
-  # last, `{:runner_end, id, outcome}`.
+  # last, `{:runner_end, id, self(), outcome}`.
 
   use GenServer, restart: :temporary
 
@@ -47,6 +47,7 @@ defmodule RingTracer.Farm.Runner do
 
   @impl true
   def init({%Job{} = job, workers, dir, head}) do
+
     {:ok, %State{job: job, head: head, dir: dir, nodes: Enum.map(workers, &elem(&1, 0))},
      {:continue, {:start, workers}}}
   end
@@ -184,7 +185,7 @@ defmodule RingTracer.Farm.Runner do
   defp outcome(%Error{message: message}), do: {:retry, message}
 
   defp finish(%State{job: job, head: head} = state, outcome) do
-    send(head, {:runner_end, job.id, outcome})
+    send(head, {:runner_end, job.id, self(), outcome})
     {:stop, :normal, state}
   end
 end
