@@ -299,8 +299,14 @@ defmodule RingTracer.Farm.Head do
 
   defp stop_runner(state, id) do
     case state.running[id] do
-      nil -> state
-      run -> send(run.runner, :stop) && drop_run(state, id)
+      nil ->
+        state
+
+      # Synchronous (the runner cancels its ring as it terminates), so that
+      # no other runner of the job starts while this one still stores frames.
+      run ->
+        _ = DynamicSupervisor.terminate_child(Names.farm_runners(), run.runner)
+        drop_run(state, id)
     end
   end
 
