@@ -11,8 +11,8 @@ defmodule RingTracer.Chaos.Farm.Soak do
   byte-identical to the same frame rendered alone.
 
   A worker is killed or frozen only while at least two are up (the queue
-  never waits on no worker at all); a fault due after the last job ended,
-  or without a victim, is counted as skipped.
+  never waits on no worker at all): a fault without a victim is counted as
+  skipped, and one still due when the last job ended as late.
   """
 
   require Logger
@@ -78,7 +78,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
       try do
         {:ok, ids} = submit(Cluster.head(cluster), schedule, opts)
         deadline = started + opts[:timeout]
-        tally = Map.new(Schedule.kinds() ++ [:skipped, :dropped], &{&1, 0})
+        tally = Map.new(Schedule.kinds() ++ [:skipped, :late, :dropped], &{&1, 0})
         run = %{cluster: cluster, ids: ids, faults: schedule.faults, tally: tally}
         run = drive(run, opts, deadline, on_event)
         {cluster, _} = Cluster.thaw(run.cluster, :all)
@@ -143,8 +143,8 @@ defmodule RingTracer.Chaos.Farm.Soak do
 
         cond do
           Enum.all?(mine, &(&1.state in [:done, :failed, :cancelled])) ->
-            skipped = length(run.faults)
-            %{run | faults: [], tally: Map.update!(run.tally, :skipped, &(&1 + skipped))}
+            late = length(run.faults)
+            %{run | faults: [], tally: Map.update!(run.tally, :late, &(&1 + late))}
 
           System.monotonic_time(:millisecond) > deadline ->
             on_event.("the queue did not end in time")
@@ -245,7 +245,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
       {"head restarts (kill -9)", f.head_kill},
       {"workers killed / frozen / added",
        "#{f.worker_kill} / #{f.worker_freeze} / #{f.worker_add}"},
-      {"faults skipped (no victim, or the queue had ended)", f.skipped},
+      {"faults skipped: no victim / the queue had ended", "#{f.skipped} / #{f.late}"},
       {"workers down after a freeze", f.dropped},
       {"frames lost", v.lost},
       {"frames stored twice", v.twice},
