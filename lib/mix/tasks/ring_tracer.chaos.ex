@@ -41,7 +41,7 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   ## Farm mode
 
       mix ring_tracer.chaos --farm [--seed 1] [--jobs 60] [--workers 3]
-                                   [--width 48] [--height 36] [--speed 30]
+                                   [--width 48] [--height 36] [--speed 300]
                                    [--freeze 3000] [--duration MS] [--verbose]
 
   A farm head and `--workers` workers (peer nodes), a queue of `--jobs`

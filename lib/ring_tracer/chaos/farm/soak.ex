@@ -4,8 +4,8 @@ defmodule RingTracer.Chaos.Farm.Soak do
   workers on this machine (`RingTracer.Chaos.Farm.Cluster`), a queue of
   jobs (`RingTracer.Chaos.Farm.Schedule`: stills and short sequences from
   two users), and faults on the seed's schedule, each due when the farm has
-  stored so many frames: the head killed (SIGKILL) and started again,
-  workers killed, frozen and added. At the end every frame the head stored
+  stored so many frames (and one more since the previous fault): the head
+  killed (SIGKILL) and started again, workers killed, frozen and added. At the end every frame the head stored
   is fetched and hashed, and `RingTracer.Chaos.Farm.Checker` gives the
   verdict: every job done, no frame lost, none stored twice, every frame
   byte-identical to the same frame rendered alone.
@@ -44,7 +44,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
     workers: 3,
     width: 48,
     height: 36,
-    speed: 30,
+    speed: 300,
     freeze: 3_000,
     timeout: 1_800_000,
     log_level: :error
@@ -59,7 +59,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
     * `:workers` — workers at the start (default 3)
     * `:width`, `:height` — every frame's size (default 48 x 36)
     * `:speed` — each worker emulates a machine this many times slower
-      (default 30), so that faults land while frames are traced
+      (default 300), so that faults land while frames are traced
     * `:freeze` — how long a frozen worker stays stopped, ms (default 3000)
     * `:timeout` — the longest the queue may take, ms (default 30 min)
     * `:log_level` — the peers' logger level (default `:error`)
@@ -79,7 +79,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
         {:ok, ids} = submit(Cluster.head(cluster), schedule, opts)
         deadline = started + opts[:timeout]
         tally = Map.new(Schedule.kinds() ++ [:skipped, :late, :dropped], &{&1, 0})
-        run = %{cluster: cluster, ids: ids, faults: schedule.faults, tally: tally}
+        run = %{cluster: cluster, ids: ids, faults: schedule.faults, tally: tally, last: -1}
         run = drive(run, opts, deadline, on_event)
         {cluster, _} = Cluster.thaw(run.cluster, :all)
         {ends, frames, twice} = collect(Cluster.head(cluster), schedule, ids, refs, opts)
@@ -164,12 +164,15 @@ defmodule RingTracer.Chaos.Farm.Soak do
     end
   end
 
-  defp fire(%{faults: [%{at: at} = fault | rest]} = run, stored, opts, on_event)
-       when at <= stored do
+  # One fault at a time, and only once a frame was stored since the last
+  # one: each meets a farm that made progress after the previous fault.
+  defp fire(%{faults: [%{at: at} = fault | rest], last: last} = run, stored, opts, on_event)
+       when at <= stored and stored > last do
     {cluster, outcome} = inject(run.cluster, fault, opts)
     on_event.("fault #{fault.kind} at #{stored} frames stored: #{outcome}")
     key = if outcome == :skipped, do: :skipped, else: fault.kind
-    %{run | cluster: cluster, faults: rest, tally: Map.update!(run.tally, key, &(&1 + 1))}
+    tally = Map.update!(run.tally, key, &(&1 + 1))
+    %{run | cluster: cluster, faults: rest, tally: tally, last: stored}
   end
 
   defp fire(run, _stored, _opts, _on_event), do: run
