@@ -15,7 +15,12 @@ defmodule RingTracer.Chaos.Farm.References do
   @spec hashes(Schedule.t(), pos_integer(), pos_integer()) ::
           {:ok, %{key() => binary()}} | {:error, RingTracer.Error.t()}
   def hashes(%Schedule{jobs: jobs}, width, height) do
-    dir = Path.join(System.tmp_dir!(), "rt_farm_refs_#{System.unique_integer([:positive])}")
+    dir =
+      Path.join(
+        System.tmp_dir!(),
+        "rt_farm_refs_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}"
+      )
+
     File.mkdir_p!(dir)
 
     try do

@@ -10,6 +10,9 @@ defmodule RingTracer.Chaos.Farm.Soak do
   verdict: every job done, no frame lost, none stored twice, every frame
   byte-identical to the same frame rendered alone.
 
+  The nodes are `:peer` nodes of the calling process: after a failure
+  part-way they stop when it exits.
+
   A worker is killed or frozen only while at least two are up (the queue
   never waits on no worker at all): a fault without a victim is counted as
   skipped, and one still due when the last job ended as late.
@@ -72,36 +75,37 @@ defmodule RingTracer.Chaos.Farm.Soak do
     schedule = Schedule.new(Keyword.take(opts, [:seed, :jobs, :faults]))
 
     with {:ok, refs} <- References.hashes(schedule, opts[:width], opts[:height]) do
-      dir = Path.join(System.tmp_dir!(), "rt_farm_soak_#{System.unique_integer([:positive])}")
-      cluster = Cluster.start(dir, opts[:workers], Keyword.take(opts, [:speed, :log_level]))
+      name = "rt_farm_soak_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}"
+      dir = Path.join(System.tmp_dir!(), name)
 
       try do
-        {:ok, ids} = submit(Cluster.head(cluster), schedule, opts)
-        deadline = started + opts[:timeout]
-        tally = Map.new(Schedule.kinds() ++ [:skipped, :late, :dropped], &{&1, 0})
-        run = %{cluster: cluster, ids: ids, faults: schedule.faults, tally: tally, last: -1}
-        run = drive(run, opts, deadline, on_event)
-        {cluster, _} = Cluster.thaw(run.cluster, :all)
-        {ends, frames, twice} = collect(Cluster.head(cluster), schedule, ids, refs, opts)
-        cluster_ref = %{run | cluster: cluster}
-        seconds = (System.monotonic_time(:millisecond) - started) / 1000
-
-        {:ok,
-         %Report{
-           options: opts,
-           verdict: Checker.check(ends, frames, twice),
-           faults: cluster_ref.tally,
-           seconds: seconds,
-           ends: ends
-         }}
-        |> tap(fn _ -> Cluster.stop(cluster) end)
-      rescue
-        e ->
-          Cluster.stop(cluster)
-          reraise e, __STACKTRACE__
+        cluster = Cluster.start(dir, opts[:workers], Keyword.take(opts, [:speed, :log_level]))
+        soak(cluster, schedule, refs, opts, started, on_event)
       after
         File.rm_rf(dir)
       end
+    end
+  end
+
+  defp soak(cluster, schedule, refs, opts, started, on_event) do
+    with {:ok, ids} <- submit(Cluster.head(cluster), schedule, opts) do
+      deadline = started + opts[:timeout]
+      tally = Map.new(Schedule.kinds() ++ [:skipped, :late, :dropped], &{&1, 0})
+      run = %{cluster: cluster, ids: ids, faults: schedule.faults, tally: tally, last: -1}
+      run = drive(run, opts, deadline, on_event)
+      {cluster, _} = Cluster.thaw(run.cluster, :all)
+      {ends, frames, twice} = collect(Cluster.head(cluster), schedule, ids, refs)
+      seconds = (System.monotonic_time(:millisecond) - started) / 1000
+      Cluster.stop(cluster)
+
+      {:ok,
+       %Report{
+         options: opts,
+         verdict: Checker.check(ends, frames, twice),
+         faults: run.tally,
+         seconds: seconds,
+         ends: ends
+       }}
     end
   end
 
@@ -203,7 +207,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
     end
   end
 
-  defp collect(head, schedule, ids, refs, opts) do
+  defp collect(head, schedule, ids, refs) do
     results =
       Enum.map(schedule.jobs, fn job ->
         id = ids[job.index]
@@ -235,7 +239,6 @@ defmodule RingTracer.Chaos.Farm.Soak do
         {:error, _} -> 0
       end
 
-    _ = opts
     {Enum.map(results, &elem(&1, 0)), Enum.flat_map(results, &elem(&1, 1)), twice}
   end
 
