@@ -37,11 +37,27 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   (the soak makes nodes drop on purpose, so they log a lot); otherwise they
   log errors only. What each figure means is in `RingTracer.Chaos`.
   `--help` (or `-h`) prints this text and starts nothing.
+
+  ## Farm mode
+
+      mix ring_tracer.chaos --farm [--seed 1] [--jobs 60] [--workers 3]
+                                   [--width 48] [--height 36] [--speed 300]
+                                   [--freeze 3000] [--duration MS] [--verbose]
+
+  A farm head and `--workers` workers (peer nodes), a queue of `--jobs`
+  stills and short sequences from two users, and faults on the seed's
+  schedule: the head killed (SIGKILL) and restarted, workers killed, frozen
+  and added (`RingTracer.Chaos.Farm.Soak`). `--speed` makes each worker
+  emulate a machine that many times slower, `--duration` is the longest the
+  queue may take (ms, default 30 min). It prints jobs, frames, faults and
+  frames lost, stored twice and differing from the frame rendered alone,
+  and fails (a non-zero exit) unless every job is done and those are 0.
   """
   @moduledoc @help
   use Mix.Task
 
   alias RingTracer.Chaos
+  alias RingTracer.Chaos.Farm.Soak
   alias RingTracer.Chaos.Plan
 
   @switches [
@@ -66,8 +82,15 @@ defmodule Mix.Tasks.RingTracer.Chaos do
     freeze: :integer,
     timeout: :integer,
     only: :string,
-    verbose: :boolean
+    verbose: :boolean,
+    farm: :boolean,
+    workers: :integer,
+    speed: :integer,
+    duration: :integer
   ]
+
+  @farm_only [:workers, :speed, :duration]
+  @farm_keys [:seed, :jobs, :width, :height, :freeze, :verbose | @farm_only]
 
   @impl Mix.Task
   def run(argv) do
@@ -78,6 +101,60 @@ defmodule Mix.Tasks.RingTracer.Chaos do
 
   defp soak(argv) do
     opts = parse(argv)
+
+    cond do
+      opts[:farm] ->
+        farm(Keyword.delete(opts, :farm))
+
+      key = Enum.find(@farm_only, &Keyword.has_key?(opts, &1)) ->
+        Mix.raise("--#{key} needs --farm")
+
+      true ->
+        ring(opts)
+    end
+  end
+
+  defp farm(opts) do
+    case Enum.find(Keyword.keys(opts), &(&1 not in @farm_keys)) do
+      nil -> :ok
+      key -> Mix.raise("--#{dashed(key)} is not an option of --farm")
+    end
+
+    {verbose, opts} = Keyword.pop(opts, :verbose, false)
+    {duration, opts} = Keyword.pop(opts, :duration)
+    opts = if duration, do: Keyword.put(opts, :timeout, duration), else: opts
+    Mix.Task.run("app.start")
+    level = if verbose, do: :warning, else: :error
+    previous = Logger.level()
+    Logger.configure(level: level)
+    on_event = fn line -> if verbose, do: Mix.shell().info(line) end
+
+    report =
+      try do
+        RingTracer.Chaos.Farm.Soak.run(Keyword.put(opts, :log_level, level), on_event)
+      after
+        Logger.configure(level: previous)
+      end
+
+    case report do
+      {:ok, report} ->
+        Mix.shell().info(Soak.format(report))
+        v = report.verdict
+
+        unless Soak.passed?(report) do
+          Mix.raise(
+            "chaos soak --farm failed: #{v.jobs - v.done} jobs not done, #{v.lost} frames lost, " <>
+              "#{v.twice} stored twice, #{v.mismatches} differing " <>
+              "(seed #{report.options[:seed]})"
+          )
+        end
+
+      {:error, error} ->
+        Mix.raise("chaos soak --farm: #{error.message}")
+    end
+  end
+
+  defp ring(opts) do
     {verbose, opts} = Keyword.pop(opts, :verbose, false)
     Mix.Task.run("app.start")
     level = if verbose, do: :warning, else: :error
@@ -123,7 +200,8 @@ defmodule Mix.Tasks.RingTracer.Chaos do
   end
 
   defp convert({key, n})
-       when key in [:jobs, :concurrency, :width, :height, :liveness, :freeze, :timeout] do
+       when key in [:jobs, :concurrency, :width, :height, :liveness, :freeze, :timeout] or
+              key in [:workers, :speed, :duration] do
     if n > 0, do: {key, n}, else: Mix.raise("--#{key} must be positive, got #{n}")
   end
 

@@ -190,7 +190,12 @@ defmodule RingTracer.Farm.Head do
       when is_map_key(state.running, id),
       do: {:noreply, put_in(state.running[id].atoms, {done, total})}
 
-  def handle_info({:runner_end, id, outcome}, state) do
+  # Only the job's current runner ends it (below: any other's end is
+  # dropped): one stopped for a new one may have sent its end before it
+  # stopped.
+  def handle_info({:runner_end, id, runner, outcome}, %State{running: running} = state)
+      when is_map_key(running, id) and
+             :erlang.map_get(:runner, :erlang.map_get(id, running)) == runner do
     state = drop_run(state, id)
 
     state =
@@ -205,6 +210,8 @@ defmodule RingTracer.Farm.Head do
 
     {:noreply, reassign(state)}
   end
+
+  def handle_info({:runner_end, _id, _stale, _outcome}, state), do: {:noreply, state}
 
   def handle_info({:DOWN, ref, :process, pid, reason}, state) do
     cond do
@@ -292,8 +299,14 @@ defmodule RingTracer.Farm.Head do
 
   defp stop_runner(state, id) do
     case state.running[id] do
-      nil -> state
-      run -> send(run.runner, :stop) && drop_run(state, id)
+      nil ->
+        state
+
+      # Synchronous (the runner cancels its ring as it terminates), so that
+      # no other runner of the job starts while this one still stores frames.
+      run ->
+        _ = DynamicSupervisor.terminate_child(Names.farm_runners(), run.runner)
+        drop_run(state, id)
     end
   end
 

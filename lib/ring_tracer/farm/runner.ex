@@ -10,7 +10,9 @@ defmodule RingTracer.Farm.Runner do
   # it tells the head `{:runner_frame, id, n}`, the ring's progress
   # (`{:runner_progress, id, atoms_done, atoms_total}`), on a head with a
   # dashboard its preview's address (`{:runner_preview, id, url}`) and,
-  # last, `{:runner_end, id, outcome}`.
+  # last, `{:runner_end, id, self(), outcome}`. Stopped by its supervisor (the
+  # head's `DynamicSupervisor.terminate_child/2`), it cancels its ring
+  # before it exits.
 
   use GenServer, restart: :temporary
 
@@ -47,6 +49,9 @@ defmodule RingTracer.Farm.Runner do
 
   @impl true
   def init({%Job{} = job, workers, dir, head}) do
+    # terminate/2 runs when the head stops this runner.
+    Process.flag(:trap_exit, true)
+
     {:ok, %State{job: job, head: head, dir: dir, nodes: Enum.map(workers, &elem(&1, 0))},
      {:continue, {:start, workers}}}
   end
@@ -124,6 +129,12 @@ defmodule RingTracer.Farm.Runner do
     end
   end
 
+  @impl true
+  def terminate(_reason, %State{handle: handle}) do
+    if handle, do: RingTracer.cancel(handle)
+    :ok
+  end
+
   defp start(scene, job, workers, remaining, preview) do
     slots = workers |> Enum.map(&elem(&1, 1)) |> Enum.min()
 
@@ -184,7 +195,7 @@ defmodule RingTracer.Farm.Runner do
   defp outcome(%Error{message: message}), do: {:retry, message}
 
   defp finish(%State{job: job, head: head} = state, outcome) do
-    send(head, {:runner_end, job.id, outcome})
+    send(head, {:runner_end, job.id, self(), outcome})
     {:stop, :normal, state}
   end
 end

@@ -2,7 +2,7 @@
 
 use crate::safe_fs;
 use crate::Error;
-use exr::prelude::{Image, SpecificChannels, Vec2, WritableImage};
+use exr::prelude::{Encoding, Image, LineOrder, SpecificChannels, Vec2, WritableImage};
 use std::io::Write;
 use std::path::Path;
 
@@ -257,7 +257,13 @@ pub fn write_image_in(
                     None => (0.0, 0.0, 0.0),
                 }
             });
-            Image::from_channels((w, height as usize), pixels)
+            // Blocks in increasing order: exr's default (`Unspecified`) writes them as its
+            // threads finish compressing them, so the same pixels made different files.
+            let encoding = Encoding {
+                line_order: LineOrder::Increasing,
+                ..Encoding::FAST_LOSSLESS
+            };
+            Image::from_encoded_channels((w, height as usize), encoding, pixels)
                 .write()
                 .to_buffered(std::io::BufWriter::new(f))
                 .map_err(|e| Error::Image(format!("{file}: {e}")))
@@ -368,6 +374,23 @@ mod tests {
         assert_eq!(mode, 0o640);
         assert!(write_image(&t.path().join("a.bmp"), 2, 2, &rgb).is_err());
         assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
+    }
+
+    #[test]
+    fn exr_files_are_the_same_for_the_same_pixels() {
+        // many blocks (16 rows each), compressed on several threads
+        let (w, h) = (200u32, 160u32);
+        let rgb: Vec<f32> = (0..w * h * 3).map(|i| (i as f32 * 0.37).sin()).collect();
+        let t = tempfile::tempdir().unwrap();
+        let out = t.path().join("a.exr");
+        write_image(&out, w, h, &rgb).unwrap();
+        let first = std::fs::read(&out).unwrap();
+        let meta = exr::meta::MetaData::read_from_file(&out, false).unwrap();
+        assert_eq!(meta.headers[0].line_order, LineOrder::Increasing);
+        for _ in 0..8 {
+            write_image(&out, w, h, &rgb).unwrap();
+            assert!(std::fs::read(&out).unwrap() == first);
+        }
     }
 
     #[test]

@@ -130,6 +130,22 @@ defmodule Mix.Tasks.RingTracer.ChaosTest do
            ]
   end
 
+  test "--farm's options are checked before anything starts" do
+    assert_raise Mix.Error, ~r/--workers needs --farm/, fn -> Task.run(~w(--workers 2)) end
+
+    assert_raise Mix.Error, ~r/--strategies is not an option of --farm/, fn ->
+      Task.run(~w(--farm --strategies ring))
+    end
+
+    assert_raise Mix.Error, ~r/--speed must be positive/, fn -> Task.parse(~w(--speed 0)) end
+
+    assert Task.parse(~w(--farm --seed 42 --jobs 60 --workers 4 --duration 9000)) ==
+             [farm: true, seed: 42, jobs: 60, workers: 4, duration: 9000]
+
+    output = capture_io(fn -> Task.run(["--help"]) end)
+    assert output =~ "mix ring_tracer.chaos --farm"
+  end
+
   test "a missing scene, or jobs render/2 would refuse, stop the soak before any job" do
     Mix.Task.run("app.start")
 
