@@ -109,11 +109,6 @@ defmodule RingTracer.Farm.Runner do
     {:noreply, elastic(state, {:shrink, node})}
   end
 
-  def handle_info(:stop, %State{handle: handle} = state) do
-    if handle, do: RingTracer.cancel(handle)
-    {:stop, :normal, state}
-  end
-
   def handle_info(_other, state), do: {:noreply, state}
 
   # On a head with a dashboard, the ring's live preview: on loopback, with
