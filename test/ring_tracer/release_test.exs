@@ -18,7 +18,8 @@ defmodule RingTracer.ReleaseTest do
   @launcher Path.expand("bin/ringtracer")
   @scene Path.expand("priv/scenes/balls_s2.nff")
   # What a machine without Erlang, Elixir or Rust lacks.
-  @hidden_dirs ~w(/usr/lib/erlang /usr/lib/elixir /root/.cargo /root/.rustup)
+  @hidden_dirs ["/usr/lib/erlang", "/usr/lib/elixir"] ++
+                 Enum.map([".cargo", ".rustup"], &Path.join(System.user_home!(), &1))
   @hidden_commands ~w(erl erlc escript epmd elixir elixirc iex mix cargo rustc rustup)
 
   @probe (cond do
@@ -48,10 +49,15 @@ defmodule RingTracer.ReleaseTest do
     on_exit(fn -> File.rm_rf!(dir) end)
 
     {started, _} = :erlang.statistics(:wall_clock)
-    {out, status} = System.cmd(@launcher, ["release", "--out", dir], stderr_to_stdout: true)
+    # Ten minutes at most: a stale checkout builds the NIF and the application first.
+    {out, status} =
+      System.cmd("timeout", ["-k", "10", "600", @launcher, "release", "--out", dir],
+        stderr_to_stdout: true
+      )
+
     assert status == 0, out
     [tarball] = Path.wildcard(Path.join(dir, "ringtracer-*-linux-*.tar.gz"))
-    {_, 0} = System.cmd("tar", ["-C", dir, "-xzf", tarball])
+    {_, 0} = System.cmd("timeout", ["60", "tar", "-C", dir, "-xzf", tarball])
     # One folder, ringtracer-VERSION.
     root = Path.join(dir, String.replace(Path.basename(tarball), ~r/-linux-.*$/, ""))
     {ended, _} = :erlang.statistics(:wall_clock)
@@ -144,8 +150,9 @@ defmodule RingTracer.ReleaseTest do
 
     {:os_pid, worker_pid} = Port.info(worker, :os_pid)
 
+    # SIGTERM reaches the VM through its launcher (SIGKILL would leave it running).
     on_exit(fn ->
-      System.cmd("kill", ["-KILL", Integer.to_string(worker_pid)], stderr_to_stdout: true)
+      System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)], stderr_to_stdout: true)
     end)
 
     assert until(worker, "ready") =~ "RingTracer worker #{w}@"
