@@ -178,4 +178,45 @@ defmodule RingTracer.ReleaseTest do
     {_, 0} = System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)])
     assert {143, _} = collect(worker)
   end
+
+  test "a release worker joins a checkout's farm head and renders a submitted job; the image is render's",
+       ctx do
+    cookie = Path.join(ctx.tmp_dir, "cookie")
+    {:ok, _} = Cookie.create(cookie)
+    creds = ["--cookie-file", cookie, "--tls", TLS.booted_dir()]
+    head = "rtrelhead_#{System.unique_integer([:positive])}"
+    dir = Path.join(ctx.tmp_dir, "head")
+
+    farm =
+      open(ctx, @launcher, ["farm", "--sname", head, "--dir", dir, "--no-dashboard" | creds], [])
+
+    {:os_pid, farm_pid} = Port.info(farm, :os_pid)
+    on_exit(fn -> System.cmd("kill", ["-TERM", Integer.to_string(farm_pid)]) end)
+    until(farm, "ready")
+
+    worker = hidden(ctx, [ctx.release, "worker", "--join", "#{head}@localhost" | creds])
+    {:os_pid, worker_pid} = Port.info(worker, :os_pid)
+    on_exit(fn -> System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)]) end)
+    until(worker, "joined #{head}@localhost")
+
+    size = ~w(--width 48)
+
+    {status, out} =
+      checkout(
+        ctx,
+        ["submit", @scene, "--out", "farm.png", "--farm", "#{head}@localhost"] ++ creds ++ size
+      )
+
+    assert status == 0, out
+    {status, out} = checkout(ctx, ["render", @scene, "--out", "render.png" | size])
+    assert status == 0, out
+
+    assert File.read!(Path.join(ctx.tmp_dir, "farm.png")) ==
+             File.read!(Path.join(ctx.tmp_dir, "render.png"))
+
+    {_, 0} = System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)])
+    assert {143, _} = collect(worker)
+    {_, 0} = System.cmd("kill", ["-TERM", Integer.to_string(farm_pid)])
+    assert {143, _} = collect(farm)
+  end
 end
