@@ -191,12 +191,20 @@ defmodule RingTracer.ReleaseTest do
       open(ctx, @launcher, ["farm", "--sname", head, "--dir", dir, "--no-dashboard" | creds], [])
 
     {:os_pid, farm_pid} = Port.info(farm, :os_pid)
-    on_exit(fn -> System.cmd("kill", ["-TERM", Integer.to_string(farm_pid)]) end)
+
+    on_exit(fn ->
+      System.cmd("kill", ["-TERM", Integer.to_string(farm_pid)], stderr_to_stdout: true)
+    end)
+
     until(farm, "ready")
 
     worker = hidden(ctx, [ctx.release, "worker", "--join", "#{head}@localhost" | creds])
     {:os_pid, worker_pid} = Port.info(worker, :os_pid)
-    on_exit(fn -> System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)]) end)
+
+    on_exit(fn ->
+      System.cmd("kill", ["-TERM", Integer.to_string(worker_pid)], stderr_to_stdout: true)
+    end)
+
     until(worker, "joined #{head}@localhost")
 
     size = ~w(--width 48)
