@@ -2,9 +2,9 @@ defmodule RingTracer.ReleaseTest do
   # `bin/ringtracer release`'s tarball, unpacked and run where Erlang,
   # Elixir and Rust are not: a mount namespace of the command's own
   # (unshare -m) with empty folders mounted over their installs. It renders
-  # the image the checkout renders, and it hosts the children of a render
-  # the checkout runs. Needs root (and unshare); skipped, saying why,
-  # elsewhere.
+  # the image the checkout renders, it hosts the children of a render the
+  # checkout runs, and it works for a checkout's farm head. Needs root (and
+  # unshare); skipped, saying why, elsewhere.
   use ExUnit.Case, async: false
 
   import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
