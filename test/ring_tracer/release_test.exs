@@ -7,6 +7,7 @@ defmodule RingTracer.ReleaseTest do
   # unshare); skipped, saying why, elsewhere.
   use ExUnit.Case, async: false
 
+  import Bitwise, only: [&&&: 2]
   import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
 
   alias RingTracer.Cluster.{Cookie, TLS}
@@ -108,7 +109,7 @@ defmodule RingTracer.ReleaseTest do
 
   defp checkout(ctx, args), do: collect(open(ctx, @launcher, args, []))
 
-  test "without Erlang, Elixir or Rust: --version, help, a usage error and a render identical to the checkout's",
+  test "without Erlang, Elixir or Rust: --version, help, a usage error, cookie, tls and a render identical to the checkout's",
        ctx do
     {status, out} = collect(hidden(ctx, ["sh", "-c", "command -v erl elixir cargo; echo none"]))
     assert {status, out} == {0, "none\n"}
@@ -124,6 +125,19 @@ defmodule RingTracer.ReleaseTest do
     {status, usage} = collect(hidden(ctx, [ctx.release, "render"]))
     assert status == 2, usage
     assert checkout(ctx, ["render"]) == {2, usage}
+
+    {status, out} = collect(hidden(ctx, [ctx.release, "cookie", "release.cookie"]))
+    assert status == 0, out
+    assert out =~ "(mode 0600)"
+    assert (File.stat!(Path.join(ctx.tmp_dir, "release.cookie")).mode &&& 0o777) == 0o600
+
+    {status, out} = collect(hidden(ctx, [ctx.release, "tls", "ca", "ca"]))
+    assert status == 0, out
+    {status, out} = collect(hidden(ctx, [ctx.release, "tls", "node", "ca", "node", "localhost"]))
+    assert status == 0, out
+
+    for file <- ~w(ca.pem node.pem node.key),
+        do: assert(File.regular?(Path.join([ctx.tmp_dir, "node", file])))
 
     size = ~w(--width 64 --children 2 --progress none)
 

@@ -332,7 +332,7 @@ dispatch() {
     serve) setup; RINGTRACER_SOCKET=$(socket_path) run_cli serve "$@" ;;
     worker|cookie|farm|submit|jobs|status|wait|cancel|fetch) setup; run_cli "$cmd" "$@" ;;
     tls) tls "$@" ;;
-    --version | version) setup; build; echo "ringtracer $(app_version "$ebin") (build $(build_id))" ;;
+    --version) setup; build; echo "ringtracer $(app_version "$ebin") (build $(build_id))" ;;
     # Help, and unknown commands (with a suggestion), from RingTracer.CLI.
     "") setup; run_cli ;;
     *) setup; run_cli "$cmd" "$@" ;;
