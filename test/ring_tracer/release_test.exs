@@ -70,12 +70,12 @@ defmodule RingTracer.ReleaseTest do
   # the installs are hidden: every hidden command must be gone (exit 97
   # otherwise, naming it).
   defp hidden(ctx, args, opts \\ []) do
-    mounts = for d <- @hidden_dirs, File.dir?(d), do: "mount --bind #{ctx.dir}/empty #{d}"
+    mounts =
+      for d <- @hidden_dirs, File.dir?(d), do: "mount --bind #{ctx.dir}/empty #{d} || exit 96\n"
 
     script =
-      Enum.join(mounts, " && ") <>
+      Enum.join(mounts) <>
         """
-         || exit 96
         for c in #{Enum.join(@hidden_commands, " ")}; do
           if p=$(command -v "$c"); then
             [ -e "$p" ] && mount --bind #{ctx.dir}/empty_file "$p"
