@@ -36,7 +36,8 @@ defmodule RingTracer.MixProject do
           :mnesia
         ]
       ],
-      aliases: aliases()
+      aliases: aliases(),
+      releases: releases()
     ]
   end
 
@@ -55,7 +56,52 @@ defmodule RingTracer.MixProject do
   defp test_applications(_), do: []
 
   defp elixirc_paths(:test), do: ["lib", "test/support"]
-  defp elixirc_paths(_), do: ["lib"]
+  defp elixirc_paths(:dev), do: ["lib"]
+
+  # The launcher's build and the release: no benchmark nor chaos soak (run
+  # from Mix, in dev or test) and their Mix tasks.
+  defp elixirc_paths(_) do
+    Enum.reject(Path.wildcard("lib/**/*.ex"), fn path ->
+      path =~ ~r{^lib/(ring_tracer/(bench|chaos)[./]|mix/tasks/ring_tracer\.(bench|chaos)\.ex$)}
+    end)
+  end
+
+  # `bin/ringtracer release` (docs/deploy.md): ERTS and every application a
+  # command may start at run time, so that the release runs where neither
+  # Erlang nor Elixir is installed. Its launcher (rel/overlays/bin/ringtracer)
+  # boots start_clean and starts the applications itself, as the checkout's
+  # does: those below are loaded on demand (TLS distribution, the preview and
+  # dashboard's HTTP server, a farm's store, the certificates' dates).
+  defp releases do
+    [
+      ring_tracer: [
+        include_erts: true,
+        include_executables_for: [],
+        applications: [
+          ring_tracer: :permanent,
+          asn1: :load,
+          public_key: :load,
+          ssl: :load,
+          inets: :load,
+          mnesia: :load
+        ],
+        steps: [:assemble, &add_client/1]
+      ]
+    ]
+  end
+
+  # The thin client of `ringtracer serve` (built by `bin/ringtracer setup`),
+  # beside the launcher's shared part (rel/overlays/libexec).
+  defp add_client(release) do
+    client = Path.join(__DIR__, "native/target/release/ringtracer-client")
+
+    unless File.exists?(client) do
+      Mix.raise("#{client} not found: build it first (bin/ringtracer setup)")
+    end
+
+    File.cp!(client, Path.join([release.path, "libexec", "ringtracer-client"]))
+    release
+  end
 
   defp aliases do
     []

@@ -1,3 +1,3 @@
 # `mix test` runs the quick tests; `bin/ringtracer test` (and CI) includes
-# the slow, multi-node, network-namespace and browser ones too.
-ExUnit.start(exclude: [:slow, :distributed, :network, :browser])
+# the slow, multi-node, network-namespace, browser and release ones too.
+ExUnit.start(exclude: [:slow, :distributed, :network, :browser, :release])
