@@ -194,12 +194,13 @@ defmodule RingTracer.Preview.Listener do
   The connections that are neither `streams` nor admitted (a request on
   its way without the token, a kept-alive connection that never showed
   it), each with when a sweep first saw it (`seen`, from the previous
-  sweep): beyond `max`, the oldest are killed. A connection is admitted
-  as soon as its request passes `check/3`, however long its answer then
-  takes (a stream joining a server that runs late on a loaded machine), so
-  clients that hold connections open without the token (or many of them,
-  reconnecting as fast as they are dropped) cannot keep the owner from
-  the page. Returns the new `seen`.
+  sweep): beyond `max`, the oldest are killed, but never one this sweep
+  sees for the first time. A connection is admitted as soon as its request
+  passes `check/3`, however long its answer then takes (a stream joining
+  a server that runs late on a loaded machine), so clients that hold
+  connections open without the token (or many of them, reconnecting as
+  fast as they are dropped) cannot keep the owner from the page. Returns
+  the new `seen`.
   """
   @spec sweep(t(), %{pid() => integer()}, %{optional(pid()) => term()}, non_neg_integer()) ::
           %{pid() => integer()}
@@ -218,8 +219,15 @@ defmodule RingTracer.Preview.Listener do
     excess = map_size(waiting) - max
 
     if excess > 0 do
+      # Never one this sweep sees for the first time: a request that has
+      # just connected has until the next sweep to show the token, however
+      # many others keep reconnecting as fast as they are dropped.
       dropped =
-        waiting |> Enum.sort_by(&elem(&1, 1)) |> Enum.take(excess) |> Enum.map(&elem(&1, 0))
+        waiting
+        |> Enum.filter(&is_map_key(seen, elem(&1, 0)))
+        |> Enum.sort_by(&elem(&1, 1))
+        |> Enum.take(excess)
+        |> Enum.map(&elem(&1, 0))
 
       Enum.each(dropped, &Process.exit(&1, :kill))
       Map.drop(waiting, dropped)
