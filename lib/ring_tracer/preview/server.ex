@@ -19,9 +19,9 @@ defmodule RingTracer.Preview.Server do
   else), and it and the viewers run at low process priority. Of a
   sequence, the queue keeps only what the log would keep: when a frame
   completes, the queued atoms of the frames complete before it are dropped
-  (but the highest complete's), and only the last `strip` frames complete
-  keep their pixels for a thumbnail; the log's frames the sequence no
-  longer needs are deleted from the table.
+  (but the highest complete's), and only the `strip` highest numbers
+  complete keep their pixels for a thumbnail (`RingTracer.Preview.Backlog`);
+  the log's frames the sequence no longer needs are deleted from the table.
   """
   use GenServer
 
