@@ -178,7 +178,7 @@ defmodule RingTracer.Preview do
   @doc false
   # What `render/2`'s `:preview` option does before the job's parent starts
   # (`job`: its id; `nodes`: its other nodes): `{preview, owned?}`, or nil.
-  # Then `watch/2` once the parent runs.
+  # Then `watch_job/2` once the parent runs.
   @spec for_job(term(), reference(), [node()]) :: {t(), boolean()} | nil
   def for_job(nil, _job, _nodes), do: nil
   def for_job(false, _job, _nodes), do: nil
@@ -219,9 +219,18 @@ defmodule RingTracer.Preview do
   @spec watch_job({t(), boolean()} | nil, pid()) :: :ok
   def watch_job(nil, _parent), do: :ok
 
+  # The caller describes the parent itself, at once: the preview's server
+  # runs at low priority, after the job's processes, and a short job can
+  # end before it does. Nor does the caller wait for the server.
   def watch_job({preview, _}, parent) do
-    _ = watch(preview, parent)
-    :ok
+    described =
+      try do
+        RingTracer.Job.Parent.describe(parent)
+      catch
+        :exit, reason -> {:error, {:job_not_running, reason}}
+      end
+
+    GenServer.cast(preview.pid, {:described, parent, described})
   end
 
   @doc false

@@ -9,24 +9,27 @@ defmodule RingTracer.Preview.Listener do
 
   `check/3` is what every request goes through first: a target that is not
   a path is 400, a `Host` not the server's own address 421, a path outside
-  the token 404, a method other than GET 405. `sweep/4` keeps the
-  connections that are not long-lived streams to a few, oldest dropped
-  first. `close/1` stops a server so that its port accepts nothing more.
+  the token 404, a method other than GET 405; a connection whose request
+  passed them is admitted (it holds the token). `sweep/4` keeps the
+  connections that are neither long-lived streams nor admitted to a few,
+  oldest dropped first. `close/1` stops a server so that its port accepts
+  nothing more.
   """
 
   require Record
 
   Record.defrecordp(:mod, Record.extract(:mod, from_lib: "inets/include/httpd.hrl"))
 
-  @enforce_keys [:httpd, :port, :addr, :listener, :connections]
-  defstruct [:httpd, :port, :addr, :listener, :connections]
+  @enforce_keys [:httpd, :port, :addr, :listener, :connections, :admitted]
+  defstruct [:httpd, :port, :addr, :listener, :connections, :admitted]
 
   @type t :: %__MODULE__{
           httpd: pid(),
           port: :inet.port_number(),
           addr: :inet.ip_address(),
           listener: port() | nil,
-          connections: term()
+          connections: term(),
+          admitted: :ets.tid()
         }
 
   # Seconds a connection has to send its request line and headers.
@@ -38,7 +41,8 @@ defmodule RingTracer.Preview.Listener do
 
   @doc """
   Starts a stand-alone `:httpd` whose only module is `module`; its handler
-  finds `data` with `data/1`.
+  finds `data` with `data/1`. The caller owns the table of admitted
+  connections: call it from the process that sweeps.
 
   ## Options
 
@@ -53,6 +57,9 @@ defmodule RingTracer.Preview.Listener do
   def start(module, data, opts) do
     addr = Keyword.get(opts, :listen, {127, 0, 0, 1})
     root = String.to_charlist(Keyword.fetch!(opts, :root))
+    # The request processes whose request passed `check/3`: they write
+    # themselves in, the sweep leaves them alone.
+    admitted = :ets.new(__MODULE__, [:set, :public, write_concurrency: true])
 
     config = [
       port: Keyword.get(opts, :port, 0),
@@ -73,7 +80,8 @@ defmodule RingTracer.Preview.Listener do
       keep_alive_timeout: @request_deadline_s,
       # A token is never in httpd's configuration, which httpd prints when
       # it cannot start: it is in a table of the caller's, in `data`.
-      ring_tracer_listener: data
+      ring_tracer_listener: data,
+      ring_tracer_admitted: admitted
     ]
 
     with {:ok, httpd} <- :inets.start(:httpd, config, :stand_alone),
@@ -84,10 +92,13 @@ defmodule RingTracer.Preview.Listener do
          port: port,
          addr: addr,
          listener: listener(addr, port),
-         connections: :httpd_connection_sup.connection_sup(addr, port)
+         connections: :httpd_connection_sup.connection_sup(addr, port),
+         admitted: admitted
        }}
     else
-      {:error, reason} -> {:error, {:listen, listen_error(reason)}}
+      {:error, reason} ->
+        :ets.delete(admitted)
+        {:error, {:listen, listen_error(reason)}}
     end
   end
 
@@ -180,36 +191,63 @@ defmodule RingTracer.Preview.Listener do
   end
 
   @doc """
-  The connections that are not `streams` (a request on its way, a file
-  being sent, a kept-alive connection between requests), each with when
-  a sweep first saw it (`seen`, from the previous sweep): beyond `max`,
-  the oldest are killed. A page's own requests are answered within
-  milliseconds of their connection, so clients that hold connections open
-  without the token (or many of them) cannot keep the owner from the page.
-  Returns the new `seen`.
+  The connections that are neither `streams` nor admitted (a request on
+  its way without the token, a kept-alive connection that never showed
+  it), each with when a sweep first saw it (`seen`, from the previous
+  sweep): beyond `max`, the oldest are killed, but never one this sweep
+  sees for the first time. A connection is admitted as soon as its request
+  passes `check/3`, however long its answer then takes (a stream joining
+  a server that runs late on a loaded machine), so clients that hold
+  connections open without the token (or many of them, reconnecting as
+  fast as they are dropped) cannot keep the owner from the page. Returns
+  the new `seen`.
   """
   @spec sweep(t(), %{pid() => integer()}, %{optional(pid()) => term()}, non_neg_integer()) ::
           %{pid() => integer()}
-  def sweep(%__MODULE__{connections: sup}, seen, streams, max) do
+  def sweep(%__MODULE__{connections: sup, admitted: admitted}, seen, streams, max) do
     now = System.monotonic_time(:millisecond)
+    live = connections(sup)
+    admitted = forget_gone(admitted, live)
 
     waiting =
-      for pid <- connections(sup),
+      for pid <- live,
           not is_map_key(streams, pid),
+          not MapSet.member?(admitted, pid),
           into: %{},
           do: {pid, Map.get(seen, pid, now)}
 
     excess = map_size(waiting) - max
 
     if excess > 0 do
+      # Never one this sweep sees for the first time: a request that has
+      # just connected has until the next sweep to show the token, however
+      # many others keep reconnecting as fast as they are dropped.
       dropped =
-        waiting |> Enum.sort_by(&elem(&1, 1)) |> Enum.take(excess) |> Enum.map(&elem(&1, 0))
+        waiting
+        |> Enum.filter(&is_map_key(seen, elem(&1, 0)))
+        |> Enum.sort_by(&elem(&1, 1))
+        |> Enum.take(excess)
+        |> Enum.map(&elem(&1, 0))
 
       Enum.each(dropped, &Process.exit(&1, :kill))
       Map.drop(waiting, dropped)
     else
       waiting
     end
+  end
+
+  # The admitted connections still open (the table forgets the others).
+  defp forget_gone(table, live) do
+    live = MapSet.new(live)
+
+    {keep, gone} =
+      table
+      |> :ets.tab2list()
+      |> Enum.map(&elem(&1, 0))
+      |> Enum.split_with(&MapSet.member?(live, &1))
+
+    Enum.each(gone, &:ets.delete(table, &1))
+    MapSet.new(keep)
   end
 
   defp connections(sup) do
@@ -252,7 +290,8 @@ defmodule RingTracer.Preview.Listener do
   the handler's answer: 400 for a target that is not a path (the absolute
   form `GET http://host/...` that proxies take, or `*`), 421 for a `Host`
   not in `hosts`, 404 outside the token (`token` nil: the server is
-  stopping), 405 for a method other than GET.
+  stopping), 405 for a method other than GET. A request that passes them
+  admits its connection (`sweep/4`).
   """
   @spec check(tuple(), String.t() | nil, [String.t()] | :any) ::
           {:ok, String.t()} | {:error, {:proceed, list()}}
@@ -272,8 +311,17 @@ defmodule RingTracer.Preview.Listener do
       not host_allowed?(m, hosts) -> status(421, "the server answers on its own address only")
       path == nil -> status(404, "not found")
       mod(m, :method) != ~c"GET" -> status(405, "only GET")
-      true -> {:ok, path}
+      true -> admit(m, path)
     end
+  end
+
+  # This connection holds the token: the sweep leaves it alone from now on
+  # (the table is gone once the server stops).
+  defp admit(m, path) do
+    :ets.insert(:httpd_util.lookup(mod(m, :config_db), :ring_tracer_admitted), {self()})
+    {:ok, path}
+  rescue
+    ArgumentError -> {:ok, path}
   end
 
   @doc "A response of `code` with a short text, as a handler returns it."

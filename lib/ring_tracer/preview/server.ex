@@ -19,13 +19,13 @@ defmodule RingTracer.Preview.Server do
   else), and it and the viewers run at low process priority. Of a
   sequence, the queue keeps only what the log would keep: when a frame
   completes, the queued atoms of the frames complete before it are dropped
-  (but the highest complete's), and only the last `strip` frames complete
-  keep their pixels for a thumbnail; the log's frames the sequence no
-  longer needs are deleted from the table.
+  (but the highest complete's), and only the `strip` highest numbers
+  complete keep their pixels for a thumbnail (`RingTracer.Preview.Backlog`);
+  the log's frames the sequence no longer needs are deleted from the table.
   """
   use GenServer
 
-  alias RingTracer.Preview.{Listener, Log}
+  alias RingTracer.Preview.{Backlog, Listener, Log}
 
   # How long a viewer's connection may take no data, during a stop, before
   # it is dropped.
@@ -131,11 +131,27 @@ defmodule RingTracer.Preview.Server do
     do: {:reply, {:error, :already_watching}, state}
 
   def handle_call({:watch, parent, progress}, _from, state) do
+    state = if state.expect, do: state, else: attach_all(state, nil, [])
+    {reply, state} = watched(state, parent, describe(parent, progress))
+    {:reply, reply, state}
+  end
+
+  @impl GenServer
+  # render/2's :preview: its caller described the job's parent as soon as
+  # it started. This server runs at low priority: a short job can end, and
+  # its parent exit, before it runs (its events wait in `pending`).
+  def handle_cast({:described, _parent, _described}, %{parent: p} = state) when p != nil,
+    do: {:noreply, state}
+
+  def handle_cast({:described, parent, described}, state),
+    do: {:noreply, state |> watched(parent, described) |> elem(1)}
+
+  # The job of `parent`, as `describe/2` gave it: the log starts.
+  defp watched(state, parent, described) do
     # Expected (render/2's :preview): the handlers were there before the job.
     from_start = state.expect != nil
-    state = if state.expect, do: state, else: attach_all(state, nil, [])
 
-    case describe(parent, progress) do
+    case described do
       {:ok, info} when state.expect in [nil, info.id] ->
         info = Map.put(info, :from_start, from_start)
         Process.monitor(parent)
@@ -146,14 +162,14 @@ defmodule RingTracer.Preview.Server do
         state = update(%{state | parent: parent, expect: info.id}, &Log.job(&1, info))
         pending = Enum.reverse(state.pending)
         state = Enum.reduce(pending, %{state | pending: []}, &apply_event(&2, &1))
-        {:reply, :ok, state}
+        {:ok, state}
 
       {:ok, _other} ->
-        {:reply, {:error, :other_job}, state}
+        {{:error, :other_job}, state}
 
       other ->
         state = if state.expect, do: state, else: detach_all(state)
-        {:reply, other, state}
+        {other, state}
     end
   end
 
@@ -186,7 +202,7 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({:frame_stop, job, _, _, _} = msg, %{log: %{job: job}} = state) do
     msg = image_done(msg, state.last_atom)
-    {queue, last_image} = prune(state.queue, msg, state.last_image, state.log)
+    {queue, last_image} = Backlog.prune(state.queue, msg, state.last_image, state.log)
     {:noreply, enqueue(%{state | queue: queue, last_image: last_image}, msg)}
   end
 
@@ -392,44 +408,6 @@ defmodule RingTracer.Preview.Server do
     }
 
     {:image_done, job, last, image}
-  end
-
-  # A sequence's image is complete: the atoms still queued of the images
-  # complete need no drawing (the log would forget them at once), but those
-  # of the highest complete (what the page shows when none is in flight),
-  # and of the images queued complete only the last `strip` keep their
-  # pixels (for their thumbnails). So the queue holds at most the images in
-  # flight, one image complete and `strip` images' pixels. Returns the
-  # queue and the highest image complete (its index).
-  defp prune(queue, {:image_done, _, last, _}, highest, %Log{m: m} = log)
-       when last != nil and m != nil do
-    f = div(RingTracer.Layout.base(last), m)
-
-    case highest do
-      nil -> {prune(queue, nil, log), f}
-      h when f > h -> {prune(queue, h, log), f}
-      h -> {prune(queue, f, log), h}
-    end
-  end
-
-  defp prune(queue, _msg, highest, _log), do: {queue, highest}
-
-  defp prune(queue, drop, %Log{strip: strip, m: m}) do
-    queue
-    |> :queue.to_list()
-    |> Enum.reject(fn
-      {:atom, _, a, _, _, _, _, _} -> drop != nil and div(RingTracer.Layout.base(a), m) == drop
-      _ -> false
-    end)
-    |> Enum.reverse()
-    |> Enum.map_reduce(strip - 1, fn
-      {:image_done, job, l, image}, 0 -> {{:image_done, job, l, %{image | pixels: nil}}, 0}
-      {:image_done, _, _, _} = msg, n -> {msg, n - 1}
-      msg, n -> {msg, n}
-    end)
-    |> elem(0)
-    |> Enum.reverse()
-    |> :queue.from_list()
   end
 
   defp ended?(state), do: :atomics.get(state.ended, 1) == 1

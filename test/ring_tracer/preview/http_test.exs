@@ -26,7 +26,7 @@ defmodule RingTracer.Preview.HTTPTest do
   # Every frame of a finished job's stream, as {id, event, data}.
   defp frames(url, headers \\ []) do
     {:ok, {{_, 200, _}, _, body}} =
-      :httpc.request(:get, {String.to_charlist(url <> "events"), headers}, [], [])
+      :httpc.request(:get, {String.to_charlist(url <> "events"), headers}, [timeout: 20_000], [])
 
     body
     |> to_string()
@@ -314,6 +314,50 @@ defmodule RingTracer.Preview.HTTPTest do
     # A browser reconnecting with Last-Event-ID gets only what it missed.
     resumed = frames(p.url, [{~c"last-event-id", ~c"#{n - 2}"}])
     assert Enum.map(resumed, &elem(&1, 1)) == ["final", "end"]
+  end
+
+  test "a job that ends before the preview's server runs is on the page whole", %{preview: p} do
+    # The server runs at low priority, after the job's processes: a short
+    # job can end, and its parent exit, before the server gets to it. Here
+    # the parent suspends it as the job starts, and it runs again once the
+    # parent has exited.
+    me = self()
+    handler = {__MODULE__, :suspend, me}
+
+    :ok =
+      RingTracer.Telemetry.attach(
+        handler,
+        [:ring_tracer, :job, :start],
+        fn _, _, _, {server, to} ->
+          :erlang.suspend_process(server)
+          send(to, {:parent, self()})
+        end,
+        {p.pid, me}
+      )
+
+    try do
+      task =
+        Task.async(fn ->
+          RingTracer.render(@scene, width: 24, height: 16, children: 3, atoms: 4, preview: p)
+        end)
+
+      assert_receive {:parent, parent}, 10_000
+      ref = Process.monitor(parent)
+      assert_receive {:DOWN, ^ref, _, _, _}, 20_000
+      # The render returned without the server.
+      assert {:ok, result} = Task.await(task, 20_000)
+
+      late = frames(p.url)
+      names = Enum.map(late, &elem(&1, 1))
+      assert hd(names) == "job" and Enum.take(names, -2) == ["final", "end"]
+      atoms = for {_, "atom", a} <- late, do: a
+      assert Enum.sort(Enum.map(atoms, & &1["a"])) == Enum.to_list(0..11)
+
+      assert atoms |> Enum.sort_by(& &1["a"]) |> Enum.map_join(&Base.decode64!(&1["px"])) ==
+               RingTracer.Image.srgb8(result.pixels)
+    after
+      RingTracer.Telemetry.detach(handler)
+    end
   end
 
   test "a sequence: a late joiner gets its last image, a bounded strip of the last frames with their times" do
