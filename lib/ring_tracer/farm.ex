@@ -391,12 +391,19 @@ defmodule RingTracer.Farm do
         end
 
       {RingTracer.Farm, ^id, {:end, _state, _error}} ->
-        Process.demonitor(ref, [:flush])
         # Frames that completed before the subscription but after the
-        # first status, if any, then the job as it ended.
+        # first status, if any, then the job as it ended. An end that the
+        # head does not confirm (left in this mailbox by an earlier head's
+        # job of the same id) is not this job's.
         with {:ok, info} <- status(head, id),
-             {:ok, _} <- fetch_each(head, id, info.done, seen, on_frame),
-             do: {:ok, info}
+             {:ok, seen} <- fetch_each(head, id, info.done, seen, on_frame) do
+          if Job.ended_state?(info.state) do
+            Process.demonitor(ref, [:flush])
+            {:ok, info}
+          else
+            wait_loop(head, id, ref, seen, on_frame, deadline)
+          end
+        end
 
       {:DOWN, ^ref, :process, _, _} ->
         rewatch(head, id, seen, on_frame, deadline)

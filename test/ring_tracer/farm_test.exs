@@ -56,6 +56,16 @@ defmodule RingTracer.FarmTest do
     assert png == expected
   end
 
+  test "wait takes only an end the head confirms (not one an earlier head's job left here)" do
+    # No worker has the tag: the job stays queued.
+    {:ok, id} = Farm.submit(node(), TestScenes.path("balls_s2.nff"), @size ++ [tags: ["none"]])
+    # What a job of the same id on a head since replaced left in this mailbox.
+    send(self(), {RingTracer.Farm, id, {:end, :done, nil}})
+    assert {:error, %RingTracer.Error{reason: :timeout}} = Farm.wait(node(), id, timeout: 500)
+    :ok = Farm.cancel(node(), id)
+    assert {:ok, %{state: :cancelled}} = Farm.wait(node(), id, timeout: 5_000)
+  end
+
   test "a sequence's frames are each the frame rendered alone" do
     {:ok, id} =
       Farm.submit(

@@ -54,7 +54,11 @@ defmodule RingTracer.Farm.Job do
 
   @doc "Whether the job will not run again."
   @spec ended?(t()) :: boolean()
-  def ended?(%__MODULE__{state: state}), do: state in [:done, :failed, :cancelled]
+  def ended?(%__MODULE__{state: state}), do: ended_state?(state)
+
+  @doc "Whether a job in `state` has ended: done, failed or cancelled."
+  @spec ended_state?(atom()) :: boolean()
+  def ended_state?(state), do: state in [:done, :failed, :cancelled]
 
   @doc "The file name a frame of the job is stored under on the head."
   @spec frame_file(t(), pos_integer()) :: String.t()

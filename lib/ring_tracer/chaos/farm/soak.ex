@@ -146,7 +146,7 @@ defmodule RingTracer.Chaos.Farm.Soak do
         stored = mine |> Enum.map(&length(&1.done)) |> Enum.sum()
 
         cond do
-          Enum.all?(mine, &(&1.state in [:done, :failed, :cancelled])) ->
+          Enum.all?(mine, &RingTracer.Farm.Job.ended_state?(&1.state)) ->
             late = length(run.faults)
             %{run | faults: [], tally: Map.update!(run.tally, :late, &(&1 + late))}
 

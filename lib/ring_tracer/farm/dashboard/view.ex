@@ -48,7 +48,7 @@ defmodule RingTracer.Farm.Dashboard.View do
           integer()
         ) :: t()
   def new(%{workers: workers, jobs: jobs}, head, now) do
-    {ended, live} = Enum.split_with(jobs, &(&1.state in [:done, :failed, :cancelled]))
+    {ended, live} = Enum.split_with(jobs, &RingTracer.Farm.Job.ended_state?(&1.state))
     shown = Enum.take(ended, -@ended_shown)
 
     queue =
