@@ -212,8 +212,27 @@ defmodule RingTracer.Farm do
            ),
          # Sequence.options gives the layout's frames, from 0
          frames = Enum.map(frames, &(&1 + 1)),
-         {:ok, job} <- job(scene, frames, farm, Keyword.drop(render, [:allow_dirs])) do
+         {:ok, job} <- job(scene, frames, farm, Keyword.drop(render, [:allow_dirs])),
+         :ok <- same_build(head, farm[:timeout]) do
       call(head, {:submit, job}, farm[:timeout])
+    end
+  end
+
+  # A job is this build's (its options, its scene's source): a head of
+  # another build is not given it.
+  defp same_build(head, timeout) do
+    case RingTracer.Cluster.Build.check(head, timeout: timeout || @timeout) do
+      :ok ->
+        :ok
+
+      {:error, %Error{} = error} ->
+        {:error, error}
+
+      {:error, {:call, {:erpc, :timeout}}} ->
+        {:error, Error.new(:farm_unreachable, "the farm head #{head} did not answer in time")}
+
+      {:error, {:call, _}} ->
+        {:error, Error.new(:farm_unreachable, "the farm head #{head} cannot be reached")}
     end
   end
 

@@ -1,0 +1,208 @@
+defmodule RingTracer.Cluster.Build do
+  @moduledoc """
+  Which build of RingTracer a node runs, so that nodes of different builds
+  never work together.
+
+  A build is the application's version, a hash of its compiled code (the
+  MD5 of each module of `:ring_tracer`, as `module_info(:md5)` gives it,
+  sorted by module and hashed together) and a hash of the NIF's shared
+  library as it is on disk when the identity is first asked for (the
+  application asks at start, right after loading the NIF). Two nodes of
+  the same version built from different sources, or with a different
+  kernel, have different builds.
+
+  The identity is computed once per node and kept in `:persistent_term`;
+  `identity/0` reads it from there.
+
+  Every place where nodes meet before work compares builds: the pre-flight
+  check of a render on other nodes (`RingTracer.Cluster.check/1`), a job's
+  parent preparing a node (at the start and when the ring grows), a farm
+  worker joining its head and a submitter queueing a job. A mismatch is
+  refused with an error of reason `:build_mismatch` that names both builds:
+
+      node w1@host runs build 0.1.0+3f2a9c1d, this node 0.1.0+77e0b1a4 (the code differs); ...
+  """
+
+  alias RingTracer.Error
+
+  @enforce_keys [:version, :code, :nif]
+  defstruct [:version, :code, :nif]
+
+  @typedoc """
+  A build: `version` the application's, `code` the hash of its modules,
+  `nif` the hash of its NIF's library (`nil` when there is none to read).
+  """
+  @type t :: %__MODULE__{version: String.t(), code: binary(), nif: binary() | nil}
+
+  @key {__MODULE__, :identity}
+  @call_ms 5_000
+
+  @doc """
+  This node's build, computed on the first call and kept for the next.
+
+      iex> RingTracer.Cluster.Build.identity() == RingTracer.Cluster.Build.identity()
+      true
+  """
+  @spec identity() :: t()
+  def identity do
+    case :persistent_term.get(@key, nil) do
+      %__MODULE__{} = build ->
+        build
+
+      nil ->
+        build = compute()
+        :persistent_term.put(@key, build)
+        build
+    end
+  end
+
+  @doc false
+  # Where identity/0 keeps the build (tests put another one there to make a
+  # node pretend to be of another build).
+  @spec key() :: term()
+  def key, do: @key
+
+  @doc """
+  The build of the code loaded now, computed afresh (`identity/0` keeps the
+  first one).
+  """
+  @spec compute() :: t()
+  def compute do
+    %__MODULE__{version: version(), code: code_hash(), nif: nif_hash()}
+  end
+
+  @doc """
+  A build's short printable form: its version, `+`, and the first 8 hex
+  digits of the hash of its code and NIF together (`0.1.0+3f2a9c1d`).
+  Anything that is not a build (a node too old to tell its build) prints
+  as `an unknown build`.
+  """
+  @spec short(t() | term()) :: String.t()
+  def short(%__MODULE__{version: v, code: code, nif: nif})
+      when is_binary(v) and is_binary(code) do
+    hash = :erlang.md5([code, nif || ""]) |> Base.encode16(case: :lower) |> binary_part(0, 8)
+    "#{v}+#{hash}"
+  end
+
+  def short(_), do: "an unknown build"
+
+  @doc """
+  Compares the build `theirs` of `node` with this node's: `:ok` when they
+  are the same, else an error of reason `:build_mismatch` naming both and
+  what differs.
+  """
+  @spec compare(node(), t() | term()) :: :ok | {:error, Error.t()}
+  def compare(node, theirs), do: compare(node, theirs, identity())
+
+  @doc """
+  Compares the build `theirs` of `node` with `ours` (pure).
+
+      iex> alias RingTracer.Cluster.Build
+      iex> a = %Build{version: "0.1.0", code: "a", nif: "n"}
+      iex> Build.compare(:w1@host, a, a)
+      :ok
+      iex> {:error, e} = Build.compare(:w1@host, %{a | code: "b"}, a)
+      iex> e.reason
+      :build_mismatch
+      iex> e.message =~ "node w1@host runs build 0.1.0+"
+      true
+  """
+  @spec compare(node(), t() | term(), t()) :: :ok | {:error, Error.t()}
+  def compare(_node, same, same), do: :ok
+
+  def compare(node, theirs, ours) do
+    {:error,
+     Error.new(
+       :build_mismatch,
+       "node #{node} runs build #{short(theirs)}, this node #{short(ours)} " <>
+         "(#{difference(theirs, ours)}); every node of a cluster must run the same build: " <>
+         "install the same release (or build the same checkout) on both"
+     )}
+  end
+
+  defp difference(%__MODULE__{version: v1} = a, %__MODULE__{version: v2} = b) do
+    cond do
+      v1 != v2 -> "the versions differ"
+      a.code != b.code -> "the code differs"
+      true -> "the NIF differs"
+    end
+  end
+
+  defp difference(_, _), do: "it does not tell its build: an older RingTracer"
+
+  @doc """
+  Asks `node` for its build and compares it with this node's. `:ok` for
+  this node itself. An error of reason `:build_mismatch` when the builds
+  differ, `{:error, {:call, reason}}` when the call failed (what `:erpc`
+  raised: `{:erpc, :noconnection}`, ...), for the caller to word.
+
+  ## Options
+
+    * `:timeout` — how long to wait for `node`, in ms (default #{@call_ms})
+  """
+  @spec check(node(), keyword()) :: :ok | {:error, Error.t() | {:call, term()}}
+  def check(node, opts \\ [])
+  def check(node, _opts) when node == node(), do: :ok
+
+  def check(node, opts) do
+    theirs = :erpc.call(node, __MODULE__, :identity, [], opts[:timeout] || @call_ms)
+    compare(node, theirs)
+  rescue
+    e in ErlangError ->
+      case e.original do
+        # the node has no such function: a RingTracer from before builds
+        {:exception, :undef, _} -> compare(node, :unknown)
+        original -> {:error, {:call, original}}
+      end
+  end
+
+  defp version do
+    case Application.spec(:ring_tracer, :vsn) do
+      nil -> "unknown"
+      vsn -> List.to_string(vsn)
+    end
+  end
+
+  defp code_hash do
+    modules = Application.spec(:ring_tracer, :modules) || []
+
+    modules
+    |> Enum.sort()
+    |> Enum.map(&[Atom.to_string(&1), module_md5(&1)])
+    |> :erlang.md5()
+  end
+
+  # A loaded module's MD5 is the one of the code running; beam_lib's for
+  # one not loaded yet is the same value, read from its file.
+  defp module_md5(module) do
+    case :code.is_loaded(module) do
+      {:file, _} ->
+        module.module_info(:md5)
+
+      false ->
+        case :code.which(module) do
+          path when is_list(path) ->
+            case :beam_lib.md5(path) do
+              {:ok, {_, md5}} -> md5
+              {:error, _, _} -> "missing"
+            end
+
+          _ ->
+            "missing"
+        end
+    end
+  end
+
+  defp nif_hash do
+    case :code.priv_dir(:ring_tracer) do
+      {:error, _} ->
+        nil
+
+      priv ->
+        case File.read(Path.join([to_string(priv), "native", "libring_tracer_nif.so"])) do
+          {:ok, bytes} -> :erlang.md5(bytes)
+          {:error, _} -> nil
+        end
+    end
+  end
+end
