@@ -117,7 +117,9 @@ defmodule RingTracer.Farm do
   @doc """
   Makes this node a worker of the farm whose head is `head`: it joins now
   or as soon as the head can be reached, and joins again by itself
-  whenever the head restarts.
+  whenever the head restarts. A head of another build
+  (`RingTracer.Cluster.Build`) refuses it: the worker logs the refusal,
+  naming both builds, and asks again every few seconds.
 
   ## Options
 
@@ -172,7 +174,8 @@ defmodule RingTracer.Farm do
 
   @doc """
   Queues a scene on the farm and returns the job's id once the head has it
-  on disk.
+  on disk. A head of another build (`RingTracer.Cluster.Build`) is not
+  given the job: an error of reason `:build_mismatch` naming both builds.
 
   `scene` is a path, read here (confined as `RingTracer.render/2` reads
   it, `:allow_dirs` included), or a loaded `RingTracer.Scene`.

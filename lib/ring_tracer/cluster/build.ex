@@ -20,7 +20,8 @@ defmodule RingTracer.Cluster.Build do
   worker joining its head and a submitter queueing a job. A mismatch is
   refused with an error of reason `:build_mismatch` that names both builds:
 
-      node w1@host runs build 0.1.0+3f2a9c1d, this node 0.1.0+77e0b1a4 (the code differs); ...
+      node w1@host runs build 0.1.0+3f2a9c1d, node head@host runs build 0.1.0+77e0b1a4
+      (the code differs); every node of a cluster must run the same build: ...
   """
 
   alias RingTracer.Error
@@ -95,7 +96,7 @@ defmodule RingTracer.Cluster.Build do
   def compare(node, theirs), do: compare(node, theirs, identity())
 
   @doc """
-  Compares the build `theirs` of `node` with `ours` (pure).
+  Compares the build `theirs` of `node` with `ours`, this node's.
 
       iex> alias RingTracer.Cluster.Build
       iex> a = %Build{version: "0.1.0", code: "a", nif: "n"}
@@ -114,7 +115,7 @@ defmodule RingTracer.Cluster.Build do
     {:error,
      Error.new(
        :build_mismatch,
-       "node #{node} runs build #{short(theirs)}, this node #{short(ours)} " <>
+       "node #{node} runs build #{short(theirs)}, node #{node()} runs build #{short(ours)} " <>
          "(#{difference(theirs, ours)}); every node of a cluster must run the same build: " <>
          "install the same release (or build the same checkout) on both"
      )}
@@ -128,7 +129,7 @@ defmodule RingTracer.Cluster.Build do
     end
   end
 
-  defp difference(_, _), do: "it does not tell its build: an older RingTracer"
+  defp difference(_, _), do: "it does not tell its build: a RingTracer from before build checks"
 
   @doc """
   Asks `node` for its build and compares it with this node's. `:ok` for

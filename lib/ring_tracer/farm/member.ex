@@ -20,7 +20,7 @@ defmodule RingTracer.Farm.Member do
   alias RingTracer.Names
 
   @retry_ms 500
-  @refused_ms 10_000
+  @refused_ms 5_000
   @call_ms 5_000
 
   defmodule State do

@@ -40,7 +40,9 @@ defmodule RingTracer.Cluster.BuildTest do
       assert {:error, %RingTracer.Error{reason: :build_mismatch, message: message}} =
                Build.compare(:w@h, theirs, ours)
 
-      assert message =~ "node w@h runs build #{Build.short(theirs)}, this node #{Build.short(ours)}"
+      assert message =~
+               "node w@h runs build #{Build.short(theirs)}, node #{node()} runs build #{Build.short(ours)}"
+
       assert message =~ what
       assert Build.short(theirs) != Build.short(ours)
     end
