@@ -67,6 +67,24 @@ defmodule RingTracer.Cluster.BuildDistributedTest do
     refute_received {:atom, _}
   end
 
+  test "ringtracer render --nodes to a node of another build fails, naming both builds",
+       %{other: n, ours: ours, theirs: theirs} do
+    dir = Path.join(System.tmp_dir!(), "rt_build_cli_#{System.unique_integer([:positive])}")
+    File.mkdir_p!(dir)
+    on_exit(fn -> File.rm_rf!(dir) end)
+    out = Path.join(dir, "out.png")
+    args = [TestScenes.path(@scene), "-o", out, "--nodes", "#{n}", "--width", "48"]
+
+    err =
+      ExUnit.CaptureIO.capture_io(:stderr, fn ->
+        assert RingTracer.CLI.Render.run(args ++ ["--progress", "none"]) != 0
+      end)
+
+    assert both?(err, n, ours, theirs)
+    refute File.exists?(out)
+    refute_received {:atom, _}
+  end
+
   test "a running job does not grow onto a node of another build, and ends whole",
        %{other: n, ours: ours, theirs: theirs} do
     opts = [kernel: {RingTracer.Test.FaultyKernel, delay: 8}, width: @w, height: @h, atoms: 32]
