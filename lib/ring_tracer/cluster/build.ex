@@ -115,11 +115,14 @@ defmodule RingTracer.Cluster.Build do
     {:error,
      Error.new(
        :build_mismatch,
-       "node #{node} runs build #{short(theirs)}, node #{node()} runs build #{short(ours)} " <>
+       "node #{node} runs #{named(theirs)}, node #{node()} runs #{named(ours)} " <>
          "(#{difference(theirs, ours)}); every node of a cluster must run the same build: " <>
          "install the same release (or build the same checkout) on both"
      )}
   end
+
+  defp named(%__MODULE__{} = build), do: "build " <> short(build)
+  defp named(other), do: short(other)
 
   defp difference(%__MODULE__{version: v1} = a, %__MODULE__{version: v2} = b) do
     cond do

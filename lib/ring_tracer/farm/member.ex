@@ -6,8 +6,9 @@ defmodule RingTracer.Farm.Member do
   # workers again by itself. The children it hosts are the jobs' own, under
   # `RingTracer.Children` as for any render.
   #
-  # It tells the head its build (RingTracer.Cluster.Build); a head of
-  # another build refuses it, naming both builds. The worker logs that once
+  # Builds (RingTracer.Cluster.Build) are checked both ways: the worker asks
+  # the head's build before it joins, and tells its own in the join, which a
+  # head of another build refuses, naming both builds. The worker logs that once
   # (again only if the head's answer changes) and tries again every
   # `@refused_ms`, so that the head, or this node, upgraded to the same
   # build finds it without a restart.
@@ -89,6 +90,7 @@ defmodule RingTracer.Farm.Member do
     about = %{tags: state.tags, slots: state.slots, speed: state.speed, build: Build.identity()}
 
     with true <- Node.connect(head),
+         :ok <- same_build(head),
          :ok <- call(head, {:join, node(), about, self()}) do
       if state.joined == 0, do: Logger.info("farm: joined #{head}")
       ref = Process.monitor(Names.farm_head(head))
@@ -108,6 +110,14 @@ defmodule RingTracer.Farm.Member do
   end
 
   defp join(state), do: state
+
+  defp same_build(head) do
+    case Build.check(head, timeout: @call_ms) do
+      :ok -> :ok
+      {:error, %Error{} = error} -> {:error, error}
+      {:error, {:call, _}} -> :unreachable
+    end
+  end
 
   defp call(head, message) do
     GenServer.call(Names.farm_head(head), message, @call_ms)

@@ -110,39 +110,56 @@ defmodule RingTracer.Cluster.BuildDistributedTest do
     assert result.pixels == TestScenes.reference(@scene, @w, @h)
   end
 
-  test "a farm refuses a worker of another build at its join; the worker logs it and backs off",
+  test "a worker of another build does not join a farm; it logs why and backs off",
        %{peer: peer, other: n, ours: ours, theirs: theirs} do
-    dir = Path.join(System.tmp_dir!(), "rt_build_farm_#{System.unique_integer([:positive])}")
-    {:ok, _} = Farm.start_head(dir: dir)
-
-    on_exit(fn ->
-      Peers.call(peer, n, Farm, :leave, [])
-      Farm.stop_head()
-      File.rm_rf!(dir)
-    end)
-
-    # The worker's own log of the refusal is its state here (its logger is the peer's).
+    farm_head()
+    on_exit(fn -> Peers.call(peer, n, Farm, :leave, []) end)
+    # The worker's log of the refusal is its state here (its logger is the peer's).
     Peers.call(peer, n, Logger, :put_module_level, [Farm.Member, :none])
     on_exit(fn -> Peers.call(peer, n, Logger, :delete_module_level, [Farm.Member]) end)
 
-    log =
-      capture_log(fn ->
-        {:ok, _} = Peers.call(peer, n, Farm, :join, [node(), [slots: 1]])
-        assert Wait.eventually(fn -> refused(peer, n) != nil end, 1_000)
-      end)
+    {:ok, _} = Peers.call(peer, n, Farm, :join, [node(), [slots: 1]])
+    assert Wait.eventually(fn -> refused(peer, n) != nil end, 1_000)
 
-    assert log =~ "farm: refused worker #{n}"
-    assert both?(log, n, ours, theirs)
-    # The worker keeps the refusal (logged once) and waits before trying again.
-    refusal = refused(peer, n)
-    assert both?(refusal, n, ours, theirs)
+    # The worker's own check: "node HEAD runs build OURS, node WORKER runs build THEIRS".
+    assert refused(peer, n) =~ "node #{node()} runs build #{ours}, node #{n} runs build #{theirs}"
     assert {:ok, []} = Farm.workers(node())
     refute Peers.call(peer, n, Farm.Member, :joined?, [])
 
     # Of the same build again, it joins by itself at its next try.
     pretend(peer, n, Build.identity())
-    assert Wait.eventually(fn -> Peers.call(peer, n, Farm.Member, :joined?, []) end, 2_000)
+    assert Wait.eventually(fn -> Peers.call(peer, n, Farm.Member, :joined?, []) end, 1_000)
     assert {:ok, [_]} = Farm.workers(node())
+  end
+
+  test "a head refuses the join of a worker of another build, naming both",
+       %{peer: peer, other: n, ours: ours, theirs: theirs} do
+    farm_head()
+    # A member of the peer's build, as one that skips its own check (an older one) joins.
+    member = Peers.call(peer, n, :erlang, :whereis, [:init])
+    about = %{tags: [], slots: 1, speed: 1, build: Peers.call(peer, n, Build, :identity, [])}
+
+    log =
+      capture_log(fn ->
+        assert {:error, %RingTracer.Error{reason: :build_mismatch, message: message}} =
+                 GenServer.call(RingTracer.Names.farm_head(), {:join, n, about, member})
+
+        assert both?(message, n, ours, theirs)
+      end)
+
+    assert log =~ "farm: refused worker #{n}"
+    assert {:ok, []} = Farm.workers(node())
+
+    # One too old to tell its build is refused too.
+    capture_log(fn ->
+      assert {:error, %RingTracer.Error{message: message}} =
+               GenServer.call(
+                 RingTracer.Names.farm_head(),
+                 {:join, n, Map.delete(about, :build), member}
+               )
+
+      assert message =~ "node #{n} runs an unknown build, node #{node()} runs build #{ours}"
+    end)
   end
 
   test "a submit to a head of another build is refused, naming both builds",
@@ -160,6 +177,17 @@ defmodule RingTracer.Cluster.BuildDistributedTest do
 
     assert both?(message, n, ours, theirs)
     assert {:ok, []} = Peers.call(peer, n, Farm, :jobs, [n])
+  end
+
+  # A head on this node, stopped and its folder removed after the test.
+  defp farm_head do
+    dir = Path.join(System.tmp_dir!(), "rt_build_farm_#{System.unique_integer([:positive])}")
+    {:ok, _} = Farm.start_head(dir: dir)
+
+    on_exit(fn ->
+      Farm.stop_head()
+      File.rm_rf!(dir)
+    end)
   end
 
   # The worker's refusal, as its membership keeps it (nil: none yet).

@@ -40,8 +40,8 @@ defmodule RingTracer.Cluster.BuildTest do
       assert {:error, %RingTracer.Error{reason: :build_mismatch, message: message}} =
                Build.compare(:w@h, theirs, ours)
 
-      assert message =~
-               "node w@h runs build #{Build.short(theirs)}, node #{node()} runs build #{Build.short(ours)}"
+      named = if theirs == :unknown, do: "an unknown build", else: "build #{Build.short(theirs)}"
+      assert message =~ "node w@h runs #{named}, node #{node()} runs build #{Build.short(ours)}"
 
       assert message =~ what
       assert Build.short(theirs) != Build.short(ours)
