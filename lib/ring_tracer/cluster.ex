@@ -141,8 +141,8 @@ defmodule RingTracer.Cluster do
 
   @impl GenServer
   def init([]) do
-    # This node's build, computed once now that the code and NIF are loaded.
-    _ = Build.identity()
+    # The NIF's part of this node's build, now that it is loaded.
+    :ok = Build.init()
     :ok = :pg.join(@scope, @group, Process.whereis(RingTracer.Children))
     :ok = :net_kernel.monitor_nodes(true)
     {:ok, %{}}

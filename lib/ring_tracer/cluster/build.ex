@@ -5,14 +5,14 @@ defmodule RingTracer.Cluster.Build do
 
   A build is the application's version, a hash of its compiled code (the
   MD5 of each module of `:ring_tracer`, as `module_info(:md5)` gives it,
-  sorted by module and hashed together) and a hash of the NIF's shared
-  library as it is on disk when the identity is first asked for (the
-  application asks at start, right after loading the NIF). Two nodes of
-  the same version built from different sources, or with a different
-  kernel, have different builds.
+  sorted by module and hashed together) and a SHA-256 of the NIF's shared
+  library as it is on disk at the application's start, right after the NIF
+  was loaded. Two nodes of the same version built from different sources,
+  or with a different kernel, have different builds.
 
-  The identity is computed once per node and kept in `:persistent_term`;
-  `identity/0` reads it from there.
+  The identity is computed once per node, on its first use (a few tens of
+  milliseconds: a render on one node never pays for it), and kept in
+  `:persistent_term`; `identity/0` reads it from there.
 
   Every place where nodes meet before work compares builds: the pre-flight
   check of a render on other nodes (`RingTracer.Cluster.check/1`), a job's
@@ -36,6 +36,7 @@ defmodule RingTracer.Cluster.Build do
   @type t :: %__MODULE__{version: String.t(), code: binary(), nif: binary() | nil}
 
   @key {__MODULE__, :identity}
+  @nif_key {__MODULE__, :nif}
   @call_ms 5_000
 
   @doc """
@@ -58,6 +59,12 @@ defmodule RingTracer.Cluster.Build do
   end
 
   @doc false
+  # At the application's start: the NIF's library, hashed while it is the
+  # one just loaded.
+  @spec init() :: :ok
+  def init, do: :persistent_term.put(@nif_key, nif_hash())
+
+  @doc false
   # Where identity/0 keeps the build (tests put another one there to make a
   # node pretend to be of another build).
   @spec key() :: term()
@@ -65,11 +72,17 @@ defmodule RingTracer.Cluster.Build do
 
   @doc """
   The build of the code loaded now, computed afresh (`identity/0` keeps the
-  first one).
+  first one); the NIF's hash is the one taken at the application's start.
   """
   @spec compute() :: t()
   def compute do
-    %__MODULE__{version: version(), code: code_hash(), nif: nif_hash()}
+    nif =
+      case :persistent_term.get(@nif_key, :none) do
+        :none -> nif_hash()
+        hash -> hash
+      end
+
+    %__MODULE__{version: version(), code: code_hash(), nif: nif}
   end
 
   @doc """
@@ -204,7 +217,7 @@ defmodule RingTracer.Cluster.Build do
 
       priv ->
         case File.read(Path.join([to_string(priv), "native", "libring_tracer_nif.so"])) do
-          {:ok, bytes} -> :erlang.md5(bytes)
+          {:ok, bytes} -> :crypto.hash(:sha256, bytes)
           {:error, _} -> nil
         end
     end
