@@ -98,7 +98,7 @@ defmodule RingTracer.Farm.Member do
     else
       {:error, %Error{message: message}} ->
         if message != state.refused,
-          do: Logger.error("farm: the head #{head} refused this worker: #{message}")
+          do: Logger.error("farm: cannot join #{head}: #{message}")
 
         Process.send_after(self(), :join, @refused_ms)
         %{state | refused: message}
