@@ -10,9 +10,10 @@ defmodule RingTracer.Cluster.Build do
   was loaded. Two nodes of the same version built from different sources,
   or with a different kernel, have different builds.
 
-  The identity is computed once per node, on its first use (a few tens of
-  milliseconds: a render on one node never pays for it), and kept in
-  `:persistent_term`; `identity/0` reads it from there.
+  The identity is computed once per node (a few tens of milliseconds), in
+  the background from the application's start (or by the first call that
+  needs it sooner), and kept in `:persistent_term`; `identity/0` reads it
+  from there.
 
   Every place where nodes meet before work compares builds: the pre-flight
   check of a render on other nodes (`RingTracer.Cluster.check/1`), a job's
@@ -182,31 +183,34 @@ defmodule RingTracer.Cluster.Build do
 
   defp code_hash do
     modules = Application.spec(:ring_tracer, :modules) || []
+    ebin = ebin()
 
     modules
     |> Enum.sort()
-    |> Enum.map(&[Atom.to_string(&1), module_md5(&1)])
+    |> Enum.map(&[Atom.to_string(&1), module_md5(&1, ebin)])
     |> :erlang.md5()
   end
 
+  defp ebin do
+    case :code.lib_dir(:ring_tracer) do
+      {:error, _} -> nil
+      dir -> Path.join(to_string(dir), "ebin")
+    end
+  end
+
   # A loaded module's MD5 is the one of the code running; beam_lib's for
-  # one not loaded yet is the same value, read from its file.
-  defp module_md5(module) do
-    case :code.is_loaded(module) do
-      {:file, _} ->
-        module.module_info(:md5)
-
-      false ->
-        case :code.which(module) do
-          path when is_list(path) ->
-            case :beam_lib.md5(path) do
-              {:ok, {_, md5}} -> md5
-              {:error, _, _} -> "missing"
-            end
-
-          _ ->
-            "missing"
-        end
+  # one not loaded yet is the same value, read from its file in the
+  # application's folder (not through the code path, which a node with a
+  # long one searches slowly).
+  defp module_md5(module, ebin) do
+    with false <- :code.is_loaded(module),
+         true <- ebin != nil,
+         path = String.to_charlist(Path.join(ebin, Atom.to_string(module) <> ".beam")),
+         {:ok, {_, md5}} <- :beam_lib.md5(path) do
+      md5
+    else
+      {:file, _} -> module.module_info(:md5)
+      _ -> "missing"
     end
   end
 
