@@ -142,18 +142,18 @@ defmodule RingTracer.Cluster do
   @impl GenServer
   def init([]) do
     # The NIF's part of this node's build, now that it is loaded; the rest
-    # in the background, so that no check waits for it.
+    # once this process has started, so that no check waits for it.
     :ok = Build.init()
-
-    {:ok, _} =
-      Task.start(fn ->
-        Process.flag(:priority, :low)
-        Build.identity()
-      end)
 
     :ok = :pg.join(@scope, @group, Process.whereis(RingTracer.Children))
     :ok = :net_kernel.monitor_nodes(true)
-    {:ok, %{}}
+    {:ok, %{}, {:continue, :build}}
+  end
+
+  @impl GenServer
+  def handle_continue(:build, state) do
+    _ = Build.identity()
+    {:noreply, state}
   end
 
   @impl GenServer

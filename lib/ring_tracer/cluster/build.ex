@@ -10,10 +10,11 @@ defmodule RingTracer.Cluster.Build do
   was loaded. Two nodes of the same version built from different sources,
   or with a different kernel, have different builds.
 
-  The identity is computed once per node (a few tens of milliseconds), in
-  the background from the application's start (or by the first call that
-  needs it sooner), and kept in `:persistent_term`; `identity/0` reads it
-  from there.
+  The identity is computed once per node (a few tens of milliseconds), by
+  `RingTracer.Cluster` right after the application's start (or by the first
+  call that needs it sooner), and kept in `:persistent_term`; `identity/0`
+  reads it from there. A node whose application has not started yet tells
+  no build: `check/2` treats it as one that cannot be reached.
 
   Every place where nodes meet before work compares builds: the pre-flight
   check of a render on other nodes (`RingTracer.Cluster.check/1`), a job's
@@ -54,9 +55,20 @@ defmodule RingTracer.Cluster.Build do
 
       nil ->
         build = compute()
-        :persistent_term.put(@key, build)
+        # Kept once the application is loaded (before, it has no version).
+        if build.version != "unknown", do: :persistent_term.put(@key, build)
         build
     end
+  end
+
+  @doc false
+  # What check/2 asks another node: its build, once its application runs
+  # (a node still starting, a head that restarts, is not there yet).
+  @spec running_identity() :: {:ok, t()} | :not_running
+  def running_identity do
+    if Process.whereis(RingTracer.Supervisor) != nil,
+      do: {:ok, identity()},
+      else: :not_running
   end
 
   @doc false
@@ -152,7 +164,8 @@ defmodule RingTracer.Cluster.Build do
   Asks `node` for its build and compares it with this node's. `:ok` for
   this node itself. An error of reason `:build_mismatch` when the builds
   differ, `{:error, {:call, reason}}` when the call failed (what `:erpc`
-  raised: `{:erpc, :noconnection}`, ...), for the caller to word.
+  raised: `{:erpc, :noconnection}`, ...; `:not_running` for a node whose
+  application has not started), for the caller to word.
 
   ## Options
 
@@ -163,8 +176,10 @@ defmodule RingTracer.Cluster.Build do
   def check(node, _opts) when node == node(), do: :ok
 
   def check(node, opts) do
-    theirs = :erpc.call(node, __MODULE__, :identity, [], opts[:timeout] || @call_ms)
-    compare(node, theirs)
+    case :erpc.call(node, __MODULE__, :running_identity, [], opts[:timeout] || @call_ms) do
+      {:ok, theirs} -> compare(node, theirs)
+      :not_running -> {:error, {:call, :not_running}}
+    end
   rescue
     e in ErlangError ->
       case e.original do

@@ -27,6 +27,9 @@ defmodule RingTracer.Cluster.BuildDistributedTest do
     Peers.ensure_distributed()
     {peer, n} = Peers.start("otherbuild")
     on_exit(fn -> Peers.stop(peer) end)
+    # The peer's own build is computed (by RingTracer.Cluster, once it has
+    # started) before the tests put another one in its place.
+    _ = Peers.call(peer, n, :sys, :get_state, [RingTracer.Cluster])
     {:ok, peer: peer, other: n}
   end
 
