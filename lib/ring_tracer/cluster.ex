@@ -10,11 +10,13 @@ defmodule RingTracer.Cluster do
   monitor on a process of a node that drops fires with `:noconnection`).
 
   `check/1` is the pre-flight test a job runs before any work starts: each
-  node must be reachable, run the application, and have loaded the NIF.
+  node must be reachable, run the application, have loaded the NIF, and run
+  the same build as this node (`RingTracer.Cluster.Build`).
   """
   use GenServer
   require Logger
 
+  alias RingTracer.Cluster.Build
   alias RingTracer.Error
 
   @scope RingTracer.PG
@@ -40,7 +42,9 @@ defmodule RingTracer.Cluster do
 
   @doc """
   Connects to `nodes` and checks that each can host children. Returns `:ok`
-  or an error naming the first node that cannot, and why.
+  or an error naming the first node that cannot, and why: of reason
+  `:build_mismatch` for a node of another build (both builds named), else
+  `:node_unavailable`.
 
       iex> RingTracer.Cluster.check([node()])
       :ok
@@ -50,6 +54,7 @@ defmodule RingTracer.Cluster do
     Enum.reduce_while(nodes, :ok, fn n, :ok ->
       case check_node(n) do
         :ok -> {:cont, :ok}
+        {:error, %Error{} = error} -> {:halt, {:error, error}}
         {:error, message} -> {:halt, {:error, Error.new(:node_unavailable, message)}}
       end
     end)
@@ -117,7 +122,11 @@ defmodule RingTracer.Cluster do
         {:error, "node #{n} has not loaded RingTracer's NIF"}
 
       true ->
-        :ok
+        case Build.check(n, timeout: @check_ms) do
+          :ok -> :ok
+          {:error, %Error{} = error} -> {:error, error}
+          {:error, {:call, reason}} -> {:error, call_failure(n, reason, @check_ms)}
+        end
     end
   rescue
     e in ErlangError ->
@@ -132,9 +141,19 @@ defmodule RingTracer.Cluster do
 
   @impl GenServer
   def init([]) do
+    # The NIF's part of this node's build, now that it is loaded; the rest
+    # once this process has started, so that no check waits for it.
+    :ok = Build.init()
+
     :ok = :pg.join(@scope, @group, Process.whereis(RingTracer.Children))
     :ok = :net_kernel.monitor_nodes(true)
-    {:ok, %{}}
+    {:ok, %{}, {:continue, :build}}
+  end
+
+  @impl GenServer
+  def handle_continue(:build, state) do
+    _ = Build.identity()
+    {:noreply, state}
   end
 
   @impl GenServer

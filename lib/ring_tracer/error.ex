@@ -17,6 +17,7 @@ defmodule RingTracer.Error do
   | `:job_ended` | `RingTracer.grow/4` or `shrink/3` reached a job that is over |
   | `:not_running` | the `:ring_tracer` application is not running |
   | `:node_unavailable` | a node given in `:nodes` cannot host children (the message says why) |
+  | `:build_mismatch` | another node runs another build of RingTracer (the message names both; `RingTracer.Cluster.Build`) |
   | `:cookie` | the cookie file is missing, unsafe (readable by others) or invalid |
   | `:distribution` | this node could not become distributed (name in use, epmd, TLS set-up) |
   | `:preview` | a preview could not start (port in use) or its job is not running |

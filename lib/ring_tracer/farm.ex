@@ -117,7 +117,9 @@ defmodule RingTracer.Farm do
   @doc """
   Makes this node a worker of the farm whose head is `head`: it joins now
   or as soon as the head can be reached, and joins again by itself
-  whenever the head restarts.
+  whenever the head restarts. A head of another build
+  (`RingTracer.Cluster.Build`) refuses it: the worker logs the refusal,
+  naming both builds, and asks again every few seconds.
 
   ## Options
 
@@ -172,7 +174,8 @@ defmodule RingTracer.Farm do
 
   @doc """
   Queues a scene on the farm and returns the job's id once the head has it
-  on disk.
+  on disk. A head of another build (`RingTracer.Cluster.Build`) is not
+  given the job: an error of reason `:build_mismatch` naming both builds.
 
   `scene` is a path, read here (confined as `RingTracer.render/2` reads
   it, `:allow_dirs` included), or a loaded `RingTracer.Scene`.
@@ -212,8 +215,27 @@ defmodule RingTracer.Farm do
            ),
          # Sequence.options gives the layout's frames, from 0
          frames = Enum.map(frames, &(&1 + 1)),
-         {:ok, job} <- job(scene, frames, farm, Keyword.drop(render, [:allow_dirs])) do
+         {:ok, job} <- job(scene, frames, farm, Keyword.drop(render, [:allow_dirs])),
+         :ok <- same_build(head, farm[:timeout]) do
       call(head, {:submit, job}, farm[:timeout])
+    end
+  end
+
+  # A job is this build's (its options, its scene's source): a head of
+  # another build is not given it.
+  defp same_build(head, timeout) do
+    case RingTracer.Cluster.Build.check(head, timeout: timeout || @timeout) do
+      :ok ->
+        :ok
+
+      {:error, %Error{} = error} ->
+        {:error, error}
+
+      {:error, {:call, {:erpc, :timeout}}} ->
+        {:error, Error.new(:farm_unreachable, "the farm head #{head} did not answer in time")}
+
+      {:error, {:call, _}} ->
+        {:error, Error.new(:farm_unreachable, "the farm head #{head} cannot be reached")}
     end
   end
 

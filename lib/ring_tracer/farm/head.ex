@@ -84,23 +84,16 @@ defmodule RingTracer.Farm.Head do
 
   @impl true
   def handle_call({:join, node, %{tags: tags, slots: slots} = about, member}, _from, state) do
-    state = forget_worker(state, node)
-    ref = Process.monitor(member)
-    at = System.os_time(:millisecond)
-    speed = Map.get(about, :speed, 1)
+    # A worker of another build is refused before it is a worker (its
+    # message names both builds); one too old to tell its build as well.
+    case RingTracer.Cluster.Build.compare(node, Map.get(about, :build)) do
+      :ok ->
+        join(state, node, tags, slots, about, member)
 
-    worker = %{
-      tags: tags,
-      slots: slots,
-      speed: speed,
-      joined_at: at,
-      member: member,
-      ref: ref,
-      job: nil
-    }
-
-    Logger.info("farm: worker #{node} joined (#{slots} slots, tags #{inspect(tags)})")
-    {:reply, :ok, reassign(put_in(state.workers[node], worker))}
+      {:error, error} ->
+        Logger.warning("farm: refused worker #{node}: #{error.message}")
+        {:reply, {:error, error}, state}
+    end
   end
 
   def handle_call({:submit, %Job{} = job}, _from, state) do
@@ -490,4 +483,26 @@ defmodule RingTracer.Farm.Head do
   end
 
   defp no_job(id), do: Error.new(:farm, "no job #{id} on this farm")
+
+  # A worker of this build joins (again): known by its node, watched through
+  # its member process.
+  defp join(state, node, tags, slots, about, member) do
+    state = forget_worker(state, node)
+    ref = Process.monitor(member)
+    at = System.os_time(:millisecond)
+    speed = Map.get(about, :speed, 1)
+
+    worker = %{
+      tags: tags,
+      slots: slots,
+      speed: speed,
+      joined_at: at,
+      member: member,
+      ref: ref,
+      job: nil
+    }
+
+    Logger.info("farm: worker #{node} joined (#{slots} slots, tags #{inspect(tags)})")
+    {:reply, :ok, reassign(put_in(state.workers[node], worker))}
+  end
 end

@@ -5,19 +5,29 @@ defmodule RingTracer.Farm.Member do
   # every `@retry_ms` until the head is back, so a restarted head finds its
   # workers again by itself. The children it hosts are the jobs' own, under
   # `RingTracer.Children` as for any render.
+  #
+  # Builds (RingTracer.Cluster.Build) are checked both ways: the worker asks
+  # the head's build before it joins, and tells its own in the join, which a
+  # head of another build refuses, naming both builds. The worker logs that once
+  # (again only if the head's answer changes) and tries again every
+  # `@refused_ms`, so that the head, or this node, upgraded to the same
+  # build finds it without a restart.
 
   use GenServer
   require Logger
 
+  alias RingTracer.Cluster.Build
+  alias RingTracer.Error
   alias RingTracer.Names
 
   @retry_ms 500
+  @refused_ms 5_000
   @call_ms 5_000
 
   defmodule State do
     @moduledoc false
     @enforce_keys [:head, :tags, :slots]
-    defstruct [:head, :tags, :slots, speed: 1, ref: nil, joined: 0]
+    defstruct [:head, :tags, :slots, speed: 1, ref: nil, joined: 0, refused: nil]
 
     @type t :: %__MODULE__{
             head: node(),
@@ -25,7 +35,8 @@ defmodule RingTracer.Farm.Member do
             slots: pos_integer(),
             speed: number(),
             ref: reference() | nil,
-            joined: non_neg_integer()
+            joined: non_neg_integer(),
+            refused: String.t() | nil
           }
   end
 
@@ -76,12 +87,22 @@ defmodule RingTracer.Farm.Member do
   def handle_call(:joined?, _from, state), do: {:reply, state.ref != nil, state}
 
   defp join(%State{ref: nil, head: head} = state) do
+    about = %{tags: state.tags, slots: state.slots, speed: state.speed, build: Build.identity()}
+
     with true <- Node.connect(head),
-         about = %{tags: state.tags, slots: state.slots, speed: state.speed},
+         :ok <- same_build(head),
          :ok <- call(head, {:join, node(), about, self()}) do
       if state.joined == 0, do: Logger.info("farm: joined #{head}")
-      %{state | ref: Process.monitor(Names.farm_head(head)), joined: state.joined + 1}
+      ref = Process.monitor(Names.farm_head(head))
+      %{state | ref: ref, joined: state.joined + 1, refused: nil}
     else
+      {:error, %Error{message: message}} ->
+        if message != state.refused,
+          do: Logger.error("farm: cannot join #{head}: #{message}")
+
+        Process.send_after(self(), :join, @refused_ms)
+        %{state | refused: message}
+
       _ ->
         Process.send_after(self(), :join, @retry_ms)
         state
@@ -89,6 +110,14 @@ defmodule RingTracer.Farm.Member do
   end
 
   defp join(state), do: state
+
+  defp same_build(head) do
+    case Build.check(head, timeout: @call_ms) do
+      :ok -> :ok
+      {:error, %Error{} = error} -> {:error, error}
+      {:error, {:call, _}} -> :unreachable
+    end
+  end
 
   defp call(head, message) do
     GenServer.call(Names.farm_head(head), message, @call_ms)

@@ -70,6 +70,9 @@ defmodule RingTracer.Job.Parent do
   # `RingTracer.render/2` documents them. An atom, not the alias: the parent
   # calls nothing of the public API module (no run-time dependency on it).
   @reply_tag :"Elixir.RingTracer"
+  # How long a node may take to tell its build (the liveness watch cuts a
+  # frozen one off sooner).
+  @build_ms 10_000
 
   @enforce_keys [:spec, :strategy, :ledger, :missing, :started, :t0]
   defstruct [
@@ -350,8 +353,10 @@ defmodule RingTracer.Job.Parent do
       placement
       |> Enum.uniq()
       |> Enum.reduce_while({:ok, %{}}, fn node, {:ok, acc} ->
-        case kernel.prepare_node(state.spec, kernel_opts, node) do
-          {:ok, bytes} -> {:cont, {:ok, Map.put(acc, node, bytes)}}
+        with :ok <- same_build(node),
+             {:ok, bytes} <- kernel.prepare_node(state.spec, kernel_opts, node) do
+          {:cont, {:ok, Map.put(acc, node, bytes)}}
+        else
           {:error, message} -> {:halt, {:error, message}}
         end
       end)
@@ -660,13 +665,28 @@ defmodule RingTracer.Job.Parent do
     if Map.has_key?(state.node_bytes, node) do
       {:ok, state}
     else
-      case kernel.prepare_node(state.spec, kernel_opts, node) do
-        {:ok, bytes} ->
-          {:ok, %{state | node_bytes: Map.put(state.node_bytes, node, bytes)}}
-
+      with :ok <- same_build(node),
+           {:ok, bytes} <- kernel.prepare_node(state.spec, kernel_opts, node) do
+        {:ok, %{state | node_bytes: Map.put(state.node_bytes, node, bytes)}}
+      else
         {:error, message} ->
           {:error, {:node_unavailable, "could not prepare #{node}: #{message}"}}
       end
+    end
+  end
+
+  # A node of another build (RingTracer.Cluster.Build) hosts no child of
+  # this job: refused before anything is asked of it, both builds named.
+  defp same_build(node) do
+    case RingTracer.Cluster.Build.check(node, timeout: @build_ms) do
+      :ok ->
+        :ok
+
+      {:error, %RingTracer.Error{message: message}} ->
+        {:error, message}
+
+      {:error, {:call, reason}} ->
+        {:error, RingTracer.Cluster.call_failure(node, reason, @build_ms)}
     end
   end
 
