@@ -127,6 +127,13 @@ defmodule RingTracer.CLI do
     end
   end
 
+  def run(["--version"]) do
+    :ok = load(:ring_tracer)
+    build = RingTracer.Cluster.Build.identity()
+    IO.puts("ringtracer #{build.version} (build #{RingTracer.Cluster.Build.short(build)})")
+    0
+  end
+
   def run([help]) when help in ["help", "--help", "-h"] do
     IO.write(help())
     0
@@ -307,5 +314,12 @@ defmodule RingTracer.CLI do
     replace an existing file. Copy it, keeping its mode, to every machine of the cluster:
     whoever has it can run any code on every node.
     """
+  end
+
+  defp load(app) do
+    case Application.load(app) do
+      :ok -> :ok
+      {:error, {:already_loaded, ^app}} -> :ok
+    end
   end
 end

@@ -116,7 +116,7 @@ defmodule RingTracer.ReleaseTest do
 
     {status, version} = collect(hidden(ctx, [ctx.release, "--version"]))
     assert status == 0, version
-    assert version =~ ~r/^ringtracer \d+\.\d+\.\d+ \(build [0-9a-f]{12}\)\n$/
+    assert version =~ ~r/^ringtracer (\d+\.\d+\.\d+) \(build \1\+[0-9a-f]{8}\)\n$/
     assert checkout(ctx, ["--version"]) == {0, version}
 
     assert collect(hidden(ctx, [ctx.release, "render", "--help"])) ==

@@ -7,7 +7,6 @@
 # and defines
 #   setup, build  what must be installed and built before a command (no-ops in a release)
 #   erl_boot      sets erl_cmd: `erl` on the compiled application
-#   build_id      prints the build's hash (see build_hash)
 # then calls `dispatch COMMAND ARGS...`.
 
 export LANG=${LANG:-C.UTF-8} LC_ALL=${LC_ALL:-C.UTF-8}
@@ -311,13 +310,6 @@ private_dir() {
   fi
 }
 
-# The build's hash: the first 12 hex digits of a SHA-256 over the
-# application's compiled modules and .app (as compiled, before a release
-# strips them) and the NIF. $1: the ebin folder, $2: the NIF's library.
-build_hash() {
-  (cd -- "$1" && sha256sum -- *.beam ring_tracer.app && sha256sum < "$2") | sha256sum | cut -c1-12
-}
-
 # The application's version, from its .app file in folder $1.
 app_version() {
   sed -n 's/.*{vsn, *"\([^"]*\)"}.*/\1/p' "$1/ring_tracer.app" | head -n 1
@@ -332,7 +324,6 @@ dispatch() {
     serve) setup; RINGTRACER_SOCKET=$(socket_path) run_cli serve "$@" ;;
     worker|cookie|farm|submit|jobs|status|wait|cancel|fetch) setup; run_cli "$cmd" "$@" ;;
     tls) tls "$@" ;;
-    --version) setup; build; echo "ringtracer $(app_version "$ebin") (build $(build_id))" ;;
     # Help, and unknown commands (with a suggestion), from RingTracer.CLI.
     "") setup; run_cli ;;
     *) setup; run_cli "$cmd" "$@" ;;
