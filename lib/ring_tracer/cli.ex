@@ -52,11 +52,7 @@ defmodule RingTracer.CLI do
           # Until Ctrl-C or SIGTERM: the children it hosts die with it, and
           # their parents trace their atoms elsewhere; a farm's worker leaves
           # its farm first.
-          receive do
-            {RingTracer.CLI.Signals, signal} ->
-              :ok = RingTracer.Farm.leave()
-              RingTracer.CLI.Signals.exit_status(signal)
-          end
+          until_signal(&RingTracer.Farm.leave/0)
 
         {:error, message} ->
           error("worker", message, 1)
@@ -75,11 +71,7 @@ defmodule RingTracer.CLI do
 
         # Until Ctrl-C or SIGTERM: the queue stays in the head's folder, and
         # a head started again under the same name resumes it.
-        receive do
-          {RingTracer.CLI.Signals, signal} ->
-            :ok = RingTracer.Farm.stop_head()
-            RingTracer.CLI.Signals.exit_status(signal)
-        end
+        until_signal(&RingTracer.Farm.stop_head/0)
 
       {:error, status, message} ->
         error("farm", message, status)
@@ -320,6 +312,15 @@ defmodule RingTracer.CLI do
     case Application.load(app) do
       :ok -> :ok
       {:error, {:already_loaded, ^app}} -> :ok
+    end
+  end
+
+  # Runs until Ctrl-C or SIGTERM, then `stop` and the signal's exit status.
+  defp until_signal(stop) do
+    receive do
+      {RingTracer.CLI.Signals, signal} ->
+        :ok = stop.()
+        RingTracer.CLI.Signals.exit_status(signal)
     end
   end
 end

@@ -109,8 +109,7 @@ defmodule RingTracer.Farm.Dashboard do
     Process.flag(:trap_exit, true)
     addr = Keyword.fetch!(opts, :listen)
     token = Keyword.fetch!(opts, :token)
-    secret = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
-    :ets.insert(secret, {:address, token, Listener.hosts(addr)})
+    secret = Listener.secret(token, addr)
 
     with {:ok, _} <- Application.ensure_all_started(:inets),
          {:ok, server} <-

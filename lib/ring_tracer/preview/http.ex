@@ -63,7 +63,7 @@ defmodule RingTracer.Preview.HTTP do
   @doc false
   def unquote(:do)(m) do
     {server, table, secret} = Listener.data(m)
-    {token, hosts} = address(secret)
+    {token, hosts} = Listener.address(secret)
 
     case Listener.check(m, token, hosts) do
       {:error, response} ->
@@ -80,14 +80,6 @@ defmodule RingTracer.Preview.HTTP do
         {:error, response} = Listener.status(404, "not found")
         response
     end
-  end
-
-  # The preview's token and host names (none once it is stopping).
-  defp address(secret) do
-    [{:address, token, hosts}] = :ets.lookup(secret, :address)
-    {token, hosts}
-  rescue
-    ArgumentError -> {nil, []}
   end
 
   defp stream(m, server, table) do

@@ -279,6 +279,26 @@ defmodule RingTracer.Preview.Listener do
     end
   end
 
+  @doc """
+  A server's secret: a table, readable by its request handlers, of its
+  token and the host names a request may give (`hosts/1` of `addr`).
+  """
+  @spec secret(String.t(), :inet.ip_address()) :: :ets.tid()
+  def secret(token, addr) do
+    table = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
+    :ets.insert(table, {:address, token, hosts(addr)})
+    table
+  end
+
+  @doc "The token and host names in `secret/2`'s table (none once the server is stopping)."
+  @spec address(:ets.tid()) :: {String.t() | nil, [String.t()] | :any}
+  def address(secret) do
+    [{:address, token, hosts}] = :ets.lookup(secret, :address)
+    {token, hosts}
+  rescue
+    ArgumentError -> {nil, []}
+  end
+
   @doc "An address as a URL's host: `127.0.0.1`, `[::1]`."
   @spec host(:inet.ip_address()) :: String.t()
   def host(addr) when tuple_size(addr) == 8, do: "[#{:inet.ntoa(addr)}]"

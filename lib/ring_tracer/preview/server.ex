@@ -54,8 +54,7 @@ defmodule RingTracer.Preview.Server do
     # can reach loopback) or a web page that rebinds a name of its own to
     # 127.0.0.1 cannot guess it, and only sees 404s.
     token = Listener.token()
-    secret = :ets.new(__MODULE__, [:set, :protected, read_concurrency: true])
-    :ets.insert(secret, {:address, token, Listener.hosts(addr)})
+    secret = Listener.secret(token, addr)
 
     listen = [
       listen: addr,

@@ -28,7 +28,7 @@ defmodule RingTracer.Farm.Dashboard.HTTP do
 
   @doc false
   def unquote(:do)(m) do
-    {token, hosts} = address(Listener.data(m))
+    {token, hosts} = Listener.address(Listener.data(m))
 
     case Listener.check(m, token, hosts) do
       {:error, response} ->
@@ -53,13 +53,5 @@ defmodule RingTracer.Farm.Dashboard.HTTP do
         {:error, response} = Listener.status(404, "not found")
         response
     end
-  end
-
-  # The dashboard's token and host names (none once it is stopping).
-  defp address(secret) do
-    [{:address, token, hosts}] = :ets.lookup(secret, :address)
-    {token, hosts}
-  rescue
-    ArgumentError -> {nil, []}
   end
 end
