@@ -113,7 +113,7 @@ defmodule RingTracer do
   end
 
   defp load_and_run(scene, opts, extra) do
-    with :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
+    with :ok <- RingTracer.Cluster.connect(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
          :ok <- check_frame(scene, opts[:frame]),
          {:ok, settings} <- settings(scene, opts) do
@@ -319,7 +319,7 @@ defmodule RingTracer do
     with :ok <- not_for_sequences(opts),
          {:ok, opts} <- Options.validate(Keyword.put(opts, :aim, false)),
          :ok <- running(),
-         :ok <- RingTracer.Cluster.check(Enum.uniq(opts[:nodes])),
+         :ok <- RingTracer.Cluster.connect(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
          {:ok, frames, window, ack} <-
            RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
@@ -683,6 +683,9 @@ defmodule RingTracer do
             name = if is_atom(opts[:strategy]), do: opts[:strategy], else: module
             result = Result.new(settings, name, capacity_cap, raw)
             {:ok, %{result | aim: Keyword.get(strategy_opts, :aim, false)}}
+
+          {:error, {reason, message}} ->
+            {:error, Error.new(reason, message)}
 
           {:error, message} ->
             {:error, Error.new(:render_failed, message)}

@@ -41,28 +41,55 @@ defmodule RingTracer.Cluster do
   end
 
   @doc """
-  Connects to `nodes` and checks that each can host children. Returns `:ok`
-  or an error naming the first node that cannot, and why: of reason
-  `:build_mismatch` for a node of another build (both builds named), else
-  `:node_unavailable`.
+  Connects to `nodes` and checks that each can host children: it runs the
+  application, has loaded the NIF and runs this node's build. One call to
+  each node, all at once. Returns `:ok` or an error naming the first node
+  that cannot, and why: of reason `:build_mismatch` for a node of another
+  build (both builds named), else `:node_unavailable`.
+
+  A render makes these checks as part of starting its children (one
+  round trip fewer), after `connect/1`.
 
       iex> RingTracer.Cluster.check([node()])
       :ok
   """
   @spec check([node()]) :: :ok | {:error, Error.t()}
   def check(nodes) do
+    with :ok <- connect(nodes) do
+      nodes
+      |> Enum.reject(&(&1 == node()))
+      |> Enum.map(&{&1, Task.async(fn -> remote_check(&1) end)})
+      |> Enum.map(fn {_n, task} -> Task.await(task, :infinity) end)
+      |> Enum.find(:ok, &(&1 != :ok))
+      |> case do
+        :ok -> :ok
+        {:error, %Error{} = error} -> {:error, error}
+        {:error, message} -> {:error, Error.new(:node_unavailable, message)}
+      end
+    end
+  end
+
+  @doc """
+  Connects to `nodes` (no call to them beyond distribution's own
+  handshake). Returns `:ok` or an error of reason `:node_unavailable`
+  naming the first node that cannot be reached, and why.
+
+      iex> RingTracer.Cluster.connect([node()])
+      :ok
+  """
+  @spec connect([node()]) :: :ok | {:error, Error.t()}
+  def connect(nodes) do
     Enum.reduce_while(nodes, :ok, fn n, :ok ->
-      case check_node(n) do
+      case connect_node(n) do
         :ok -> {:cont, :ok}
-        {:error, %Error{} = error} -> {:halt, {:error, error}}
         {:error, message} -> {:halt, {:error, Error.new(:node_unavailable, message)}}
       end
     end)
   end
 
-  defp check_node(n) when n == node(), do: :ok
+  defp connect_node(n) when n == node(), do: :ok
 
-  defp check_node(n) do
+  defp connect_node(n) do
     cond do
       not Node.alive?() ->
         {:error,
@@ -73,7 +100,7 @@ defmodule RingTracer.Cluster do
         {:error, "cannot connect to node #{n}: #{RingTracer.Cluster.TLS.diagnose(n)}"}
 
       true ->
-        remote_check(n)
+        :ok
     end
   end
 

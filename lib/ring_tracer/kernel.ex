@@ -19,11 +19,15 @@ defmodule RingTracer.Kernel do
   @callback prepare(Spec.t(), keyword()) :: {:ok, context()} | {:error, String.t()}
 
   @doc """
-  Prepares `node` for the job's children, from the parent, once per node
-  (e.g. ships and parses the scene there). Returns the bytes shipped.
+  Prepares the calling process's node for the job's children, once per
+  node, before they start there (`RingTracer.Job.Host`, called by the
+  parent on every node at once): e.g. pins the job's scene there for as
+  long as `owner`, the job's parent, lives. Returns `:need_scene` when the
+  spec's scene came by hash only and this node does not hold it; the
+  parent then sends it packed.
   """
-  @callback prepare_node(Spec.t(), keyword(), node()) ::
-              {:ok, non_neg_integer()} | {:error, String.t()}
+  @callback prepare_node(Spec.t(), keyword(), owner :: pid()) ::
+              :ok | :need_scene | {:error, String.t()}
 
   @doc """
   Traces `count` pixels from `first`, atom number `atom`: linear RGB as

@@ -66,6 +66,12 @@ defmodule RingTracer.SceneCache do
     end
   end
 
+  # What a child reads when its node lacks the scene its parent pinned.
+  defp missing(%Source{name: name}) do
+    message = "scene #{name} is not cached on #{node()} and was shipped without its bytes"
+    Error.new(:invalid_scene, message)
+  end
+
   @doc """
   The handle of frame `frame` (from 0) of the scene of `source` on this
   node, for `RingTracer.Native`'s scene calls: built on a miss (parsing the
@@ -95,14 +101,17 @@ defmodule RingTracer.SceneCache do
   end
 
   @doc """
-  Parses `source` on this node unless it is cached, and pins it for `owner`
-  (a job's parent) until `owner` ends. What a parent calls once per node
-  (through `:erpc` for other nodes) before starting children there.
+  Pins the scene of `source` on this node for `owner` (a job's parent)
+  until `owner` ends, parsing it first unless it is cached: what a job
+  does on each node before starting children there
+  (`RingTracer.Job.Host`). A source without its contents (stripped, not
+  packed) pins a scene this node holds, or returns `:need_scene`.
   """
-  @spec pin(Source.t(), pid()) :: :ok | {:error, String.t()}
+  @spec pin(Source.t(), pid()) :: :ok | :need_scene | {:error, String.t()}
   def pin(%Source{} = source, owner) when is_pid(owner) do
     case GenServer.call(__MODULE__, {:pin, source, owner}, :infinity) do
       :ok -> :ok
+      :need_scene -> :need_scene
       {:error, error} -> {:error, error.message}
     end
   end
@@ -169,6 +178,7 @@ defmodule RingTracer.SceneCache do
   def handle_call({:fetch, %Source{} = source}, _from, state) do
     case load(state, source) do
       {:ok, scene, state} -> {:reply, {:ok, scene}, evict(state)}
+      {:missing, state} -> {:reply, {:error, missing(source)}, state}
       {:error, error, state} -> {:reply, {:error, error}, state}
     end
   end
@@ -191,6 +201,9 @@ defmodule RingTracer.SceneCache do
                 {:reply, {:error, error}, evict(state)}
             end
 
+          {:missing, state} ->
+            {:reply, {:error, missing(source)}, state}
+
           {:error, error, state} ->
             {:reply, {:error, error}, state}
         end
@@ -207,6 +220,9 @@ defmodule RingTracer.SceneCache do
           |> update_entry(hash, &%{&1 | pins: MapSet.put(&1.pins, ref)})
 
         {:reply, :ok, evict(state)}
+
+      {:missing, state} ->
+        {:reply, :need_scene, state}
 
       {:error, error, state} ->
         {:reply, {:error, error}, state}
@@ -248,23 +264,29 @@ defmodule RingTracer.SceneCache do
     do: {:noreply, state |> drop_pins([ref]) |> evict()}
 
   @spec load(state(), Source.t()) ::
-          {:ok, Scene.t(), state()} | {:error, RingTracer.Error.t(), state()}
+          {:ok, Scene.t(), state()} | {:missing, state()} | {:error, Error.t(), state()}
   defp load(state, %Source{hash: hash} = source) do
     case :ets.lookup(@table, hash) do
       [{^hash, scene}] ->
         {:ok, scene, touch(state, hash)}
 
-      [] when source.bytes == nil ->
-        message =
-          "scene #{source.name} is not cached on #{node()} and was shipped without its bytes"
-
-        {:error, Error.new(:invalid_scene, message), state}
+      [] when source.bytes == nil and source.packed == nil ->
+        {:missing, state}
 
       [] ->
-        case Scene.from_source(source) do
-          {:ok, scene} -> {:ok, scene, insert(state, scene)}
+        with {:ok, source} <- unpack(source),
+             {:ok, scene} <- Scene.from_source(source) do
+          {:ok, scene, insert(state, scene)}
+        else
           {:error, error} -> {:error, error, state}
         end
+    end
+  end
+
+  defp unpack(source) do
+    case Source.unpack(source) do
+      {:ok, source} -> {:ok, source}
+      {:error, message} -> {:error, Error.new(:invalid_scene, message)}
     end
   end
 

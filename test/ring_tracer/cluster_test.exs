@@ -17,7 +17,9 @@ defmodule RingTracer.ClusterTest do
 
       parent = spawn(fn -> receive do: (:stop -> :ok) end)
       ring = {self(), remote_pid(:w9@ours)}
-      :ok = RingTracer.Job.Directory.publish(node(), make_ref(), parent, ring, 5_000)
+      id = make_ref()
+      :ok = RingTracer.Job.Directory.publish(node(), id, parent, ring)
+      :ok = RingTracer.Job.Directory.await(id, 2, 5_000)
       assert Cluster.hosts_our_children?(:w9@ours)
       # another render's VM, met through a shared worker
       refute Cluster.hosts_our_children?(:render2@theirs)

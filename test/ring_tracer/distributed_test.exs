@@ -21,16 +21,34 @@ defmodule RingTracer.DistributedTest do
     nodes: nodes,
     reference: reference
   } do
+    {:ok, scene} = RingTracer.Scene.load(TestScenes.path(@scene))
+    held = Map.new(nodes, &{&1, held?(&1, scene)})
+
     {:ok, result} =
       RingTracer.render(TestScenes.path(@scene), [nodes: nodes, children: 6, atoms: 8] ++ @size)
 
     assert result.pixels == reference
     assert Enum.sort(Map.keys(result.nodes)) == Enum.sort([node() | nodes])
     assert Enum.all?(Map.values(result.nodes), &(&1.children == 2))
-    # The scene's bytes went once to each other node.
-    size = File.stat!(TestScenes.path(@scene)).size
-    for n <- nodes, do: assert(result.nodes[n].scene_bytes == size)
+    # The scene went packed to each other node that lacked it ...
+    packed =
+      scene.source |> RingTracer.Scene.Source.pack() |> RingTracer.Scene.Source.packed_size()
+
+    assert packed > 0
+
+    for n <- nodes do
+      assert result.nodes[n].scene_bytes == if(held[n], do: 0, else: packed)
+      assert held?(n, scene)
+    end
+
     assert Enum.sort(RingTracer.Cluster.members()) |> Enum.count() >= 3
+
+    # ... and not again to nodes that hold it: by its hash only.
+    {:ok, again} =
+      RingTracer.render(TestScenes.path(@scene), [nodes: nodes, children: 6, atoms: 8] ++ @size)
+
+    assert again.pixels == reference
+    for n <- nodes, do: assert(again.nodes[n].scene_bytes == 0)
   end
 
   test "children per node, and the local node left out", %{nodes: nodes, reference: reference} do
@@ -154,7 +172,8 @@ defmodule RingTracer.DistributedTest do
       assert {:error, %RingTracer.Error{reason: :node_unavailable, message: message}} =
                RingTracer.render(TestScenes.path(@scene), nodes: [frozen])
 
-      assert message =~ "node #{frozen} did not answer within 5000 ms"
+      # the node's first answer is due within 5 s, plus 2 ms a child it starts
+      assert message =~ ~r/node #{frozen} did not answer within 50\d\d ms/
     end)
   end
 
@@ -174,6 +193,9 @@ defmodule RingTracer.DistributedTest do
     assert message =~ Atom.to_string(bare)
     Peers.stop(peer)
   end
+
+  defp held?(node, scene),
+    do: Map.has_key?(:erpc.call(node, RingTracer.SceneCache, :info, []), scene.source.hash)
 
   # Runs `fun.(node, os_pid)` on a peer of its own, which is then continued
   # (should `fun` have stopped it with SIGSTOP) and stopped, whatever happened.

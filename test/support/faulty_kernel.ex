@@ -6,8 +6,8 @@ defmodule RingTracer.Test.FaultyKernel do
   traced; and, with `:jitter`, each atom's result waits up to that many
   milliseconds more, drawn at random, before it goes to its child (and
   `:delay` milliseconds more, always); and, with
-  `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) just
-  before the parent prepares it, as a node that hangs while a job starts.
+  `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) as
+  the parent prepares it, as a node that hangs while a job starts.
   """
   @behaviour RingTracer.Kernel
 
@@ -19,13 +19,13 @@ defmodule RingTracer.Test.FaultyKernel do
   end
 
   @impl true
-  def prepare_node(spec, opts, node) do
+  def prepare_node(spec, opts, owner) do
     case opts[:freeze] do
-      {^node, os_pid} -> {_, 0} = System.cmd("kill", ["-STOP", os_pid])
+      {node, os_pid} when node == node() -> {_, 0} = System.cmd("kill", ["-STOP", os_pid])
       _ -> :ok
     end
 
-    Native.prepare_node(spec, [], node)
+    Native.prepare_node(spec, [], owner)
   end
 
   @impl true

@@ -510,23 +510,20 @@ defmodule RingTracer.Job.Child do
   def handle_info(msg, state), do: handle(msg, state)
 
   defp handle({:ring, ring}, state) do
-    state =
-      %{
-        state
-        | left: ring.left,
-          left_index: ring.left_index,
-          ring_size: ring.size,
-          t0: ring.t0,
-          status: :working
-      }
-      |> spawn_grandchild()
-      |> fill_pipe()
-      |> maybe_idle()
+    with :ok <- await_ring(state, ring.size), do: ring_started(ring, state)
+  end
 
-    # Siblings (or the parent, for :master) may have written to us before the
-    # parent's ring message came: handle those messages now, in order.
-    Enum.each(Enum.reverse(state.early), &send(self(), &1))
-    {:noreply, %{state | early: []}}
+  # Siblings joined the ring (`RingTracer.grow/4`): the ring is larger, and
+  # the lowest child's left sibling is now the highest that joined.
+  defp handle({:ring_grown, ring}, %{left: left} = state) when left != nil do
+    with :ok <- await_ring(state, ring.size) do
+      state = %{state | ring_size: ring.size}
+
+      state =
+        if ring.left, do: %{state | left: ring.left, left_index: ring.left_index}, else: state
+
+      {:noreply, strategy_message(state, {:siblings_joined, ring.joined})}
+    end
   end
 
   defp handle({:traced, gc, atom, pixels, rays, timing}, %{grandchild: gc} = state) do
@@ -615,16 +612,6 @@ defmodule RingTracer.Job.Child do
     {:noreply, strategy_message(state, {:siblings_died, ring.dead})}
   end
 
-  # Siblings joined the ring (`RingTracer.grow/4`): the ring is larger, and
-  # the lowest child's left sibling is now the highest that joined.
-  defp handle({:ring_grown, ring}, %{left: left} = state) when left != nil do
-    state = %{state | ring_size: ring.size}
-
-    state = if ring.left, do: %{state | left: ring.left, left_index: ring.left_index}, else: state
-
-    {:noreply, strategy_message(state, {:siblings_joined, ring.joined})}
-  end
-
   defp handle(msg, %{left: nil} = state),
     do: {:noreply, %{state | early: [msg | state.early]}}
 
@@ -638,6 +625,44 @@ defmodule RingTracer.Job.Child do
     do: {:noreply, state |> confirm(from, atoms) |> strategy_message(msg)}
 
   defp handle(msg, state), do: {:noreply, strategy_message(state, msg)}
+
+  defp ring_started(ring, state) do
+    state =
+      %{
+        state
+        | left: ring.left,
+          left_index: ring.left_index,
+          ring_size: ring.size,
+          t0: ring.t0,
+          status: :working
+      }
+      |> spawn_grandchild()
+      |> fill_pipe()
+      |> maybe_idle()
+
+    # Siblings (or the parent, for :master) may have written to us before the
+    # parent's ring message came: handle those messages now, in order.
+    Enum.each(Enum.reverse(state.early), &send(self(), &1))
+    {:noreply, %{state | early: []}}
+  end
+
+  # The parent publishes the ring on this node (`Directory.publish/4`)
+  # just before it tells the children: wait, within the liveness timeout,
+  # until this node's table holds it.
+  defp await_ring(state, size) do
+    case Directory.await(state.spec.id, size, state.spec.liveness) do
+      :ok ->
+        :ok
+
+      {:error, :timeout} ->
+        message =
+          "the job's ring of #{size} children did not reach #{node()} within " <>
+            "#{state.spec.liveness} ms"
+
+        send(state.parent, {:child_failed, state.index, message})
+        {:stop, :normal, state}
+    end
+  end
 
   defp confirm(state, from, atoms),
     do: send_counted(state, state.parent, :control, {:got, from, state.index, atoms})

@@ -7,9 +7,11 @@ defmodule RingTracer.Job.Directory do
   hand-over to an offer's origin), so it needs every sibling's pid. Giving
   each child its own copy of the ring would cost O(N) per child and O(N²)
   per job (16,384 children would hold 2 GiB of pids); instead the parent
-  publishes the ring once on each node its children run on, before any
-  child starts work, and a child looks a sibling up in its node's table
-  when it needs one (`sibling/2`, an ETS read, no message).
+  publishes the ring once on each node its children run on, a message sent
+  just before it tells the children of their ring, and a child waits until
+  its node's table holds that ring (`await/3`, at once in the usual case)
+  and looks a sibling up there when it needs one (`sibling/2`, an ETS
+  read, no message).
 
   This process owns the table and monitors each job's parent: when the
   parent ends, normally or not, its rows go.
@@ -24,13 +26,24 @@ defmodule RingTracer.Job.Directory do
 
   @doc """
   Publishes job `id`'s children (`pids`, by index) on `node` for as long as
-  `parent` lives. Waits at most `timeout` ms for the node to answer.
+  `parent` lives: a message, with no answer to wait for. A child waits
+  for the ring it is told of with `await/3` before it looks a sibling up.
   """
-  @spec publish(node(), reference(), pid(), tuple(), timeout()) :: :ok | {:error, term()}
-  def publish(node, id, parent, pids, timeout) when is_tuple(pids) do
-    GenServer.call({__MODULE__, node}, {:publish, id, parent, pids}, timeout)
+  @spec publish(node(), reference(), pid(), tuple()) :: :ok
+  def publish(node, id, parent, pids) when is_tuple(pids),
+    do: GenServer.cast({__MODULE__, node}, {:publish, id, parent, pids})
+
+  @doc """
+  Waits, at most `timeout` ms, until this node's table holds job `id`'s
+  ring of at least `size` children.
+  """
+  @spec await(reference(), pos_integer(), timeout()) :: :ok | {:error, :timeout}
+  def await(id, size, timeout) do
+    if :ets.member(@table, {id, size - 1}),
+      do: :ok,
+      else: GenServer.call(__MODULE__, {:await, id, size, timeout}, timeout)
   catch
-    :exit, reason -> {:error, reason}
+    :exit, {:timeout, _} -> {:error, :timeout}
   end
 
   @doc "The pid of child `index` of job `id`, from this node's table."
@@ -51,11 +64,11 @@ defmodule RingTracer.Job.Directory do
   @impl GenServer
   def init([]) do
     :ets.new(@table, [:named_table, :set, :protected, read_concurrency: true])
-    {:ok, %{ids: %{}, refs: %{}}}
+    {:ok, %{ids: %{}, refs: %{}, waiting: %{}}}
   end
 
   @impl GenServer
-  def handle_call({:publish, id, parent, pids}, _from, state) do
+  def handle_cast({:publish, id, parent, pids}, state) do
     rows = for i <- 0..(tuple_size(pids) - 1)//1, do: {{id, i}, elem(pids, i)}
     true = :ets.insert(@table, rows)
 
@@ -64,18 +77,53 @@ defmodule RingTracer.Job.Directory do
         state
       else
         ref = Process.monitor(parent)
-        %{ids: Map.put(state.ids, id, ref), refs: Map.put(state.refs, ref, id)}
+        %{state | ids: Map.put(state.ids, id, ref), refs: Map.put(state.refs, ref, id)}
       end
 
-    {:reply, :ok, state}
+    {ready, still} =
+      state.waiting |> Map.get(id, []) |> Enum.split_with(&(elem(&1, 1) <= tuple_size(pids)))
+
+    Enum.each(ready, fn {from, _, _} -> GenServer.reply(from, :ok) end)
+    {:noreply, %{state | waiting: Map.put(state.waiting, id, still)} |> prune()}
+  end
+
+  @impl GenServer
+  def handle_call({:await, id, size, timeout}, from, state) do
+    if :ets.member(@table, {id, size - 1}) do
+      {:reply, :ok, state}
+    else
+      until = if timeout == :infinity, do: :infinity, else: now() + timeout
+      waiter = {from, size, until}
+
+      {:noreply,
+       prune(%{state | waiting: Map.update(state.waiting, id, [waiter], &[waiter | &1])})}
+    end
   end
 
   def handle_call(:jobs, _from, state), do: {:reply, map_size(state.ids), state}
+
+  # Waiters whose call has timed out (their job's ring never came here) go.
+  defp prune(state) do
+    t = now()
+
+    waiting =
+      for {id, waiters} <- state.waiting,
+          kept = Enum.filter(waiters, fn {_, _, until} -> until == :infinity or until > t end),
+          kept != [],
+          into: %{},
+          do: {id, kept}
+
+    %{state | waiting: waiting}
+  end
+
+  defp now, do: System.monotonic_time(:millisecond)
 
   @impl GenServer
   def handle_info({:DOWN, ref, :process, _parent, _reason}, state) do
     {id, refs} = Map.pop(state.refs, ref)
     if id != nil, do: :ets.match_delete(@table, {{id, :_}, :_})
-    {:noreply, %{ids: Map.delete(state.ids, id), refs: refs}}
+
+    {:noreply,
+     %{state | ids: Map.delete(state.ids, id), refs: refs, waiting: Map.delete(state.waiting, id)}}
   end
 end

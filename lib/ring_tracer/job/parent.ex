@@ -70,9 +70,6 @@ defmodule RingTracer.Job.Parent do
   # `RingTracer.render/2` documents them. An atom, not the alias: the parent
   # calls nothing of the public API module (no run-time dependency on it).
   @reply_tag :"Elixir.RingTracer"
-  # How long a node may take to tell its build (the liveness watch cuts a
-  # frozen one off sooner).
-  @build_ms 10_000
 
   @enforce_keys [:spec, :strategy, :ledger, :missing, :started, :t0]
   defstruct [
@@ -328,72 +325,35 @@ defmodule RingTracer.Job.Parent do
       }
     )
 
-    %Spec{layout: layout, nodes: nodes, kernel: {kernel, kernel_opts}} = state.spec
+    %Spec{layout: layout, nodes: nodes} = state.spec
     n = layout.children
     placement = placement(nodes, n)
-    # The scene travels once per node; children get its hash and name only,
-    # and each its own speed: nothing in a child's spec grows with the ring.
-    child_spec = %{
-      state.spec
-      | source: RingTracer.Scene.Source.strip(state.spec.source),
-        nodes: [],
-        speeds: []
-    }
-
     speeds = List.to_tuple(state.spec.speeds)
 
     # The watch starts before the nodes are asked for anything: a node that
     # freezes while the job starts is disconnected after the liveness
-    # timeout, so that preparing it or starting a child there fails then,
-    # not after distribution's minute.
+    # timeout, so that starting the job there fails then, not after
+    # distribution's minute.
     _ = RingTracer.Cluster.Liveness.start(placement, state.spec.liveness)
     state = %{state | watched: MapSet.new(placement)}
 
-    prepared =
+    # Every node at once, the scene by hash, then packed to those that lack
+    # it (`RingTracer.Job.Start`); each child gets its own speed: nothing in
+    # a child's spec grows with the ring.
+    plan =
       placement
-      |> Enum.uniq()
-      |> Enum.reduce_while({:ok, %{}}, fn node, {:ok, acc} ->
-        with :ok <- same_build(node),
-             {:ok, bytes} <- kernel.prepare_node(state.spec, kernel_opts, node) do
-          {:cont, {:ok, Map.put(acc, node, bytes)}}
-        else
-          {:error, message} -> {:halt, {:error, message}}
-        end
-      end)
+      |> Enum.with_index()
+      |> Enum.group_by(&elem(&1, 0), fn {_, i} -> {i, Spec.speed(speeds, i)} end)
 
-    started =
-      case prepared do
-        {:ok, _} ->
-          placement
-          |> Enum.with_index()
-          |> Enum.reduce_while({:ok, []}, fn {node, i}, {:ok, acc} ->
-            case Child.start(node, %{child_spec | speeds: [Spec.speed(speeds, i)]}, i, self()) do
-              {:ok, pid} ->
-                {:cont, {:ok, [{i, pid} | acc]}}
-
-              {:error, {:exit, reason}} ->
-                why = RingTracer.Cluster.call_failure(node, reason, :infinity)
-                {:halt, {:error, "could not start child #{i}: #{why}", acc}}
-
-              other ->
-                {:halt, {:error, "could not start child #{i} on #{node}: #{inspect(other)}", acc}}
-            end
-          end)
-
-        {:error, message} ->
-          {:error, "could not prepare the job: #{message}", []}
-      end
-
-    state = %{state | node_bytes: elem(prepared, 1)}
-
-    case started do
-      {:ok, list} ->
+    case RingTracer.Job.Start.run(state.spec, plan) do
+      {:ok, list, bytes} ->
         children = Map.new(list)
         monitors = Map.new(list, fn {i, pid} -> {Process.monitor(pid), i} end)
 
         state = %{
           state
-          | children: children,
+          | node_bytes: bytes,
+            children: children,
             monitors: monitors,
             size: n,
             pids: children,
@@ -426,30 +386,25 @@ defmodule RingTracer.Job.Parent do
 
         {:noreply, state}
 
-      {:error, message, list} ->
+      {:error, reason, message, list} ->
         for {_i, pid} <- list, do: Process.exit(pid, :kill)
-        send(state.spec.caller, {@reply_tag, state.spec.id, {:error, message}})
+        send(state.spec.caller, {@reply_tag, state.spec.id, {:error, {reason, message}}})
         {:stop, :normal, state}
     end
   end
 
   # The ring, once per node its living children run on
   # (`RingTracer.Job.Directory`): every child's pid by index, those of dead
-  # children included. A node that does not answer within the liveness
-  # timeout loses its children: they are killed, and the job goes on as
-  # after any death.
+  # children included. A message, sent before the children are told of
+  # the ring; each child waits for it on its node.
   defp publish(state) do
     pids = List.to_tuple(for i <- 0..(state.size - 1), do: Map.fetch!(state.pids, i))
 
     state.children
     |> Map.keys()
-    |> Enum.group_by(&Map.fetch!(state.placement, &1))
-    |> Enum.each(fn {node, indices} ->
-      case Directory.publish(node, state.spec.id, self(), pids, state.spec.liveness) do
-        :ok -> :ok
-        {:error, _} -> for i <- indices, do: Process.exit(Map.fetch!(state.children, i), :kill)
-      end
-    end)
+    |> Enum.map(&Map.fetch!(state.placement, &1))
+    |> Enum.uniq()
+    |> Enum.each(&Directory.publish(&1, state.spec.id, self(), pids))
   end
 
   @impl GenServer
@@ -643,8 +598,7 @@ defmodule RingTracer.Job.Parent do
     joined = Enum.to_list(first..(first + count - 1))
 
     with :ok <- check_size(first, count),
-         {:ok, state} <- prepare_node(state, node),
-         {:ok, started} <- start_joined(state, node, joined) do
+         {:ok, state, started} <- start_joined(state, node, joined) do
       state = state |> watch(node) |> splice(node, started)
 
       RingTracer.Telemetry.execute(
@@ -659,66 +613,22 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  defp prepare_node(state, node) do
-    %Spec{kernel: {kernel, kernel_opts}} = state.spec
-
-    if Map.has_key?(state.node_bytes, node) do
-      {:ok, state}
-    else
-      with :ok <- same_build(node),
-           {:ok, bytes} <- kernel.prepare_node(state.spec, kernel_opts, node) do
-        {:ok, %{state | node_bytes: Map.put(state.node_bytes, node, bytes)}}
-      else
-        {:error, message} ->
-          {:error, {:node_unavailable, "could not prepare #{node}: #{message}"}}
-      end
-    end
-  end
-
-  # A node of another build (RingTracer.Cluster.Build) hosts no child of
-  # this job: refused before anything is asked of it, both builds named.
-  defp same_build(node) do
-    case RingTracer.Cluster.Build.check(node, timeout: @build_ms) do
-      :ok ->
-        :ok
-
-      {:error, %RingTracer.Error{message: message}} ->
-        {:error, message}
-
-      {:error, {:call, reason}} ->
-        {:error, RingTracer.Cluster.call_failure(node, reason, @build_ms)}
-    end
-  end
-
+  # The children that join on `node`, started as the job's first ones
+  # were (`RingTracer.Job.Start`): the node checked, the scene sent if it
+  # lacks it.
   defp start_joined(state, node, joined) do
     speeds = List.to_tuple(state.spec.speeds)
+    plan = %{node => Enum.map(joined, &{&1, Spec.speed(speeds, &1)})}
 
-    child_spec = %{
-      state.spec
-      | source: RingTracer.Scene.Source.strip(state.spec.source),
-        nodes: []
-    }
+    case RingTracer.Job.Start.run(state.spec, plan) do
+      {:ok, started, bytes} ->
+        node_bytes = Map.update(state.node_bytes, node, bytes[node], &(&1 + bytes[node]))
+        {:ok, %{state | node_bytes: node_bytes}, started}
 
-    Enum.reduce_while(joined, {:ok, []}, fn i, {:ok, acc} ->
-      case Child.start(node, %{child_spec | speeds: [Spec.speed(speeds, i)]}, i, self()) do
-        {:ok, pid} ->
-          {:cont, {:ok, acc ++ [{i, pid}]}}
-
-        other ->
-          for {_, pid} <- acc, do: Process.exit(pid, :kill)
-
-          why =
-            case other do
-              {:error, {:exit, reason}} ->
-                RingTracer.Cluster.call_failure(node, reason, :infinity)
-
-              other ->
-                inspect(other)
-            end
-
-          {:halt, {:error, {:node_unavailable, "could not start child #{i} on #{node}: #{why}"}}}
-      end
-    end)
+      {:error, _reason, message, started} ->
+        for {_, pid} <- started, do: Process.exit(pid, :kill)
+        {:error, {:node_unavailable, "could not prepare #{node}: #{message}"}}
+    end
   end
 
   # The liveness watch, on a node the job had not used.

@@ -39,9 +39,6 @@ defmodule RingTracer.Kernel.Native do
   # Pixels of the preview that `atom_work/2` traces (about 0.1% of a
   # 1024x1024 image), and at most this share of a small image's.
   @preview_pixels 1024
-  # How long a node may take to parse and pin a job's scene (a node that
-  # freezes meanwhile is disconnected sooner, by the job's liveness watch).
-  @prepare_ms 60_000
   @preview_share 1 / 64
   # An atom of at most this many pixels is traced on the grandchild's own
   # scheduler for at most @short_budget_us, and only what is left over on a
@@ -142,22 +139,7 @@ defmodule RingTracer.Kernel.Native do
   @impl RingTracer.Kernel
   # The parent pins the scene on each node for as long as it lives, so no
   # other job's scenes can push it out of a cache while this job runs.
-  def prepare_node(spec, _opts, node) when node == node() do
-    with :ok <- SceneCache.pin(spec.source, self()), do: {:ok, 0}
-  end
-
-  def prepare_node(spec, _opts, node) do
-    case :erpc.call(node, SceneCache, :pin, [spec.source, self()], @prepare_ms) do
-      :ok -> {:ok, RingTracer.Scene.Source.size(spec.source)}
-      {:error, message} -> {:error, "#{node}: #{message}"}
-    end
-  rescue
-    e in ErlangError ->
-      case e.original do
-        {:erpc, _} -> {:error, RingTracer.Cluster.call_failure(node, e.original, @prepare_ms)}
-        _ -> {:error, "#{node}: #{Exception.message(e)}"}
-      end
-  end
+  def prepare_node(spec, _opts, owner), do: SceneCache.pin(spec.source, owner)
 
   @doc """
   Each atom's work, estimated from a preview: the same scene and settings

@@ -59,7 +59,7 @@ defmodule RingTracer.Kernel.Simulated do
   def pack(costs), do: costs
 
   @impl RingTracer.Kernel
-  def prepare_node(_spec, _opts, _node), do: {:ok, 0}
+  def prepare_node(_spec, _opts, _owner), do: :ok
 
   @doc "Each atom's work, of one frame: its cost in the model (an exact preview)."
   @impl RingTracer.Kernel

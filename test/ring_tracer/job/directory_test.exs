@@ -17,7 +17,8 @@ defmodule RingTracer.Job.DirectoryTest do
     parent = spawn(fn -> receive(do: (:stop -> :ok)) end)
     pids = {self(), parent, self()}
 
-    assert :ok = Directory.publish(node(), id, parent, pids, 1_000)
+    assert :ok = Directory.publish(node(), id, parent, pids)
+    assert :ok = Directory.await(id, 3, 1_000)
     assert Directory.sibling(id, 1) == parent
     assert Directory.sibling(id, 2) == self()
     assert Directory.jobs() >= 1
@@ -26,8 +27,27 @@ defmodule RingTracer.Job.DirectoryTest do
     assert eventually(fn -> not published?(id) end)
   end
 
-  test "publishing on a node that does not answer is an error, not a hang" do
-    assert {:error, _} = Directory.publish(:nobody@nowhere, make_ref(), self(), {self()}, 100)
+  test "a child waits for its ring until it is published, and no longer than its deadline" do
+    id = make_ref()
+    parent = spawn(fn -> receive(do: (:stop -> :ok)) end)
+    waiter = Task.async(fn -> Directory.await(id, 2, 10_000) end)
+    # the waiter has asked (its call is in the directory's queue) before the ring comes
+    assert eventually(fn -> Map.has_key?(:sys.get_state(Directory).waiting, id) end)
+    assert :ok = Directory.publish(node(), id, parent, {self(), parent})
+    assert :ok = Task.await(waiter, 5_000)
+
+    # a larger ring (grown) is awaited by its size
+    assert {:error, :timeout} = Directory.await(id, 3, 50)
+    assert :ok = Directory.publish(node(), id, parent, {self(), parent, self()})
+    assert :ok = Directory.await(id, 3, 1_000)
+
+    # a ring that never comes: the deadline, not a hang
+    assert {:error, :timeout} = Directory.await(make_ref(), 1, 50)
+    send(parent, :stop)
+  end
+
+  test "publishing on a node that cannot be reached neither raises nor waits" do
+    assert :ok = Directory.publish(:nobody@nowhere, make_ref(), self(), {self()})
   end
 
   # The size of one child's state, in words, while every child of a ring of

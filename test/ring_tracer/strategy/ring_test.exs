@@ -27,7 +27,8 @@ defmodule RingTracer.Strategy.RingTest do
     fields = Keyword.delete(fields, :options)
     # the child keeps its queue as a RingTracer.Job.Queue; tests write lists
     fields = Keyword.update(fields, :queue, Queue.new(), &Queue.new/1)
-    :ok = Directory.publish(node(), spec.id, me, siblings, 5_000)
+    :ok = Directory.publish(node(), spec.id, me, siblings)
+    :ok = Directory.await(spec.id, tuple_size(siblings), 5_000)
 
     base = %Child{
       spec: spec,
