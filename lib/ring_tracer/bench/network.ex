@@ -4,19 +4,22 @@ defmodule RingTracer.Bench.Network do
   delayed links between nodes in Linux network namespaces
   (`RingTracer.Bench.Network.Lab`; needs root).
 
-      mix ring_tracer.bench network [--delays 0,1,10,50] [--rate 1gbit] [--workers 2]
-        [--children 2] [--atoms 16] [--size 512] [--speeds 1,1,4,1] [--runs 3]
-        [--scene priv/scenes/spd/rings_s7.nff] [--strategies static,master,ring,steal]
+      mix ring_tracer.bench network [--delays 0,1,10,50] [--rates 1gbit,100mbit]
+        [--workers 2] [--children 2] [--atoms 16] [--size 512] [--speeds 1,1,4,1]
+        [--runs 3] [--pixels srgb8] [--scene priv/scenes/spd/rings_s7.nff]
+        [--strategies static,master,ring,steal]
 
   The parent runs on a node of its own (it hosts no children); the
   children are on `--workers` worker nodes, `--children` on each, with
-  `--speeds` (one slowdown factor per child, in ring order). Each link is
-  limited to `--rate` both ways (`tc tbf`) and the relay holds every byte
-  for the one-way delay. For each delay it prints the measured round trip
-  (parent to workers, `:net_adm.ping/1`) and the makespan of an empty job
-  (8x8 pixels, one atom per child: the job's fixed cost), then per
-  strategy the median (by makespan / ideal) of `--runs` renders after one
-  warm-up:
+  `--speeds` (one slowdown factor per child, in ring order). The job's
+  pixels travel as `--pixels` (`srgb8`, a PNG job's, or `float`, an EXR
+  job's). Each link is limited to each of `--rates` in turn, both ways
+  (`tc tbf`), and the relay holds every byte for the one-way delay. For
+  each rate and delay it prints the measured round trip (parent to
+  workers, `:net_adm.ping/1`) and the time of an empty job (8x8 pixels,
+  one atom per child: the job's fixed cost) to its last atom and until
+  the render's call returned, in round trips; then per strategy the
+  median (by makespan / ideal) of `--runs` renders after one warm-up:
 
     * `makespan/ideal` — the ideal being the total trace work over the
       atoms that can trace at once (one per worker node's dirty scheduler,
@@ -28,14 +31,18 @@ defmodule RingTracer.Bench.Network do
       acknowledgements included (the veths' counters);
     * `parent_bytes%`, `parent_msgs%` — the share of that traffic that the
       parent sent or received;
-    * `parent_link_ms` — the time the parent's link needs, at `--rate`, for
-      the bytes that came in to the parent during the run (every pixel
-      among them): a floor under the makespan that no strategy can go
-      below, since all pixels end at the parent. Near the makespan, the
-      parent's link is the bottleneck.
+    * `parent_in/px` — the bytes that came in on the parent's link during
+      the run (TCP/IP headers included) per pixel of the image;
+    * `parent_link_ms` — the time the parent's link needs, at the rate, for
+      those bytes (every pixel among them): a floor under the makespan
+      that no strategy can go below, since all pixels end at the parent.
+      Near the makespan, the parent's link is the bottleneck.
 
-  Every image is compared with a render on this VM alone; the last line
-  says whether all were byte-identical.
+  Every image is compared with a render on this VM alone. The last lines
+  hold the figures against their targets: bytes per pixel into the
+  parent, the ring's makespan at the lowest rate over the highest, the
+  empty job against three round trips plus 10 ms, and whether every image
+  was byte-identical.
   """
   @moduledoc @help
   @behaviour RingTracer.Bench
@@ -44,13 +51,14 @@ defmodule RingTracer.Bench.Network do
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "network [--delays 0,1,10,50] [--rate 1gbit] [--workers 2] [--runs 3] ..."
+  def usage, do: "network [--delays 0,1,10,50] [--rates 1gbit,100mbit] [--runs 3] ..."
 
   alias RingTracer.Bench.Network.{Lab, Remote}
 
   @defaults [
     delays: "0,1,10,50",
-    rate: "1gbit",
+    rates: "1gbit,100mbit",
+    pixels: "srgb8",
     workers: 2,
     children: 2,
     atoms: 16,
@@ -63,7 +71,9 @@ defmodule RingTracer.Bench.Network do
 
   @switches [
     delays: :string,
+    rates: :string,
     rate: :string,
+    pixels: :string,
     workers: :integer,
     children: :integer,
     atoms: :integer,
@@ -93,6 +103,7 @@ defmodule RingTracer.Bench.Network do
 
     {:ok, _} = Application.ensure_all_started(:ring_tracer)
     delays = numbers(opts[:delays])
+    rates = String.split(opts[:rate] || opts[:rates], ",", trim: true)
     strategies = opts[:strategies] |> String.split(",") |> Enum.map(&strategy/1)
     job = job(opts)
     scene = Path.expand(opts[:scene])
@@ -101,42 +112,35 @@ defmodule RingTracer.Bench.Network do
     reference = :crypto.hash(:sha256, local.pixels)
 
     IO.puts(
-      "#{opts[:scene]} #{opts[:size]}x#{opts[:size]}: parent on its own node, " <>
+      "#{opts[:scene]} #{opts[:size]}x#{opts[:size]}, #{opts[:pixels]} pixels: parent on its own node, " <>
         "#{opts[:workers]} worker nodes x #{opts[:children]} children x #{opts[:atoms]} atoms, " <>
-        "speeds #{opts[:speeds]}; links #{opts[:rate]} (tbf) each way, one-way delay in a relay; " <>
-        "median of #{opts[:runs]} after a warm-up; #{System.schedulers_online()} cores"
+        "speeds #{opts[:speeds]}; links #{Enum.join(rates, ", then ")} (tbf) each way, " <>
+        "one-way delay in a relay; median of #{opts[:runs]} after a warm-up; " <>
+        "#{System.schedulers_online()} cores"
     )
 
-    {rows, identical} =
-      Lab.with_lab([workers: opts[:workers], rate: opts[:rate]], fn lab ->
-        for delay <- delays, reduce: {[], true} do
-          {rows, same} ->
+    {rows, empties, identical} =
+      Lab.with_lab([workers: opts[:workers], rate: hd(rates)], fn lab ->
+        for rate <- rates, delay <- delays, reduce: {[], [], true} do
+          {rows, empties, same} ->
+            lab = Lab.set_rate(lab, rate)
             :ok = Lab.set_delay(lab, delay)
             rtt = lab |> Lab.rtt_ms() |> Map.values()
-            empty = empty_job_ms(lab, scene, opts)
+            empty = empty_job(lab, scene, opts) |> Map.merge(%{rate: rate, rtt: Enum.max(rtt)})
+            print_empty(rate, delay, rtt, empty)
 
-            IO.puts(
-              "one-way delay #{fmt(delay)} ms: round trip parent -> each worker, median of 7 pings: " <>
-                Enum.map_join(rtt, ", ", &"#{fmt(&1)} ms") <>
-                "; an empty job (8x8 pixels, 1 atom per child, ring): #{fmt(empty)} ms"
-            )
-
-            for strategy <- strategies, reduce: {rows, same} do
-              {rows, same} ->
+            for strategy <- strategies, reduce: {rows, empties ++ [empty], same} do
+              {rows, empties, same} ->
                 row = measure(lab, scene, [strategy: strategy] ++ job, opts)
                 ok = Enum.all?(row.shas, &(&1 == reference))
-
-                {rows ++ [Map.merge(row, %{delay: delay, rtt: median(rtt), strategy: strategy})],
-                 same and ok}
+                at = %{rate: rate, delay: delay, rtt: median(rtt), strategy: strategy}
+                {rows ++ [Map.merge(row, at)], empties, same and ok}
             end
         end
       end)
 
-    print_table(rows, Lab.rate_bps(opts[:rate]))
-
-    IO.puts(
-      "every image byte-identical to the local render: #{if identical, do: "yes", else: "NO"}"
-    )
+    print_table(rows, opts[:size] * opts[:size])
+    print_targets(rows, empties, rates, identical)
   end
 
   @doc false
@@ -152,9 +156,16 @@ defmodule RingTracer.Bench.Network do
       width: opts[:size],
       height: opts[:size],
       children: children,
-      speeds: Enum.map(speeds, &round/1)
+      speeds: Enum.map(speeds, &round/1),
+      pixels: pixels(opts[:pixels])
     ]
   end
+
+  defp pixels("srgb8"), do: :srgb8
+  defp pixels("float"), do: :float
+
+  defp pixels(other),
+    do: raise(ArgumentError, "--pixels: srgb8 or float, got: #{inspect(other)}")
 
   @doc """
   One row: a warm-up, then `opts[:runs]` renders on the lab's parent with
@@ -188,8 +199,10 @@ defmodule RingTracer.Bench.Network do
   end
 
   # The job's fixed cost at this delay: start-up, scene hand-out, the end
-  # of the job, with (almost) no work. The median of three after a warm-up.
-  defp empty_job_ms(lab, scene, opts) do
+  # of the job, with (almost) no work: to its last atom (the makespan) and
+  # until the render's call returned (`wall`). The median of three after a
+  # warm-up.
+  defp empty_job(lab, scene, opts) do
     job = [
       strategy: :ring,
       nodes: lab.workers,
@@ -197,17 +210,31 @@ defmodule RingTracer.Bench.Network do
       children_per_node: opts[:children],
       atoms: 1,
       width: 8,
-      height: 8
+      height: 8,
+      pixels: pixels(opts[:pixels])
     ]
 
     samples =
       for _ <- 0..3 do
         {:ok, r} = Lab.call(lab.parent, Remote, :render, [scene, job, 1, false])
-        r.elapsed_us / 1000
+        %{last_atom: r.elapsed_us / 1000, wall: r.wall_us / 1000}
       end
 
-    median(tl(samples))
+    samples |> tl() |> Enum.sort_by(& &1.wall) |> Enum.at(1)
   end
+
+  defp print_empty(rate, delay, rtt, empty) do
+    IO.puts(
+      "#{rate}, one-way delay #{fmt(delay)} ms: round trip parent -> each worker, median of 7 pings: " <>
+        Enum.map_join(rtt, ", ", &"#{fmt(&1)} ms") <>
+        "; an empty job (8x8 pixels, 1 atom per child, ring): last atom at " <>
+        "#{fmt(empty.last_atom)} ms, returned at #{fmt(empty.wall)} ms " <>
+        "(#{fmt(round_trips(empty))} round trips + 10 ms)"
+    )
+  end
+
+  # The empty job's time, less 10 ms, in round trips (the slower worker's).
+  defp round_trips(empty), do: max(empty.wall - 10, 0) / max(empty.rtt, 0.001)
 
   defp figures(lab, r, before, after_) do
     delta =
@@ -231,6 +258,7 @@ defmodule RingTracer.Bench.Network do
       parent_bytes: share(p.send_oct + p.recv_oct, sent_bytes),
       parent_msgs: share(p.send_cnt + p.recv_cnt, sent_msgs),
       parent_in: p.link_tx,
+      parent_in_px: p.link_tx / r.pixel_count,
       sha: r.sha
     }
   end
@@ -238,17 +266,18 @@ defmodule RingTracer.Bench.Network do
   defp share(_, 0), do: 0.0
   defp share(part, total), do: 100 * part / total
 
-  defp print_table(rows, rate_bps) do
+  defp print_table(rows, pixels) do
     header =
-      ~w(delay_ms rtt_ms strategy makespan_ms ideal_ms makespan/ideal msgs/atom bytes/atom wire/atom parent_bytes% parent_msgs% parent_link_ms)
+      ~w(rate delay_ms rtt_ms strategy makespan_ms ideal_ms makespan/ideal msgs/atom bytes/atom wire/atom parent_bytes% parent_msgs% parent_in/px parent_link_ms)
 
     cells =
       for r <- rows do
-        link_ms = r.parent_in * 8 * 1000 / rate_bps
+        link_ms = r.parent_in * 8 * 1000 / Lab.rate_bps(r.rate)
 
-        [fmt(r.delay), fmt(r.rtt), Atom.to_string(r.strategy), fmt(r.elapsed_us / 1000)] ++
-          [fmt(r.ideal_us / 1000), fmt(r.ratio), fmt(r.msgs), int(r.bytes), int(r.wire)] ++
-          [fmt1(r.parent_bytes), fmt1(r.parent_msgs), fmt(link_ms)]
+        [r.rate, fmt(r.delay), fmt(r.rtt), Atom.to_string(r.strategy)] ++
+          [fmt(r.elapsed_us / 1000), fmt(r.ideal_us / 1000), fmt(r.ratio), fmt(r.msgs)] ++
+          [int(r.bytes), int(r.wire), fmt1(r.parent_bytes), fmt1(r.parent_msgs)] ++
+          [fmt(r.parent_in / pixels), fmt(link_ms)]
       end
 
     widths =
@@ -262,6 +291,52 @@ defmodule RingTracer.Bench.Network do
       |> Enum.map_join("  ", fn {cell, w} -> String.pad_leading(cell, w) end)
       |> IO.puts()
     end
+
+    :ok
+  end
+
+  # The figures against issue 44's targets, from this run's rows.
+  defp print_targets(rows, empties, rates, identical) do
+    pixels = rows |> Enum.map(& &1.parent_in_px) |> Enum.max(fn -> 0.0 end)
+    IO.puts("targets:")
+    verdict = fn ok -> if ok, do: "met", else: "NOT met" end
+
+    IO.puts(
+      "  bytes per pixel into the parent (its link, all rows): at most #{fmt(pixels)} " <>
+        "(target 3.5): #{verdict.(pixels <= 3.5)}"
+    )
+
+    case {rates, Enum.filter(rows, &(&1.strategy == :ring))} do
+      {[_, _ | _], ring} when ring != [] ->
+        {fast, slow} = Enum.min_max_by(rates, &Lab.rate_bps/1) |> then(fn {s, f} -> {f, s} end)
+
+        ratios =
+          for %{rate: ^slow, delay: d} = r <- ring,
+              f = Enum.find(ring, &(&1.rate == fast and &1.delay == d)),
+              do: {d, r.elapsed_us / f.elapsed_us}
+
+        worst = ratios |> Enum.map(&elem(&1, 1)) |> Enum.max()
+
+        IO.puts(
+          "  the ring's makespan at #{slow} / at #{fast}: " <>
+            Enum.map_join(ratios, ", ", fn {d, x} -> "#{fmt(x)} at #{fmt(d)} ms" end) <>
+            " (target 1.25): #{verdict.(worst <= 1.25)}"
+        )
+
+      _ ->
+        :ok
+    end
+
+    worst = empties |> Enum.map(&round_trips/1) |> Enum.max()
+
+    IO.puts(
+      "  an empty job, call to return: at most #{fmt(worst)} round trips + 10 ms " <>
+        "(target 3): #{verdict.(worst <= 3)}"
+    )
+
+    IO.puts(
+      "  every image byte-identical to the local render: #{if identical, do: "yes", else: "NO"}"
+    )
   end
 
   defp strategy(name) do

@@ -297,6 +297,22 @@ defmodule RingTracer.Bench.Network.Lab do
   @spec call(lab_node(), module(), atom(), [term()], timeout()) :: term()
   def call(n, m, f, a, timeout \\ 600_000), do: :peer.call(n.peer, m, f, a, timeout)
 
+  @doc """
+  Sets every link's `tbf` rate (both ends of each veth), in `tc`'s units,
+  e.g. `"100mbit"`.
+  """
+  @spec set_rate(t(), String.t()) :: t()
+  def set_rate(lab, rate) do
+    burst = burst(rate)
+
+    for n <- lab.nodes, {ns, dev} <- [{lab.hub, "h#{n.index}"}, {n.ns, "eth0"}] do
+      cmd!("tc", ~w(-n #{ns} qdisc change dev #{dev} root tbf rate #{rate}
+        burst #{burst} latency 100ms))
+    end
+
+    %{lab | rate: rate}
+  end
+
   @doc "Sets the relay's one-way delay, in milliseconds."
   @spec set_delay(t(), number()) :: :ok
   def set_delay(lab, ms), do: Relay.set_delay(lab.relay, round(ms * 1000))

@@ -74,17 +74,25 @@ defmodule RingTracer.Bench.Network.Remote do
 
   @doc """
   Renders `scene` from this node with `opts` and returns what the benchmark
-  needs: makespan, the ideal time with `cap` atoms tracing at once, the
-  atom count, the job's own message counts and the pixels (`pixels: true`)
-  or their SHA-256.
+  needs: makespan (to the last atom) and the time until the call returned
+  (`wall_us`), the ideal time with `cap` atoms tracing at once, the atom
+  and pixel counts, the job's own message counts and the pixels
+  (`pixels: true`) or their SHA-256. The scene is loaded once per node
+  and path, so that its parsing on this node is not part of any job's
+  time.
   """
   @spec render(Path.t(), keyword(), pos_integer(), boolean()) :: {:ok, map()} | {:error, term()}
-  def render(scene, opts, cap, pixels?) do
+  def render(path, opts, cap, pixels?) do
+    scene = loaded(path)
+    t0 = System.monotonic_time(:microsecond)
+
     case RingTracer.render(scene, opts) do
       {:ok, r} ->
         {:ok,
          %{
            elapsed_us: r.elapsed_us,
+           wall_us: System.monotonic_time(:microsecond) - t0,
+           pixel_count: r.width * r.height,
            ideal_us: RingTracer.Result.ideal_us(r.atoms, Enum.map(r.children, & &1.speed), cap),
            atoms: length(r.atoms),
            job: RingTracer.Result.per_atom(r),
@@ -95,6 +103,20 @@ defmodule RingTracer.Bench.Network.Remote do
 
       {:error, e} ->
         {:error, e}
+    end
+  end
+
+  defp loaded(path) do
+    key = {__MODULE__, :scene, path}
+
+    case :persistent_term.get(key, nil) do
+      nil ->
+        {:ok, scene} = RingTracer.Scene.load(path)
+        :persistent_term.put(key, scene)
+        scene
+
+      scene ->
+        scene
     end
   end
 end
