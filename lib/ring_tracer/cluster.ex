@@ -9,9 +9,11 @@ defmodule RingTracer.Cluster do
   logs them; jobs themselves learn of a lost node from their monitors (a
   monitor on a process of a node that drops fires with `:noconnection`).
 
-  `check/1` is the pre-flight test a job runs before any work starts: each
-  node must be reachable, run the application, have loaded the NIF, and run
-  the same build as this node (`RingTracer.Cluster.Build`).
+  `check/1` tests, before any work starts, that each node is reachable,
+  runs the application, has loaded the NIF and runs the same build as this
+  node (`RingTracer.Cluster.Build`). A render only connects first
+  (`connect/1`): its nodes make the same checks as they start its children
+  (`RingTracer.Job.Host`), so that a job starts in one round trip.
   """
   use GenServer
   require Logger

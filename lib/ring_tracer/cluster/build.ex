@@ -16,10 +16,10 @@ defmodule RingTracer.Cluster.Build do
   reads it from there. A node whose application has not started yet tells
   no build: `check/2` treats it as one that cannot be reached.
 
-  Every place where nodes meet before work compares builds: the pre-flight
-  check of a render on other nodes (`RingTracer.Cluster.check/1`), a job's
-  parent preparing a node (at the start and when the ring grows), a farm
-  worker joining its head and a submitter queueing a job. A mismatch is
+  Every place where nodes meet before work compares builds: a node asked
+  to host a job's children (at the start and when the ring grows,
+  `RingTracer.Job.Host`), `RingTracer.Cluster.check/1`, a farm worker
+  joining its head and a submitter queueing a job. A mismatch is
   refused with an error of reason `:build_mismatch` that names both builds:
 
       node w1@host runs build 0.1.0+3f2a9c1d, node head@host runs build 0.1.0+77e0b1a4
