@@ -1,3 +1,7 @@
 [
-  inputs: ["{mix,.formatter}.exs", "native/mix_compiler.exs", "{config,lib,test}/**/*.{ex,exs}"]
+  inputs: [
+    "{mix,.formatter}.exs",
+    "native/mix_compiler.exs",
+    "{config,lib,tools,test}/**/*.{ex,exs}"
+  ]
 ]

@@ -55,16 +55,11 @@ defmodule RingTracer.MixProject do
   defp test_applications(:test), do: [:proper, :xmerl]
   defp test_applications(_), do: []
 
-  defp elixirc_paths(:test), do: ["lib", "test/support"]
-  defp elixirc_paths(:dev), do: ["lib"]
-
-  # The launcher's build and the release: no benchmark nor chaos soak (run
-  # from Mix, in dev or test) and their Mix tasks.
-  defp elixirc_paths(_) do
-    Enum.reject(Path.wildcard("lib/**/*.ex"), fn path ->
-      path =~ ~r{^lib/(ring_tracer/(bench|chaos)[./]|mix/tasks/ring_tracer\.(bench|chaos)\.ex$)}
-    end)
-  end
+  # tools/: the benchmarks, the chaos soak and their Mix tasks, run from Mix
+  # in dev or test; the launcher's build and the release are lib/ alone.
+  defp elixirc_paths(:test), do: ["lib", "tools/lib", "test/support"]
+  defp elixirc_paths(:dev), do: ["lib", "tools/lib"]
+  defp elixirc_paths(_), do: ["lib"]
 
   # `bin/ringtracer release` (docs/deploy.md): ERTS and every application a
   # command may start at run time, so that the release runs where neither

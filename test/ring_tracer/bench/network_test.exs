@@ -66,6 +66,15 @@ defmodule RingTracer.Bench.NetworkTest do
         assert after_[parent].link_tx - before[parent].link_tx >= byte_size(reference)
       end
 
+      # The rate changes on both ends of every link.
+      lab = Lab.set_rate(lab, "1gbit")
+
+      for n <- lab.nodes do
+        {hub, 0} = System.cmd("tc", ~w(-n #{lab.hub} qdisc show dev h#{n.index}))
+        {own, 0} = System.cmd("tc", ~w(-n #{n.ns} qdisc show dev eth0))
+        assert hub =~ "1Gbit" and own =~ "1Gbit"
+      end
+
       namespaces
     end)
     |> then(fn namespaces ->
@@ -100,13 +109,20 @@ defmodule RingTracer.Bench.NetworkPureTest do
   doctest RingTracer.Bench.Network.Lab
 
   test "the job's options put the children on the workers with their speeds" do
-    job = Network.job(workers: 2, children: 2, atoms: 8, size: 64, speeds: "1,1,4,1")
-    assert job[:children] == 4 and job[:speeds] == [1, 1, 4, 1]
+    job =
+      Network.job(workers: 2, children: 2, atoms: 8, size: 64, speeds: "1,1,4,1", pixels: "srgb8")
 
-    assert Network.job(workers: 3, children: 1, atoms: 8, size: 64, speeds: "1,2")[:speeds] == [
-             1,
-             2,
-             1
-           ]
+    assert job[:children] == 4 and job[:speeds] == [1, 1, 4, 1]
+    assert job[:pixels] == :srgb8
+
+    three =
+      Network.job(workers: 3, children: 1, atoms: 8, size: 64, speeds: "1,2", pixels: "float")
+
+    assert three[:speeds] == [1, 2, 1]
+    assert three[:pixels] == :float
+
+    assert_raise ArgumentError, ~r/--pixels: srgb8 or float/, fn ->
+      Network.job(workers: 1, children: 1, atoms: 1, size: 8, speeds: "1", pixels: "f16")
+    end
   end
 end
