@@ -262,7 +262,7 @@ defmodule RingTracer.CLI do
                               may then be left out (a name is made up)
       --tags a,b              tags a job may ask its workers to have
       --slots N               children hosted for a job (default: one per core)
-      --speed F               emulate a machine F times slower (1-1000, for tests)
+      --speed F               emulate a machine F times slower (1-#{RingTracer.Job.Slowdown.max()}, for tests)
 
     Distribution runs over TLS with mutual authentication by default, loopback included.
 

@@ -137,8 +137,10 @@ defmodule RingTracer.Farm do
     speed = Keyword.get(opts, :speed, 1)
 
     cond do
-      not (is_number(speed) and speed >= 1 and speed <= 1000) ->
-        invalid(":speed must be a number from 1 to 1000, got: #{inspect(speed)}")
+      not RingTracer.Job.Slowdown.factor?(speed) ->
+        invalid(
+          ":speed must be a number from 1 to #{RingTracer.Job.Slowdown.max()}, got: #{inspect(speed)}"
+        )
 
       not (is_integer(slots) and slots > 0) ->
         invalid(":slots must be a positive integer, got: #{inspect(slots)}")

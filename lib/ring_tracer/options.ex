@@ -39,9 +39,6 @@ defmodule RingTracer.Options do
   # `mix ring_tracer.bench limits` (docs/benchmarks.md).
   @max_children 16_384
   @max_atoms 1_048_576
-  # A slowdown beyond this emulates no machine anyone renders on, and its
-  # sleeps would overflow timers.
-  @max_speed 1000
 
   @doc "The largest ring, and the most atoms in all, that a job may have."
   @spec maxima() :: %{children: pos_integer(), atoms: pos_integer()}
@@ -199,12 +196,13 @@ defmodule RingTracer.Options do
   end
 
   defp check(:speeds, v) when is_list(v) do
-    if Enum.all?(v, &(is_number(&1) and &1 >= 1 and &1 <= @max_speed)),
+    if Enum.all?(v, &RingTracer.Job.Slowdown.factor?/1),
       do: :ok,
-      else: {:error, "a list of slowdown factors from 1 to #{@max_speed}"}
+      else: {:error, "a list of slowdown factors from 1 to #{RingTracer.Job.Slowdown.max()}"}
   end
 
-  defp check(:speeds, _), do: {:error, "a list of slowdown factors from 1 to #{@max_speed}"}
+  defp check(:speeds, _),
+    do: {:error, "a list of slowdown factors from 1 to #{RingTracer.Job.Slowdown.max()}"}
 
   defp check(:paths, v) when is_list(v) do
     if Enum.all?(v, &is_binary/1), do: :ok, else: {:error, "a list of folder paths (strings)"}

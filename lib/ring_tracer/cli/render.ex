@@ -15,6 +15,7 @@ defmodule RingTracer.CLI.Render do
 
   alias RingTracer.CLI.{Args, Console, Frames, Paths, Progress}
   alias RingTracer.Cluster.Distribution
+  alias RingTracer.Job.Slowdown
 
   @render_switches [
     out: :string,
@@ -131,7 +132,7 @@ defmodule RingTracer.CLI.Render do
           --layout L          strips (default) or interleaved
           --aim, --no-aim     ring: offers straight to the busiest sibling (default on strips)
           --split, --no-split ring: adaptive atoms, cut in pieces near the end (default off)
-          --speeds 1,1,4      slowdown factor of each child, cyclic (1-1000)
+          --speeds 1,1,4      slowdown factor of each child, cyclic (1-#{Slowdown.max()})
 
     Reports:
           --stats FILE        the job's statistics, .json or .csv
@@ -432,7 +433,7 @@ defmodule RingTracer.CLI.Render do
         parsed =
           for part <- String.split(text, ",") do
             case Float.parse(String.trim(part)) do
-              {f, ""} when f >= 1 and f <= 1000 -> if f == trunc(f), do: trunc(f), else: f
+              {f, ""} -> if Slowdown.factor?(f), do: if(f == trunc(f), do: trunc(f), else: f)
               _ -> nil
             end
           end
@@ -440,7 +441,8 @@ defmodule RingTracer.CLI.Render do
         if parsed != [] and nil not in parsed,
           do: {:ok, Keyword.put(opts, :speeds, parsed)},
           else:
-            {:usage, "--speeds takes numbers from 1 to 1000 separated by commas, got: #{text}"}
+            {:usage,
+             "--speeds takes numbers from 1 to #{Slowdown.max()} separated by commas, got: #{text}"}
     end
   end
 

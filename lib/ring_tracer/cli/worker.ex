@@ -28,7 +28,8 @@ defmodule RingTracer.CLI.Worker do
       name is made up)
     * `--tags a,b`, `--slots N`, `--speed F` — with `--join`: tags a job may
       ask for, the children this worker hosts for a job (default: one per
-      core), and a slowdown that emulates a slower machine (1 to 1000)
+      core), and a slowdown that emulates a slower machine (1 to
+      `RingTracer.Job.Slowdown.max/0`)
   """
 
   alias RingTracer.CLI.Paths

@@ -27,6 +27,30 @@ defmodule RingTracer.Job.Slowdown do
   @enforce_keys [:speed]
   defstruct [:speed, balance: 0]
 
+  # A slowdown beyond this emulates no machine anyone renders on, and its
+  # sleeps would overflow timers.
+  @max 1000
+
+  @doc """
+  The largest slowdown factor a child or a node may have (the smallest is 1).
+
+      iex> RingTracer.Job.Slowdown.max()
+      1000
+  """
+  @spec max() :: pos_integer()
+  def max, do: @max
+
+  @doc """
+  Whether `factor` is a slowdown factor (a number from 1 to `max/0`).
+
+      iex> RingTracer.Job.Slowdown.factor?(4)
+      true
+      iex> RingTracer.Job.Slowdown.factor?(0.5)
+      false
+  """
+  @spec factor?(term()) :: boolean()
+  def factor?(factor), do: is_number(factor) and factor >= 1 and factor <= @max
+
   @typedoc """
   A child's speed factor and its wait balance in microseconds (negative when
   past sleeps overran).
