@@ -27,7 +27,7 @@ defmodule RingTracer do
   ## Options
 
     * `:children` — ring size N (default: schedulers online)
-    * `:atoms` — atoms per child K (default 16)
+    * `:atoms` — atoms per child K (default #{RingTracer.Options.default(:atoms)})
     * `:width`, `:height` — image size (default: the scene's; one of them
       alone keeps the scene's aspect ratio)
     * `:depth` — ray-tree depth limit, eye ray = 1 (default #{RingTracer.Settings.shown_default(:depth)})
@@ -608,7 +608,8 @@ defmodule RingTracer do
 
   Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
   `:aim`, `:split`, `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
-  microseconds (see `RingTracer.Kernel.Simulated`; default 2000 each).
+  microseconds (see `RingTracer.Kernel.Simulated`; default
+  #{RingTracer.Kernel.Simulated.default_cost()} each).
 
       iex> {:ok, result} = RingTracer.simulate(children: 16, atoms: 4, costs: 1000)
       iex> length(result.atoms)
@@ -616,7 +617,7 @@ defmodule RingTracer do
   """
   @spec simulate(keyword()) :: {:ok, Result.t()} | {:error, Error.t()}
   def simulate(opts \\ []) do
-    {costs, opts} = Keyword.pop(opts, :costs, 2000)
+    {costs, opts} = Keyword.pop(opts, :costs, RingTracer.Kernel.Simulated.default_cost())
 
     with {:ok, opts} <- Options.validate(opts),
          :ok <- running() do

@@ -40,6 +40,18 @@ defmodule RingTracer.Options do
   @max_children 16_384
   @max_atoms 1_048_576
 
+  @doc """
+  The default of option `key` (nil when it has none of its own).
+
+      iex> RingTracer.Options.default(:atoms)
+      16
+  """
+  @spec default(atom()) :: term()
+  def default(key) do
+    {_type, default} = Keyword.fetch!(@schema, key)
+    default
+  end
+
   @doc "The largest ring, and the most atoms in all, that a job may have."
   @spec maxima() :: %{children: pos_integer(), atoms: pos_integer()}
   def maxima, do: %{children: @max_children, atoms: @max_atoms}

@@ -127,7 +127,7 @@ defmodule RingTracer.CLI.Render do
 
     Ring:
           --children N        ring size (1-#{@max.children}, default: schedulers online)
-          --atoms K           atoms per child (default 16; N x K at most #{@max.atoms})
+          --atoms K           atoms per child (default #{RingTracer.Options.default(:atoms)}; N x K at most #{@max.atoms})
           --strategy S        ring (default), static, master or steal
           --layout L          strips (default) or interleaved
           --aim, --no-aim     ring: offers straight to the busiest sibling (default on strips)
@@ -635,7 +635,14 @@ defmodule RingTracer.CLI.Render do
     try do
       {:ok, handle} = RingTracer.render_async(scene, job.render_opts)
       now = System.monotonic_time(:millisecond)
-      progress = Progress.new(job.mode, total * Keyword.get(job.render_opts, :atoms, 16), now)
+
+      progress =
+        Progress.new(
+          job.mode,
+          total * Keyword.get(job.render_opts, :atoms, RingTracer.Options.default(:atoms)),
+          now
+        )
+
       schedule(job.mode)
       await(handle, handler, progress)
     after

@@ -73,7 +73,11 @@ defmodule RingTracer.CLI.Sequence do
           {:ok, RingTracer.Result.t(), [map()]} | outcome()
   def collect(handle, handler, job, plan, numbers, dir) do
     children = Keyword.get(job.render_opts, :children, :erlang.system_info(:schedulers_online))
-    atoms = children * Keyword.get(job.render_opts, :atoms, 16) * length(numbers)
+
+    atoms =
+      children * Keyword.get(job.render_opts, :atoms, RingTracer.Options.default(:atoms)) *
+        length(numbers)
+
     progress = job.mode |> Progress.new(atoms, now()) |> Progress.frames(0, length(numbers))
     schedule(job.mode)
 

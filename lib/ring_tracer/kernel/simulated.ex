@@ -1,4 +1,7 @@
 defmodule RingTracer.Kernel.Simulated do
+  # An atom's cost, in microseconds, when none is given.
+  @default_cost 2000
+
   @moduledoc """
   A cost model in place of the ray tracer: each atom "costs" some
   microseconds, and tracing it is sleeping that long (no CPU burnt), then
@@ -12,7 +15,7 @@ defmodule RingTracer.Kernel.Simulated do
       binary of native-endian unsigned 32-bit integers (what `RingTracer.simulate/1`
       turns a list or tuple into, so that 1024 children share one copy), a
       function `atom -> microseconds`, or one integer for every atom
-      (default 2000).
+      (default #{@default_cost}).
 
   In a job of several frames (`RingTracer.Layout`, "Frames") every frame
   costs alike: costs are indexed by the atom within its frame.
@@ -31,13 +34,18 @@ defmodule RingTracer.Kernel.Simulated do
     @type t :: %__MODULE__{costs: term(), frame_atoms: pos_integer()}
   end
 
+  @doc "An atom's cost when none is given, in microseconds."
+  @spec default_cost() :: pos_integer()
+  def default_cost, do: @default_cost
+
   @impl RingTracer.Kernel
-  def prepare(%{layout: %Layout{frames: 1}}, opts), do: {:ok, Keyword.get(opts, :costs, 2000)}
+  def prepare(%{layout: %Layout{frames: 1}}, opts),
+    do: {:ok, Keyword.get(opts, :costs, @default_cost)}
 
   def prepare(spec, opts) do
     {:ok,
      %Frames{
-       costs: Keyword.get(opts, :costs, 2000),
+       costs: Keyword.get(opts, :costs, @default_cost),
        frame_atoms: Layout.frame_atom_count(spec.layout)
      }}
   end
@@ -64,7 +72,7 @@ defmodule RingTracer.Kernel.Simulated do
   @doc "Each atom's work, of one frame: its cost in the model (an exact preview)."
   @impl RingTracer.Kernel
   def atom_work(spec, opts) do
-    costs = Keyword.get(opts, :costs, 2000)
+    costs = Keyword.get(opts, :costs, @default_cost)
     {:ok, List.to_tuple(for a <- Layout.frame_atoms(spec.layout, 0), do: cost(costs, a))}
   end
 
