@@ -672,6 +672,8 @@ defmodule RingTracer do
     }
 
     spec = struct!(spec, extra)
+    # a sequence has no ownership map
+    spec = %{spec | tint: spec.tint and not spec.sequence}
     spec = %{spec | layout: Layout.with_frames(spec.layout, length(spec.frames))}
 
     preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])

@@ -41,6 +41,26 @@ defmodule RingTracer.Pixels do
   def bytes_per_pixel(:float), do: 12
   def bytes_per_pixel(:srgb8), do: 3
 
+  @doc """
+  The format a job writing the images `paths` needs: `:srgb8` when every
+  one is a PNG (8-bit: the job need not send more), else `:float`.
+
+      iex> RingTracer.Pixels.for_files(["a.png", "frames/f_####.PNG"])
+      :srgb8
+      iex> RingTracer.Pixels.for_files(["a.png", "b.exr"])
+      :float
+      iex> RingTracer.Pixels.for_files([])
+      :float
+  """
+  @spec for_files([Path.t()]) :: format()
+  def for_files([_ | _] = paths) do
+    if Enum.all?(paths, &(String.downcase(Path.extname(&1)) == ".png")),
+      do: :srgb8,
+      else: :float
+  end
+
+  def for_files([]), do: :float
+
   @doc "Bytes of `count` pixels in `format`."
   @spec size(non_neg_integer(), format()) :: non_neg_integer()
   def size(count, format), do: count * bytes_per_pixel(format)
