@@ -60,7 +60,10 @@ defmodule RingTracer.Image do
 
       format not in RingTracer.Pixels.formats() ->
         {:error,
-         Error.new(:invalid_option, "unknown pixel format #{inspect(format)}; use :float or :srgb8")}
+         Error.new(
+           :invalid_option,
+           "unknown pixel format #{inspect(format)}; use :float or :srgb8"
+         )}
 
       true ->
         mode = opts[:mode] || -1

@@ -4,7 +4,12 @@ defmodule RingTracer.CodecTest do
   alias RingTracer.Codec
 
   test "bytes come back as they were, within the bound" do
-    for bytes <- [<<>>, "a scene", :crypto.strong_rand_bytes(100_000), :binary.copy("ab", 500_000)] do
+    for bytes <- [
+          <<>>,
+          "a scene",
+          :crypto.strong_rand_bytes(100_000),
+          :binary.copy("ab", 500_000)
+        ] do
       assert {:ok, frame} = Codec.compress(bytes)
       assert {:ok, ^bytes} = Codec.decompress(frame, byte_size(bytes))
     end
@@ -15,10 +20,17 @@ defmodule RingTracer.CodecTest do
 
   test "more than the bound, or corrupt frames, are errors, not crashes" do
     {:ok, frame} = Codec.compress(:binary.copy("x", 10_000))
-    assert {:error, %RingTracer.Error{reason: :corrupt, message: m}} = Codec.decompress(frame, 9_999)
+
+    assert {:error, %RingTracer.Error{reason: :corrupt, message: m}} =
+             Codec.decompress(frame, 9_999)
+
     assert m =~ "more than 9999 bytes"
 
-    for bad <- [binary_part(frame, 0, byte_size(frame) - 3), "not zstd at all", <<40, 181, 47, 253>>] do
+    for bad <- [
+          binary_part(frame, 0, byte_size(frame) - 3),
+          "not zstd at all",
+          <<40, 181, 47, 253>>
+        ] do
       assert {:error, %RingTracer.Error{reason: :corrupt}} = Codec.decompress(bad, 10_000)
     end
   end

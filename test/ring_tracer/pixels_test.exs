@@ -172,7 +172,10 @@ defmodule RingTracer.PixelsTest do
     test "an EXR of 8-bit pixels is a clear error", %{tmp_dir: dir} do
       eight = render("tetra_s1.nff", children: 2, atoms: 2, pixels: :srgb8)
       path = Path.join(dir, "a.exr")
-      assert {:error, %RingTracer.Error{reason: :file, message: message}} = Image.write(eight, path)
+
+      assert {:error, %RingTracer.Error{reason: :file, message: message}} =
+               Image.write(eight, path)
+
       assert message =~ ".png only"
       refute File.exists?(path)
     end

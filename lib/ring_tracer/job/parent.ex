@@ -641,7 +641,8 @@ defmodule RingTracer.Job.Parent do
         with {:ok, pixels} <- decode_one(pixels, format, count), do: {:ok, pixels, nil}
 
       _ ->
-        {:error, "something other than its #{count} pixels" <> if(tint?, do: " and tint", else: "")}
+        {:error,
+         "something other than its #{count} pixels" <> if(tint?, do: " and tint", else: "")}
     end
   end
 

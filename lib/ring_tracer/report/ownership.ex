@@ -22,7 +22,9 @@ defmodule RingTracer.Report.Ownership do
   `result.atoms` are left as they are.
   """
   @spec pixels(Result.t()) :: binary()
-  def pixels(%Result{children: children, atoms: atoms, pixels: pixels, pixel_format: :float} = result)
+  def pixels(
+        %Result{children: children, atoms: atoms, pixels: pixels, pixel_format: :float} = result
+      )
       when is_list(atoms) and atoms != [] and is_list(children) and children != [] do
     n = length(children)
     k = max(div(atoms |> Enum.uniq_by(&Layout.base(&1.atom)) |> length(), n), 1)
@@ -61,7 +63,8 @@ defmodule RingTracer.Report.Ownership do
 
   def write(%Result{tinted: tinted} = result, path, opts)
       when is_binary(tinted) and is_binary(path),
-      do: Image.write(path, result.width, result.height, tinted, Keyword.put(opts, :format, :srgb8))
+      do:
+        Image.write(path, result.width, result.height, tinted, Keyword.put(opts, :format, :srgb8))
 
   def write(%Result{pixel_format: :srgb8}, path, _opts) when is_binary(path),
     do:

@@ -276,7 +276,9 @@ defmodule RingTracer.CLI.RenderTest do
     test "8-bit when every image is a PNG, the same files as of floats", %{tmp_dir: dir} do
       read = reference(dir)
 
-      {:ok, _} = render([@scene, "-o", "#{dir}/a.png", "--ownership", "#{dir}/own.png"] ++ @common)
+      {:ok, _} =
+        render([@scene, "-o", "#{dir}/a.png", "--ownership", "#{dir}/own.png"] ++ @common)
+
       assert_receive {:pixels, :srgb8, true}
       assert read.("a.png") == read.("ref.png")
       assert read.("own.png") == read.("ref_own.png")
@@ -289,7 +291,9 @@ defmodule RingTracer.CLI.RenderTest do
     test "floats when an image is an EXR, which is unchanged", %{tmp_dir: dir} do
       read = reference(dir)
 
-      {:ok, _} = render([@scene, "-o", "#{dir}/a.exr", "--ownership", "#{dir}/own.png"] ++ @common)
+      {:ok, _} =
+        render([@scene, "-o", "#{dir}/a.exr", "--ownership", "#{dir}/own.png"] ++ @common)
+
       assert_receive {:pixels, :float, false}
       assert read.("a.exr") == read.("ref.exr")
       assert read.("own.png") == read.("ref_own.png")
@@ -309,7 +313,9 @@ defmodule RingTracer.CLI.RenderTest do
         {:ok, png} = RingTracer.Image.png(24, 16, floats)
         assert File.read!(Path.join(dir, "f_#{n}.png")) == png
         :ok = RingTracer.Image.write(Path.join(dir, "r_#{n}.exr"), 24, 16, floats)
-        assert File.read!(Path.join(dir, "g_#{n}.exr")) == File.read!(Path.join(dir, "r_#{n}.exr"))
+
+        assert File.read!(Path.join(dir, "g_#{n}.exr")) ==
+                 File.read!(Path.join(dir, "r_#{n}.exr"))
       end
     end
   end
