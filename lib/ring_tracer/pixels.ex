@@ -12,8 +12,10 @@ defmodule RingTracer.Pixels do
   #     of the floats; sent compressed.
   #
   # Encoding and decoding run in the NIF, on a normal scheduler for the many
-  # small atoms and on a dirty CPU one past `@dirty_bytes` of floats (about
-  # 0.2 ms of work on this machine's cores).
+  # small atoms (a 4,096-pixel atom: 70 us to encode in floats, 50 us in 8
+  # bits, less to decode), where a switch to a dirty scheduler would cost
+  # about as much; past `@dirty_bytes` of floats (5,461 pixels, some 0.15 ms)
+  # on a dirty CPU one, so that no normal scheduler is held long.
 
   alias RingTracer.Native
 
@@ -23,7 +25,7 @@ defmodule RingTracer.Pixels do
   @type wire :: binary()
 
   @formats [:float, :srgb8]
-  @dirty_bytes 128 * 1024
+  @dirty_bytes 64 * 1024
 
   @doc "The pixel formats, the default first."
   @spec formats() :: [format(), ...]

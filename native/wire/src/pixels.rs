@@ -45,14 +45,11 @@ impl Format {
     }
 }
 
-/// The 4 byte planes of `bytes` (a multiple of 4 long).
+/// The 4 byte planes of `bytes` (a multiple of 4 long), a plane at a time.
 fn shuffle(bytes: &[u8]) -> Vec<u8> {
-    let n = bytes.len() / 4;
-    let mut out = vec![0u8; bytes.len()];
-    for (i, word) in bytes.chunks_exact(4).enumerate() {
-        for (k, &b) in word.iter().enumerate() {
-            out[k * n + i] = b;
-        }
+    let mut out = Vec::with_capacity(bytes.len());
+    for k in 0..4 {
+        out.extend(bytes.iter().skip(k).step_by(4));
     }
     out
 }
@@ -60,11 +57,12 @@ fn shuffle(bytes: &[u8]) -> Vec<u8> {
 /// The bytes whose planes are `planes` (`shuffle`'s inverse).
 fn unshuffle(planes: &[u8]) -> Vec<u8> {
     let n = planes.len() / 4;
-    let mut out = vec![0u8; planes.len()];
-    for (i, word) in out.chunks_exact_mut(4).enumerate() {
-        for (k, b) in word.iter_mut().enumerate() {
-            *b = planes[k * n + i];
-        }
+    let (p0, rest) = planes.split_at(n);
+    let (p1, rest) = rest.split_at(n);
+    let (p2, p3) = rest.split_at(n);
+    let mut out = Vec::with_capacity(planes.len());
+    for i in 0..n {
+        out.extend_from_slice(&[p0[i], p1[i], p2[i], p3[i]]);
     }
     out
 }
