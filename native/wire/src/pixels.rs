@@ -205,31 +205,4 @@ mod tests {
         assert!(encode(&bytes[..20], &rgb[..5], Format::Float).is_err());
         assert!(encode_tinted(&rgb[..5], (0.0, 0.0, 0.0)).is_err());
     }
-
-    /// Bytes and time of each level on an SPD-like atom (`--ignored --nocapture`): the figures
-    /// behind `LEVEL`.
-    #[test]
-    #[ignore]
-    fn levels() {
-        let n = 512 * 512;
-        let rgb: Vec<f32> = (0..n * 3)
-            .map(|i| {
-                let (p, c) = (i / 3, i % 3);
-                let (x, y) = ((p % 512) as f32, (p / 512) as f32);
-                ((x * 0.02).sin() * (y * 0.03).cos() * 0.4 + 0.45 + c as f32 * 0.05).max(0.0)
-            })
-            .collect();
-        let bytes: Vec<u8> = rgb.iter().flat_map(|v| v.to_ne_bytes()).collect();
-        for level in 1..=3 {
-            for (name, content) in [("float", shuffle(&bytes)), ("srgb8", to_srgb8(&rgb))] {
-                let t = std::time::Instant::now();
-                let z = zstd::bulk::compress(&content, level).unwrap();
-                println!(
-                    "level {level} {name}: {:.2} B/px, {:?}",
-                    z.len() as f64 / n as f64,
-                    t.elapsed()
-                );
-            }
-        }
-    }
 }
