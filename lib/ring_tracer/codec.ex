@@ -1,30 +1,26 @@
 defmodule RingTracer.Codec do
   @moduledoc false
-  # Plain zstd frames (the `zstd` crate, through the NIF), for what a job
-  # sends compressed besides its pixels (`RingTracer.Pixels`): a scene
-  # shipped to a node. Both run on a dirty CPU scheduler.
+  # Plain zstd frames (the `zstd` crate, through the NIF: `native/wire`),
+  # for what a job sends compressed besides its pixels
+  # (`RingTracer.Pixels`): a scene shipped to a node
+  # (`RingTracer.Scene.Source.pack/1`). Both run on a dirty CPU scheduler.
 
-  alias RingTracer.{Error, Native}
+  alias RingTracer.Native
 
-  @doc "`bytes` as one zstd frame."
-  @spec compress(binary()) :: {:ok, binary()} | {:error, Error.t()}
-  def compress(bytes) when is_binary(bytes) do
-    case Native.zstd_compress(bytes) do
-      {:ok, frame} -> {:ok, frame}
-      {:error, message} -> {:error, Error.new(:invalid_option, message)}
+  @doc "`binary` as one zstd frame (level 3)."
+  @spec compress(binary()) :: binary()
+  def compress(binary) when is_binary(binary) do
+    case Native.zstd_compress(binary) do
+      {:ok, frame} -> frame
+      {:error, message} -> raise RingTracer.Error.new(:render_failed, "zstd: #{message}")
     end
   end
 
   @doc """
-  The bytes of zstd frames, at most `max_bytes` of them: more, or a frame
-  that is not zstd, is an error (`:reason` `:corrupt`), never a crash.
+  The bytes of zstd frames, at most `max` of them: more, or data that is
+  not zstd frames, is an error that says so, never a crash.
   """
-  @spec decompress(binary(), non_neg_integer()) :: {:ok, binary()} | {:error, Error.t()}
-  def decompress(frames, max_bytes)
-      when is_binary(frames) and is_integer(max_bytes) and max_bytes >= 0 do
-    case Native.zstd_decompress(frames, max_bytes) do
-      {:ok, bytes} -> {:ok, bytes}
-      {:error, message} -> {:error, Error.new(:corrupt, message)}
-    end
-  end
+  @spec decompress(binary(), non_neg_integer()) :: {:ok, binary()} | {:error, String.t()}
+  def decompress(binary, max) when is_binary(binary) and is_integer(max) and max >= 0,
+    do: Native.zstd_decompress(binary, max)
 end

@@ -23,7 +23,6 @@ defmodule RingTracer.Error do
   | `:preview` | a preview could not start (port in use) or its job is not running |
   | `:farm` | a farm's head refused a request (no such job, a job that has ended) or could not start |
   | `:farm_unreachable` | a farm's head could not be reached, or did not answer in time |
-  | `:corrupt` | compressed data that does not decode, or decodes to more than it may |
 
   A message never holds a control character but newlines and tabs (see
   `escape/2`): a file name from an untrusted folder cannot drive the
