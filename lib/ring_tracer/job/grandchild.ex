@@ -51,13 +51,14 @@ defmodule RingTracer.Job.Grandchild do
     spawn_link(fn -> loop(child, {kernel, wire}, layout, Slowdown.new(speed)) end)
   end
 
-  defp loop(child, kernel, layout, slowdown) do
+  # `tracer`: the kernel, and how its pixels go out (`t:wire/0`).
+  defp loop(child, tracer, layout, slowdown) do
     receive do
       {:trace, atom} ->
-        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, 1))
+        loop(child, tracer, layout, take(child, tracer, layout, slowdown, atom, 1))
 
       {:trace, atom, n} ->
-        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, n))
+        loop(child, tracer, layout, take(child, tracer, layout, slowdown, atom, n))
     end
   end
 
