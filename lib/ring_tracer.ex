@@ -85,6 +85,17 @@ defmodule RingTracer do
       each printing the page's address on stderr (on the I/O device
       `announce: device` instead, if given) and stopping the page when
       the job ends, or a preview started with `RingTracer.Preview.start/1`
+    * `:pixels` — the format of the result's pixels, and of the atoms'
+      pixels on their way to the parent: `:float` (default: linear 32-bit
+      floats, sent losslessly compressed) or `:srgb8` (8-bit sRGB, a
+      quarter of the bytes and fewer still on the wire). PNG files written
+      from either are the same bytes; `:srgb8` cannot be written as EXR
+      (`RingTracer.Image`). `ringtracer render` picks `:srgb8` when every
+      image it writes is a PNG
+    * `:ownership` — with `pixels: :srgb8`, also keep the image tinted by
+      who traced each atom (the result's `:tinted`), which
+      `RingTracer.Report.Ownership` writes (default false; with `:float`
+      the map is made from the pixels themselves)
 
   Returns `{:ok, %RingTracer.Result{}}` or `{:error, %RingTracer.Error{}}`
   for a missing or invalid scene, a bad option, or a job that failed.
@@ -656,10 +667,14 @@ defmodule RingTracer do
       kernel: kernel,
       speeds: opts[:speeds],
       progress: opts[:progress],
-      frames: [opts[:frame] - 1]
+      frames: [opts[:frame] - 1],
+      pixels: opts[:pixels],
+      tint: opts[:ownership] and opts[:pixels] == :srgb8
     }
 
     spec = struct!(spec, extra)
+    # a sequence has no ownership map
+    spec = %{spec | tint: spec.tint and not spec.sequence}
     spec = %{spec | layout: Layout.with_frames(spec.layout, length(spec.frames))}
 
     preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])

@@ -3,6 +3,9 @@ defmodule RingTracer.Frame do
   One frame of a sequence (`RingTracer.render_sequence/2`), as it completes:
   its number in the scene (from 1), its image (`pixels`: linear RGB,
   native-endian f32 triples, row-major, like `RingTracer.Result`'s), and
+  `pixel_format`, the format of `pixels` (`:float`, or `:srgb8` for a job
+  rendered with `pixels: :srgb8`: 8-bit sRGB, 3 bytes a pixel; see
+  `RingTracer.render/2`), and
   when it was traced: `released_us`, when the job put its atoms in the
   ring, and `completed_us`, when its last pixel arrived (job microseconds,
   from the job's start). `atoms` counts its atoms, `traced` how many atoms
@@ -16,6 +19,7 @@ defmodule RingTracer.Frame do
     :width,
     :height,
     :pixels,
+    pixel_format: :float,
     released_us: 0,
     completed_us: 0,
     atoms: 0,
@@ -28,6 +32,7 @@ defmodule RingTracer.Frame do
           width: pos_integer(),
           height: pos_integer(),
           pixels: binary() | nil,
+          pixel_format: :float | :srgb8,
           released_us: integer(),
           completed_us: integer(),
           atoms: non_neg_integer(),

@@ -32,7 +32,9 @@ defmodule RingTracer.Options do
     local: {:boolean, true},
     allow_dirs: {:paths, []},
     liveness: {:pos_integer, RingTracer.Cluster.Liveness.default_timeout()},
-    preview: {:preview, nil}
+    preview: {:preview, nil},
+    pixels: {:pixels, :float},
+    ownership: {:boolean, false}
   ]
 
   # Documented maxima, checked before any work. Each is run at full size by
@@ -246,6 +248,15 @@ defmodule RingTracer.Options do
        "true, a port (0 for a free one), [port: p, listen: address, max_viewers: n, " <>
          "cpu_share: 0.01, strip: 12] " <>
          "or a RingTracer.Preview"}
+
+  defp check(:pixels, v) do
+    if v in RingTracer.Pixels.formats(),
+      do: :ok,
+      else:
+        {:error,
+         "one of #{inspect(RingTracer.Pixels.formats())} (:srgb8 only when every " <>
+           "image written is 8-bit, e.g. PNG)"}
+  end
 
   defp check(:pid, v) when is_pid(v), do: :ok
   defp check(:pid, _), do: {:error, "a pid"}

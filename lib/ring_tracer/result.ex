@@ -6,7 +6,13 @@ defmodule RingTracer.Result do
 
     * `:pixels` — `width * height * 3` native-endian 32-bit floats, row-major
       from the top-left, linear light (write it with `RingTracer.Image`);
-      `nil` for a sequence;
+      `nil` for a sequence; for a job rendered with `pixels: :srgb8`
+      (`RingTracer.render/2`), `width * height * 3` bytes of 8-bit sRGB;
+    * `:pixel_format` — the format of `:pixels`: `:float` (default) or
+      `:srgb8`;
+    * `:tinted` — with `pixels: :srgb8` and `ownership: true`, the image
+      tinted by who traced each atom, as 8-bit sRGB
+      (`RingTracer.Report.Ownership`); `nil` otherwise;
     * `:frames` — a sequence's frames (`RingTracer.Frame`, without their
       pixels), in the order they completed; none for one image;
     * `:started_at_us` — when the job's parent started, wall clock
@@ -73,6 +79,8 @@ defmodule RingTracer.Result do
     :settings,
     :strategy,
     layout: :strips,
+    pixel_format: :float,
+    tinted: nil,
     aim: false,
     duplicates: 0,
     failures: [],
@@ -150,6 +158,8 @@ defmodule RingTracer.Result do
           settings: RingTracer.Settings.t(),
           strategy: atom(),
           layout: RingTracer.Layout.order(),
+          pixel_format: :float | :srgb8,
+          tinted: binary() | nil,
           aim: boolean(),
           duplicates: non_neg_integer(),
           failures: [failure()],
@@ -173,6 +183,8 @@ defmodule RingTracer.Result do
       width: width,
       height: height,
       pixels: raw.pixels,
+      pixel_format: Map.get(raw, :pixel_format, :float),
+      tinted: Map.get(raw, :tinted),
       started_at_us: raw.started_at_us,
       elapsed_us: raw.elapsed_us,
       teardown_us: raw.teardown_us,

@@ -19,6 +19,8 @@ defmodule RingTracer.OptionsTest do
           {[nodes: ["a@b"]], ":nodes"},
           {[timeout: 0], ":timeout"},
           {[layout: :spiral], ":layout"},
+          {[pixels: :rgb16], ":pixels must be one of [:float, :srgb8]"},
+          {[ownership: :yes], ":ownership"},
           {[bogus: 1], ":bogus"}
         ] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =

@@ -3,7 +3,8 @@ defmodule RingTracer.Test.FaultyKernel do
   A test-only kernel: the native one, except that an atom holding pixel
   `:fail_pixel` fails as a kernel panic does (`RingTracer.Kernel.Native`
   turns a panic into `{:error, "kernel raised: ..."}`), every time it is
-  traced; and, with `:jitter`, each atom's result waits up to that many
+  traced; an atom holding pixel `:short_pixel` comes back a pixel short,
+  as a kernel with a bug would give it; and, with `:jitter`, each atom's result waits up to that many
   milliseconds more, drawn at random, before it goes to its child (and
   `:delay` milliseconds more, always); and, with
   `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) as
@@ -35,10 +36,20 @@ defmodule RingTracer.Test.FaultyKernel do
   def trace({context, opts}, first, count, atom) do
     pixel = opts[:fail_pixel]
 
+    holds? = fn p -> is_integer(p) and p >= first and p < first + count end
+
     result =
-      if is_integer(pixel) and pixel >= first and pixel < first + count,
-        do: {:error, "kernel raised: test fault at pixel #{pixel}"},
-        else: Native.trace(context, first, count, atom)
+      cond do
+        holds?.(pixel) ->
+          {:error, "kernel raised: test fault at pixel #{pixel}"}
+
+        holds?.(opts[:short_pixel]) ->
+          {:ok, pixels, rays, us} = Native.trace(context, first, count, atom)
+          {:ok, binary_part(pixels, 0, byte_size(pixels) - 12), rays, us}
+
+        true ->
+          Native.trace(context, first, count, atom)
+      end
 
     case Keyword.get(opts, :jitter, 0) do
       0 -> :ok

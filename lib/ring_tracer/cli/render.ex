@@ -248,6 +248,7 @@ defmodule RingTracer.CLI.Render do
          {:ok, out} <- required_out(opts),
          :ok <- Frames.check_out(out),
          {:ok, render_opts} <- render_opts(opts),
+         render_opts = render_opts ++ pixels(opts),
          {:ok, mode} <- progress_mode(opts),
          outputs = for({key, kind} <- @outputs, path = opts[key], do: {kind, path}),
          scene = Paths.expand(scene_arg),
@@ -295,6 +296,18 @@ defmodule RingTracer.CLI.Render do
     case opts[:out] do
       nil -> {:usage, "--out FILE is required (a .png or .exr file)"}
       out -> {:ok, out}
+    end
+  end
+
+  # The pixels' format: 8-bit when every image written is a PNG (the
+  # image, or the frames' pattern, and the ownership map), whose tints the
+  # children then send too.
+  defp pixels(opts) do
+    images = for key <- [:out, :ownership], path = opts[key], do: path
+
+    case RingTracer.Pixels.for_files(images) do
+      :srgb8 -> [pixels: :srgb8, ownership: opts[:ownership] != nil]
+      :float -> [pixels: :float]
     end
   end
 

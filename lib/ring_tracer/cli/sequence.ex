@@ -144,7 +144,7 @@ defmodule RingTracer.CLI.Sequence do
                frame.width,
                frame.height,
                frame.pixels,
-               [in: s.dir] ++ s.mode
+               [in: s.dir, format: frame.pixel_format] ++ s.mode
              ) do
           :ok ->
             :ok = RingTracer.ack_frame(s.handle, n)

@@ -19,8 +19,8 @@ defmodule RingTracer.Farm.Runner do
   alias RingTracer.{Error, Image, Scene}
   alias RingTracer.Farm.{Job, Store}
 
-  # Options the farm sets itself, for the workers it chose.
-  @farm_set [:nodes, :local, :children_per_node, :children, :frames, :window, :ack]
+  # Options the farm sets itself, for the workers it chose and the frames' format.
+  @farm_set [:nodes, :local, :children_per_node, :children, :frames, :window, :ack, :pixels]
 
   @type outcome :: :done | {:failed, String.t()} | {:retry, String.t()} | {:lost, String.t()}
 
@@ -75,7 +75,11 @@ defmodule RingTracer.Farm.Runner do
     %State{job: job, dir: dir, handle: handle} = state
     name = Job.frame_file(job, n)
 
-    case Image.write(name, frame.width, frame.height, frame.pixels, in: dir, mode: 0o600) do
+    case Image.write(name, frame.width, frame.height, frame.pixels,
+           in: dir,
+           mode: 0o600,
+           format: frame.pixel_format
+         ) do
       :ok ->
         :ok = Store.frame_done(job.id, n)
         send(state.head, {:runner_frame, job.id, n})
@@ -140,7 +144,9 @@ defmodule RingTracer.Farm.Runner do
           local: false,
           children_per_node: slots,
           frames: remaining,
-          ack: true
+          ack: true,
+          # 8-bit when the frames are PNGs
+          pixels: RingTracer.Pixels.for_files([Job.frame_file(job, 1)])
         ] ++ preview
 
     RingTracer.render_sequence(scene, opts)

@@ -706,7 +706,9 @@ defmodule RingTracer.Job.Child do
   end
 
   defp spawn_grandchild(state) do
-    gc = Grandchild.start_link(state.kernel, state.spec.layout, state.stats.speed)
+    %Spec{pixels: format, tint: tint?} = state.spec
+    wire = %{format: format, tint: if(tint?, do: RingTracer.Report.Palette.linear(state.index))}
+    gc = Grandchild.start_link(state.kernel, state.spec.layout, state.stats.speed, wire)
     %{state | grandchild: gc}
   end
 

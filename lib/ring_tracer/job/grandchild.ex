@@ -21,36 +21,52 @@ defmodule RingTracer.Job.Grandchild do
   not yet started for a faster sibling (`RingTracer.Job.Pipe.cut/3`); the
   parts traced come back as one piece (`RingTracer.Layout.parts/4`).
 
+  The pixels go out encoded for the wire in the job's format
+  (`RingTracer.Pixels.encode/2`); with a tint (the ownership map of a job
+  in `:srgb8`), with the pixels mixed with the child's colour beside them
+  (`RingTracer.Pixels.encode_tinted/2`).
+
   Messages in: `{:trace, atom}`, `{:trace, atom, n}`. Messages out, to the child:
-  `{:traced, self(), atom, pixels, rays, timing}` (timing: `:trace_us`,
-  `:started_at`, `:ended_at` in system microseconds) or
+  `{:traced, self(), atom, pixels, rays, timing}` (pixels: `t:sent/0`;
+  timing: `:trace_us`, `:started_at`, `:ended_at` in system microseconds) or
   `{:atom_failed, self(), atom, message}`.
   """
 
   alias RingTracer.Job.{Pipe, Slowdown}
-  alias RingTracer.{Layout, Rays}
+  alias RingTracer.{Layout, Pixels, Rays}
+
+  @typedoc """
+  How traced pixels go out: in `format`, and with `tint` (a linear colour)
+  also tinted for the ownership map.
+  """
+  @type wire :: %{format: Pixels.format(), tint: {float(), float(), float()} | nil}
+
+  @typedoc "An atom's pixels as sent: on the wire, and tinted beside them with a `tint`."
+  @type sent :: Pixels.wire() | {Pixels.wire(), Pixels.wire()}
 
   @doc "Spawns a grandchild linked to the calling child."
-  @spec start_link({module(), term()}, Layout.t(), number()) :: pid()
-  def start_link(kernel, %Layout{} = layout, speed) do
+  @spec start_link({module(), term()}, Layout.t(), number(), wire()) :: pid()
+  def start_link(kernel, %Layout{} = layout, speed, wire \\ %{format: :float, tint: nil}) do
     child = self()
-    spawn_link(fn -> loop(child, kernel, layout, Slowdown.new(speed)) end)
+    spawn_link(fn -> loop(child, {kernel, wire}, layout, Slowdown.new(speed)) end)
   end
 
-  defp loop(child, kernel, layout, slowdown) do
+  # `tracer`: the kernel, and how its pixels go out (`t:wire/0`).
+  defp loop(child, tracer, layout, slowdown) do
     receive do
       {:trace, atom} ->
-        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, 1))
+        loop(child, tracer, layout, take(child, tracer, layout, slowdown, atom, 1))
 
       {:trace, atom, n} ->
-        loop(child, kernel, layout, take(child, kernel, layout, slowdown, atom, n))
+        loop(child, tracer, layout, take(child, tracer, layout, slowdown, atom, n))
     end
   end
 
   # The child may have taken the atom back for a sibling (`Pipe`).
-  defp take(child, kernel, layout, slowdown, atom, n) do
+  defp take(child, {kernel, wire}, layout, slowdown, atom, n) do
     if Pipe.claim(self(), atom) do
       {message, slowdown} = trace(kernel, layout, slowdown, atom, n)
+      message = encoded(message, wire)
       send(child, message)
       slowdown
     else
@@ -89,6 +105,23 @@ defmodule RingTracer.Job.Grandchild do
 
         {{:atom_failed, self(), failed, message}, acc.slowdown}
     end
+  end
+
+  defp encoded({:traced, gc, atom, pixels, rays, timing}, wire) do
+    with {:ok, sent} <- Pixels.encode(pixels, wire.format),
+         {:ok, sent} <- tinted(sent, pixels, wire.tint) do
+      {:traced, gc, atom, sent, rays, timing}
+    else
+      {:error, message} -> {:atom_failed, gc, atom, "its pixels could not be encoded: #{message}"}
+    end
+  end
+
+  defp encoded(failed, _wire), do: failed
+
+  defp tinted(sent, _pixels, nil), do: {:ok, sent}
+
+  defp tinted(sent, pixels, colour) do
+    with {:ok, tinted} <- Pixels.encode_tinted(pixels, colour), do: {:ok, {sent, tinted}}
   end
 
   defp parts(_kernel, _layout, _atom, n, n, acc), do: {:ok, n, acc}

@@ -170,11 +170,13 @@ defmodule RingTracer.Job.Parent do
         }
 
   @typedoc """
-  A frame in flight: the atoms received (atom or piece => pixels), how
+  A frame in flight: the atoms received (atom or piece => pixels, in the
+  job's format; `tinted`: their copies for the ownership map, with a tint), how
   many atoms are missing, and what its `RingTracer.Frame` reports.
   """
   @type frame :: %{
           results: %{Layout.atom_id() => binary()},
+          tinted: %{Layout.atom_id() => binary()},
           missing: non_neg_integer(),
           released_us: integer(),
           traced: %{non_neg_integer() => non_neg_integer()},
@@ -196,6 +198,8 @@ defmodule RingTracer.Job.Parent do
   @typedoc "What the parent replies to the job's caller when the job completes."
   @type reply :: %{
           pixels: binary() | nil,
+          pixel_format: RingTracer.Pixels.format(),
+          tinted: binary() | nil,
           frames: [RingTracer.Frame.t()],
           kept_trace_us: non_neg_integer(),
           started_at_us: integer(),
@@ -279,8 +283,8 @@ defmodule RingTracer.Job.Parent do
   @doc """
   What a preview (`RingTracer.Preview`) needs of a running job: its id,
   start time, layout, strategy, the node and speed of each child, and the
-  atoms traced so far (`results`: atom => pixels; `traced_by`: atom =>
-  child). With `progress` given, only a job that reports its progress to
+  atoms traced so far (`results`: atom => pixels, in `format`, a
+  `RingTracer.Pixels` format; `traced_by`: atom => child). With `progress` given, only a job that reports its progress to
   that pid answers (`{:error, :other_job}` otherwise).
   """
   @spec describe(pid(), pid() | nil) :: {:ok, map()} | {:error, :other_job}
@@ -423,6 +427,7 @@ defmodule RingTracer.Job.Parent do
           nodes: placement(state.spec.nodes, n),
           speeds: for(i <- 0..(n - 1), do: Spec.speed(speeds, i)),
           results: oldest_results(state),
+          format: state.spec.pixels,
           traced_by: state.traced_by
         }}, state}
     else
@@ -529,19 +534,15 @@ defmodule RingTracer.Job.Parent do
 
   def handle_info(_other, state), do: {:noreply, state}
 
-  defp atom_done(state, coverage, child, atom, pixels, rays, us) do
+  defp atom_done(state, coverage, child, atom, sent, rays, us) do
     %Spec{layout: layout} = state.spec
-    {_first, count} = Layout.span(layout, atom)
     base = Layout.base(atom)
 
-    cond do
-      byte_size(pixels) != count * 12 ->
-        fail(
-          state,
-          "atom #{inspect(atom)} came back with #{byte_size(pixels)} bytes, expected #{count * 12}"
-        )
+    case decode(state.spec, atom, sent) do
+      {:error, message} ->
+        fail(state, "atom #{inspect(atom)} came back with #{message}")
 
-      true ->
+      {:ok, pixels, tinted} ->
         # An atom counts once all of it has arrived (pieces tile it).
         done = if Coverage.complete?(coverage, base), do: 1, else: 0
         f = Layout.frame(layout, base)
@@ -550,6 +551,7 @@ defmodule RingTracer.Job.Parent do
           state.frames
           |> Map.fetch!(f)
           |> Map.update!(:results, &Map.put(&1, atom, pixels))
+          |> Map.update!(:tinted, &if(tinted, do: Map.put(&1, atom, tinted), else: &1))
           |> Map.update!(:missing, &(&1 - done))
           |> Map.update!(:traced, &Map.update(&1, child, 1, fn n -> n + 1 end))
           |> Map.update!(:rays, &RingTracer.Rays.add(&1, rays))
@@ -577,6 +579,42 @@ defmodule RingTracer.Job.Parent do
         end
     end
   end
+
+  # An atom's pixels as a grandchild sent them (`RingTracer.Job.Grandchild`),
+  # decoded in the job's format, and with a tint their tinted copy: the right
+  # number of pixels, or an error that says what came instead.
+  defp decode(%Spec{layout: layout, pixels: format, tint: tint?}, atom, sent) do
+    {_first, count} = Layout.span(layout, atom)
+
+    case {sent, tint?} do
+      {{pixels, tinted}, true} ->
+        with {:ok, pixels} <- decode_one(pixels, format, count),
+             {:ok, tinted} <- decode_one(tinted, :srgb8, count),
+             do: {:ok, pixels, tinted}
+
+      {pixels, false} when is_binary(pixels) ->
+        with {:ok, pixels} <- decode_one(pixels, format, count), do: {:ok, pixels, nil}
+
+      _ ->
+        {:error,
+         "something other than its #{count} pixels" <> if(tint?, do: " and tint", else: "")}
+    end
+  end
+
+  defp decode_one(pixels, format, count) when is_binary(pixels) do
+    case RingTracer.Pixels.decode(pixels, format, count) do
+      {:ok, decoded} ->
+        {:ok, decoded}
+
+      {:error, message} ->
+        {:error,
+         "#{byte_size(pixels)} bytes that are not its #{count} pixels " <>
+           "(#{RingTracer.Pixels.size(count, format)} bytes of #{format}): #{message}"}
+    end
+  end
+
+  defp decode_one(_other, _format, count),
+    do: {:error, "something other than its #{count} pixels"}
 
   ## An elastic ring
 
@@ -748,6 +786,7 @@ defmodule RingTracer.Job.Parent do
 
     frame = %{
       results: %{},
+      tinted: %{},
       missing: Layout.frame_atom_count(state.spec.layout),
       released_us: now,
       traced: %{},
@@ -791,7 +830,8 @@ defmodule RingTracer.Job.Parent do
       number: Enum.at(numbers, f) + 1,
       width: layout.width,
       height: layout.height,
-      pixels: assemble(layout, frame.results, f),
+      pixels: assemble(layout, frame.results, f, state.spec.pixels),
+      pixel_format: state.spec.pixels,
       released_us: frame.released_us,
       completed_us: Child.job_time(state),
       atoms: Range.size(atoms),
@@ -1078,8 +1118,9 @@ defmodule RingTracer.Job.Parent do
 
   @doc """
   The image of frame `frame` (the first by default) from the pixels
-  received of it, by atom or piece (`results`): each atom's pieces in pixel
-  order, the pixels two pieces share (after a failure) taken once.
+  received of it, by atom or piece (`results`, in `format`, a
+  `RingTracer.Pixels` format, `:float` by default): each atom's pieces in
+  pixel order, the pixels two pieces share (after a failure) taken once.
 
       iex> layout = RingTracer.Layout.new(4, 1, 1, 1)
       iex> {h, t} = RingTracer.Layout.split(0, 1, 2)
@@ -1088,13 +1129,18 @@ defmodule RingTracer.Job.Parent do
       iex> RingTracer.Job.Parent.assemble(layout, results) == px.(1) <> px.(2) <> px.(3) <> px.(4)
       true
   """
-  @spec assemble(Layout.t(), %{Layout.atom_id() => binary()}, non_neg_integer()) :: binary()
-  def assemble(layout, results, frame \\ 0) do
+  @spec assemble(
+          Layout.t(),
+          %{Layout.atom_id() => binary()},
+          non_neg_integer(),
+          RingTracer.Pixels.format()
+        ) :: binary()
+  def assemble(layout, results, frame \\ 0, format \\ :float) do
     whole =
       if map_size(results) == Layout.frame_atom_count(layout),
         do: whole_atoms(layout, results, frame)
 
-    whole || assemble_pieces(layout, results, frame)
+    whole || assemble_pieces(layout, results, frame, RingTracer.Pixels.bytes_per_pixel(format))
   end
 
   # Every atom came back whole (as many results as atoms, each an atom's):
@@ -1114,7 +1160,7 @@ defmodule RingTracer.Job.Parent do
     end
   end
 
-  defp assemble_pieces(layout, results, frame) do
+  defp assemble_pieces(layout, results, frame, bpp) do
     by_atom = Enum.group_by(results, fn {a, _} -> Layout.base(a) end)
 
     layout
@@ -1128,7 +1174,7 @@ defmodule RingTracer.Job.Parent do
       |> Enum.sort()
       |> Enum.reduce({first, []}, fn {{f, c}, pixels}, {cursor, acc} ->
         if f + c > cursor,
-          do: {f + c, [binary_part(pixels, (cursor - f) * 12, (f + c - cursor) * 12) | acc]},
+          do: {f + c, [binary_part(pixels, (cursor - f) * bpp, (f + c - cursor) * bpp) | acc]},
           else: {cursor, acc}
       end)
       |> elem(1)
@@ -1168,7 +1214,14 @@ defmodule RingTracer.Job.Parent do
     reply =
       case outcome do
         :ok ->
-          pixels = if spec.sequence, do: nil, else: assemble(spec.layout, state.frames[0].results)
+          pixels =
+            if spec.sequence,
+              do: nil,
+              else: assemble(spec.layout, state.frames[0].results, 0, spec.pixels)
+
+          tinted =
+            if spec.tint and not spec.sequence,
+              do: assemble(spec.layout, state.frames[0].tinted, 0, :srgb8)
 
           traffic =
             Enum.reduce(reports, state.traffic, fn r, acc ->
@@ -1178,6 +1231,8 @@ defmodule RingTracer.Job.Parent do
           {:ok,
            %{
              pixels: pixels,
+             pixel_format: spec.pixels,
+             tinted: tinted,
              frames: Enum.reverse(state.summaries),
              kept_trace_us: state.kept_trace_us,
              started_at_us: state.t0,

@@ -11,7 +11,11 @@ defmodule RingTracer.Job.Spec do
   caller acknowledges it. With `announce` (jobs started through a handle,
   `RingTracer.render_async/2` and `RingTracer.render_sequence/2`) the
   parent tells the progress pid its own pid, so that the handle reaches
-  it (`RingTracer.grow/4`, `RingTracer.ack_frame/2`).
+  it (`RingTracer.grow/4`, `RingTracer.ack_frame/2`). `pixels` is the
+  format of the job's pixels (`RingTracer.Pixels`): the grandchildren send
+  them in it and the parent assembles them in it; with `tint` (a job in
+  `:srgb8` that writes an ownership map) they also send each atom tinted
+  with their child's colour (`RingTracer.Report.Ownership`).
   """
 
   alias RingTracer.{Layout, Settings}
@@ -34,6 +38,8 @@ defmodule RingTracer.Job.Spec do
     sequence: false,
     ack: false,
     announce: false,
+    pixels: :float,
+    tint: false,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -53,6 +59,8 @@ defmodule RingTracer.Job.Spec do
           sequence: boolean(),
           ack: boolean(),
           announce: boolean(),
+          pixels: RingTracer.Pixels.format(),
+          tint: boolean(),
           liveness: pos_integer()
         }
 

@@ -53,12 +53,13 @@ defmodule RingTracer.Preview.Log do
     * `end` — the stream ends
   """
 
-  alias RingTracer.Layout
+  alias RingTracer.{Layout, Pixels}
   alias RingTracer.Report.Palette
 
   defstruct seq: 0,
             frames: [],
             job: nil,
+            format: :float,
             t0: 0,
             atoms: MapSet.new(),
             events: 0,
@@ -95,13 +96,15 @@ defmodule RingTracer.Preview.Log do
 
   @typedoc """
   A sequence's image, complete: its number, times (job µs), and its
-  pixels (`RingTracer.Frame`'s, or nil) to make the thumbnail from.
+  pixels (`RingTracer.Frame`'s, or nil, in `pixel_format`) to make the
+  thumbnail from.
   """
   @type image :: %{
           number: pos_integer(),
           width: pos_integer(),
           height: pos_integer(),
           pixels: binary() | nil,
+          pixel_format: RingTracer.Pixels.format(),
           at_us: integer(),
           elapsed_us: non_neg_integer()
         }
@@ -137,8 +140,8 @@ defmodule RingTracer.Preview.Log do
   @doc """
   Starts the log with the job's description (`RingTracer.Job.Parent`'s
   `describe`): its layout, the node and speed of each child, its start
-  time, and the atoms traced so far (`results`, `traced_by`; of a
-  sequence, the oldest image in flight's). `from_start: true` when the
+  time, and the atoms traced so far (`results`, in `format`, `traced_by`;
+  of a sequence, the oldest image in flight's). `from_start: true` when the
   log has every event of the job (the preview was there before it
   started): then a sequence's images are numbered from its first release.
   """
@@ -173,6 +176,7 @@ defmodule RingTracer.Preview.Log do
     log = %{
       log
       | job: info.id,
+        format: Map.get(info, :format, :float),
         t0: info.t0,
         m: m,
         images: layout.frames,
@@ -195,7 +199,7 @@ defmodule RingTracer.Preview.Log do
   end
 
   @doc """
-  An atom's pixels (linear RGB floats, as the parent gets them) reached the
+  An atom's pixels (in the job's format, as the parent decoded them) reached the
   parent at wall-clock µs `at` (`nil`: unknown, before the preview opened).
   A second copy of an atom is ignored.
   """
@@ -232,7 +236,7 @@ defmodule RingTracer.Preview.Log do
           ~s(,"rays":),
           Integer.to_string(rays),
           ~s(,"px":"),
-          px_base64(pixels),
+          px_base64(pixels, log.format),
           ~s("})
         ])
 
@@ -358,46 +362,52 @@ defmodule RingTracer.Preview.Log do
           required(:width) => pos_integer(),
           required(:height) => pos_integer(),
           required(:pixels) => binary() | nil,
+          optional(:pixel_format) => RingTracer.Pixels.format(),
           optional(atom()) => term()
         }) ::
           {pos_integer(), pos_integer(), binary() | nil}
-  def thumbnail(%{width: w, height: h, pixels: px}) do
+  def thumbnail(%{width: w, height: h, pixels: px} = image) do
+    format = Map.get(image, :pixel_format, :float)
     scale = min(1.0, @thumb / max(w, h))
     {tw, th} = {max(1, round(w * scale)), max(1, round(h * scale))}
 
     cond do
-      px == nil or byte_size(px) != w * h * 12 ->
+      px == nil or byte_size(px) != Pixels.size(w * h, format) ->
         {tw, th, nil}
 
       {tw, th} == {w, h} ->
-        {w, h, IO.iodata_to_binary(px_base64(px))}
+        {w, h, IO.iodata_to_binary(px_base64(px, format))}
 
       true ->
         sampled =
           for ty <- 0..(th - 1), tx <- 0..(tw - 1), into: <<>> do
             y = div((2 * ty + 1) * h, 2 * th)
             x = div((2 * tx + 1) * w, 2 * tw)
-            binary_part(px, (y * w + x) * 12, 12)
+            Pixels.slice(px, format, y * w + x, 1)
           end
 
-        {tw, th, IO.iodata_to_binary(px_base64(sampled))}
+        {tw, th, IO.iodata_to_binary(px_base64(sampled, format))}
     end
   end
 
-  # 4096 pixels of 3 floats: a piece of the NIF's (on a normal scheduler,
-  # never taking a dirty one from the job's atoms), a multiple of 3 bytes of
-  # sRGB, so the pieces' base64 texts concatenate.
-  @piece_bytes 4096 * 12
+  # Pieces of 4096 pixels: the NIF's (on a normal scheduler, never taking a
+  # dirty one from the job's atoms), a multiple of 3 bytes of sRGB, so the
+  # pieces' base64 texts concatenate.
+  @piece_pixels 4096
 
-  defp px_base64(<<piece::binary-size(@piece_bytes), rest::binary>>),
-    do: [base64(piece) | px_base64(rest)]
+  defp px_base64(pixels, format) do
+    bytes = Pixels.size(@piece_pixels, format)
 
-  defp px_base64(<<>>), do: []
-  defp px_base64(piece), do: [base64(piece)]
+    case pixels do
+      <<piece::binary-size(bytes), rest::binary>> ->
+        [Pixels.srgb8_base64(piece, format) | px_base64(rest, format)]
 
-  defp base64(piece) do
-    {:ok, text} = RingTracer.Native.to_srgb8_base64(piece)
-    text
+      <<>> ->
+        []
+
+      piece ->
+        [Pixels.srgb8_base64(piece, format)]
+    end
   end
 
   @doc "A child's protocol event (its `at_us` is already job time)."

@@ -402,6 +402,7 @@ defmodule RingTracer.Preview.Server do
       width: frame.width,
       height: frame.height,
       pixels: frame.pixels,
+      pixel_format: frame.pixel_format,
       at_us: at,
       elapsed_us: us
     }

@@ -159,10 +159,28 @@ pub fn encode_png(width: u32, height: u32, rgb: &[f32]) -> Result<Vec<u8>, Error
 }
 
 /// Encodes linear RGB as an 8-bit sRGB PNG into `out`, a row at a time: no copy of the image
-/// is made, in floats or in bytes. fdeflate (png's `Fast`): several times faster than the
-/// default for files a little larger, so that a sequence's frames are written while the ring
-/// traces the next ones.
+/// is made, in floats or in bytes.
 fn encode_png_to<W: Write>(out: W, width: u32, height: u32, rgb: &[f32]) -> Result<(), Error> {
+    let (buckets, stops) = (buckets(), stops());
+    let mut floats = rgb.chunks_exact(width as usize * 3);
+    encode_rows(out, width, height, |row| {
+        if let Some(floats) = floats.next() {
+            for (byte, &v) in row.iter_mut().zip(floats) {
+                *byte = srgb8_with(buckets, stops, v);
+            }
+        }
+    })
+}
+
+/// Writes a PNG of `height` rows that `fill` makes, one at a time, as 8-bit sRGB bytes.
+/// fdeflate (png's `Fast`): several times faster than the default for files a little larger,
+/// so that a sequence's frames are written while the ring traces the next ones.
+fn encode_rows<W: Write>(
+    out: W,
+    width: u32,
+    height: u32,
+    mut fill: impl FnMut(&mut [u8]),
+) -> Result<(), Error> {
     let image = |e: png::EncodingError| Error::Image(e.to_string());
     let mut enc = png::Encoder::new(out, width, height);
     enc.set_compression(png::Compression::Fast);
@@ -171,17 +189,76 @@ fn encode_png_to<W: Write>(out: W, width: u32, height: u32, rgb: &[f32]) -> Resu
     enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
     let mut header = enc.write_header().map_err(image)?;
     let mut stream = header.stream_writer().map_err(image)?;
-    let (buckets, stops) = (buckets(), stops());
     let mut row = vec![0u8; width as usize * 3];
-    for floats in rgb.chunks_exact(width as usize * 3) {
-        for (byte, &v) in row.iter_mut().zip(floats) {
-            *byte = srgb8_with(buckets, stops, v);
-        }
+    for _ in 0..height {
+        fill(&mut row);
         stream
             .write_all(&row)
             .map_err(|e| Error::Image(e.to_string()))?;
     }
     stream.finish().map_err(image)
+}
+
+fn check_len8(width: u32, height: u32, srgb: &[u8]) -> Result<(), Error> {
+    let want = width as u64 * height as u64 * 3;
+    if srgb.len() as u64 != want || width == 0 || height == 0 {
+        return Err(Error::InvalidArgument(format!(
+            "image {width}x{height} needs {want} bytes of 8-bit sRGB, got {}",
+            srgb.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Encodes 8-bit sRGB bytes (3 a pixel, [`to_srgb8`]'s) as a PNG in memory: the same file
+/// [`encode_png`] makes of the floats they came from.
+pub fn encode_png8(width: u32, height: u32, srgb: &[u8]) -> Result<Vec<u8>, Error> {
+    check_len8(width, height, srgb)?;
+    let mut out = Vec::with_capacity(srgb.len() / 2);
+    let mut rows = srgb.chunks_exact(width as usize * 3);
+    encode_rows(&mut out, width, height, |row| {
+        if let Some(r) = rows.next() {
+            row.copy_from_slice(r)
+        }
+    })?;
+    Ok(out)
+}
+
+/// [`write_image_in`] of 8-bit sRGB bytes: `.png` only (the same file as of the floats they
+/// came from); any other extension is an error.
+pub fn write_png8_in(
+    dir: &safe_fs::Dir,
+    name: &str,
+    width: u32,
+    height: u32,
+    srgb: &[u8],
+    new_mode: Option<u32>,
+) -> Result<(), Error> {
+    check_len8(width, height, srgb)?;
+    let path = &dir.path().join(name);
+    let file = path.display().to_string();
+    let png = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !png {
+        return Err(Error::Unsupported(format!(
+            "{file}: 8-bit pixels are written as .png only"
+        )));
+    }
+    dir.write_file(name, new_mode, safe_fs::Replace::Yes, |f| {
+        let mut buffered = std::io::BufWriter::with_capacity(1 << 16, f);
+        let mut rows = srgb.chunks_exact(width as usize * 3);
+        encode_rows(&mut buffered, width, height, |row| {
+            if let Some(r) = rows.next() {
+                row.copy_from_slice(r)
+            }
+        })?;
+        buffered.flush().map_err(|e| Error::Io {
+            file: file.clone(),
+            message: e.to_string(),
+        })
+    })
 }
 
 /// Writes an image: `.png` as 8-bit sRGB, `.exr` as linear f32 RGB; other extensions are an error.
@@ -374,6 +451,29 @@ mod tests {
         assert_eq!(mode, 0o640);
         assert!(write_image(&t.path().join("a.bmp"), 2, 2, &rgb).is_err());
         assert_eq!(names(t.path()), ["a.exr", "a.png", "folder.png"]);
+    }
+
+    #[test]
+    fn png_of_srgb8_bytes_is_the_png_of_the_floats() {
+        let (w, h) = (37u32, 23u32);
+        let rgb: Vec<f32> = (0..w * h * 3)
+            .map(|i| (i as f32 * 0.37).sin() * 1.2)
+            .collect();
+        let bytes = to_srgb8(&rgb);
+        assert_eq!(
+            encode_png8(w, h, &bytes).unwrap(),
+            encode_png(w, h, &rgb).unwrap()
+        );
+        assert!(encode_png8(w, h, &bytes[1..]).is_err());
+        let t = tempfile::tempdir().unwrap();
+        let dir = safe_fs::Dir::open(t.path()).unwrap();
+        write_png8_in(&dir, "a.png", w, h, &bytes, None).unwrap();
+        write_image_in(&dir, "b.png", w, h, &rgb, None).unwrap();
+        let read = |n: &str| std::fs::read(t.path().join(n)).unwrap();
+        assert_eq!(read("a.png"), read("b.png"));
+        let e = write_png8_in(&dir, "a.exr", w, h, &bytes, None).unwrap_err();
+        assert!(matches!(e, Error::Unsupported(_)), "{e}");
+        assert_eq!(names(t.path()), ["a.png", "b.png"]);
     }
 
     #[test]

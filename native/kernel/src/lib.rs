@@ -89,7 +89,9 @@ pub use animation::{Animation, Interpolation, Track};
 pub use bvh::Scratch;
 pub use camera::Camera;
 pub use error::Error;
-pub use film::{encode_png, to_srgb8, write_image, write_image_in, write_image_mode};
+pub use film::{
+    encode_png, encode_png8, to_srgb8, write_image, write_image_in, write_image_mode, write_png8_in,
+};
 pub use geometry::Aabb;
 pub use glam;
 pub use integrator::{Integrator, Whitted};

@@ -3,8 +3,9 @@
 use std::path::Path;
 
 use ring_tracer_kernel::{
-    encode_png as kernel_encode_png, to_srgb8, write_image_in as kernel_write_in,
-    write_image_mode as kernel_write,
+    encode_png as kernel_encode_png, encode_png8 as kernel_encode_png8, safe_fs, to_srgb8,
+    write_image_in as kernel_write_in, write_image_mode as kernel_write,
+    write_png8_in as kernel_write_png8_in,
 };
 use rustler::{Atom, Binary, Env, OwnedBinary, ResourceArc};
 
@@ -57,6 +58,64 @@ fn write_image_in(
     Ok(ok())
 }
 
+/// Writes 8-bit sRGB pixels (3 bytes a pixel) to `path`, a `.png`: the file `write_image`
+/// makes of the floats they came from.
+#[rustler::nif(schedule = "DirtyIo")]
+fn write_png8(
+    path: String,
+    width: u32,
+    height: u32,
+    pixels: Binary,
+    mode: i64,
+) -> Result<Atom, String> {
+    let (dir, name) = safe_fs::open_parent(Path::new(&path)).map_err(message)?;
+    kernel_write_png8_in(
+        &dir,
+        &name,
+        width,
+        height,
+        pixels.as_slice(),
+        mode_arg(mode),
+    )
+    .map_err(message)?;
+    Ok(ok())
+}
+
+/// `write_png8` into a folder held open (`fs_open_dir`), as `name` there.
+#[rustler::nif(schedule = "DirtyIo")]
+fn write_png8_in(
+    dir: ResourceArc<DirResource>,
+    name: String,
+    width: u32,
+    height: u32,
+    pixels: Binary,
+    mode: i64,
+) -> Result<Atom, String> {
+    kernel_write_png8_in(
+        &dir.dir,
+        &name,
+        width,
+        height,
+        pixels.as_slice(),
+        mode_arg(mode),
+    )
+    .map_err(message)?;
+    Ok(ok())
+}
+
+/// Encodes 8-bit sRGB pixels (3 bytes a pixel) as a PNG in memory: `encode_png`'s bytes of
+/// the floats they came from.
+#[rustler::nif(schedule = "DirtyCpu")]
+fn encode_png8<'a>(
+    env: Env<'a>,
+    width: u32,
+    height: u32,
+    pixels: Binary<'a>,
+) -> Result<Binary<'a>, String> {
+    let png = kernel_encode_png8(width, height, pixels.as_slice()).map_err(message)?;
+    Ok(OwnedBinary::from_slice(&png).release(env))
+}
+
 /// Encodes linear RGB pixels as an 8-bit sRGB PNG in memory.
 #[rustler::nif(schedule = "DirtyCpu")]
 fn encode_png<'a>(
@@ -81,6 +140,19 @@ fn to_srgb8_binary<'a>(env: Env<'a>, pixels: Binary<'a>) -> Result<Binary<'a>, S
 /// The most pixels `to_srgb8_base64` takes in one call: about a tenth of a millisecond of work,
 /// short enough for a normal scheduler.
 const BASE64_PIECE_PIXELS: usize = 4096;
+
+/// 8-bit sRGB bytes (at most 4096 pixels) as base64 text: `to_srgb8_base64` of pixels already
+/// 8-bit.
+#[rustler::nif]
+fn srgb8_base64<'a>(env: Env<'a>, pixels: Binary<'a>) -> Result<Binary<'a>, String> {
+    if pixels.len() > 3 * BASE64_PIECE_PIXELS {
+        return Err(format!(
+            "at most {BASE64_PIECE_PIXELS} pixels a call, got {}",
+            pixels.len() / 3
+        ));
+    }
+    Ok(OwnedBinary::from_slice(&base64(pixels.as_slice())).release(env))
+}
 
 /// Linear RGB floats (at most 4096 pixels) to 8-bit sRGB bytes (3 a pixel), as base64 text
 /// (standard alphabet, padded): the preview's encoding of an atom's pixels, piece by piece. On a

@@ -9,6 +9,7 @@ mod defaults;
 mod fs;
 mod image;
 mod panic;
+mod pixels;
 mod scene;
 mod trace;
 

@@ -233,4 +233,90 @@ defmodule RingTracer.CLI.RenderTest do
       assert File.read!(Path.join(dir, "one.png")) == File.read!(Path.join(dir, "f_01.png"))
     end
   end
+
+  describe "the pixels' format" do
+    # The format each job of the test used, from the jobs' ends.
+    setup do
+      me = self()
+      id = {__MODULE__, make_ref()}
+
+      :ok =
+        RingTracer.Telemetry.attach(
+          id,
+          [:ring_tracer, :job, :stop],
+          fn _, _, %{reply: reply}, _ ->
+            with {:ok, raw} <- reply, do: send(me, {:pixels, raw.pixel_format, raw.tinted != nil})
+          end,
+          nil
+        )
+
+      on_exit(fn -> RingTracer.Telemetry.detach(id) end)
+    end
+
+    @scene "priv/scenes/balls_s2.nff"
+    @common ~w(--width 40 --height 30 --children 2 --atoms 3 --strategy static -q --progress none)
+
+    defp reference(dir) do
+      {:ok, r} =
+        RingTracer.render(Path.expand(@scene),
+          width: 40,
+          height: 30,
+          children: 2,
+          atoms: 3,
+          strategy: :static
+        )
+
+      :ok = RingTracer.Image.write(r, Path.join(dir, "ref.png"))
+      :ok = RingTracer.Image.write(r, Path.join(dir, "ref.exr"))
+      :ok = RingTracer.Report.Ownership.write(r, Path.join(dir, "ref_own.png"))
+      assert_receive {:pixels, :float, false}
+      &File.read!(Path.join(dir, &1))
+    end
+
+    test "8-bit when every image is a PNG, the same files as of floats", %{tmp_dir: dir} do
+      read = reference(dir)
+
+      {:ok, _} =
+        render([@scene, "-o", "#{dir}/a.png", "--ownership", "#{dir}/own.png"] ++ @common)
+
+      assert_receive {:pixels, :srgb8, true}
+      assert read.("a.png") == read.("ref.png")
+      assert read.("own.png") == read.("ref_own.png")
+
+      {:ok, _} = render([@scene, "-o", "#{dir}/b.png"] ++ @common)
+      assert_receive {:pixels, :srgb8, false}
+      assert read.("b.png") == read.("ref.png")
+    end
+
+    test "floats when an image is an EXR, which is unchanged", %{tmp_dir: dir} do
+      read = reference(dir)
+
+      {:ok, _} =
+        render([@scene, "-o", "#{dir}/a.exr", "--ownership", "#{dir}/own.png"] ++ @common)
+
+      assert_receive {:pixels, :float, false}
+      assert read.("a.exr") == read.("ref.exr")
+      assert read.("own.png") == read.("ref_own.png")
+    end
+
+    test "a sequence of PNGs in 8 bits, of EXRs in floats", %{tmp_dir: dir} do
+      scene = "priv/scenes/whitted_orbit.toml"
+      args = ~w(--frames 1-2 --width 24 --height 16 --children 2 --atoms 2 -q --progress none)
+
+      {:ok, _} = render([scene, "-o", "#{dir}/f_#.png"] ++ args)
+      assert_receive {:pixels, :srgb8, false}
+      {:ok, _} = render([scene, "-o", "#{dir}/g_#.exr"] ++ args)
+      assert_receive {:pixels, :float, false}
+
+      for n <- 1..2 do
+        floats = RingTracer.TestScenes.reference("whitted_orbit.toml", 24, 16, frame: n)
+        {:ok, png} = RingTracer.Image.png(24, 16, floats)
+        assert File.read!(Path.join(dir, "f_#{n}.png")) == png
+        :ok = RingTracer.Image.write(Path.join(dir, "r_#{n}.exr"), 24, 16, floats)
+
+        assert File.read!(Path.join(dir, "g_#{n}.exr")) ==
+                 File.read!(Path.join(dir, "r_#{n}.exr"))
+      end
+    end
+  end
 end

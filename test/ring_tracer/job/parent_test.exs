@@ -25,4 +25,22 @@ defmodule RingTracer.Job.ParentTest do
       500
     )
   end
+
+  test "an atom that comes back with the wrong number of pixels fails the job, in either format" do
+    for format <- [:float, :srgb8] do
+      assert {:error, %RingTracer.Error{reason: :render_failed, message: message}} =
+               RingTracer.render(RingTracer.TestScenes.path("tetra_s1.nff"),
+                 width: 16,
+                 height: 16,
+                 children: 2,
+                 atoms: 2,
+                 pixels: format,
+                 kernel: {RingTracer.Test.FaultyKernel, short_pixel: 70}
+               )
+
+      size = RingTracer.Pixels.size(64, format)
+      assert message =~ "atom 1 came back with"
+      assert message =~ "not its 64 pixels (#{size} bytes of #{format})"
+    end
+  end
 end

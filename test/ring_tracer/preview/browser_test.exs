@@ -151,7 +151,9 @@ defmodule RingTracer.Preview.BrowserTest do
           height: 12,
           children: 2,
           speeds: [50, 50],
-          preview: preview
+          preview: preview,
+          # 8 bits, as `ringtracer render` sends frames written as PNGs
+          pixels: :srgb8
         )
 
       id = job.id
@@ -220,7 +222,8 @@ defmodule RingTracer.Preview.BrowserTest do
       # At the end the page shows the last frame, pixel for pixel.
       "data:image/png;base64," <> b64 = data_url
       {16, 12, 4, canvas} = PNG.decode(Base.decode64!(b64))
-      assert rgb(canvas) == RingTracer.Image.srgb8(frames[30].pixels)
+      assert frames[30].pixel_format == :srgb8
+      assert rgb(canvas) == frames[30].pixels
     after
       RingTracer.Preview.stop(preview)
     end

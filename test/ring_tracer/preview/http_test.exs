@@ -276,6 +276,14 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "two viewers during the job and one after it all get the whole job", %{preview: p} do
+    check_viewers(p, :float)
+  end
+
+  test "a job in 8 bits is on the page as in floats", %{preview: p} do
+    check_viewers(p, :srgb8)
+  end
+
+  defp check_viewers(p, format) do
     me = self()
     url = p.url <> "events"
     for i <- 1..2, do: spawn_link(fn -> send(me, {:viewer, i, Viewer.viewer(url)}) end)
@@ -283,7 +291,14 @@ defmodule RingTracer.Preview.HTTPTest do
     assert RingTracer.Test.Wait.eventually(fn -> Preview.viewers(p) == 2 end)
 
     {:ok, result} =
-      RingTracer.render(@scene, width: 24, height: 16, children: 3, atoms: 4, preview: p)
+      RingTracer.render(@scene,
+        width: 24,
+        height: 16,
+        children: 3,
+        atoms: 4,
+        preview: p,
+        pixels: format
+      )
 
     assert_receive {:viewer, 1, {:ok, n}}, 10_000
     assert_receive {:viewer, 2, {:ok, ^n}}, 10_000
@@ -302,7 +317,8 @@ defmodule RingTracer.Preview.HTTPTest do
       |> Enum.sort_by(& &1["a"])
       |> Enum.map_join(&Base.decode64!(&1["px"]))
 
-    assert pixels == RingTracer.Image.srgb8(result.pixels)
+    assert pixels == RingTracer.Image.srgb8(result.pixels, result.pixel_format)
+    assert byte_size(pixels) == 24 * 16 * 3
 
     for {_, "atom", a} <- late,
         do: assert(a["c"] == Enum.find(result.atoms, &(&1.atom == a["a"])).child)
@@ -368,7 +384,12 @@ defmodule RingTracer.Preview.HTTPTest do
     check_sequence(strip: 3, cpu_share: 0.0001)
   end
 
+  test "a sequence in 8 bits: the same strip and images" do
+    check_sequence(strip: 3, pixels: :srgb8)
+  end
+
   defp check_sequence(opts) do
+    {format, opts} = Keyword.pop(opts, :pixels, :float)
     {:ok, p} = Preview.start(opts)
     on_exit(fn -> Preview.stop(p, 0) end)
 
@@ -378,7 +399,8 @@ defmodule RingTracer.Preview.HTTPTest do
         width: 16,
         height: 12,
         children: 2,
-        preview: p
+        preview: p,
+        pixels: format
       )
 
     id = job.id
@@ -399,7 +421,7 @@ defmodule RingTracer.Preview.HTTPTest do
     for f <- strip do
       assert f["us"] == RingTracer.Frame.elapsed_us(frames[f["n"]])
       assert f["f"] == f["n"] - 1
-      assert Base.decode64!(f["px"]) == RingTracer.Image.srgb8(frames[f["n"]].pixels)
+      assert Base.decode64!(f["px"]) == RingTracer.Image.srgb8(frames[f["n"]].pixels, format)
     end
 
     # Each: how many frames had completed, and their mean time.
@@ -418,7 +440,9 @@ defmodule RingTracer.Preview.HTTPTest do
     assert Enum.sort(Enum.map(atoms, & &1["a"])) == Enum.to_list(608..639)
 
     assert atoms |> Enum.sort_by(& &1["a"]) |> Enum.map_join(&Base.decode64!(&1["px"])) ==
-             RingTracer.Image.srgb8(frames[20].pixels)
+             RingTracer.Image.srgb8(frames[20].pixels, format)
+
+    assert frames[20].pixel_format == format
 
     [{_, "final", final}] = for {_, "final", _} = f <- late, do: f
     assert final["ok"] and final["frames"] == 20

@@ -75,6 +75,35 @@ defmodule RingTracer.Preview.LogTest do
     end
   end
 
+  test "a job in 8 bits: its atoms and thumbnails are the same texts as of the floats" do
+    for n <- [1, 4096, 4097, 10_001] do
+      floats =
+        for i <- 1..(3 * n), into: <<>>, do: <<rem(i * 7919, 1201) / 1000::float-32-native>>
+
+      eight = RingTracer.Image.srgb8(floats)
+
+      texts =
+        for {px, format} <- [{floats, :float}, {eight, :srgb8}] do
+          log = Log.job(Log.new(), Map.put(info(), :format, format))
+          {_, log} = Log.take(log)
+          [{_, "atom", a}] = frames(Log.atom(log, 0, 0, px, 1, 1, nil))
+          a["px"]
+        end
+
+      assert [text, text] = texts
+      assert text == Base.encode64(eight)
+    end
+
+    floats = for i <- 1..(3 * 200 * 100), into: <<>>, do: <<rem(i, 97) / 97::float-32-native>>
+    eight = RingTracer.Image.srgb8(floats)
+
+    assert Log.thumbnail(%{width: 200, height: 100, pixels: eight, pixel_format: :srgb8}) ==
+             Log.thumbnail(%{width: 200, height: 100, pixels: floats})
+
+    assert {4, 2, nil} =
+             Log.thumbnail(%{width: 4, height: 2, pixels: eight, pixel_format: :srgb8})
+  end
+
   test "a late joiner's log starts with the atoms traced before it opened, in order" do
     results = %{4 => pixels(2, 0.5), 1 => pixels(2, 0.25)}
     log = Log.job(Log.new(), info(results, %{4 => 1, 1 => 0}))

@@ -85,4 +85,12 @@ defmodule RingTracer.Report.OwnershipTest do
     assert :ok = Ownership.write(result, path)
     assert <<137, "PNG", _::binary>> = File.read!(path)
   end
+
+  test "a result in 8 bits needs its tinted image", %{result: result, tmp_dir: dir} do
+    eight = %{result | pixels: RingTracer.Image.srgb8(result.pixels), pixel_format: :srgb8}
+    path = Path.join(dir, "own.png")
+    assert {:error, %RingTracer.Error{message: m}} = Ownership.write(eight, path)
+    assert m =~ "ownership: true"
+    refute File.exists?(path)
+  end
 end

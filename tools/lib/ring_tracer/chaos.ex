@@ -735,7 +735,7 @@ defmodule RingTracer.Chaos do
 
     Enum.count(Layout.atoms(layout), fn atom ->
       {first, count} = Layout.span(layout, atom)
-      part = fn pixels -> binary_part(pixels, first * 12, count * 12) end
+      part = fn pixels -> RingTracer.Pixels.slice(pixels, :float, first, count) end
       byte_size(pixels) != byte_size(reference) or part.(pixels) != part.(reference)
     end)
   end
