@@ -42,31 +42,66 @@ impl Scene {
         scratch: &mut Scratch,
         slot: usize,
     ) -> bool {
-        let shapes = &self.geom.shapes;
-        let geom = &self.geom;
         // the slot's occluder at 2 slot, and at 2 slot + 1 how many rays in a row it let through
         let entry = (slot < CACHE_SLOTS).then_some(2 * slot);
         let (cached, misses) = match entry.map(|e| scratch.shadow_cache.get(e..e + 2)) {
             Some(Some(&[c, (m, _)])) => (c, m),
             _ => (NO_CACHE, 0),
         };
+        if cached != NO_CACHE && self.cached_blocks(cached, ray, tmax, scratch) {
+            if misses != 0 {
+                self::set_cache(scratch, entry, cached, 0);
+            }
+            return true;
+        }
+        if let Some(found) = self.occluder_in_bvh(ray, tmax, scratch) {
+            self::set_cache(scratch, entry, found, 0);
+            return true;
+        }
+        let beyond = self.occluded_beyond_bvh(ray, tmax, scratch);
+        if let Some(f) = beyond.filter(|&f| f != NO_CACHE) {
+            self::set_cache(scratch, entry, f, 0);
+            return true;
+        }
         if cached != NO_CACHE {
-            let (ci, c) = cached;
-            scratch.work += 1;
-            let blocked = if ci == Hit::NO_INSTANCE {
-                shapes
-                    .get(c as usize)
-                    .is_some_and(|s| geom.hit(s, ray, 0.0, tmax).is_some())
+            // a cached occluder that keeps letting rays through is tested no more
+            if misses + 1 >= CACHE_PATIENCE {
+                self::set_cache(scratch, entry, NO_CACHE, 0);
             } else {
-                self.hits_instance_triangle(ci, c, ray, tmax)
-            };
-            if blocked {
-                if misses != 0 {
-                    self::set_cache(scratch, entry, cached, 0);
-                }
-                return true;
+                self::set_cache(scratch, entry, cached, misses + 1);
             }
         }
+        beyond.is_some()
+    }
+
+    /// Whether the cached occluder `cached` (instance or [`Hit::NO_INSTANCE`], primitive)
+    /// blocks `ray` before `tmax`: one test, counted in `scratch.work`.
+    #[inline(always)]
+    fn cached_blocks(
+        &self,
+        cached: (u32, u32),
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> bool {
+        let (ci, c) = cached;
+        scratch.work += 1;
+        if ci == Hit::NO_INSTANCE {
+            let geom = &self.geom;
+            geom.shapes
+                .get(c as usize)
+                .is_some_and(|s| geom.hit(s, ray, 0.0, tmax).is_some())
+        } else {
+            self.hits_instance_triangle(ci, c, ray, tmax)
+        }
+    }
+
+    /// The first of the scene's own primitives found to block `ray` before `tmax`, through
+    /// its BVH, as a shadow-cache entry; `None` if none does.
+    #[inline(always)]
+    fn occluder_in_bvh(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<(u32, u32)> {
+        let shapes = &self.geom.shapes;
+        let geom = &self.geom;
         let mut found = NO_CACHE;
         let mut mailbox = Mailbox::default();
         let blocks = &self.tri_blocks;
@@ -111,24 +146,7 @@ impl Scene {
             },
             |first, count| blocks.prefetch(first, count),
         );
-        if r < 0.0 {
-            self::set_cache(scratch, entry, found, 0);
-            return true;
-        }
-        let beyond = self.occluded_beyond_bvh(ray, tmax, scratch);
-        if let Some(f) = beyond.filter(|&f| f != NO_CACHE) {
-            self::set_cache(scratch, entry, f, 0);
-            return true;
-        }
-        if cached != NO_CACHE {
-            // a cached occluder that keeps letting rays through is tested no more
-            if misses + 1 >= CACHE_PATIENCE {
-                self::set_cache(scratch, entry, NO_CACHE, 0);
-            } else {
-                self::set_cache(scratch, entry, cached, misses + 1);
-            }
-        }
-        beyond.is_some()
+        (r < 0.0).then_some(found)
     }
 
     /// The rest of an any-hit query once the scene's own BVH let `ray` through: the mesh
