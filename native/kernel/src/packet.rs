@@ -519,6 +519,10 @@ unsafe fn rays_enter<L: Lanes>(
 ///
 /// # Safety
 /// The CPU must have the features of the width `L` (see [`crate::lanes`]).
+// Longer than 80 lines, kept whole: the vector leaf test, run for every leaf a packet meets.
+// Its box tests and triangle tests share the vectors of the rays and of their hits so far,
+// which must stay in registers; a split passing them by reference is only safe once measured
+// not to cost speed, on a quiet machine (tests/function_length.rs lists it).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -760,21 +764,16 @@ fn singles<A: Answer>(
     }
 }
 
-/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
-/// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
-#[allow(clippy::too_many_arguments)]
-fn group<A: Answer>(
-    scene: &Scene,
+/// Loads the rays `members` of a packet (bit `i` for `rays[i]`, with the bound `tmax[i]`)
+/// into the first lanes of `soa`, in order; `idx[j]` gets the index in `rays` of lane `j`.
+#[inline(always)]
+fn gather(
     rays: &[Ray],
     members: u32,
-    class: usize,
     tmax: &[f32; PACKET],
-    scratch: &mut Scratch,
-    at: usize,
-    out: &mut [A],
+    soa: &mut Soa,
+    idx: &mut [usize; PACKET],
 ) {
-    let mut soa = Soa::empty();
-    let mut idx = [0usize; PACKET];
     let k = members.count_ones() as usize;
     if members == (1u32 << rays.len().min(PACKET)) - 1 {
         // the whole packet, in order: four rays at a time
@@ -797,6 +796,55 @@ fn group<A: Answer>(
             }
         }
     }
+}
+
+impl Frustum {
+    /// The frustum of the rays in `soa`, all of sign class `class` (bit `a` set: negative
+    /// along axis `a`); `any` for an any-hit query.
+    #[inline(always)]
+    fn of(soa: &Soa, class: usize, any: bool) -> Frustum {
+        let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
+        let mut f = Frustum {
+            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
+            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
+            inv_lo: [0, 1, 2].map(|a| row_min(&soa.inv[a])),
+            inv_hi: [0, 1, 2].map(|a| row_max(&soa.inv[a])),
+            oinv_lo: [0, 1, 2].map(|a| row_min(&soa.oinv[a])),
+            oinv_hi: [0, 1, 2].map(|a| row_max(&soa.oinv[a])),
+            shared: false,
+            o: [0.0; 3],
+            k: [0.0; 3],
+            any,
+        };
+        let o = [0, 1, 2].map(|a| soa.o[a][0]);
+        let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
+        let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+        if same && tame {
+            f.shared = true;
+            f.o = o;
+            f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
+        }
+        f
+    }
+}
+
+/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
+/// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
+#[allow(clippy::too_many_arguments)]
+fn group<A: Answer>(
+    scene: &Scene,
+    rays: &[Ray],
+    members: u32,
+    class: usize,
+    tmax: &[f32; PACKET],
+    scratch: &mut Scratch,
+    at: usize,
+    out: &mut [A],
+) {
+    let mut soa = Soa::empty();
+    let mut idx = [0usize; PACKET];
+    let k = members.count_ones() as usize;
+    gather(rays, members, tmax, &mut soa, &mut idx);
     // lanes past the rays: copies of the first ray (so that the packet's bounds are the
     // rays'), never entering a box
     soa.pad(k);
@@ -806,27 +854,7 @@ fn group<A: Answer>(
     if k == 0 {
         return;
     }
-    let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
-    let mut f = Frustum {
-        near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
-        far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
-        inv_lo: [0, 1, 2].map(|a| row_min(&soa.inv[a])),
-        inv_hi: [0, 1, 2].map(|a| row_max(&soa.inv[a])),
-        oinv_lo: [0, 1, 2].map(|a| row_min(&soa.oinv[a])),
-        oinv_hi: [0, 1, 2].map(|a| row_max(&soa.oinv[a])),
-        shared: false,
-        o: [0.0; 3],
-        k: [0.0; 3],
-        any: A::ANY,
-    };
-    let o = [0, 1, 2].map(|a| soa.o[a][0]);
-    let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
-    let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
-    if same && tame {
-        f.shared = true;
-        f.o = o;
-        f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
-    }
+    let f = Frustum::of(&soa, class, A::ANY);
     let idx = &idx[..k];
     #[cfg(test)]
     probe::add(5, 1);
@@ -901,6 +929,11 @@ unsafe fn traverse_avx512(
 /// leaves were met in, nor on the other rays of the packet (all of them are met, since a ray's
 /// bound never falls below its final hit), so a pixel costs the same in any tile. In an
 /// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
+// Longer than 80 lines, kept whole: the packet traversal's loop, run per node. The node
+// test, the leaf tests and the stacking share its state (the packet's bound, the stack and
+// its pointer, the mailboxes, the children being sorted), which must stay in registers; a
+// split passing it by reference is only safe once measured not to cost speed, on a quiet
+// machine (tests/function_length.rs lists it).
 #[inline(always)]
 fn traverse<const AVX: bool, const WIDE: bool>(
     scene: &Scene,
