@@ -305,7 +305,9 @@ pub fn trace_span_into(
 }
 
 /// `settings.samples` squared samples per pixel over the span `start..end`: each pixel's
-/// stratified jittered samples traced ray by ray, their mean put in row order.
+/// stratified jittered samples traced ray by ray, their mean put in row order. Inlined: a
+/// function of its own, its loop took 2.7% more instructions (callgrind).
+#[inline(always)]
 fn stratified_span(
     scene: &Scene,
     settings: &Settings,
