@@ -921,8 +921,8 @@ impl Bvh {
     // Longer than 80 lines, kept whole: the loop of every closest-hit query, run per node.
     // The node test, the sorted stacking and the leaf visit share its state (the ray's
     // planes, the stack and its pointer, the bound, the work count), which must stay in
-    // registers; a split passing it by reference is only safe once measured not to cost
-    // speed, on a quiet machine (tests/function_length.rs lists it).
+    // registers; split, its parts would pass it by reference, which only an instruction count
+    // before and after could clear (docs/testing.md; tests/function_length.rs lists it).
     #[inline(always)]
     fn ordered_loop<const AVX: bool>(
         &self,

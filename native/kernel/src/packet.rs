@@ -521,8 +521,9 @@ unsafe fn rays_enter<L: Lanes>(
 /// The CPU must have the features of the width `L` (see [`crate::lanes`]).
 // Longer than 80 lines, kept whole: the vector leaf test, run for every leaf a packet meets.
 // Its box tests and triangle tests share the vectors of the rays and of their hits so far,
-// which must stay in registers; a split passing them by reference is only safe once measured
-// not to cost speed, on a quiet machine (tests/function_length.rs lists it).
+// which must stay in registers; split, its parts would pass them by reference, which only an
+// instruction count before and after could clear (docs/testing.md; tests/function_length.rs
+// lists it).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -910,9 +911,9 @@ unsafe fn traverse_avx512(
 /// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
 // Longer than 80 lines, kept whole: the packet traversal's loop, run per node. The node
 // test, the leaf tests and the stacking share its state (the packet's bound, the stack and
-// its pointer, the mailboxes, the children being sorted), which must stay in registers; a
-// split passing it by reference is only safe once measured not to cost speed, on a quiet
-// machine (tests/function_length.rs lists it).
+// its pointer, the mailboxes, the children being sorted), which must stay in registers;
+// split, its parts would pass it by reference, which only an instruction count before and
+// after could clear (docs/testing.md; tests/function_length.rs lists it).
 #[inline(always)]
 fn traverse<const AVX: bool, const WIDE: bool>(
     scene: &Scene,
