@@ -604,6 +604,51 @@ type Movable = (
 
 /// The animation and the key lists of a scene, checked against its definition.
 fn bindings(def: &SceneDef, doc: AnimDoc, cx: &Ctx) -> Result<(Animation, Vec<Binding>), Error> {
+    let AnimDoc {
+        animation,
+        camera,
+        lights,
+        materials,
+        objects,
+    } = doc;
+    let lists = movables(def, camera, lights, materials, objects);
+    let animation = animation_of(animation, &lists, cx)?;
+    let mut out = Vec::new();
+    for (what, kind, can, tracks) in lists {
+        for (prop, track) in tracks {
+            let span = track.span();
+            let Some((_, value_kind, target)) = can.iter().find(|c| c.0 == prop) else {
+                let message = if kind == "include" {
+                    format!("{what} cannot move: an include's objects are static")
+                } else {
+                    let names: Vec<&str> = can.iter().map(|c| c.0).collect();
+                    format!(
+                        "{what} cannot animate '{}' (it can: {})",
+                        snippet(&prop),
+                        names.join(", ")
+                    )
+                };
+                return Err(cx.err(span, message));
+            };
+            let name = format!("{what} '{prop}'");
+            let track = track_of(&name, &what, &prop, track, *value_kind, &animation, cx)?;
+            out.push(Binding {
+                target: target.clone(),
+                track,
+            });
+        }
+    }
+    Ok((animation, out))
+}
+
+/// Each item that has key lists, with what it can move.
+fn movables(
+    def: &SceneDef,
+    camera: Option<Item>,
+    lights: Vec<Item>,
+    materials: BTreeMap<String, Item>,
+    objects: Vec<Item>,
+) -> Vec<Movable> {
     let mut lists: Vec<Movable> = Vec::new();
     let motion = |i: usize, s: Kind| {
         vec![
@@ -612,7 +657,7 @@ fn bindings(def: &SceneDef, doc: AnimDoc, cx: &Ctx) -> Result<(Animation, Vec<Bi
             ("scale", s, Target::Scale(i)),
         ]
     };
-    if let Some(c) = doc.camera {
+    if let Some(c) = camera {
         let can = vec![
             ("from", Kind::Triple, Target::From),
             ("at", Kind::Triple, Target::At),
@@ -621,18 +666,18 @@ fn bindings(def: &SceneDef, doc: AnimDoc, cx: &Ctx) -> Result<(Animation, Vec<Bi
         ];
         lists.push(("the camera".into(), "", can, c.animate));
     }
-    for (i, l) in doc.lights.into_iter().enumerate() {
+    for (i, l) in lights.into_iter().enumerate() {
         let can = vec![
             ("position", Kind::Triple, Target::LightPosition(i)),
             ("color", Kind::Triple, Target::LightColor(i)),
         ];
         lists.push((format!("light {}", i + 1), "", can, l.animate));
     }
-    for (name, m) in doc.materials {
+    for (name, m) in materials {
         let can = vec![("color", Kind::Triple, Target::MaterialColor(name.clone()))];
         lists.push((format!("material '{}'", snippet(&name)), "", can, m.animate));
     }
-    for (i, o) in doc.objects.into_iter().enumerate() {
+    for (i, o) in objects.into_iter().enumerate() {
         let (kind, can) = match def.objects.get(i).map(|o| o.get_ref()) {
             Some(ObjectDef::Sphere { .. }) => {
                 let mut can = vec![
@@ -652,18 +697,26 @@ fn bindings(def: &SceneDef, doc: AnimDoc, cx: &Ctx) -> Result<(Animation, Vec<Bi
         };
         lists.push((format!("object {} ({kind})", i + 1), kind, can, o.animate));
     }
+    lists
+}
 
+/// The scene's `[animation]`, or [`Animation::STILL`] if it has none (and no key lists).
+fn animation_of(
+    def: Option<Spanned<AnimationDef>>,
+    lists: &[Movable],
+    cx: &Ctx,
+) -> Result<Animation, Error> {
     let first_list = lists
         .iter()
         .flat_map(|l| l.3.values())
         .map(|t| t.span())
         .min_by_key(|s| s.start);
-    let animation = match doc.animation {
+    match def {
         Some(a) => {
             let span = a.span();
             let a = a.into_inner();
             Animation::new(a.frames, a.clock[0], a.clock[1], a.cyclic)
-                .map_err(|e| cx.err(span, format!("[animation]: {e}")))?
+                .map_err(|e| cx.err(span, format!("[animation]: {e}")))
         }
         None => {
             if let Some(span) = first_list {
@@ -672,95 +725,96 @@ fn bindings(def: &SceneDef, doc: AnimDoc, cx: &Ctx) -> Result<(Animation, Vec<Bi
                     "key lists ('animate') need an [animation] table with the frame count",
                 ));
             }
-            Animation::STILL
-        }
-    };
-    let (start, end) = animation.clock_range();
-    let mut out = Vec::new();
-    for (what, kind, can, tracks) in lists {
-        for (prop, track) in tracks {
-            let span = track.span();
-            let Some((_, value_kind, target)) = can.iter().find(|c| c.0 == prop) else {
-                let message = if kind == "include" {
-                    format!("{what} cannot move: an include's objects are static")
-                } else {
-                    let names: Vec<&str> = can.iter().map(|c| c.0).collect();
-                    format!(
-                        "{what} cannot animate '{}' (it can: {})",
-                        snippet(&prop),
-                        names.join(", ")
-                    )
-                };
-                return Err(cx.err(span, message));
-            };
-            let track_def = track.into_inner();
-            if track_def.keys.is_empty() {
-                return Err(cx.err(
-                    span,
-                    format!("{what}: the key list of '{prop}' has no keys"),
-                ));
-            }
-            let mut keys = Vec::with_capacity(track_def.keys.len());
-            for k in &track_def.keys {
-                let kspan = k.span();
-                let key = k.get_ref();
-                let value = key_value(key.value, *value_kind).ok_or_else(|| {
-                    let want = match value_kind {
-                        Kind::Triple => "a triple [x, y, z]",
-                        Kind::Number => "a number",
-                        Kind::Scale => "a number or a triple [x, y, z]",
-                        Kind::Uniform => {
-                            "one positive number (or three equal ones): it scales uniformly"
-                        }
-                    };
-                    cx.err(
-                        kspan.clone(),
-                        format!("{what} '{prop}': a key's value must be {want}"),
-                    )
-                })?;
-                if !(key.clock.is_finite() && value.iter().all(|v| v.is_finite())) {
-                    return Err(cx.err(
-                        kspan,
-                        format!("{what} '{prop}': a key's clock and value must be finite numbers"),
-                    ));
-                }
-                if !animation.contains(key.clock) {
-                    return Err(cx.err(
-                        kspan,
-                        format!(
-                            "{what} '{prop}': a key at clock {} is outside the animation's clock \
-                             range [{start}, {end}]",
-                            key.clock
-                        ),
-                    ));
-                }
-                keys.push((key.clock, value));
-            }
-            let (lo, hi) = (start.min(end), start.max(end));
-            let periodic = animation.cyclic()
-                && keys.first().map(|k| k.0) == Some(lo)
-                && keys.last().map(|k| k.0) == Some(hi);
-            let interpolation = match track_def.interpolation {
-                InterpolationDef::Linear => Interpolation::Linear,
-                InterpolationDef::Smooth => Interpolation::Smooth,
-            };
-            let track = Track::new(&keys, interpolation, periodic).map_err(|i| {
-                let (before, at) = (keys[i.saturating_sub(1)].0, keys[i].0);
-                cx.err(
-                    track_def.keys[i].span(),
-                    format!(
-                        "{what} '{prop}': keys out of order: clock {at} does not come after the \
-                         key before it (clock {before}); keys go in increasing clock order"
-                    ),
-                )
-            })?;
-            out.push(Binding {
-                target: target.clone(),
-                track,
-            });
+            Ok(Animation::STILL)
         }
     }
-    Ok((animation, out))
+}
+
+/// The track of key list `track` of property `prop` of item `what` (`name`: both, as errors
+/// name them), its values of kind `value_kind`, its clocks in `animation`'s range.
+fn track_of(
+    name: &str,
+    what: &str,
+    prop: &str,
+    track: Spanned<TrackDef>,
+    value_kind: Kind,
+    animation: &Animation,
+    cx: &Ctx,
+) -> Result<Track, Error> {
+    let span = track.span();
+    let track_def = track.into_inner();
+    if track_def.keys.is_empty() {
+        return Err(cx.err(
+            span,
+            format!("{what}: the key list of '{prop}' has no keys"),
+        ));
+    }
+    let mut keys = Vec::with_capacity(track_def.keys.len());
+    for k in &track_def.keys {
+        keys.push(key_of(name, k, value_kind, animation, cx)?);
+    }
+    let (start, end) = animation.clock_range();
+    let (lo, hi) = (start.min(end), start.max(end));
+    let periodic = animation.cyclic()
+        && keys.first().map(|k| k.0) == Some(lo)
+        && keys.last().map(|k| k.0) == Some(hi);
+    let interpolation = match track_def.interpolation {
+        InterpolationDef::Linear => Interpolation::Linear,
+        InterpolationDef::Smooth => Interpolation::Smooth,
+    };
+    Track::new(&keys, interpolation, periodic).map_err(|i| {
+        let (before, at) = (keys[i.saturating_sub(1)].0, keys[i].0);
+        cx.err(
+            track_def.keys[i].span(),
+            format!(
+                "{name}: keys out of order: clock {at} does not come after the \
+                 key before it (clock {before}); keys go in increasing clock order"
+            ),
+        )
+    })
+}
+
+/// Key `k` of the key list `name` (item and property, as errors name them): its clock and
+/// its value as a triple, both finite, the clock in `animation`'s range.
+fn key_of(
+    name: &str,
+    k: &Spanned<KeyDef>,
+    value_kind: Kind,
+    animation: &Animation,
+    cx: &Ctx,
+) -> Result<(f64, [f64; 3]), Error> {
+    let kspan = k.span();
+    let key = k.get_ref();
+    let value = key_value(key.value, value_kind).ok_or_else(|| {
+        let want = match value_kind {
+            Kind::Triple => "a triple [x, y, z]",
+            Kind::Number => "a number",
+            Kind::Scale => "a number or a triple [x, y, z]",
+            Kind::Uniform => "one positive number (or three equal ones): it scales uniformly",
+        };
+        cx.err(
+            kspan.clone(),
+            format!("{name}: a key's value must be {want}"),
+        )
+    })?;
+    if !(key.clock.is_finite() && value.iter().all(|v| v.is_finite())) {
+        return Err(cx.err(
+            kspan,
+            format!("{name}: a key's clock and value must be finite numbers"),
+        ));
+    }
+    if !animation.contains(key.clock) {
+        let (start, end) = animation.clock_range();
+        return Err(cx.err(
+            kspan,
+            format!(
+                "{name}: a key at clock {} is outside the animation's clock range \
+                 [{start}, {end}]",
+                key.clock
+            ),
+        ));
+    }
+    Ok((key.clock, value))
 }
 
 /// A key's value as a triple of the kind the property takes (a number in the first

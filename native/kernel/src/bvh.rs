@@ -918,6 +918,11 @@ impl Bvh {
     /// others are stacked far to near, each skipped when popped if a closer hit was found
     /// meanwhile. The stack is addressed modulo [`STACK_CAP`], which the build's depth cap
     /// keeps it below.
+    // Longer than 80 lines, kept whole: the loop of every closest-hit query, run per node.
+    // The node test, the sorted stacking and the leaf visit share its state (the ray's
+    // planes, the stack and its pointer, the bound, the work count), which must stay in
+    // registers; split, its parts would pass it by reference, which only an instruction count
+    // before and after could clear (docs/testing.md; tests/function_length.rs lists it).
     #[inline(always)]
     fn ordered_loop<const AVX: bool>(
         &self,

@@ -112,6 +112,9 @@ impl Whitted {
         self.shade(scene, ray, hit, 1, 1.0, scratch, stats, true)
     }
 
+    // Longer than 80 lines, kept whole: the shading of every hit. Split into #[inline(always)]
+    // parts (the view of the hit, the direct light), the same renders took 4% more
+    // instructions in it (callgrind, balls_s3 at 256 x 256).
     /// The rest of [`Whitted::trace`] once the ray's closest hit is known.
     #[allow(clippy::too_many_arguments)]
     fn shade(

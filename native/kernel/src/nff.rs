@@ -203,240 +203,324 @@ enum Role {
 }
 
 fn read(bytes: &[u8], file: &str, b: &mut SceneBuilder, role: Role) -> Result<(), Error> {
-    let mut lx = Lexer {
-        src: bytes,
-        pos: 0,
-        line: 1,
-        file,
+    let material = b.material(Material::default());
+    let mut r = Reader {
+        lx: Lexer {
+            src: bytes,
+            pos: 0,
+            line: 1,
+            file,
+        },
+        b,
+        include: role != Role::Scene,
+        keep_lights: matches!(role, Role::Scene | Role::Include { lights: true }),
+        file_lights: 0,
+        material,
+        colourless_lights: Vec::new(),
+        verts: Vec::new(),
+        normals: Vec::new(),
+        view_line: None,
+        background_line: None,
+        unused_fill: None,
     };
-    let include = role != Role::Scene;
-    let keep_lights = matches!(role, Role::Scene | Role::Include { lights: true });
-    let mut file_lights = 0usize;
-    let mut material = b.material(Material::default());
-    let mut colourless_lights = Vec::new();
-    let mut verts: Vec<Vec3A> = Vec::new();
-    let mut normals: Vec<Vec3A> = Vec::new();
     let mut last_line = 1;
-    // lines of the `v` and `b` seen (each sets a single value: a second would replace it)
-    let (mut view_line, mut background_line) = (None::<usize>, None::<usize>);
-    // the line of the last `f`, while no object has used it yet
-    let mut unused_fill: Option<usize> = None;
-    while let Some((tok, line)) = lx.next()? {
+    while let Some((tok, line)) = r.lx.next()? {
         last_line = line;
         match tok {
-            b"v" => {
-                if let Some(first) = view_line {
-                    return Err(lx.err(
-                        line,
-                        format!(
-                            "second viewpoint 'v' (the first is at line {first}): a scene has one \
-                             view, and this one would replace it"
-                        ),
-                    ));
-                }
-                view_line = Some(line);
-                if include {
-                    parse_view(&mut lx, &mut SceneBuilder::new(), line)?;
-                } else {
-                    parse_view(&mut lx, b, line)?;
-                }
-            }
-            b"b" => {
-                if let Some(first) = background_line {
-                    return Err(lx.err(
-                        line,
-                        format!(
-                            "second background colour 'b' (the first is at line {first}): a \
-                             scene has one, and this one would replace it"
-                        ),
-                    ));
-                }
-                background_line = Some(line);
-                let background = lx.vec3("background colour 'b'", line)?;
-                if !include {
-                    b.background = background;
-                    if let Some(w) = check_light_colour("background colour", background) {
-                        b.warnings.add(file, Some(line), || w);
-                    }
-                }
-            }
-            b"l" => {
-                let position = lx.vec3("light 'l'", line)?;
-                limits::check(
-                    "light count",
-                    b.lights.len() as u64 + 1,
-                    limits::MAX_LIGHTS as u64,
-                    "MAX_LIGHTS",
-                )
-                .map_err(|e| lx.err(line, e.to_string()))?;
-                file_lights += 1;
-                let color = if lx.peek()?.is_some_and(is_number) {
-                    let c = lx.vec3("light colour", line)?;
-                    if let Some(w) = check_light_colour("light colour", c).filter(|_| keep_lights) {
-                        b.warnings.add(file, Some(line), || w);
-                    }
-                    c
-                } else {
-                    if keep_lights {
-                        colourless_lights.push(b.lights.len());
-                    }
-                    Vec3A::ZERO
-                };
-                if keep_lights {
-                    b.lights.push(Light { position, color });
-                }
-            }
-            b"f" => {
-                let what = "fill colour 'f'";
-                let color = lx.vec3(what, line)?;
-                let m = Material {
-                    color,
-                    kd: lx.number(what, line)?,
-                    ks: lx.number(what, line)?,
-                    shine: lx.number(what, line)?,
-                    t: lx.number(what, line)?,
-                    ior: lx.number(what, line)?,
-                    checker: None,
-                };
-                for w in m.check(FILL_NAMES).map_err(|e| lx.err(line, e))? {
-                    b.warnings
-                        .add(file, Some(line), || format!("fill colour 'f': {w}"));
-                }
-                if let Some(unused) = unused_fill.replace(line) {
-                    b.warnings.add(file, Some(unused), || {
-                        format!(
-                            "fill colour 'f' is used by no object: the 'f' at line {line} \
-                             replaces it first"
-                        )
-                    });
-                }
-                material = b.material(m);
-            }
-            b"s" => {
-                let c = lx.vec3("sphere 's'", line)?;
-                let r = lx.number("sphere 's'", line)?;
-                unused_fill = None;
-                let before = b.primitive_count();
-                b.sphere(c, r, material)
-                    .map_err(|e| lx.err(line, e.to_string()))?;
-                if b.primitive_count() == before {
-                    b.warnings.add(file, Some(line), || {
-                        "sphere 's' has radius 0 and is not rendered".into()
-                    });
-                }
-            }
-            b"c" => {
-                let what = "cone/cylinder 'c'";
-                let base = lx.vec3(what, line)?;
-                let r0 = lx.number(what, line)?;
-                let apex = lx.vec3(what, line)?;
-                let r1 = lx.number(what, line)?;
-                check_cone_radii(r0, r1).map_err(|e| lx.err(line, format!("{what}: {e}")))?;
-                unused_fill = None;
-                let before = b.primitive_count();
-                b.cone(base, r0, apex, r1, material)
-                    .map_err(|e| lx.err(line, e.to_string()))?;
-                if b.primitive_count() == before {
-                    b.warnings.add(file, Some(line), || {
-                        format!("{what} has a zero-length axis or both radii 0 and is not rendered")
-                    });
-                }
-            }
-            b"p" | b"pp" => {
-                let patch = tok == b"pp";
-                let what = if patch { "patch 'pp'" } else { "polygon 'p'" };
-                let (n, nline) = lx.integer(&format!("the vertex count of {what}"), line)?;
-                if n < 3 {
-                    let kind = if patch { "patch" } else { "polygon" };
-                    return Err(lx.err(nline, format!("{kind} needs at least 3 vertices, got {n}")));
-                }
-                // checked before reading (and storing) any vertex
-                limits::check(
-                    format!("the vertex count of {what}"),
-                    n,
-                    limits::MAX_POLYGON_VERTICES as u64,
-                    "MAX_POLYGON_VERTICES",
-                )
-                .map_err(|e| lx.err(nline, e.to_string()))?;
-                verts.clear();
-                normals.clear();
-                for _ in 0..n {
-                    verts.push(lx.vec3(what, line)?);
-                    if patch {
-                        normals.push(lx.vec3(what, line)?);
-                    }
-                }
-                unused_fill = None;
-                let before = b.primitive_count();
-                let r = if patch {
-                    if normals.contains(&Vec3A::ZERO) {
-                        b.warnings.add(file, Some(line), || {
-                            format!(
-                                "{what} has a zero vertex normal, which has no direction: the \
-                                 shading there follows the other vertices' normals"
-                            )
-                        });
-                    }
-                    let mut r = Ok(());
-                    for i in 1..verts.len() - 1 {
-                        r = b.triangle(
-                            [verts[0], verts[i], verts[i + 1]],
-                            Some([normals[0], normals[i], normals[i + 1]]),
-                            material,
-                        );
-                        if r.is_err() {
-                            break;
-                        }
-                    }
-                    r
-                } else {
-                    b.polygon(&verts, material)
-                };
-                r.map_err(|e| lx.err(line, e.to_string()))?;
-                if b.primitive_count() == before {
-                    b.warnings.add(file, Some(line), || {
-                        format!(
-                            "{what} has zero area (its vertices are equal or on one line) and is \
-                             not rendered"
-                        )
-                    });
-                }
-            }
-            _ => {
-                let message = if looks_like_keyword(tok) {
-                    format!(
-                        "unknown entity '{}' (expected {ENTITIES})",
-                        String::from_utf8_lossy(tok)
-                    )
-                } else if lx.token_starts_line(tok) {
-                    format!(
-                        "line does not start with an NFF entity ({ENTITIES}); is this an NFF file?"
-                    )
-                } else {
-                    format!(
-                        "unexpected text where an NFF entity ({ENTITIES}) should start \
-                         (too many values for the entity before it?)"
-                    )
-                };
-                return Err(lx.err(line, message));
-            }
+            b"v" => r.view(line)?,
+            b"b" => r.background(line)?,
+            b"l" => r.light(line)?,
+            b"f" => r.fill(line)?,
+            b"s" => r.sphere(line)?,
+            b"c" => r.cone(line)?,
+            b"p" | b"pp" => r.polygon(tok == b"pp", line)?,
+            _ => return Err(r.unknown(tok, line)),
         }
     }
-    if b.camera.is_none() && !include {
-        return Err(lx.err(last_line, "no viewpoint: the file has no 'v' entity"));
+    r.finish(last_line)
+}
+
+/// The state of reading one NFF file into a scene builder.
+struct Reader<'a, 'b> {
+    lx: Lexer<'a>,
+    b: &'b mut SceneBuilder,
+    /// The file is included in another's scene: its view and background are left out.
+    include: bool,
+    /// Its lights are the scene's.
+    keep_lights: bool,
+    /// Lights in the file (kept or not), for the SPD's intensity.
+    file_lights: usize,
+    /// The material of the last `f`.
+    material: u32,
+    /// The scene's lights the file gave no colour.
+    colourless_lights: Vec<usize>,
+    /// The vertices and normals of the polygon or patch being read.
+    verts: Vec<Vec3A>,
+    normals: Vec<Vec3A>,
+    /// Lines of the `v` and `b` seen (each sets a single value: a second would replace it).
+    view_line: Option<usize>,
+    background_line: Option<usize>,
+    /// The line of the last `f`, while no object has used it yet.
+    unused_fill: Option<usize>,
+}
+
+impl Reader<'_, '_> {
+    /// Adds warning `w` at `line`.
+    fn warn(&mut self, line: usize, w: impl FnOnce() -> String) {
+        self.b.warnings.add(self.lx.file, Some(line), w);
     }
-    if let Some(unused) = unused_fill {
-        b.warnings.add(file, Some(unused), || {
-            "fill colour 'f' is used by no object: none follows it".into()
-        });
+
+    /// A builder's error (a limit, the memory left) as an error at `line`.
+    fn at(&self, line: usize) -> impl Fn(Error) -> Error + '_ {
+        move |e| self.lx.err(line, e.to_string())
     }
-    let intensity = spd_intensity(file_lights);
-    for i in colourless_lights {
-        if let Some(l) = b.lights.get_mut(i) {
-            l.color = Vec3A::splat(intensity);
+
+    /// The viewpoint `v`.
+    fn view(&mut self, line: usize) -> Result<(), Error> {
+        if let Some(first) = self.view_line {
+            return Err(self.lx.err(
+                line,
+                format!(
+                    "second viewpoint 'v' (the first is at line {first}): a scene has one \
+                     view, and this one would replace it"
+                ),
+            ));
+        }
+        self.view_line = Some(line);
+        if self.include {
+            parse_view(&mut self.lx, &mut SceneBuilder::new(), line)
+        } else {
+            parse_view(&mut self.lx, self.b, line)
         }
     }
-    Ok(())
+
+    /// The background colour `b`.
+    fn background(&mut self, line: usize) -> Result<(), Error> {
+        if let Some(first) = self.background_line {
+            return Err(self.lx.err(
+                line,
+                format!(
+                    "second background colour 'b' (the first is at line {first}): a \
+                     scene has one, and this one would replace it"
+                ),
+            ));
+        }
+        self.background_line = Some(line);
+        let background = self.lx.vec3("background colour 'b'", line)?;
+        if !self.include {
+            self.b.background = background;
+            if let Some(w) = check_light_colour("background colour", background) {
+                self.warn(line, || w);
+            }
+        }
+        Ok(())
+    }
+
+    /// A light `l`, with or without a colour.
+    fn light(&mut self, line: usize) -> Result<(), Error> {
+        let position = self.lx.vec3("light 'l'", line)?;
+        limits::check(
+            "light count",
+            self.b.lights.len() as u64 + 1,
+            limits::MAX_LIGHTS as u64,
+            "MAX_LIGHTS",
+        )
+        .map_err(self.at(line))?;
+        self.file_lights += 1;
+        let color = if self.lx.peek()?.is_some_and(is_number) {
+            let c = self.lx.vec3("light colour", line)?;
+            if let Some(w) = check_light_colour("light colour", c).filter(|_| self.keep_lights) {
+                self.warn(line, || w);
+            }
+            c
+        } else {
+            if self.keep_lights {
+                self.colourless_lights.push(self.b.lights.len());
+            }
+            Vec3A::ZERO
+        };
+        if self.keep_lights {
+            self.b.lights.push(Light { position, color });
+        }
+        Ok(())
+    }
+
+    /// A fill colour `f`: the material of the objects that follow.
+    fn fill(&mut self, line: usize) -> Result<(), Error> {
+        let what = "fill colour 'f'";
+        let lx = &mut self.lx;
+        let color = lx.vec3(what, line)?;
+        let m = Material {
+            color,
+            kd: lx.number(what, line)?,
+            ks: lx.number(what, line)?,
+            shine: lx.number(what, line)?,
+            t: lx.number(what, line)?,
+            ior: lx.number(what, line)?,
+            checker: None,
+        };
+        for w in m.check(FILL_NAMES).map_err(|e| self.lx.err(line, e))? {
+            self.warn(line, || format!("fill colour 'f': {w}"));
+        }
+        if let Some(unused) = self.unused_fill.replace(line) {
+            self.warn(unused, || {
+                format!(
+                    "fill colour 'f' is used by no object: the 'f' at line {line} \
+                     replaces it first"
+                )
+            });
+        }
+        self.material = self.b.material(m);
+        Ok(())
+    }
+
+    /// A sphere `s`.
+    fn sphere(&mut self, line: usize) -> Result<(), Error> {
+        let c = self.lx.vec3("sphere 's'", line)?;
+        let r = self.lx.number("sphere 's'", line)?;
+        self.unused_fill = None;
+        let before = self.b.primitive_count();
+        self.b
+            .sphere(c, r, self.material)
+            .map_err(|e| self.lx.err(line, e.to_string()))?;
+        if self.b.primitive_count() == before {
+            self.warn(line, || {
+                "sphere 's' has radius 0 and is not rendered".into()
+            });
+        }
+        Ok(())
+    }
+
+    /// A cone or cylinder `c`.
+    fn cone(&mut self, line: usize) -> Result<(), Error> {
+        let what = "cone/cylinder 'c'";
+        let lx = &mut self.lx;
+        let base = lx.vec3(what, line)?;
+        let r0 = lx.number(what, line)?;
+        let apex = lx.vec3(what, line)?;
+        let r1 = lx.number(what, line)?;
+        check_cone_radii(r0, r1).map_err(|e| lx.err(line, format!("{what}: {e}")))?;
+        self.unused_fill = None;
+        let before = self.b.primitive_count();
+        self.b
+            .cone(base, r0, apex, r1, self.material)
+            .map_err(|e| self.lx.err(line, e.to_string()))?;
+        if self.b.primitive_count() == before {
+            self.warn(line, || {
+                format!("{what} has a zero-length axis or both radii 0 and is not rendered")
+            });
+        }
+        Ok(())
+    }
+
+    /// A polygon `p`, or with `patch` a polygonal patch `pp` (vertex normals, fanned into
+    /// triangles).
+    fn polygon(&mut self, patch: bool, line: usize) -> Result<(), Error> {
+        let what = if patch { "patch 'pp'" } else { "polygon 'p'" };
+        let (n, nline) = self
+            .lx
+            .integer(&format!("the vertex count of {what}"), line)?;
+        if n < 3 {
+            let kind = if patch { "patch" } else { "polygon" };
+            return Err(self
+                .lx
+                .err(nline, format!("{kind} needs at least 3 vertices, got {n}")));
+        }
+        // checked before reading (and storing) any vertex
+        limits::check(
+            format!("the vertex count of {what}"),
+            n,
+            limits::MAX_POLYGON_VERTICES as u64,
+            "MAX_POLYGON_VERTICES",
+        )
+        .map_err(self.at(nline))?;
+        self.verts.clear();
+        self.normals.clear();
+        for _ in 0..n {
+            self.verts.push(self.lx.vec3(what, line)?);
+            if patch {
+                self.normals.push(self.lx.vec3(what, line)?);
+            }
+        }
+        self.unused_fill = None;
+        let before = self.b.primitive_count();
+        let r = if patch {
+            self.patch(what, line)
+        } else {
+            self.b.polygon(&self.verts, self.material)
+        };
+        r.map_err(|e| self.lx.err(line, e.to_string()))?;
+        if self.b.primitive_count() == before {
+            self.warn(line, || {
+                format!(
+                    "{what} has zero area (its vertices are equal or on one line) and is \
+                     not rendered"
+                )
+            });
+        }
+        Ok(())
+    }
+
+    /// The patch read into `verts` and `normals`, as a fan of smooth triangles.
+    fn patch(&mut self, what: &str, line: usize) -> Result<(), Error> {
+        let (verts, normals) = (&self.verts, &self.normals);
+        if normals.contains(&Vec3A::ZERO) {
+            self.b.warnings.add(self.lx.file, Some(line), || {
+                format!(
+                    "{what} has a zero vertex normal, which has no direction: the \
+                     shading there follows the other vertices' normals"
+                )
+            });
+        }
+        for i in 1..verts.len() - 1 {
+            self.b.triangle(
+                [verts[0], verts[i], verts[i + 1]],
+                Some([normals[0], normals[i], normals[i + 1]]),
+                self.material,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The error for token `tok` where an entity should start.
+    fn unknown(&self, tok: &[u8], line: usize) -> Error {
+        let message = if looks_like_keyword(tok) {
+            format!(
+                "unknown entity '{}' (expected {ENTITIES})",
+                String::from_utf8_lossy(tok)
+            )
+        } else if self.lx.token_starts_line(tok) {
+            format!("line does not start with an NFF entity ({ENTITIES}); is this an NFF file?")
+        } else {
+            format!(
+                "unexpected text where an NFF entity ({ENTITIES}) should start \
+                 (too many values for the entity before it?)"
+            )
+        };
+        self.lx.err(line, message)
+    }
+
+    /// The checks at the end of the file (`last_line`), and the colour of its lights without
+    /// one.
+    fn finish(mut self, last_line: usize) -> Result<(), Error> {
+        if self.b.camera.is_none() && !self.include {
+            return Err(self
+                .lx
+                .err(last_line, "no viewpoint: the file has no 'v' entity"));
+        }
+        if let Some(unused) = self.unused_fill {
+            self.warn(unused, || {
+                "fill colour 'f' is used by no object: none follows it".into()
+            });
+        }
+        let intensity = spd_intensity(self.file_lights);
+        for i in self.colourless_lights {
+            if let Some(l) = self.b.lights.get_mut(i) {
+                l.color = Vec3A::splat(intensity);
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A cone's radii must not have opposite signs: NFF.TXT makes a cone with negative radii an

@@ -50,19 +50,87 @@ pub(crate) fn load_mesh(
     smooth: bool,
     b: &mut SceneBuilder,
 ) -> Result<Aabb, Error> {
+    let bytes = check_before_reading(bytes, name, b.max_mesh_triangles)?;
+    let (models, mtls, missing) = read_obj(bytes, name, resolve)?;
+    let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
+    limits::check(
+        format!("the triangle count of mesh {name}"),
+        total as u64,
+        b.max_mesh_triangles as u64,
+        "MAX_MESH_TRIANGLES",
+    )?;
+    let default_mat = match material {
+        Some(m) => m,
+        None => b.material(grey()),
+    };
+    let mtl_ids: Vec<u32> = match (&mtls, material) {
+        (Ok(ms), None) => ms.iter().map(|m| mtl_material(m, name, b)).collect(),
+        _ => Vec::new(),
+    };
+    scan_warnings(bytes, name, &mtls, &missing, material.is_some(), b);
+    let before = b.primitive_count();
+    let mut bounds = Aabb::EMPTY;
+    for model in &models {
+        let mat = (model.mesh.material_id)
+            .and_then(|i| mtl_ids.get(i).copied())
+            .unwrap_or(default_mat);
+        bounds = bounds.union(add_model(&model.mesh, name, xf, smooth, mat, b)?);
+    }
+    let added = b.primitive_count() - before;
+    if total == 0 {
+        b.warnings.add(name, None, || {
+            "the mesh has no faces: nothing of it is rendered".into()
+        });
+    } else if added < total {
+        b.warnings.add(name, None, || {
+            format!(
+                "{} of its {total} triangles have zero area (vertices equal or on one line) and \
+                 are not rendered",
+                total - added
+            )
+        });
+    }
+    Ok(bounds)
+}
+
+/// The checks made before the OBJ reader allocates or copies anything: the file's size, an
+/// upper bound of its triangles (under `max_triangles`), its words, numbers and face indices.
+/// Returns the bytes without a byte order mark.
+fn check_before_reading<'a>(
+    bytes: &'a [u8],
+    name: &str,
+    max_triangles: usize,
+) -> Result<&'a [u8], Error> {
     limits::check_file_size(format!("the size of mesh {name}"), bytes.len() as u64)?;
     let bytes = crate::files::without_bom(bytes);
     // an upper bound from the face lines, before the OBJ reader allocates anything
     limits::check(
         format!("the triangle count of mesh {name} (from its face lines)"),
         limits::obj_triangle_bound(bytes),
-        b.max_mesh_triangles as u64,
+        max_triangles as u64,
         "MAX_MESH_TRIANGLES",
     )?;
     // before the OBJ reader copies any line
     limits::check_tokens(bytes, limits::Tokens::Words, name)?;
     check_numbers(bytes, name)?;
     check_face_indices(bytes, name)?;
+    Ok(bytes)
+}
+
+/// The OBJ's models (faces triangulated), its materials (or why its material libraries could
+/// not be read), and the material libraries that are missing, as written.
+type ReadObj = (
+    Vec<tobj::Model>,
+    Result<Vec<tobj::Material>, tobj::LoadError>,
+    Vec<String>,
+);
+
+/// Reads checked OBJ `bytes` with `tobj`, its material libraries through `resolve`.
+fn read_obj(
+    bytes: &[u8],
+    name: &str,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
+) -> Result<ReadObj, Error> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: false,
@@ -95,123 +163,91 @@ pub(crate) fn load_mesh(
     if let Some(e) = refused.into_inner() {
         return Err(Error::scene(name, format!("cannot load its mtllib: {e}")));
     }
-    let (models, mtls) = match loaded {
-        Ok(Ok(r)) => r,
-        Ok(Err(e)) => return Err(Error::scene(name, format!("invalid OBJ: {e}"))),
-        Err(_) => return Err(Error::scene(name, "invalid OBJ (the OBJ reader failed)")),
-    };
-    let total: usize = models.iter().map(|m| m.mesh.indices.len() / 3).sum();
-    limits::check(
-        format!("the triangle count of mesh {name}"),
-        total as u64,
-        b.max_mesh_triangles as u64,
-        "MAX_MESH_TRIANGLES",
-    )?;
-    let default_mat = match material {
-        Some(m) => m,
-        None => b.material(grey()),
-    };
-    let mtl_ids: Vec<u32> = match (&mtls, material) {
-        (Ok(ms), None) => ms
-            .iter()
-            .map(|m| {
-                let ok3 = |v: Option<[f32; 3]>| v.filter(|a| a.iter().all(|x| x.is_finite()));
-                let mut mat = grey();
-                let clamped = |b: &mut SceneBuilder, what: &str, c: Vec3A| {
-                    if let Some(w) = check_unit_colour(what, c) {
-                        b.warnings.add(name, None, || {
-                            format!("material '{}': {w}; clamped to [0, 1]", snippet(&m.name))
-                        });
-                    }
-                };
-                if let Some(kd) = ok3(m.diffuse) {
-                    clamped(b, "Kd", Vec3A::from_array(kd));
-                    mat.color = Vec3A::from_array(kd).clamp(Vec3A::ZERO, Vec3A::ONE);
-                }
-                if let Some(ks) = ok3(m.specular) {
-                    clamped(b, "Ks", Vec3A::from_array(ks));
-                    mat.ks = Vec3A::from_array(ks).max_element().clamp(0.0, 1.0);
-                }
-                if let Some(ns) = m.shininess.filter(|s| s.is_finite() && *s >= 0.0) {
-                    mat.shine = ns;
-                }
-                b.material(mat)
-            })
-            .collect(),
-        _ => Vec::new(),
-    };
-    scan_warnings(
-        bytes,
-        name,
-        &mtls,
-        &missing.into_inner(),
-        material.is_some(),
-        b,
-    );
-    let before = b.primitive_count();
-    let nxf = xf.matrix3.inverse().transpose();
-    let nxf_ok = nxf.is_finite();
-    let mut bounds = Aabb::EMPTY;
-    for model in &models {
-        let m = &model.mesh;
-        let mat = m
-            .material_id
-            .and_then(|i| mtl_ids.get(i).copied())
-            .unwrap_or(default_mat);
-        let pos = |i: u32| -> Result<Vec3A, Error> {
-            let i = i as usize * 3;
-            let p = m
-                .positions
-                .get(i..i + 3)
-                .ok_or_else(|| Error::scene(name, "vertex index out of range"))?;
-            let v = Vec3A::new(p[0], p[1], p[2]);
-            if !v.is_finite() {
-                return Err(Error::scene(
-                    name,
-                    "vertex coordinate is not a finite number",
-                ));
-            }
-            Ok(xf.transform_point3a(v))
-        };
-        let has_normals =
-            smooth && nxf_ok && !m.normals.is_empty() && m.normal_indices.len() == m.indices.len();
-        let nrm = |i: u32| -> Option<Vec3A> {
-            let i = i as usize * 3;
-            let p = m.normals.get(i..i + 3)?;
-            let n = Vec3A::new(p[0], p[1], p[2]);
-            (nxf * n).try_normalize()
-        };
-        for (k, tri) in m.indices.chunks_exact(3).enumerate() {
-            let v = [pos(tri[0])?, pos(tri[1])?, pos(tri[2])?];
-            bounds = bounds.grow(v[0]).grow(v[1]).grow(v[2]);
-            let normals = if has_normals {
-                let ni = m.normal_indices.get(k * 3..k * 3 + 3);
-                match ni {
-                    Some(ni) => match (nrm(ni[0]), nrm(ni[1]), nrm(ni[2])) {
-                        (Some(a), Some(b2), Some(c)) => Some([a, b2, c]),
-                        _ => None,
-                    },
-                    None => None,
-                }
-            } else {
-                None
-            };
-            b.triangle(v, normals, mat)?;
-        }
+    match loaded {
+        Ok(Ok((models, mtls))) => Ok((models, mtls, missing.into_inner())),
+        Ok(Err(e)) => Err(Error::scene(name, format!("invalid OBJ: {e}"))),
+        Err(_) => Err(Error::scene(name, "invalid OBJ (the OBJ reader failed)")),
     }
-    let added = b.primitive_count() - before;
-    if total == 0 {
-        b.warnings.add(name, None, || {
-            "the mesh has no faces: nothing of it is rendered".into()
-        });
-    } else if added < total {
-        b.warnings.add(name, None, || {
-            format!(
-                "{} of its {total} triangles have zero area (vertices equal or on one line) and \
-                 are not rendered",
-                total - added
-            )
-        });
+}
+
+/// Adds MTL material `m` to `b` (colours clamped to [0, 1], with a warning); its index.
+fn mtl_material(m: &tobj::Material, name: &str, b: &mut SceneBuilder) -> u32 {
+    let ok3 = |v: Option<[f32; 3]>| v.filter(|a| a.iter().all(|x| x.is_finite()));
+    let mut mat = grey();
+    let clamped = |b: &mut SceneBuilder, what: &str, c: Vec3A| {
+        if let Some(w) = check_unit_colour(what, c) {
+            b.warnings.add(name, None, || {
+                format!("material '{}': {w}; clamped to [0, 1]", snippet(&m.name))
+            });
+        }
+    };
+    if let Some(kd) = ok3(m.diffuse) {
+        clamped(b, "Kd", Vec3A::from_array(kd));
+        mat.color = Vec3A::from_array(kd).clamp(Vec3A::ZERO, Vec3A::ONE);
+    }
+    if let Some(ks) = ok3(m.specular) {
+        clamped(b, "Ks", Vec3A::from_array(ks));
+        mat.ks = Vec3A::from_array(ks).max_element().clamp(0.0, 1.0);
+    }
+    if let Some(ns) = m.shininess.filter(|s| s.is_finite() && *s >= 0.0) {
+        mat.shine = ns;
+    }
+    b.material(mat)
+}
+
+/// Adds the triangles of model mesh `m` under `xf` with material `mat` (and its vertex
+/// normals with `smooth`); returns their bounding box.
+fn add_model(
+    m: &tobj::Mesh,
+    name: &str,
+    xf: Affine3A,
+    smooth: bool,
+    mat: u32,
+    b: &mut SceneBuilder,
+) -> Result<Aabb, Error> {
+    let nxf = xf.matrix3.inverse().transpose();
+    let pos = |i: u32| -> Result<Vec3A, Error> {
+        let i = i as usize * 3;
+        let p = m
+            .positions
+            .get(i..i + 3)
+            .ok_or_else(|| Error::scene(name, "vertex index out of range"))?;
+        let v = Vec3A::new(p[0], p[1], p[2]);
+        if !v.is_finite() {
+            return Err(Error::scene(
+                name,
+                "vertex coordinate is not a finite number",
+            ));
+        }
+        Ok(xf.transform_point3a(v))
+    };
+    let has_normals = smooth
+        && nxf.is_finite()
+        && !m.normals.is_empty()
+        && m.normal_indices.len() == m.indices.len();
+    let nrm = |i: u32| -> Option<Vec3A> {
+        let i = i as usize * 3;
+        let p = m.normals.get(i..i + 3)?;
+        let n = Vec3A::new(p[0], p[1], p[2]);
+        (nxf * n).try_normalize()
+    };
+    let mut bounds = Aabb::EMPTY;
+    for (k, tri) in m.indices.chunks_exact(3).enumerate() {
+        let v = [pos(tri[0])?, pos(tri[1])?, pos(tri[2])?];
+        bounds = bounds.grow(v[0]).grow(v[1]).grow(v[2]);
+        let normals = if has_normals {
+            let ni = m.normal_indices.get(k * 3..k * 3 + 3);
+            match ni {
+                Some(ni) => match (nrm(ni[0]), nrm(ni[1]), nrm(ni[2])) {
+                    (Some(a), Some(b2), Some(c)) => Some([a, b2, c]),
+                    _ => None,
+                },
+                None => None,
+            }
+        } else {
+            None
+        };
+        b.triangle(v, normals, mat)?;
     }
     Ok(bounds)
 }

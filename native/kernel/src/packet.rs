@@ -519,6 +519,11 @@ unsafe fn rays_enter<L: Lanes>(
 ///
 /// # Safety
 /// The CPU must have the features of the width `L` (see [`crate::lanes`]).
+// Longer than 80 lines, kept whole: the vector leaf test, run for every leaf a packet meets.
+// Its box tests and triangle tests share the vectors of the rays and of their hits so far,
+// which must stay in registers; split, its parts would pass them by reference, which only an
+// instruction count before and after could clear (docs/testing.md; tests/function_length.rs
+// lists it).
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -762,6 +767,9 @@ fn singles<A: Answer>(
 
 /// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
 /// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
+// Longer than 80 lines, kept whole: run per packet of a tile's eye or shadow rays. Split into
+// #[inline(always)] parts (the gathering of the rays, the frustum), the same renders took
+// 2.7% more instructions in `Scene::intersect_tile` (callgrind, balls_s3 at 256 x 256).
 #[allow(clippy::too_many_arguments)]
 fn group<A: Answer>(
     scene: &Scene,
@@ -901,6 +909,11 @@ unsafe fn traverse_avx512(
 /// leaves were met in, nor on the other rays of the packet (all of them are met, since a ray's
 /// bound never falls below its final hit), so a pixel costs the same in any tile. In an
 /// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
+// Longer than 80 lines, kept whole: the packet traversal's loop, run per node. The node
+// test, the leaf tests and the stacking share its state (the packet's bound, the stack and
+// its pointer, the mailboxes, the children being sorted), which must stay in registers;
+// split, its parts would pass it by reference, which only an instruction count before and
+// after could clear (docs/testing.md; tests/function_length.rs lists it).
 #[inline(always)]
 fn traverse<const AVX: bool, const WIDE: bool>(
     scene: &Scene,

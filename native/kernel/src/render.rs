@@ -275,50 +275,74 @@ pub fn trace_span_into(
             &mut put,
             &mut stats,
         );
-    } else {
+    } else if settings.samples == 1 {
         let (w, h) = (settings.width, settings.height);
-        let span = Camera::centre_span(w, h);
-        let s = settings.samples;
-        let inv = 1.0 / (s * s) as f32;
-        let (mut px_x, mut px_y) = (start % w as u64, start / w as u64);
-        if s == 1 {
-            primary_tiles(
-                scene,
-                &integ,
-                (w, h),
-                (start, end),
-                &mut scratch,
-                &mut put,
-                &mut stats,
-            );
-        }
-        for idx in (start..end).filter(|_| s > 1) {
-            let x = px_x as f32;
-            let y = px_y as f32;
-            px_x += 1;
-            if px_x == w as u64 {
-                px_x = 0;
-                px_y += 1;
-            }
-            let mut acc = Vec3A::ZERO;
-            for j in 0..s {
-                for i in 0..s {
-                    let k = (j * s + i) as u64;
-                    let (jx, jy) = jitter(idx, k);
-                    let px = x + (i as f32 + jx) / s as f32;
-                    let py = y + (j as f32 + jy) / s as f32;
-                    let ray = scene.camera.ray(px, py, w, h, span);
-                    acc += integ.radiance(scene, &ray, &mut scratch, &mut stats);
-                }
-            }
-            put(acc * inv);
-        }
+        primary_tiles(
+            scene,
+            &integ,
+            (w, h),
+            (start, end),
+            &mut scratch,
+            &mut put,
+            &mut stats,
+        );
+    } else {
+        stratified_span(
+            scene,
+            settings,
+            &integ,
+            (start, end),
+            &mut scratch,
+            &mut put,
+            &mut stats,
+        );
     }
     if scene.display_referred() {
         crate::film::decode_srgb_in_place(out);
     }
     stats.work = scratch.work + stats.total();
     Ok(stats)
+}
+
+/// `settings.samples` squared samples per pixel over the span `start..end`: each pixel's
+/// stratified jittered samples traced ray by ray, their mean put in row order. Inlined: a
+/// function of its own, its loop took 2.7% more instructions (callgrind).
+#[inline(always)]
+fn stratified_span(
+    scene: &Scene,
+    settings: &Settings,
+    integ: &Whitted,
+    (start, end): (u64, u64),
+    scratch: &mut Scratch,
+    put: &mut impl FnMut(Vec3A),
+    stats: &mut RayStats,
+) {
+    let (w, h) = (settings.width, settings.height);
+    let span = Camera::centre_span(w, h);
+    let s = settings.samples;
+    let inv = 1.0 / (s * s) as f32;
+    let (mut px_x, mut px_y) = (start % w as u64, start / w as u64);
+    for idx in start..end {
+        let x = px_x as f32;
+        let y = px_y as f32;
+        px_x += 1;
+        if px_x == w as u64 {
+            px_x = 0;
+            px_y += 1;
+        }
+        let mut acc = Vec3A::ZERO;
+        for j in 0..s {
+            for i in 0..s {
+                let k = (j * s + i) as u64;
+                let (jx, jy) = jitter(idx, k);
+                let px = x + (i as f32 + jx) / s as f32;
+                let py = y + (j as f32 + jy) / s as f32;
+                let ray = scene.camera.ray(px, py, w, h, span);
+                acc += integ.radiance(scene, &ray, scratch, stats);
+            }
+        }
+        put(acc * inv);
+    }
 }
 
 /// The side of the pixel tiles whose eye rays [`primary_tiles`] traces as one packet.

@@ -166,30 +166,12 @@ type FolderCheck<'a> = &'a dyn Fn(&OwnedFd, &Path) -> Result<(), Error>;
 /// `check`, when given, is made on every folder the walk opens something in (not on the
 /// folder it ends at), before it does.
 fn walk(path: &Path, last_link: LastLink, check: Option<FolderCheck>) -> Result<OwnedFd, Error> {
-    use std::collections::VecDeque;
-    use std::ffi::OsString;
     use std::os::unix::ffi::OsStrExt;
-    use std::path::Component;
     let dir_flags = OFlags::PATH | OFlags::DIRECTORY | OFlags::CLOEXEC;
     let me = rustix::process::geteuid().as_raw();
-    let mut cur = if path.is_absolute() {
-        rfs::open("/", dir_flags, Mode::empty())
-    } else {
-        rfs::open(".", dir_flags, Mode::empty())
-    }
-    .map_err(|e| errno_error(path, e))?;
-    // where the walk is, by the names it went through (for `check`'s messages)
-    let mut at = if path.is_absolute() {
-        PathBuf::from("/")
-    } else {
-        PathBuf::from(".")
-    };
-    // what is left to walk; `true` marks the path's own last component
-    let mut todo: VecDeque<(OsString, bool)> = VecDeque::new();
-    let parts: Vec<Component> = path.components().collect();
-    for (i, c) in parts.iter().enumerate() {
-        todo.push_back((c.as_os_str().to_os_string(), i + 1 == parts.len()));
-    }
+    // where the walk is, by the names it went through (for `check`'s messages), and what is
+    // left to walk
+    let (mut cur, mut at, mut todo) = walk_start(path, dir_flags)?;
     let mut links = 0;
     while let Some((part, last)) = todo.pop_front() {
         let bytes = part.as_bytes();
@@ -225,25 +207,8 @@ fn walk(path: &Path, last_link: LastLink, check: Option<FolderCheck>) -> Result<
                 if last && last_link == LastLink::Refuse {
                     return Err(message_error(path, "is a symbolic link, not a folder"));
                 }
-                if st.st_uid != me && st.st_uid != 0 {
-                    return Err(message_error(
-                        path,
-                        format!(
-                            "goes through a symbolic link ({}) that belongs to user {}; \
-                             not following it (name the folder it leads to instead)",
-                            Path::new(&part).display(),
-                            st.st_uid
-                        ),
-                    ));
-                }
-                links += 1;
-                if links > MAX_LINKS {
-                    return Err(errno_error(path, Errno::LOOP));
-                }
-                let target =
-                    rfs::readlinkat(&next, "", Vec::new()).map_err(|e| errno_error(path, e))?;
-                let target = Path::new(std::ffi::OsStr::from_bytes(target.as_bytes()));
-                let comps: Vec<Component> = target.components().collect();
+                let target = link_target(path, &part, &next, st.st_uid, me, &mut links)?;
+                let comps: Vec<std::path::Component> = target.components().collect();
                 for (i, c) in comps.iter().enumerate().rev() {
                     todo.push_front((c.as_os_str().to_os_string(), last && i + 1 == comps.len()));
                 }
@@ -252,6 +217,54 @@ fn walk(path: &Path, last_link: LastLink, check: Option<FolderCheck>) -> Result<
         }
     }
     Ok(cur)
+}
+
+/// What is left of a walk: components, `true` marking the path's own last one.
+type Todo = std::collections::VecDeque<(std::ffi::OsString, bool)>;
+
+/// Where [`walk`] of `path` starts: the folder it is relative to (`/` or `.`, opened with
+/// `dir_flags`), that folder's path, and the path's components.
+fn walk_start(path: &Path, dir_flags: OFlags) -> Result<(OwnedFd, PathBuf, Todo), Error> {
+    let root = if path.is_absolute() { "/" } else { "." };
+    let cur = rfs::open(root, dir_flags, Mode::empty()).map_err(|e| errno_error(path, e))?;
+    let parts: Vec<std::path::Component> = path.components().collect();
+    let todo = (parts.iter().enumerate())
+        .map(|(i, c)| (c.as_os_str().to_os_string(), i + 1 == parts.len()))
+        .collect();
+    Ok((cur, PathBuf::from(root), todo))
+}
+
+/// The target of symbolic link `next`, named `part`, owned by `uid`, met by [`walk`] of
+/// `path`: refused unless the link is this user's (`me`) or root's, and past [`MAX_LINKS`]
+/// links on the way (`links` counts them).
+fn link_target(
+    path: &Path,
+    part: &std::ffi::OsStr,
+    next: &OwnedFd,
+    uid: u32,
+    me: u32,
+    links: &mut usize,
+) -> Result<PathBuf, Error> {
+    use std::os::unix::ffi::OsStrExt;
+    if uid != me && uid != 0 {
+        return Err(message_error(
+            path,
+            format!(
+                "goes through a symbolic link ({}) that belongs to user {}; \
+                 not following it (name the folder it leads to instead)",
+                Path::new(part).display(),
+                uid
+            ),
+        ));
+    }
+    *links += 1;
+    if *links > MAX_LINKS {
+        return Err(errno_error(path, Errno::LOOP));
+    }
+    let target = rfs::readlinkat(next, "", Vec::new()).map_err(|e| errno_error(path, e))?;
+    Ok(PathBuf::from(std::ffi::OsStr::from_bytes(
+        target.as_bytes(),
+    )))
 }
 
 /// The folder and file name of `path` (`a.png` is in `.`).

@@ -624,36 +624,65 @@ pub(crate) fn build(
     own: &dyn Fn(&str) -> bool,
 ) -> Result<Built, Error> {
     let file = cx.file;
-    let warn =
-        |b: &mut SceneBuilder, span: &Range<usize>, w: String| cx.warn(&mut b.warnings, span, w);
     let mut b = SceneBuilder::new();
     let (camera, resolution) = camera(def, cx)?;
     b.camera = Some(camera);
     b.resolution = resolution;
+    lighting(def, cx, &mut b)?;
+    // Mesh references by (file as written, smooth): a mesh referenced once is flattened into
+    // the scene, one referenced more often is read once and instanced.
+    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, cx)?;
+    let default_mat = b.material(Material::default());
+    let names = named_materials(def, cx, own, &mut b)?;
+    let mut objects = Objects {
+        cx,
+        resolve,
+        names: &names,
+        default_mat,
+        mesh_refs,
+        shared: BTreeMap::new(),
+        moving_meshes: BTreeMap::new(),
+    };
+    for (index, o) in def.objects.iter().enumerate() {
+        objects.add(&mut b, index, o)?;
+    }
+    let moving_meshes = objects.moving_meshes;
+    crate::warning::scene_warnings(&mut b, file);
+    Ok(Built {
+        scene: b.build(file)?,
+        materials: names,
+        moving_meshes,
+    })
+}
 
+/// The background, the ambient light and the lights, into `b`.
+fn lighting(def: &SceneDef, cx: &Ctx, b: &mut SceneBuilder) -> Result<(), Error> {
     if let Some(bg) = &def.background {
         b.background = cx.v3(&bg.span(), "background", *bg.get_ref())?;
         if let Some(w) = check_light_colour("background", b.background) {
-            warn(&mut b, &bg.span(), w);
+            cx.warn(&mut b.warnings, &bg.span(), w);
         }
     }
     if let Some(a) = &def.ambient {
         let v = a.get_ref().vec();
         cx.finite(&a.span(), "ambient", &v.to_array())?;
         if let Some(w) = check_light_colour("ambient", v) {
-            warn(&mut b, &a.span(), w);
+            cx.warn(&mut b.warnings, &a.span(), w);
         }
         b.ambient = Some(v);
     }
     b.lights = lights(def, cx, &mut b.warnings)?;
+    Ok(())
+}
 
-    // Mesh references by (file as written, smooth): a mesh referenced once is flattened into
-    // the scene, one referenced more often is read once and instanced.
-    let mesh_refs = mesh_references(&def.objects, limits::MAX_MESH_REFERENCES, cx)?;
-    let mut shared: BTreeMap<(&str, bool), u32> = BTreeMap::new();
-
+/// The named materials, added to `b` (an own index for those `own` names): each name's index.
+fn named_materials(
+    def: &SceneDef,
+    cx: &Ctx,
+    own: &dyn Fn(&str) -> bool,
+    b: &mut SceneBuilder,
+) -> Result<BTreeMap<String, u32>, Error> {
     let mut names: BTreeMap<String, u32> = BTreeMap::new();
-    let default_mat = b.material(Material::default());
     for (name, m) in &def.materials {
         let mat = material(cx, name, m, &mut b.warnings)?;
         let idx = if own(name) {
@@ -664,45 +693,52 @@ pub(crate) fn build(
         };
         names.insert(name.clone(), idx);
     }
+    Ok(names)
+}
 
-    let mut moving_meshes = BTreeMap::new();
-    for (index, o) in def.objects.iter().enumerate() {
+/// A builder's error (a limit, the memory left) as an error at the object's line.
+fn at_object(cx: &Ctx, span: &Range<usize>, e: Error) -> Error {
+    cx.err(span.clone(), e.to_string())
+}
+
+/// What adding a scene's objects needs and gathers: the named materials, how often each mesh
+/// is referenced, the shared meshes read so far, and the instances of moving meshes.
+struct Objects<'a> {
+    cx: &'a Ctx<'a>,
+    resolve: &'a dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
+    names: &'a BTreeMap<String, u32>,
+    default_mat: u32,
+    mesh_refs: BTreeMap<(&'a str, bool), usize>,
+    /// Shared meshes by (file as written, smooth).
+    shared: BTreeMap<(&'a str, bool), u32>,
+    moving_meshes: BTreeMap<usize, MovingMesh>,
+}
+
+impl<'a> Objects<'a> {
+    /// The index of material `m` (the default one if none is named).
+    fn find(&self, span: &Range<usize>, m: &Option<String>) -> Result<u32, Error> {
+        match m {
+            None => Ok(self.default_mat),
+            Some(n) => self.names.get(n.as_str()).copied().ok_or_else(|| {
+                self.cx
+                    .err(span.clone(), format!("unknown material '{}'", snippet(n)))
+            }),
+        }
+    }
+
+    /// Adds object `index`, `o`, to `b`, with a warning if it is degenerate and left out.
+    fn add(
+        &mut self,
+        b: &mut SceneBuilder,
+        index: usize,
+        o: &'a Spanned<ObjectDef>,
+    ) -> Result<(), Error> {
         let span = o.span();
-        let find = |m: &Option<String>| -> Result<u32, Error> {
-            match m {
-                None => Ok(default_mat),
-                Some(n) => names.get(n.as_str()).copied().ok_or_else(|| {
-                    cx.err(span.clone(), format!("unknown material '{}'", snippet(n)))
-                }),
-            }
-        };
-        let lim = |e: Error| cx.err(span.clone(), e.to_string());
         let before = b.primitive_count();
         // what a degenerate object of this kind is, for the warning that it is left out
-        let mut degenerate: Option<&str> = None;
-        match o.get_ref() {
-            ObjectDef::Sphere {
-                center,
-                radius,
-                material,
-                ..
-            } => {
-                let c = cx.v3(&span, "sphere 'center'", *center)?;
-                cx.finite(&span, "sphere 'radius'", &[*radius])?;
-                b.sphere(c, *radius, find(material)?).map_err(lim)?;
-                degenerate = Some("sphere has 'radius' 0");
-            }
-            ObjectDef::Plane {
-                point,
-                normal,
-                material,
-                ..
-            } => {
-                let p = cx.v3(&span, "plane 'point'", *point)?;
-                let n = cx.v3(&span, "plane 'normal'", *normal)?;
-                if b.plane(p, n, find(material)?).map_err(lim)?.is_none() {
-                    return Err(cx.err(span, "plane 'normal' must not be zero"));
-                }
+        let degenerate = match o.get_ref() {
+            ObjectDef::Sphere { .. } | ObjectDef::Plane { .. } => {
+                self.sphere_or_plane(b, &span, o.get_ref())?
             }
             ObjectDef::Triangle {
                 vertices,
@@ -710,57 +746,93 @@ pub(crate) fn build(
                 material,
                 ..
             } => {
-                let v = [
-                    cx.v3(&span, "triangle 'vertices'", vertices[0])?,
-                    cx.v3(&span, "triangle 'vertices'", vertices[1])?,
-                    cx.v3(&span, "triangle 'vertices'", vertices[2])?,
-                ];
-                let n = match normals {
-                    Some(n) => {
-                        let n = [
-                            cx.v3(&span, "triangle 'normals'", n[0])?,
-                            cx.v3(&span, "triangle 'normals'", n[1])?,
-                            cx.v3(&span, "triangle 'normals'", n[2])?,
-                        ];
-                        if n.contains(&Vec3A::ZERO) {
-                            warn(
-                                &mut b,
-                                &span,
-                                "triangle has a zero vertex normal, which has no direction: the \
-                                 shading there follows the other vertices' normals"
-                                    .into(),
-                            );
-                        }
-                        Some(n.map(Vec3A::normalize_or_zero))
-                    }
-                    None => None,
-                };
-                b.triangle(v, n, find(material)?).map_err(lim)?;
-                degenerate = Some("triangle has zero area (its vertices are equal or on one line)");
+                self.triangle(b, &span, vertices, normals, material)?;
+                Some("triangle has zero area (its vertices are equal or on one line)")
             }
             ObjectDef::Polygon {
                 vertices, material, ..
             } => {
-                if vertices.len() < 3 {
-                    return Err(cx.err(
-                        span,
-                        format!("polygon needs at least 3 vertices, got {}", vertices.len()),
-                    ));
-                }
-                limits::check(
-                    "polygon vertex count",
-                    vertices.len() as u64,
-                    limits::MAX_POLYGON_VERTICES as u64,
-                    "MAX_POLYGON_VERTICES",
-                )
-                .map_err(lim)?;
-                let vs = vertices
-                    .iter()
-                    .map(|v| cx.v3(&span, "polygon 'vertices'", *v))
-                    .collect::<Result<Vec<_>, _>>()?;
-                b.polygon(&vs, find(material)?).map_err(lim)?;
-                degenerate = Some("polygon has zero area (its vertices are equal or on one line)");
+                self.polygon(b, &span, vertices, material)?;
+                Some("polygon has zero area (its vertices are equal or on one line)")
             }
+            ObjectDef::Cone { .. } | ObjectDef::Cylinder { .. } => {
+                self.cone(b, &span, o.get_ref())?
+            }
+            ObjectDef::Mesh { .. } => {
+                self.mesh(b, index, &span, o.get_ref())?;
+                None
+            }
+            ObjectDef::Include {
+                file: included,
+                lights,
+                ..
+            } => {
+                include(self.cx, self.resolve, b, &span, included, *lights)?;
+                None
+            }
+        };
+        if let Some(what) = degenerate.filter(|_| b.primitive_count() == before) {
+            (self.cx).warn(
+                &mut b.warnings,
+                &span,
+                format!("{what} and is not rendered"),
+            );
+        }
+        Ok(())
+    }
+
+    /// A sphere or a plane object; for a sphere, what it is when degenerate.
+    fn sphere_or_plane(
+        &self,
+        b: &mut SceneBuilder,
+        span: &Range<usize>,
+        o: &ObjectDef,
+    ) -> Result<Option<&'static str>, Error> {
+        let cx = self.cx;
+        let lim = |e: Error| at_object(cx, span, e);
+        match o {
+            ObjectDef::Sphere {
+                center,
+                radius,
+                material,
+                ..
+            } => {
+                let c = cx.v3(span, "sphere 'center'", *center)?;
+                cx.finite(span, "sphere 'radius'", &[*radius])?;
+                b.sphere(c, *radius, self.find(span, material)?)
+                    .map_err(lim)?;
+                Ok(Some("sphere has 'radius' 0"))
+            }
+            ObjectDef::Plane {
+                point,
+                normal,
+                material,
+                ..
+            } => {
+                let p = cx.v3(span, "plane 'point'", *point)?;
+                let n = cx.v3(span, "plane 'normal'", *normal)?;
+                if b.plane(p, n, self.find(span, material)?)
+                    .map_err(lim)?
+                    .is_none()
+                {
+                    return Err(cx.err(span.clone(), "plane 'normal' must not be zero"));
+                }
+                Ok(None)
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// A cone or a cylinder object; what it is when degenerate.
+    fn cone(
+        &self,
+        b: &mut SceneBuilder,
+        span: &Range<usize>,
+        o: &ObjectDef,
+    ) -> Result<Option<&'static str>, Error> {
+        let cx = self.cx;
+        let lim = |e: Error| at_object(cx, span, e);
+        match o {
             ObjectDef::Cone {
                 base,
                 base_radius,
@@ -769,14 +841,20 @@ pub(crate) fn build(
                 material,
                 ..
             } => {
-                let b0 = cx.v3(&span, "cone 'base'", *base)?;
-                let a0 = cx.v3(&span, "cone 'apex'", *apex)?;
-                cx.finite(&span, "cone radii", &[*base_radius, *apex_radius])?;
+                let b0 = cx.v3(span, "cone 'base'", *base)?;
+                let a0 = cx.v3(span, "cone 'apex'", *apex)?;
+                cx.finite(span, "cone radii", &[*base_radius, *apex_radius])?;
                 crate::nff::check_cone_radii(*base_radius, *apex_radius)
                     .map_err(|e| cx.err(span.clone(), format!("cone {e}")))?;
-                b.cone(b0, *base_radius, a0, *apex_radius, find(material)?)
-                    .map_err(lim)?;
-                degenerate = Some("cone has base = apex or both radii 0");
+                b.cone(
+                    b0,
+                    *base_radius,
+                    a0,
+                    *apex_radius,
+                    self.find(span, material)?,
+                )
+                .map_err(lim)?;
+                Ok(Some("cone has base = apex or both radii 0"))
             }
             ObjectDef::Cylinder {
                 base,
@@ -785,132 +863,224 @@ pub(crate) fn build(
                 material,
                 ..
             } => {
-                let b0 = cx.v3(&span, "cylinder 'base'", *base)?;
-                let a0 = cx.v3(&span, "cylinder 'apex'", *apex)?;
-                cx.finite(&span, "cylinder 'radius'", &[*radius])?;
-                b.cone(b0, *radius, a0, *radius, find(material)?)
+                let b0 = cx.v3(span, "cylinder 'base'", *base)?;
+                let a0 = cx.v3(span, "cylinder 'apex'", *apex)?;
+                cx.finite(span, "cylinder 'radius'", &[*radius])?;
+                b.cone(b0, *radius, a0, *radius, self.find(span, material)?)
                     .map_err(lim)?;
-                degenerate = Some("cylinder has base = apex or 'radius' 0");
+                Ok(Some("cylinder has base = apex or 'radius' 0"))
             }
-            ObjectDef::Mesh {
-                file: mesh_file,
-                translate,
-                scale,
-                rotate_y_degrees,
-                matrix,
-                material,
-                smooth,
-                motion,
-                ..
-            } => {
-                let xf = if let Some(m) = matrix {
-                    if translate.is_some() || scale.is_some() || rotate_y_degrees.is_some() {
-                        return Err(cx.err(
-                            span,
-                            "mesh: give either 'matrix' or 'translate'/'scale'/'rotate_y_degrees', not both",
-                        ));
-                    }
-                    matrix_transform(m).ok_or_else(|| {
-                        cx.err(
-                            span.clone(),
-                            "mesh 'matrix' must be 3x4 or 4x4 (rows) of finite numbers with last row 0 0 0 1",
-                        )
-                    })?
-                } else {
-                    let t = cx.v3(&span, "mesh 'translate'", translate.unwrap_or([0.0; 3]))?;
-                    let s = scale.map_or(Vec3A::ONE, Scalar3::vec);
-                    cx.finite(&span, "mesh 'scale'", &s.to_array())?;
-                    let r = rotate_y_degrees.unwrap_or(0.0);
-                    cx.finite(&span, "mesh 'rotate_y_degrees'", &[r])?;
-                    Affine3A::from_translation(t.into())
-                        * Affine3A::from_rotation_y(r.to_radians())
-                        * Affine3A::from_scale(s.into())
-                };
-                let placed = xf;
-                let xf = motion.map_or(xf, |m| m * xf);
-                // the inverse is what an instance keeps, so it must exist whatever the count
-                if xf.matrix3.determinant() == 0.0 || !xf.inverse().is_finite() {
-                    return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
-                }
-                let shown = snippet(mesh_file);
-                let mat = match material {
-                    Some(_) => Some(find(material)?),
-                    None => None,
-                };
-                let key = (mesh_file.as_str(), *smooth);
-                let load = |xf: Affine3A, mat: Option<u32>, b: &mut SceneBuilder| {
-                    let data = resolve(mesh_file).map_err(|e| {
-                        cx.err(span.clone(), format!("cannot load mesh '{shown}': {e}"))
-                    })?;
-                    crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, b)
-                        .map_err(|e| cx.err(span.clone(), e.to_string()))
-                };
-                if mesh_refs.get(&key).copied().unwrap_or(0) <= 1 && motion.is_none() {
-                    // referenced once: flattened, as it always was
-                    load(xf, mat, &mut b)?;
-                } else {
-                    let mesh = match shared.get(&key) {
-                        Some(&m) => m,
-                        None => {
-                            let mut mb = b.for_mesh();
-                            load(Affine3A::IDENTITY, None, &mut mb)?;
-                            let m = b
-                                .add_mesh(mb, &shown)
-                                .map_err(|e| cx.err(span.clone(), e.to_string()))?;
-                            shared.insert(key, m);
-                            m
-                        }
-                    };
-                    let instance = b.placed_instances();
-                    if !b.instance(mesh, xf, mat).map_err(lim)? {
-                        return Err(cx.err(span, "mesh transform is singular (zero scale?)"));
-                    }
-                    // (an empty mesh places no instance, and there is nothing to move)
-                    if motion.is_some() && b.placed_instances() > instance {
-                        let line = cx.line(&span);
-                        moving_meshes.insert(
-                            index,
-                            MovingMesh {
-                                instance,
-                                placed,
-                                line,
-                            },
-                        );
-                    }
-                }
-            }
-            ObjectDef::Include {
-                file: included,
-                lights,
-                ..
-            } => {
-                let shown = snippet(included);
-                let data = resolve(included)
-                    .map_err(|e| cx.err(span.clone(), format!("cannot include '{shown}': {e}")))?;
-                let format = crate::scene::Format::from_path(included);
-                if format != Ok(crate::scene::Format::Nff) {
-                    return Err(cx.err(
-                        span,
-                        format!(
-                            "cannot include '{shown}': only NFF files (.nff) are included; an \
-                             OBJ file is a \"mesh\""
-                        ),
-                    ));
-                }
-                let data = crate::files::without_bom(&data);
-                crate::nff::include(data, &shown, &mut b, *lights)?;
-            }
-        }
-        if let Some(what) = degenerate.filter(|_| b.primitive_count() == before) {
-            warn(&mut b, &span, format!("{what} and is not rendered"));
+            _ => Ok(None),
         }
     }
-    crate::warning::scene_warnings(&mut b, file);
-    Ok(Built {
-        scene: b.build(file)?,
-        materials: names,
-        moving_meshes,
-    })
+
+    /// A triangle object, its vertex normals normalised (a zero one with a warning).
+    fn triangle(
+        &self,
+        b: &mut SceneBuilder,
+        span: &Range<usize>,
+        vertices: &[V3; 3],
+        normals: &Option<[V3; 3]>,
+        material: &Option<String>,
+    ) -> Result<(), Error> {
+        let cx = self.cx;
+        let v = [
+            cx.v3(span, "triangle 'vertices'", vertices[0])?,
+            cx.v3(span, "triangle 'vertices'", vertices[1])?,
+            cx.v3(span, "triangle 'vertices'", vertices[2])?,
+        ];
+        let n = match normals {
+            Some(n) => {
+                let n = [
+                    cx.v3(span, "triangle 'normals'", n[0])?,
+                    cx.v3(span, "triangle 'normals'", n[1])?,
+                    cx.v3(span, "triangle 'normals'", n[2])?,
+                ];
+                if n.contains(&Vec3A::ZERO) {
+                    cx.warn(
+                        &mut b.warnings,
+                        span,
+                        "triangle has a zero vertex normal, which has no direction: the \
+                         shading there follows the other vertices' normals"
+                            .into(),
+                    );
+                }
+                Some(n.map(Vec3A::normalize_or_zero))
+            }
+            None => None,
+        };
+        b.triangle(v, n, self.find(span, material)?)
+            .map_err(|e| at_object(cx, span, e))
+    }
+
+    /// A polygon object: at least 3 vertices, at most [`limits::MAX_POLYGON_VERTICES`].
+    fn polygon(
+        &self,
+        b: &mut SceneBuilder,
+        span: &Range<usize>,
+        vertices: &[V3],
+        material: &Option<String>,
+    ) -> Result<(), Error> {
+        let cx = self.cx;
+        let lim = |e: Error| at_object(cx, span, e);
+        if vertices.len() < 3 {
+            return Err(cx.err(
+                span.clone(),
+                format!("polygon needs at least 3 vertices, got {}", vertices.len()),
+            ));
+        }
+        limits::check(
+            "polygon vertex count",
+            vertices.len() as u64,
+            limits::MAX_POLYGON_VERTICES as u64,
+            "MAX_POLYGON_VERTICES",
+        )
+        .map_err(lim)?;
+        let vs = vertices
+            .iter()
+            .map(|v| cx.v3(span, "polygon 'vertices'", *v))
+            .collect::<Result<Vec<_>, _>>()?;
+        b.polygon(&vs, self.find(span, material)?).map_err(lim)
+    }
+
+    /// Mesh object `index`, `mesh`: flattened into the scene when referenced once and not
+    /// moving, else an instance of the mesh read once (recorded in `moving_meshes` if it moves).
+    fn mesh(
+        &mut self,
+        b: &mut SceneBuilder,
+        index: usize,
+        span: &Range<usize>,
+        mesh: &'a ObjectDef,
+    ) -> Result<(), Error> {
+        let ObjectDef::Mesh {
+            file: mesh_file,
+            material,
+            smooth,
+            motion,
+            ..
+        } = mesh
+        else {
+            return Ok(());
+        };
+        let cx = self.cx;
+        let resolve = self.resolve;
+        let placed = mesh_transform(cx, span, mesh)?;
+        let xf = motion.map_or(placed, |m| m * placed);
+        // the inverse is what an instance keeps, so it must exist whatever the count
+        if xf.matrix3.determinant() == 0.0 || !xf.inverse().is_finite() {
+            return Err(cx.err(span.clone(), "mesh transform is singular (zero scale?)"));
+        }
+        let shown = snippet(mesh_file);
+        let mat = match material {
+            Some(_) => Some(self.find(span, material)?),
+            None => None,
+        };
+        let key = (mesh_file.as_str(), *smooth);
+        let load = |xf: Affine3A, mat: Option<u32>, b: &mut SceneBuilder| {
+            let data = resolve(mesh_file)
+                .map_err(|e| cx.err(span.clone(), format!("cannot load mesh '{shown}': {e}")))?;
+            crate::obj::load_mesh(&data, &shown, resolve, xf, mat, *smooth, b)
+                .map_err(|e| at_object(cx, span, e))
+        };
+        if self.mesh_refs.get(&key).copied().unwrap_or(0) <= 1 && motion.is_none() {
+            // referenced once: flattened, as it always was
+            load(xf, mat, b)?;
+            return Ok(());
+        }
+        let mesh = match self.shared.get(&key) {
+            Some(&m) => m,
+            None => {
+                let mut mb = b.for_mesh();
+                load(Affine3A::IDENTITY, None, &mut mb)?;
+                let m = b.add_mesh(mb, &shown).map_err(|e| at_object(cx, span, e))?;
+                self.shared.insert(key, m);
+                m
+            }
+        };
+        let instance = b.placed_instances();
+        if !b
+            .instance(mesh, xf, mat)
+            .map_err(|e| at_object(cx, span, e))?
+        {
+            return Err(cx.err(span.clone(), "mesh transform is singular (zero scale?)"));
+        }
+        // (an empty mesh places no instance, and there is nothing to move)
+        if motion.is_some() && b.placed_instances() > instance {
+            let line = cx.line(span);
+            self.moving_meshes.insert(
+                index,
+                MovingMesh {
+                    instance,
+                    placed,
+                    line,
+                },
+            );
+        }
+        Ok(())
+    }
+}
+
+/// A mesh object's transform as written (its `motion` not applied): its `matrix`, or its
+/// `translate`, `scale` and `rotate_y_degrees`.
+fn mesh_transform(cx: &Ctx, span: &Range<usize>, mesh: &ObjectDef) -> Result<Affine3A, Error> {
+    let ObjectDef::Mesh {
+        translate,
+        scale,
+        rotate_y_degrees,
+        matrix,
+        ..
+    } = mesh
+    else {
+        return Ok(Affine3A::IDENTITY);
+    };
+    if let Some(m) = matrix {
+        if translate.is_some() || scale.is_some() || rotate_y_degrees.is_some() {
+            return Err(cx.err(
+                span.clone(),
+                "mesh: give either 'matrix' or 'translate'/'scale'/'rotate_y_degrees', not both",
+            ));
+        }
+        return matrix_transform(m).ok_or_else(|| {
+            cx.err(
+                span.clone(),
+                "mesh 'matrix' must be 3x4 or 4x4 (rows) of finite numbers with last row 0 0 0 1",
+            )
+        });
+    }
+    let t = cx.v3(span, "mesh 'translate'", translate.unwrap_or([0.0; 3]))?;
+    let s = scale.map_or(Vec3A::ONE, Scalar3::vec);
+    cx.finite(span, "mesh 'scale'", &s.to_array())?;
+    let r = rotate_y_degrees.unwrap_or(0.0);
+    cx.finite(span, "mesh 'rotate_y_degrees'", &[r])?;
+    Ok(Affine3A::from_translation(t.into())
+        * Affine3A::from_rotation_y(r.to_radians())
+        * Affine3A::from_scale(s.into()))
+}
+
+/// An `include` object: the objects of an NFF file (and its lights with `lights`).
+fn include(
+    cx: &Ctx,
+    resolve: &dyn Fn(&str) -> Result<Vec<u8>, Unreadable>,
+    b: &mut SceneBuilder,
+    span: &Range<usize>,
+    included: &str,
+    lights: bool,
+) -> Result<(), Error> {
+    let shown = snippet(included);
+    let data = resolve(included)
+        .map_err(|e| cx.err(span.clone(), format!("cannot include '{shown}': {e}")))?;
+    let format = crate::scene::Format::from_path(included);
+    if format != Ok(crate::scene::Format::Nff) {
+        return Err(cx.err(
+            span.clone(),
+            format!(
+                "cannot include '{shown}': only NFF files (.nff) are included; an \
+                 OBJ file is a \"mesh\""
+            ),
+        ));
+    }
+    let data = crate::files::without_bom(&data);
+    crate::nff::include(data, &shown, b, lights)
 }
 
 /// How often each (mesh file as written, smooth flag) is referenced; [`Error::Limit`] at the
