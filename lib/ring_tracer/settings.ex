@@ -1,11 +1,10 @@
 defmodule RingTracer.Settings do
-  @moduledoc """
-  What the kernel needs to trace a pixel: image size, ray-tree depth,
-  adaptive cut-off, samples per pixel, SPD corner mode, and the region of
-  the image traced (the camera still frames the whole image, so a region
-  holds exactly the whole render's pixels there). The same settings and
-  scene give the same bytes for every pixel wherever it is traced.
-  """
+  @moduledoc false
+  # What the kernel needs to trace a pixel: image size, ray-tree depth,
+  # adaptive cut-off, samples per pixel, SPD corner mode, and the region of
+  # the image traced (the camera still frames the whole image, so a region
+  # holds exactly the whole render's pixels there). The same settings and
+  # scene give the same bytes for every pixel wherever it is traced.
 
   # The kernel's defaults (`Settings::new` in native/kernel/src/render.rs),
   # read through the NIF when this module compiles: they are written down

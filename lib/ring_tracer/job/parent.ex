@@ -1,55 +1,54 @@
 defmodule RingTracer.Job.Parent do
-  @moduledoc """
-  The parent of one render job: it starts the children, links them in a
-  ring, receives every atom's pixels, and ends the job.
-
-  The job is complete when the parent holds every atom, whole or in pieces
-  (`RingTracer.Job.Coverage`); that, not the ring's tokens, is the
-  termination test, because atoms handed over between children may still be
-  in flight when an offer returns. An atom (or a piece) that brings nothing
-  new is counted as a duplicate. On completion the parent sends each
-  child the stop message, waits until every child has stopped and reported
-  its statistics (a child kills its grandchild first), sends the result to
-  the caller and stops: no process of the job outlives it.
-
-  ## Frames
-
-  A job of several frames (`RingTracer.Layout`, "Frames") keeps at most
-  its spec's `window` of frames in flight: the first frame's atoms are the
-  children's initial atoms, and each time the oldest frame in flight
-  completes, the next frame is released (`RingTracer.Strategy.parent_frame/3`:
-  by default each child gets its strip of it, queued behind what it holds).
-  A child that runs out goes on with the next frame's atoms or helps its
-  siblings, so the ring does not drain between frames. In a `sequence`,
-  the parent sends each frame to the caller as it completes
-  (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
-  their places in the ledger: memory holds the window, whatever the
-  number of frames. With the spec's `ack`, a frame sent stays in the
-  window until the caller acknowledges it (`{:frame_ack, n}`, e.g. once it
-  is written), so that a caller slower than the ring holds the frames back
-  instead of letting them pile up in its mailbox.
-
-  If the caller dies, the job stops. If a child dies, the atoms it may have
-  held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
-  is re-linked around it; if an atom fails for good, or every child dies,
-  the job fails with the reason.
-
-  ## An elastic ring
-
-  Children can join a running job (`{:grow, from, ref, node, count}`, from
-  `RingTracer.grow/4`): the parent prepares the node if the job has not
-  used it yet (the scene shipped and pinned there), starts the children
-  with the next indices and no atoms, publishes the larger ring on every
-  node, sends each new child `{:ring, ...}` with the highest child before
-  it as its left sibling, and tells the others `{:ring_grown, ...}` (the
-  lowest child's left sibling is now the highest that joined). A new
-  child starts idle and finds work through its strategy
-  (`RingTracer.Strategy.parent_joined/3` for the parent's side); later
-  frames are cut over every child. Children leave (`{:shrink, from, ref,
-  node}`, from `RingTracer.shrink/3`) by the stop message: each reports
-  and stops, and the atoms it may have held are handed out again as a
-  dead child's are, without counting as a failure.
-  """
+  @moduledoc false
+  # The parent of one render job: it starts the children, links them in a
+  # ring, receives every atom's pixels, and ends the job.
+  #
+  # The job is complete when the parent holds every atom, whole or in pieces
+  # (`RingTracer.Job.Coverage`); that, not the ring's tokens, is the
+  # termination test, because atoms handed over between children may still be
+  # in flight when an offer returns. An atom (or a piece) that brings nothing
+  # new is counted as a duplicate. On completion the parent sends each
+  # child the stop message, waits until every child has stopped and reported
+  # its statistics (a child kills its grandchild first), sends the result to
+  # the caller and stops: no process of the job outlives it.
+  #
+  # ## Frames
+  #
+  # A job of several frames (`RingTracer.Layout`, "Frames") keeps at most
+  # its spec's `window` of frames in flight: the first frame's atoms are the
+  # children's initial atoms, and each time the oldest frame in flight
+  # completes, the next frame is released (`RingTracer.Strategy.parent_frame/3`:
+  # by default each child gets its strip of it, queued behind what it holds).
+  # A child that runs out goes on with the next frame's atoms or helps its
+  # siblings, so the ring does not drain between frames. In a `sequence`,
+  # the parent sends each frame to the caller as it completes
+  # (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
+  # their places in the ledger: memory holds the window, whatever the
+  # number of frames. With the spec's `ack`, a frame sent stays in the
+  # window until the caller acknowledges it (`{:frame_ack, n}`, e.g. once it
+  # is written), so that a caller slower than the ring holds the frames back
+  # instead of letting them pile up in its mailbox.
+  #
+  # If the caller dies, the job stops. If a child dies, the atoms it may have
+  # held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
+  # is re-linked around it; if an atom fails for good, or every child dies,
+  # the job fails with the reason.
+  #
+  # ## An elastic ring
+  #
+  # Children can join a running job (`{:grow, from, ref, node, count}`, from
+  # `RingTracer.grow/4`): the parent prepares the node if the job has not
+  # used it yet (the scene shipped and pinned there), starts the children
+  # with the next indices and no atoms, publishes the larger ring on every
+  # node, sends each new child `{:ring, ...}` with the highest child before
+  # it as its left sibling, and tells the others `{:ring_grown, ...}` (the
+  # lowest child's left sibling is now the highest that joined). A new
+  # child starts idle and finds work through its strategy
+  # (`RingTracer.Strategy.parent_joined/3` for the parent's side); later
+  # frames are cut over every child. Children leave (`{:shrink, from, ref,
+  # node}`, from `RingTracer.shrink/3`) by the stop message: each reports
+  # and stops, and the atoms it may have held are handed out again as a
+  # dead child's are, without counting as a failure.
   use GenServer, restart: :temporary
 
   alias RingTracer.Job.{Child, Coverage, Directory, Ledger, Spec}

@@ -44,7 +44,7 @@ defmodule RingTracer.Bench.Network do
   empty job against three round trips plus 10 ms, and whether every image
   was byte-identical.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   @impl RingTracer.Bench
