@@ -51,14 +51,15 @@ defmodule RingTracer.CLI.Render do
   @aliases [o: :out, q: :quiet, w: :width]
 
   @max RingTracer.Options.maxima()
+  @limits RingTracer.Settings.limits()
   @ranges [
     children: 1..@max.children,
     atoms: 1..@max.atoms,
-    width: 1..16_384,
-    height: 1..16_384,
-    depth: 1..64,
-    samples: 1..16,
-    frame: 1..1_000_000,
+    width: 1..@limits.max_side,
+    height: 1..@limits.max_side,
+    depth: 1..@limits.max_depth,
+    samples: 1..@limits.max_samples,
+    frame: 1..@limits.max_frames,
     window: 1..RingTracer.Sequence.max_window(),
     children_per_node: 1..@max.children,
     preview: 0..65_535
