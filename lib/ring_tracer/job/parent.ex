@@ -1185,75 +1185,11 @@ defmodule RingTracer.Job.Parent do
   defp finish(state) do
     %{spec: spec, stopping: stopping} = state
     now = System.monotonic_time(:microsecond)
-    # The makespan ends when the image is complete; stopping the children and
-    # collecting their reports afterwards is reported apart.
-    elapsed = (state.completed || now) - state.started
-
-    reports =
-      for i <- 0..(state.size - 1) do
-        case {state.departed, state.dead} do
-          {%{^i => report}, _} -> report
-          {_, %{^i => failure}} -> dead_report(i, failure)
-          _ -> Map.get(stopping.reports, i)
-        end
-      end
-
-    # A child that died after the image was complete, before it reported,
-    # costs its statistics, not the image.
-    reports =
-      reports
-      |> Enum.with_index()
-      |> Enum.map(fn
-        {nil, i} -> dead_report(i, %{reason: "exited before reporting its statistics"})
-        {report, _} -> report
-      end)
-
-    outcome = stopping.outcome
 
     reply =
-      case outcome do
-        :ok ->
-          pixels =
-            if spec.sequence,
-              do: nil,
-              else: assemble(spec.layout, state.frames[0].results, 0, spec.pixels)
-
-          tinted =
-            if spec.tint and not spec.sequence,
-              do: assemble(spec.layout, state.frames[0].tinted, 0, :srgb8)
-
-          traffic =
-            Enum.reduce(reports, state.traffic, fn r, acc ->
-              Map.merge(acc, r.traffic, fn _, {n1, b1}, {n2, b2} -> {n1 + n2, b1 + b2} end)
-            end)
-
-          {:ok,
-           %{
-             pixels: pixels,
-             pixel_format: spec.pixels,
-             tinted: tinted,
-             frames: Enum.reverse(state.summaries),
-             kept_trace_us: state.kept_trace_us,
-             started_at_us: state.t0,
-             elapsed_us: elapsed,
-             teardown_us: now - state.completed,
-             children: Enum.map(reports, & &1.stats),
-             atoms: kept_atoms(reports, state.traced_by, spec.layout),
-             events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
-             traffic: traffic,
-             duplicates: state.duplicates,
-             failures:
-               state.dead
-               |> Map.drop(MapSet.to_list(state.leaving))
-               |> Map.values()
-               |> Enum.sort_by(& &1.child),
-             redone: state.redone,
-             nodes: node_summary(state, reports),
-             layout: state.spec.layout.order
-           }}
-
-        {:error, message} ->
-          {:error, message}
+      case stopping.outcome do
+        :ok -> {:ok, success(state, final_reports(state), now)}
+        {:error, message} -> {:error, message}
       end
 
     stop_helpers(state.helpers)
@@ -1266,6 +1202,61 @@ defmodule RingTracer.Job.Parent do
 
     send(spec.caller, {@reply_tag, spec.id, reply})
     {:stop, :normal, state}
+  end
+
+  # Every child's report, by index: as it stopped, as it left, or as it
+  # died. A child that died after the image was complete, before it
+  # reported, costs its statistics, not the image.
+  defp final_reports(state) do
+    for i <- 0..(state.size - 1) do
+      case {state.departed, state.dead, state.stopping.reports} do
+        {%{^i => report}, _, _} -> report
+        {_, %{^i => failure}, _} -> dead_report(i, failure)
+        {_, _, %{^i => report}} -> report
+        _ -> dead_report(i, %{reason: "exited before reporting its statistics"})
+      end
+    end
+  end
+
+  # The reply of a job that completed (`t:reply/0`).
+  defp success(state, reports, now) do
+    %{spec: spec} = state
+    first = state.frames[0]
+
+    traffic =
+      Enum.reduce(reports, state.traffic, fn r, acc ->
+        Map.merge(acc, r.traffic, fn _, {n1, b1}, {n2, b2} -> {n1 + n2, b1 + b2} end)
+      end)
+
+    %{
+      pixels:
+        if(spec.sequence, do: nil, else: assemble(spec.layout, first.results, 0, spec.pixels)),
+      pixel_format: spec.pixels,
+      tinted:
+        if(spec.tint and not spec.sequence,
+          do: assemble(spec.layout, first.tinted, 0, :srgb8)
+        ),
+      frames: Enum.reverse(state.summaries),
+      kept_trace_us: state.kept_trace_us,
+      started_at_us: state.t0,
+      # The makespan ends when the image is complete; stopping the children
+      # and collecting their reports afterwards is reported apart.
+      elapsed_us: state.completed - state.started,
+      teardown_us: now - state.completed,
+      children: Enum.map(reports, & &1.stats),
+      atoms: kept_atoms(reports, state.traced_by, spec.layout),
+      events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
+      traffic: traffic,
+      duplicates: state.duplicates,
+      failures:
+        state.dead
+        |> Map.drop(MapSet.to_list(state.leaving))
+        |> Map.values()
+        |> Enum.sort_by(& &1.child),
+      redone: state.redone,
+      nodes: node_summary(state, reports),
+      layout: spec.layout.order
+    }
   end
 
   defp stop_helpers(helpers) do
