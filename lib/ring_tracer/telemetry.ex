@@ -7,7 +7,9 @@ defmodule RingTracer.Telemetry do
   Events, emitted on the node of the job's parent, in the parent:
 
     * `[:ring_tracer, :job, :start]` — measurements `%{system_time: native}`,
-      metadata `%{job: id, children: n, atoms: total, strategy: module}`
+      metadata `%{job: id, children: n, atoms: total, strategy: module,
+      description: map}` (the description holds the job's layout, strategy,
+      nodes and speeds, and its start time: what a live preview draws)
     * `[:ring_tracer, :atom, :stop]` — an atom's pixels reached the parent:
       measurements `%{rays: n, trace_us: us}` (rays of every kind), metadata
       `%{job: id, atom: a, child: index, node: the child's node, done:

@@ -289,6 +289,25 @@ defmodule RingTracer.Job.Parent do
   @spec describe(pid(), pid() | nil) :: {:ok, map()} | {:error, :other_job}
   def describe(parent, progress \\ nil), do: GenServer.call(parent, {:describe, progress})
 
+  # What `describe/2` answers, and the job's start event carries (so that a
+  # preview that runs after the job has ended still knows it).
+  defp description(state) do
+    n = state.spec.layout.children
+    speeds = List.to_tuple(state.spec.speeds)
+
+    %{
+      id: state.spec.id,
+      t0: state.t0,
+      layout: state.spec.layout,
+      strategy: state.spec.strategy,
+      nodes: placement(state.spec.nodes, n),
+      speeds: for(i <- 0..(n - 1), do: Spec.speed(speeds, i)),
+      results: oldest_results(state),
+      format: state.spec.pixels,
+      traced_by: state.traced_by
+    }
+  end
+
   @impl GenServer
   def init(%Spec{} = spec) do
     Process.monitor(spec.caller)
@@ -324,7 +343,8 @@ defmodule RingTracer.Job.Parent do
         job: state.spec.id,
         children: state.spec.layout.children,
         atoms: state.missing,
-        strategy: state.strategy
+        strategy: state.strategy,
+        description: description(state)
       }
     )
 
@@ -412,26 +432,9 @@ defmodule RingTracer.Job.Parent do
 
   @impl GenServer
   def handle_call({:describe, progress}, _from, state) do
-    if progress == nil or progress == state.spec.progress do
-      n = state.spec.layout.children
-      speeds = List.to_tuple(state.spec.speeds)
-
-      {:reply,
-       {:ok,
-        %{
-          id: state.spec.id,
-          t0: state.t0,
-          layout: state.spec.layout,
-          strategy: state.spec.strategy,
-          nodes: placement(state.spec.nodes, n),
-          speeds: for(i <- 0..(n - 1), do: Spec.speed(speeds, i)),
-          results: oldest_results(state),
-          format: state.spec.pixels,
-          traced_by: state.traced_by
-        }}, state}
-    else
-      {:reply, {:error, :other_job}, state}
-    end
+    if progress == nil or progress == state.spec.progress,
+      do: {:reply, {:ok, description(state)}, state},
+      else: {:reply, {:error, :other_job}, state}
   end
 
   @impl GenServer

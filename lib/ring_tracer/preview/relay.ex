@@ -30,6 +30,12 @@ defmodule RingTracer.Preview.Relay do
   @doc false
   # Also raises the flag that ends the preview's pacing at once (its
   # message may queue behind atoms).
+  # Run by the job's parent: its description, in case the server runs only
+  # after the parent has ended.
+  def job_start(_event, _m, md, server),
+    do: send(server, {:job_start, self(), md.job, md.description})
+
+  @doc false
   def job_stop(_event, _m, md, {server, ended}) do
     :atomics.put(ended, 1, 1)
     send(server, {:job_stop, md.job, md.reply})

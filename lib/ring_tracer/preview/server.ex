@@ -35,6 +35,60 @@ defmodule RingTracer.Preview.Server do
   @sweep_ms 100
   @max_connections 1024
 
+  @enforce_keys [:table, :server, :port, :addr, :token, :log, :max_viewers, :ended, :cpu_share]
+  defstruct @enforce_keys ++
+              [
+                owner: nil,
+                last_atom: nil,
+                last_image: nil,
+                parent: nil,
+                handlers: [],
+                waiters: MapSet.new(),
+                viewers: %{},
+                expect: nil,
+                pending: [],
+                queue: :queue.new(),
+                pacing: nil,
+                drain: nil,
+                waiting: %{}
+              ]
+
+  @typedoc """
+  The preview's state: its event table and HTTP server (address, port,
+  token), the job's log, who owns the preview (it stops with them), the
+  job's last atom and image seen, the job's parent and the telemetry
+  handlers attached for it, viewers waiting for more and those streaming
+  (at most `max_viewers`), the job expected (`expect`) and the events that
+  came before it was known (`pending`), the queue of atoms waiting for
+  their share of CPU (`cpu_share`) and its pacing timer, a stop's drain,
+  the connections without a stream yet (`waiting`), and `ended`, an
+  atomics the request processes read.
+  """
+  @type t :: %__MODULE__{
+          table: :ets.tid(),
+          server: Listener.t(),
+          port: :inet.port_number(),
+          addr: :inet.ip_address(),
+          token: String.t(),
+          log: Log.t(),
+          owner: pid() | nil,
+          last_atom: term(),
+          last_image: term(),
+          parent: pid() | nil,
+          handlers: [term()],
+          waiters: MapSet.t(pid()),
+          viewers: %{pid() => term()},
+          max_viewers: pos_integer(),
+          expect: term(),
+          ended: :atomics.atomics_ref(),
+          cpu_share: float(),
+          pending: [term()],
+          queue: :queue.queue(),
+          pacing: reference() | nil,
+          drain: term(),
+          waiting: %{pid() => term()}
+        }
+
   @doc false
   @spec start(keyword()) :: GenServer.on_start()
   def start(opts), do: GenServer.start(__MODULE__, opts)
@@ -68,28 +122,16 @@ defmodule RingTracer.Preview.Server do
 
     case Listener.start(RingTracer.Preview.HTTP, {self(), table, secret}, listen) do
       {:ok, server} ->
-        state = %{
+        state = %__MODULE__{
           table: table,
           server: server,
           port: server.port,
           addr: addr,
           token: token,
           log: Log.new(Keyword.take(opts, [:max_events, :strip])),
-          last_atom: nil,
-          last_image: nil,
-          parent: nil,
-          handlers: [],
-          waiters: MapSet.new(),
-          viewers: %{},
           max_viewers: max_viewers,
-          expect: nil,
           ended: :atomics.new(1, []),
-          cpu_share: Keyword.get(opts, :cpu_share, 0.01),
-          pending: [],
-          queue: :queue.new(),
-          pacing: nil,
-          drain: nil,
-          waiting: %{}
+          cpu_share: Keyword.get(opts, :cpu_share, 0.01)
         }
 
         Process.send_after(self(), :sweep, @sweep_ms)
@@ -171,7 +213,14 @@ defmodule RingTracer.Preview.Server do
     end
   end
 
+  # The expected job's start, from its parent: the same description, which
+  # the render's caller may have failed to get if the job had already ended.
   @impl GenServer
+  def handle_info({:job_start, parent, job, info}, %{parent: nil, expect: job} = state),
+    do: {:noreply, state |> watched(parent, {:ok, info}) |> elem(1)}
+
+  def handle_info({:job_start, _parent, _job, _info}, state), do: {:noreply, state}
+
   def handle_info({kind, job, a, _, _, _, _, _} = msg, %{log: %{job: nil}, expect: job} = state)
       when kind == :atom,
       do: {:noreply, %{state | pending: [msg | state.pending], last_atom: a}}
@@ -231,7 +280,7 @@ defmodule RingTracer.Preview.Server do
 
   def handle_info({:owner, pid}, state) do
     Process.monitor(pid)
-    {:noreply, Map.put(state, :owner, pid)}
+    {:noreply, %{state | owner: pid}}
   end
 
   def handle_info({:DOWN, _, :process, pid, _}, %{owner: pid} = state),
@@ -419,6 +468,7 @@ defmodule RingTracer.Preview.Server do
     parent =
       if state.handlers == [] do
         [
+          {[:ring_tracer, :job, :start], &RingTracer.Preview.Relay.job_start/4, me},
           {[:ring_tracer, :atom, :stop], &RingTracer.Preview.Relay.atom/4, me},
           {[:ring_tracer, :atoms, :moved], &RingTracer.Preview.Relay.moved/4, me},
           {[:ring_tracer, :frame, :start], &RingTracer.Preview.Relay.frame_start/4, me},

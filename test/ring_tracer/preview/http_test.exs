@@ -332,6 +332,35 @@ defmodule RingTracer.Preview.HTTPTest do
     assert Enum.map(resumed, &elem(&1, 1)) == ["final", "end"]
   end
 
+  test "a job its caller could not describe (it had ended) is known from its start event",
+       %{preview: p} do
+    # The render's caller describes the parent right after starting it; on a
+    # loaded machine the job may be over by then. The parent's start event
+    # carries the same description.
+    id = make_ref()
+    :ok = GenServer.call(p.pid, {:expect, id, []})
+    parent = spawn(fn -> receive(do: (:stop -> :ok)) end)
+
+    info = %{
+      id: id,
+      t0: System.system_time(:microsecond),
+      layout: RingTracer.Layout.new(8, 2, 2, 2),
+      strategy: {RingTracer.Strategy.Ring, []},
+      nodes: [node(), node()],
+      speeds: [1, 1],
+      results: %{},
+      format: :float,
+      traced_by: %{}
+    }
+
+    GenServer.cast(p.pid, {:described, parent, {:error, {:job_not_running, :noproc}}})
+    send(p.pid, {:job_start, parent, id, info})
+    send(parent, :stop)
+
+    names = p.url |> frames() |> Enum.map(&elem(&1, 1))
+    assert hd(names) == "job" and List.last(names) == "end"
+  end
+
   test "a job that ends before the preview's server runs is on the page whole", %{preview: p} do
     # The server runs at low priority, after the job's processes: a short
     # job can end, and its parent exit, before the server gets to it. Here
