@@ -477,6 +477,7 @@ defmodule RingTracer.Job.Child do
       spec: spec,
       index: index,
       parent: parent,
+      t0: spec.t0 || System.system_time(:microsecond),
       strategy: strategy,
       strategy_state: strategy.init(options),
       queue: Queue.new(queue),
@@ -498,7 +499,10 @@ defmodule RingTracer.Job.Child do
 
     case kernel.prepare(state.spec, opts) do
       {:ok, context} ->
-        {:noreply, %{state | kernel: {kernel, context}}}
+        # Its strip's atoms go to the grandchild at once, before the ring
+        # reaches it: a child needs its siblings only once it runs out.
+        state = %{state | kernel: {kernel, context}} |> spawn_grandchild() |> fill_pipe()
+        {:noreply, state}
 
       {:error, message} ->
         send(state.parent, {:child_failed, state.index, message})
@@ -633,10 +637,8 @@ defmodule RingTracer.Job.Child do
         | left: ring.left,
           left_index: ring.left_index,
           ring_size: ring.size,
-          t0: ring.t0,
           status: :working
       }
-      |> spawn_grandchild()
       |> fill_pipe()
       |> maybe_idle()
 

@@ -317,11 +317,16 @@ defmodule RingTracer.Job.Parent do
     if spec.ack or spec.announce,
       do: send(spec.progress || spec.caller, {@reply_tag, spec.id, {:parent, self()}})
 
+    # The job's clock starts here; its children read it from the spec, as
+    # they may trace before the ring reaches them.
+    t0 = System.system_time(:microsecond)
+    spec = %{spec | t0: t0}
+
     state = %__MODULE__{
       spec: spec,
       strategy: strategy,
       started: System.monotonic_time(:microsecond),
-      t0: System.system_time(:microsecond),
+      t0: t0,
       missing: Layout.atom_count(spec.layout),
       ledger: Ledger.new(spec.layout, spec.strategy),
       numbers:

@@ -39,6 +39,7 @@ defmodule RingTracer.Job.Spec do
     announce: false,
     pixels: :float,
     tint: false,
+    t0: nil,
     liveness: RingTracer.Cluster.Liveness.default_timeout()
   ]
 
@@ -60,6 +61,7 @@ defmodule RingTracer.Job.Spec do
           announce: boolean(),
           pixels: RingTracer.Pixels.format(),
           tint: boolean(),
+          t0: integer() | nil,
           liveness: pos_integer()
         }
 
