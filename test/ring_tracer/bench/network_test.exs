@@ -60,11 +60,31 @@ defmodule RingTracer.Bench.NetworkTest do
 
         assert r.pixels == reference, "#{strategy}: the image differs from a local render"
         assert Enum.sort(r.nodes) == Enum.sort(lab.workers)
-        # The pixels crossed the parent's link.
+        # The pixels crossed the parent's link, as each atom's compressed floats.
         parent = lab.parent.name
-        assert after_[parent].recv_oct - before[parent].recv_oct >= byte_size(reference)
-        assert after_[parent].link_tx - before[parent].link_tx >= byte_size(reference)
+        assert after_[parent].recv_oct - before[parent].recv_oct >= wire_bytes(reference)
+        assert after_[parent].link_tx - before[parent].link_tx >= wire_bytes(reference)
       end
+
+      # A PNG job's pixels travel as compressed 8-bit sRGB: at most 3.5
+      # bytes a pixel come in on the parent's link, headers included.
+      before = Lab.counters(lab)
+
+      png_job = [
+        nodes: lab.workers,
+        local: false,
+        children_per_node: 2,
+        atoms: 4,
+        width: 96,
+        height: 72,
+        pixels: :srgb8
+      ]
+
+      {:ok, r} = Lab.call(lab.parent, Remote, :render, [scene, png_job, 2, true])
+      after_ = Lab.counters(lab)
+      assert r.pixels == RingTracer.Image.srgb8(reference)
+      parent = lab.parent.name
+      assert (after_[parent].link_tx - before[parent].link_tx) / (96 * 72) <= 3.5
 
       # The rate changes on both ends of every link.
       lab = Lab.set_rate(lab, "1gbit")
@@ -82,6 +102,22 @@ defmodule RingTracer.Bench.NetworkTest do
       {listed, 0} = System.cmd("ip", ["netns", "list"])
       for ns <- namespaces, do: refute(listed =~ ns)
     end)
+  end
+
+  # The bytes of the job's atoms (4 children x 4 atoms) as they travel:
+  # each one's pixels, encoded.
+  defp wire_bytes(reference) do
+    layout = RingTracer.Layout.new(96, 72, 4, 4)
+
+    layout
+    |> RingTracer.Layout.atoms()
+    |> Enum.map(fn a ->
+      {first, count} = RingTracer.Layout.span(layout, a)
+      slice = RingTracer.Pixels.slice(reference, :float, first, count)
+      {:ok, wire} = RingTracer.Pixels.encode(slice, :float)
+      byte_size(wire)
+    end)
+    |> Enum.sum()
   end
 
   test "a lab whose work fails is removed all the same" do
