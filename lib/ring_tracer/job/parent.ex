@@ -1093,7 +1093,7 @@ defmodule RingTracer.Job.Parent do
   end
 
   defp dead_report(i, failure) do
-    stats = i |> Child.new_stats(nil, 1, 0) |> Map.put(:failed, failure.reason)
+    stats = %{RingTracer.Job.Stats.new(i, nil, 1, 0) | failed: failure.reason}
     %{stats: stats, traffic: %{}, events: [], atoms: []}
   end
 

@@ -27,9 +27,9 @@ defmodule RingTracer.Strategy.Ring.Aim do
   # `at_us` of when a sibling will have traced everything it holds (`end_us`)
   # and how many atoms it had queued. A child's own: its queued atoms times its
   # mean time per atom, plus what its atom in flight should still take. Offers
-  # carry the #{@loads_max} latest-ending loads their children know of, and so do
+  # carry the 3 (`@loads_max`) latest-ending loads their children know of, and so do
   # hand-overs (the giver's own load, just lowered, first among them); every
-  # child an offer or a hand-over reaches adds its own and keeps the #{@known_max}
+  # child an offer or a hand-over reaches adds its own and keeps the 8 (`@known_max`)
   # latest-ending ones, the newest report per sibling. A report ages: by the
   # time per atom it implies, the sibling has started atoms since, and one
   # that should have no atom queued any more is not aimed at.

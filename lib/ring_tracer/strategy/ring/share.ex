@@ -9,7 +9,7 @@ defmodule RingTracer.Strategy.Ring.Share do
   # its own. Atoms differ in cost, though (on the SPD `balls` scene by 6x from
   # the sky to the reflective spheres), so a slow child that happened to trace
   # cheap atoms passes for a fast one. We compare speeds measured as kernel work
-  # units per busy microsecond (`RingTracer.Job.Child.rate/1`): work units cost
+  # units per busy microsecond (`RingTracer.Job.Stats.rate/1`): work units cost
   # the same on every machine, and time is what a machine spends on them.
   #
   # ## The plan
