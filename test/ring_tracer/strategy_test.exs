@@ -193,11 +193,13 @@ defmodule RingTracer.StrategyTest do
 
   test "a strategy's options are its own to check; the ring's moved from render/2's" do
     for {opts, message} <- [
-          {[split: true], "option :split is the ring's own: give it with the strategy, " <>
+          {[split: true],
+           "option :split is the ring's own: give it with the strategy, " <>
              "strategy: {:ring, [split: true]}"},
           {[hold_after: 2], "strategy: {:ring, [hold_after: 2]}"},
           {[aim: false], "strategy: {:ring, [aim: false]}"},
-          {[strategy: {:ring, hold_after: 0}], "the ring's :hold_after must be a positive integer"},
+          {[strategy: {:ring, hold_after: 0}],
+           "the ring's :hold_after must be a positive integer"},
           {[strategy: {:ring, aim: :yes}], "the ring's :aim must be a boolean"},
           {[strategy: {:ring, hold: 2}], "the ring has no option :hold"},
           {[strategy: {:steal, split: true}], "strategy :steal takes no options"},

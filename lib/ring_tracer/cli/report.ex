@@ -41,7 +41,12 @@ defmodule RingTracer.CLI.Report do
 
   # "own 4, given 1": each count of `keys` in `stats`, named without `prefix`.
   defp counts(stats, keys, prefix),
-    do: Enum.map_join(keys, ", ", &"#{String.replace_prefix(to_string(&1), prefix, "")} #{Map.get(stats, &1)}")
+    do:
+      Enum.map_join(
+        keys,
+        ", ",
+        &"#{String.replace_prefix(to_string(&1), prefix, "")} #{Map.get(stats, &1)}"
+      )
 
   @doc "A line for each report file of `opts` (`--stats`, `--timeline`, `--ownership`)."
   @spec reports_written(keyword()) :: iodata()

@@ -65,7 +65,13 @@ defmodule RingTracer.Job.Stats do
   """
   @spec new(non_neg_integer(), node() | nil, number(), non_neg_integer()) :: t()
   def new(index, node, speed, own),
-    do: %__MODULE__{index: index, node: node, speed: speed, own: own, rays: RingTracer.Kernel.no_rays()}
+    do: %__MODULE__{
+      index: index,
+      node: node,
+      speed: speed,
+      own: own,
+      rays: RingTracer.Kernel.no_rays()
+    }
 
   @doc """
   The statistics a table shows, one column each, in order: every field but

@@ -109,8 +109,7 @@ defmodule RingTracer.Report.Stats do
   def csv(%Result{children: children}) do
     children = children || []
 
-    ray_keys =
-      children |> Enum.flat_map(&Map.keys(rays(&1))) |> Enum.uniq() |> Enum.sort()
+    ray_keys = children |> Enum.flat_map(&Map.keys(rays(&1))) |> Enum.uniq() |> Enum.sort()
 
     header = Enum.map(@child_columns, &Atom.to_string/1) ++ Enum.map(ray_keys, &"rays_#{&1}")
 

@@ -44,7 +44,9 @@ defmodule RingTracer.Strategy.Ring.Options do
 
         if check.(value),
           do: {:cont, {:ok, acc ++ [{key, value}]}},
-          else: {:halt, {:error, "the ring's #{inspect(key)} must be #{what}, got: #{inspect(value)}"}}
+          else:
+            {:halt,
+             {:error, "the ring's #{inspect(key)} must be #{what}, got: #{inspect(value)}"}}
       end)
       |> one_image(layout)
     end
@@ -53,7 +55,8 @@ defmodule RingTracer.Strategy.Ring.Options do
   # Each option: its check, what the check asks for, its default.
   defp schema(layout) do
     [
-      hold_after: {&(is_integer(&1) and &1 > 0), "a positive integer", HelpOffer.default_hold_after()},
+      hold_after:
+        {&(is_integer(&1) and &1 > 0), "a positive integer", HelpOffer.default_hold_after()},
       aim: {&is_boolean/1, "a boolean", layout.order == :strips and layout.frames == 1},
       split: {&is_boolean/1, "a boolean", false},
       part_us: {&non_neg?/1, "a non-negative number", 2_000},
@@ -66,8 +69,11 @@ defmodule RingTracer.Strategy.Ring.Options do
 
   defp known(options, keys) do
     case Keyword.keys(options) -- keys do
-      [] -> :ok
-      [key | _] -> {:error, "the ring has no option #{inspect(key)}; its options: #{inspect(keys)}"}
+      [] ->
+        :ok
+
+      [key | _] ->
+        {:error, "the ring has no option #{inspect(key)}; its options: #{inspect(keys)}"}
     end
   end
 
