@@ -110,8 +110,20 @@ defmodule RingTracer.Options do
          )}
 
       true ->
-        {:ok, opts}
+        early_strategy(opts)
     end
+  end
+
+  # The strategy's own options (`RingTracer.Strategy.options/2`), checked
+  # before any work on a layout of the job's shape, of one frame and of one
+  # row per atom (its image is not known yet): the job checks them again on
+  # its own layout, which only a sequence's frames change.
+  defp early_strategy(opts) do
+    n = opts[:children]
+    k = opts[:atoms]
+    layout = RingTracer.Layout.new(n * k, 1, n, k, opts[:layout])
+
+    with {:ok, _} <- RingTracer.Strategies.resolve(opts[:strategy], layout), do: {:ok, opts}
   end
 
   # Nodes: the local node first unless `local: false`, then the others; with
