@@ -47,10 +47,12 @@ defmodule RingTracer do
       a name with its options (`{:ring, split: true}`), or a strategy of
       your own as `{module, options}` (see `RingTracer.Strategy`). The
       ring's options: `:hold_after` — hops an offer walks before it may
-      wait at a child about to run out (default 16); `:aim` — whether an
+      wait at a child about to run out (default
+      #{RingTracer.Strategy.Ring.HelpOffer.default_hold_after()}); `:aim` — whether an
       idle child sends its offer straight to the sibling it expects to stay
       busy longest rather than to its left sibling (default: on strips of
-      one image yes, otherwise no; a sequence refuses it); `:split` —
+      one image yes, otherwise no; a sequence of several frames refuses
+      `aim: true`); `:split` —
       adaptive atoms, cut into pieces near the end of a job (default false:
       they do not yet pay for their messages on this machine). The image is
       the same whatever the strategy

@@ -378,15 +378,4 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
   @spec hop(t(), non_neg_integer(), non_neg_integer()) :: t()
   def hop(%__MODULE__{} = offer, from, to),
     do: %{offer | wrapped: offer.wrapped or to > from, hops: offer.hops + 1}
-
-  @doc """
-  Splits the queued atoms into the ones kept and the `g` given away (the last
-  ones of the queue, farthest from being traced).
-
-      iex> RingTracer.Strategy.Ring.HelpOffer.split_queue([1, 2, 3, 4, 5], 2)
-      {[1, 2, 3], [4, 5]}
-  """
-  @spec split_queue([non_neg_integer()], non_neg_integer()) ::
-          {[non_neg_integer()], [non_neg_integer()]}
-  def split_queue(queue, g), do: Enum.split(queue, length(queue) - g)
 end
