@@ -1,17 +1,16 @@
 defmodule RingTracer.CLI do
-  @moduledoc """
-  The command line, booted straight from `erl` by the launcher
-  (`bin/ringtracer`), without Mix:
-
-      erl -noshell +Bi -pa ... -s Elixir.RingTracer.CLI main -extra render scene.nff -o a.png
-
-  Commands: `render` (`RingTracer.CLI.Render`), `worker`
-  (`RingTracer.CLI.Worker`), `serve`, `cookie`, and a farm's: `farm`
-  (`RingTracer.CLI.Farm.Head`), `submit` (`RingTracer.CLI.Farm.Submit`),
-  `jobs`, `status`, `wait`, `cancel`, `fetch` (`RingTracer.CLI.Farm.Jobs`).
-  `--help`/`-h` works on each. Exit status: 0 ok,
-  1 a failure, 2 a usage error, 130/143 interrupted.
-  """
+  @moduledoc false
+  # The command line, booted straight from `erl` by the launcher
+  # (`bin/ringtracer`), without Mix:
+  #
+  #     erl -noshell +Bi -pa ... -s Elixir.RingTracer.CLI main -extra render scene.nff -o a.png
+  #
+  # Commands: `render` (`RingTracer.CLI.Render`), `worker`
+  # (`RingTracer.CLI.Worker`), `serve`, `cookie`, and a farm's: `farm`
+  # (`RingTracer.CLI.Farm.Head`), `submit` (`RingTracer.CLI.Farm.Submit`),
+  # `jobs`, `status`, `wait`, `cancel`, `fetch` (`RingTracer.CLI.Farm.Jobs`).
+  # `--help`/`-h` works on each. Exit status: 0 ok,
+  # 1 a failure, 2 a usage error, 130/143 interrupted.
 
   alias RingTracer.CLI.{Args, Console, Paths}
 

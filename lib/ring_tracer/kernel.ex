@@ -1,14 +1,13 @@
 defmodule RingTracer.Kernel do
-  @moduledoc """
-  What a grandchild calls to trace an atom. Two implementations share the
-  same parent, children and strategies:
-
-    * `RingTracer.Kernel.Native` — the Rust ray tracer, through the NIF;
-    * `RingTracer.Kernel.Simulated` — a cost model that sleeps for each atom's
-      cost instead of tracing, so that hundreds of children fit on one machine.
-
-  A job's spec names the kernel as `{module, options}`.
-  """
+  @moduledoc false
+  # What a grandchild calls to trace an atom. Two implementations share the
+  # same parent, children and strategies:
+  #
+  #   * `RingTracer.Kernel.Native` — the Rust ray tracer, through the NIF;
+  #   * `RingTracer.Kernel.Simulated` — a cost model that sleeps for each atom's
+  #     cost instead of tracing, so that hundreds of children fit on one machine.
+  #
+  # A job's spec names the kernel as `{module, options}`.
 
   alias RingTracer.Job.Spec
 

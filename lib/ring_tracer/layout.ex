@@ -1,71 +1,43 @@
 defmodule RingTracer.Layout do
-  @moduledoc """
-  How an image is cut into strips and atoms.
-
-  The image's pixels are numbered row-major from the top-left, `0..w*h-1`.
-  With `n` children and `k` atoms per child there are `m = n * k` atoms; atom
-  `a` covers pixels `div(a * p, m)` up to (not including) `div((a + 1) * p, m)`
-  where `p = w * h`, so atoms tile the image exactly once for every size, and
-  concatenating atom results in atom order gives the image. When `p < m` some
-  atoms are empty (zero pixels); they are still traced (instantly) and counted.
-
-  Which atoms a child owns at the start (its strip) is the layout's `order`:
-
-    * `:strips` (the paper, the default): child `i`'s strip is atoms
-      `i*k .. i*k + k - 1`, one contiguous band of the image;
-    * `:interleaved`: child `i` owns atoms `i, i + n, i + 2n, ...`, bands
-      spread over the whole image, so every child's share costs about the
-      same whatever the scene (the sky, the floor and the busy middle).
-
-  The atoms themselves, and so the image, are the same either way.
-
-  ## Frames
-
-  A job of an animation traces several frames through one ring
-  (`with_frames/2`). Every frame is cut alike, and the atoms are numbered
-  on: atom `a` of frame `f` is `f * m + a`, so that atom numbers, pieces and
-  everything that handles them work across frames unchanged. `span/2` is
-  the pixels of an atom within its frame, `frame/2` the frame it is in, and
-  `strip/3` a child's strip in a given frame.
-
-      iex> layout = RingTracer.Layout.new(10, 1, 2, 2) |> RingTracer.Layout.with_frames(3)
-      iex> {RingTracer.Layout.atom_count(layout), RingTracer.Layout.frame_atom_count(layout)}
-      {12, 4}
-      iex> RingTracer.Layout.strip(layout, 1, 2)
-      [10, 11]
-      iex> {RingTracer.Layout.frame(layout, 10), RingTracer.Layout.span(layout, 10), RingTracer.Layout.owner(layout, 10)}
-      {2, {5, 2}, 1}
-      iex> RingTracer.Layout.frame_atoms(layout, 1)
-      4..7
-
-  ## Pieces
-
-  An atom can be split at run time (`split/3`): a piece `{a, lo, hi, d}` is
-  parts `lo` up to (not including) `hi` of atom `a` cut into `d` parts, part
-  `j` starting at pixel `first + div(j * count, d)` of the atom's span. A
-  whole atom is its plain index (`{a, 0, 1, 1}` is written `a`). Cutting a
-  piece again refines the same grid, so pieces of one atom always tile it,
-  and a pixel's value does not depend on the span it is traced in
-  (`RingTracer.Kernel`): an image of pieces is the image of atoms, byte for
-  byte.
-
-      iex> layout = RingTracer.Layout.new(10, 1, 1, 1)
-      iex> {head, tail} = RingTracer.Layout.split(0, 3, 4)
-      iex> {head, tail}
-      {{0, 0, 3, 4}, {0, 3, 4, 4}}
-      iex> {RingTracer.Layout.span(layout, head), RingTracer.Layout.span(layout, tail)}
-      {{0, 7}, {7, 3}}
-      iex> RingTracer.Layout.split(tail, 1, 2)
-      {{0, 6, 7, 8}, {0, 7, 8, 8}}
-
-      iex> layout = RingTracer.Layout.new(10, 1, 2, 2)
-      iex> Enum.map(RingTracer.Layout.atoms(layout), &RingTracer.Layout.span(layout, &1))
-      [{0, 2}, {2, 3}, {5, 2}, {7, 3}]
-      iex> RingTracer.Layout.strip(layout, 1)
-      [2, 3]
-      iex> RingTracer.Layout.strip(RingTracer.Layout.new(10, 1, 2, 2, :interleaved), 1)
-      [1, 3]
-  """
+  @moduledoc false
+  # How an image is cut into strips and atoms.
+  #
+  # The image's pixels are numbered row-major from the top-left, `0..w*h-1`.
+  # With `n` children and `k` atoms per child there are `m = n * k` atoms; atom
+  # `a` covers pixels `div(a * p, m)` up to (not including) `div((a + 1) * p, m)`
+  # where `p = w * h`, so atoms tile the image exactly once for every size, and
+  # concatenating atom results in atom order gives the image. When `p < m` some
+  # atoms are empty (zero pixels); they are still traced (instantly) and counted.
+  #
+  # Which atoms a child owns at the start (its strip) is the layout's `order`:
+  #
+  #   * `:strips` (the paper, the default): child `i`'s strip is atoms
+  #     `i*k .. i*k + k - 1`, one contiguous band of the image;
+  #   * `:interleaved`: child `i` owns atoms `i, i + n, i + 2n, ...`, bands
+  #     spread over the whole image, so every child's share costs about the
+  #     same whatever the scene (the sky, the floor and the busy middle).
+  #
+  # The atoms themselves, and so the image, are the same either way.
+  #
+  # ## Frames
+  #
+  # A job of an animation traces several frames through one ring
+  # (`with_frames/2`). Every frame is cut alike, and the atoms are numbered
+  # on: atom `a` of frame `f` is `f * m + a`, so that atom numbers, pieces and
+  # everything that handles them work across frames unchanged. `span/2` is
+  # the pixels of an atom within its frame, `frame/2` the frame it is in, and
+  # `strip/3` a child's strip in a given frame.
+  #
+  # ## Pieces
+  #
+  # An atom can be split at run time (`split/3`): a piece `{a, lo, hi, d}` is
+  # parts `lo` up to (not including) `hi` of atom `a` cut into `d` parts, part
+  # `j` starting at pixel `first + div(j * count, d)` of the atom's span. A
+  # whole atom is its plain index (`{a, 0, 1, 1}` is written `a`). Cutting a
+  # piece again refines the same grid, so pieces of one atom always tile it,
+  # and a pixel's value does not depend on the span it is traced in
+  # (`RingTracer.Kernel`): an image of pieces is the image of atoms, byte for
+  # byte.
 
   @enforce_keys [:width, :height, :children, :atoms_per_child]
   defstruct [:width, :height, :children, :atoms_per_child, order: :strips, frames: 1]
@@ -112,7 +84,19 @@ defmodule RingTracer.Layout do
     }
   end
 
-  @doc "The same layout for a job of `frames` frames (see \"Frames\")."
+  @doc """
+  The same layout for a job of `frames` frames (see "Frames").
+
+      iex> layout = RingTracer.Layout.new(10, 1, 2, 2) |> RingTracer.Layout.with_frames(3)
+      iex> {RingTracer.Layout.atom_count(layout), RingTracer.Layout.frame_atom_count(layout)}
+      {12, 4}
+      iex> RingTracer.Layout.strip(layout, 1, 2)
+      [10, 11]
+      iex> {RingTracer.Layout.frame(layout, 10), RingTracer.Layout.span(layout, 10), RingTracer.Layout.owner(layout, 10)}
+      {2, {5, 2}, 1}
+      iex> RingTracer.Layout.frame_atoms(layout, 1)
+      4..7
+  """
   @spec with_frames(t(), pos_integer()) :: t()
   def with_frames(%__MODULE__{} = layout, frames) when is_integer(frames) and frames > 0,
     do: %{layout | frames: frames}
@@ -144,7 +128,17 @@ defmodule RingTracer.Layout do
   @spec frame(t(), atom_id()) :: non_neg_integer()
   def frame(layout, a), do: div(base(a), frame_atom_count(layout))
 
-  @doc "The atoms of child `i`'s strip in frame `f` (the first by default), in image order."
+  @doc """
+  The atoms of child `i`'s strip in frame `f` (the first by default), in image order.
+
+      iex> layout = RingTracer.Layout.new(10, 1, 2, 2)
+      iex> Enum.map(RingTracer.Layout.atoms(layout), &RingTracer.Layout.span(layout, &1))
+      [{0, 2}, {2, 3}, {5, 2}, {7, 3}]
+      iex> RingTracer.Layout.strip(layout, 1)
+      [2, 3]
+      iex> RingTracer.Layout.strip(RingTracer.Layout.new(10, 1, 2, 2, :interleaved), 1)
+      [1, 3]
+  """
   @spec strip(t(), non_neg_integer(), non_neg_integer()) :: [atom_id()]
   def strip(layout, i, f \\ 0)
 
@@ -240,6 +234,15 @@ defmodule RingTracer.Layout do
   Atom or piece `a` cut in two: its first `k` of `n` equal parts, and the
   rest (`0 < k < n`). The pieces are written with the smallest grid (a
   piece that is a whole atom is its index).
+
+      iex> layout = RingTracer.Layout.new(10, 1, 1, 1)
+      iex> {head, tail} = RingTracer.Layout.split(0, 3, 4)
+      iex> {head, tail}
+      {{0, 0, 3, 4}, {0, 3, 4, 4}}
+      iex> {RingTracer.Layout.span(layout, head), RingTracer.Layout.span(layout, tail)}
+      {{0, 7}, {7, 3}}
+      iex> RingTracer.Layout.split(tail, 1, 2)
+      {{0, 6, 7, 8}, {0, 7, 8, 8}}
   """
   @spec split(atom_id(), pos_integer(), pos_integer()) :: {atom_id(), atom_id()}
   def split(a, k, n) when is_integer(k) and is_integer(n) and k > 0 and k < n,

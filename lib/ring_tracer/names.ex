@@ -1,11 +1,10 @@
 defmodule RingTracer.Names do
-  @moduledoc """
-  Every registered name RingTracer uses, built in one place.
-
-  Per node: the jobs supervisor (parents), the children supervisor (children
-  started on this node by any job's parent), the scene cache and the
-  tables of the job directory and the grandchildren's pipes.
-  """
+  @moduledoc false
+  # Every registered name RingTracer uses, built in one place.
+  #
+  # Per node: the jobs supervisor (parents), the children supervisor (children
+  # started on this node by any job's parent), the scene cache and the
+  # tables of the job directory and the grandchildren's pipes.
 
   @doc "Supervisor of parents, one per running job, on this node."
   @spec jobs() :: atom()

@@ -1,47 +1,33 @@
 defmodule RingTracer.Output do
-  @moduledoc """
-  The files a render writes: checked before any tracing, written atomically.
-
-  `check/2` runs before a job starts and refuses, with the option and the
-  path in the message:
-
-    * an extension the output's kind does not have (an image is `.png` or
-      `.exr`, statistics `.json` or `.csv`, a timeline `.svg`, an ownership
-      map `.png`);
-    * a folder that does not exist or cannot be written;
-    * an existing path that is not a regular file (a folder, a FIFO, ...);
-    * two outputs that are the same file (also through a symlink or a hard
-      link);
-    * an output that is one of the render's inputs: the scene or a file it
-      references.
-
-  `write/2` writes to a temporary file in the same folder and renames it
-  over the target, so a failed, cancelled or interrupted render leaves any
-  earlier file untouched and never a partial one.
-
-  Another local user may be racing every step (a folder she can write,
-  swapped for a symbolic link in between): the folder is opened once, and
-  the temporary file is made in it through that descriptor with
-  `O_CREAT | O_EXCL | O_NOFOLLOW` and mode 0600, given its final mode with
-  `fchmod` on its own descriptor, then renamed over the target in the same
-  folder (`ring_tracer_kernel::safe_fs`). No name is chmodded, nothing is
-  resolved twice. The folder is reached following only this user's or
-  root's symbolic links: a path through another user's link is refused
-  (she could point it, at any moment, at a folder of her choice).
-
-      iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
-      iex> File.mkdir_p!(dir)
-      iex> scene = Path.join(dir, "scene.nff")
-      iex> File.write!(scene, "v\\n")
-      iex> RingTracer.Output.check([image: Path.join(dir, "a.png"), stats: Path.join(dir, "a.json")], [scene])
-      :ok
-      iex> {:error, error} = RingTracer.Output.check([timeline: scene], [scene])
-      iex> error.message =~ "--timeline"
-      true
-      iex> :ok = RingTracer.Output.write(Path.join(dir, "a.json"), "{}")
-      iex> File.read!(Path.join(dir, "a.json"))
-      "{}"
-  """
+  @moduledoc false
+  # The files a render writes: checked before any tracing, written atomically.
+  #
+  # `check/2` runs before a job starts and refuses, with the option and the
+  # path in the message:
+  #
+  #   * an extension the output's kind does not have (an image is `.png` or
+  #     `.exr`, statistics `.json` or `.csv`, a timeline `.svg`, an ownership
+  #     map `.png`);
+  #   * a folder that does not exist or cannot be written;
+  #   * an existing path that is not a regular file (a folder, a FIFO, ...);
+  #   * two outputs that are the same file (also through a symlink or a hard
+  #     link);
+  #   * an output that is one of the render's inputs: the scene or a file it
+  #     references.
+  #
+  # `write/2` writes to a temporary file in the same folder and renames it
+  # over the target, so a failed, cancelled or interrupted render leaves any
+  # earlier file untouched and never a partial one.
+  #
+  # Another local user may be racing every step (a folder she can write,
+  # swapped for a symbolic link in between): the folder is opened once, and
+  # the temporary file is made in it through that descriptor with
+  # `O_CREAT | O_EXCL | O_NOFOLLOW` and mode 0600, given its final mode with
+  # `fchmod` on its own descriptor, then renamed over the target in the same
+  # folder (`ring_tracer_kernel::safe_fs`). No name is chmodded, nothing is
+  # resolved twice. The folder is reached following only this user's or
+  # root's symbolic links: a path through another user's link is refused
+  # (she could point it, at any moment, at a folder of her choice).
 
   alias RingTracer.{Error, Native}
 
@@ -67,6 +53,19 @@ defmodule RingTracer.Output do
   @doc """
   Checks `outputs` (`[{kind, path}]`) against each other and against
   `inputs` (paths the render reads). Returns `:ok` or the first problem.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_output_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
+      iex> File.mkdir_p!(dir)
+      iex> scene = Path.join(dir, "scene.nff")
+      iex> File.write!(scene, "v\\n")
+      iex> RingTracer.Output.check([image: Path.join(dir, "a.png"), stats: Path.join(dir, "a.json")], [scene])
+      :ok
+      iex> {:error, error} = RingTracer.Output.check([timeline: scene], [scene])
+      iex> error.message =~ "--timeline"
+      true
+      iex> :ok = RingTracer.Output.write(Path.join(dir, "a.json"), "{}")
+      iex> File.read!(Path.join(dir, "a.json"))
+      "{}"
   """
   @spec check([{kind(), Path.t()}], [Path.t()]) :: :ok | {:error, Error.t()}
   def check(outputs, inputs) do

@@ -1,15 +1,9 @@
 defmodule RingTracer.Rays do
-  @moduledoc """
-  Ray counters, of an atom, a child or a job: a map of non-negative
-  integers under the kernel's own names (`RayStats` in
-  `native/kernel/src/stats.rs`, which the NIF reports when this module
-  compiles), the rays of each kind and the kernel's work units.
-
-      iex> Map.keys(RingTracer.Rays.zero())
-      [:eye, :eye_hits, :reflected, :refracted, :shadow, :work]
-      iex> RingTracer.Rays.kinds()
-      [:eye, :reflected, :refracted, :shadow]
-  """
+  @moduledoc false
+  # Ray counters, of an atom, a child or a job: a map of non-negative
+  # integers under the kernel's own names (`RayStats` in
+  # `native/kernel/src/stats.rs`, which the NIF reports when this module
+  # compiles), the rays of each kind and the kernel's work units.
 
   @external_resource "native/kernel/src/stats.rs"
   {zero, kinds} = RingTracer.Native.ray_counters()
@@ -23,7 +17,14 @@ defmodule RingTracer.Rays do
   @spec zero() :: t()
   def zero, do: @zero
 
-  @doc "The counters that count rays (eye hits and work units do not)."
+  @doc """
+  The counters that count rays (eye hits and work units do not).
+
+      iex> Map.keys(RingTracer.Rays.zero())
+      [:eye, :eye_hits, :reflected, :refracted, :shadow, :work]
+      iex> RingTracer.Rays.kinds()
+      [:eye, :reflected, :refracted, :shadow]
+  """
   @spec kinds() :: [atom()]
   def kinds, do: @kinds
 

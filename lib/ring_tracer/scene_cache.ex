@@ -1,35 +1,34 @@
 defmodule RingTracer.SceneCache do
-  @moduledoc """
-  One per node: parsed scenes by content hash, so that every child of a job
-  on this node (and later jobs of the same scene) share one parsed scene and
-  BVH.
-
-  Reads go straight to a protected ETS table; a miss asks the cache process,
-  which parses (one parse at a time, so two children asking for the same new
-  scene parse it once).
-
-  **Pins.** A job's parent pins its scene on every node it uses before it
-  starts children there (`pin/2`, with the scene's bytes), and the pin lasts
-  until the parent ends (the cache monitors it) or `unpin/2`. A pinned scene
-  is never evicted, so any number of concurrent jobs, with any number of
-  distinct scenes, find their scene when their children fetch it.
-
-  **Eviction** is bounded by bytes: when the scenes held exceed
-  `max_bytes` (application env `:scene_cache_bytes`, default 256 MiB of
-  scene source, references included), the least recently used *unpinned*
-  scenes are dropped until they fit, or until only pinned ones are left. A
-  dropped scene's memory is freed when the last process holding it lets go.
-
-  **Frames.** The scene of a frame of an animation (`fetch_frame/2`), keyed
-  by the scene's hash and the frame, is cached the same way: read from the
-  table, built on a miss by the cache process (one build at a time, so the
-  children of a job on this node build each frame once). Frame 0 is the
-  scene itself. At most `max_frames` frames of each scene are held
-  (application env `:scene_cache_frames`, default 8), the least recently
-  fetched going first, and a scene's frames go with it when it is evicted.
-  A dropped frame is freed when the last process holding it (say, a
-  grandchild tracing it) lets go.
-  """
+  @moduledoc false
+  # One per node: parsed scenes by content hash, so that every child of a job
+  # on this node (and later jobs of the same scene) share one parsed scene and
+  # BVH.
+  #
+  # Reads go straight to a protected ETS table; a miss asks the cache process,
+  # which parses (one parse at a time, so two children asking for the same new
+  # scene parse it once).
+  #
+  # **Pins.** A job's parent pins its scene on every node it uses before it
+  # starts children there (`pin/2`, with the scene's bytes), and the pin lasts
+  # until the parent ends (the cache monitors it) or `unpin/2`. A pinned scene
+  # is never evicted, so any number of concurrent jobs, with any number of
+  # distinct scenes, find their scene when their children fetch it.
+  #
+  # **Eviction** is bounded by bytes: when the scenes held exceed
+  # `max_bytes` (application env `:scene_cache_bytes`, default 256 MiB of
+  # scene source, references included), the least recently used *unpinned*
+  # scenes are dropped until they fit, or until only pinned ones are left. A
+  # dropped scene's memory is freed when the last process holding it lets go.
+  #
+  # **Frames.** The scene of a frame of an animation (`fetch_frame/2`), keyed
+  # by the scene's hash and the frame, is cached the same way: read from the
+  # table, built on a miss by the cache process (one build at a time, so the
+  # children of a job on this node build each frame once). Frame 0 is the
+  # scene itself. At most `max_frames` frames of each scene are held
+  # (application env `:scene_cache_frames`, default 8), the least recently
+  # fetched going first, and a scene's frames go with it when it is evicted.
+  # A dropped frame is freed when the last process holding it (say, a
+  # grandchild tracing it) lets go.
   use GenServer
 
   alias RingTracer.{Error, Native, Scene}

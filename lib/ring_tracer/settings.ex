@@ -1,17 +1,18 @@
 defmodule RingTracer.Settings do
-  @moduledoc """
-  What the kernel needs to trace a pixel: image size, ray-tree depth,
-  adaptive cut-off, samples per pixel, SPD corner mode, and the region of
-  the image traced (the camera still frames the whole image, so a region
-  holds exactly the whole render's pixels there). The same settings and
-  scene give the same bytes for every pixel wherever it is traced.
-  """
+  @moduledoc false
+  # What the kernel needs to trace a pixel: image size, ray-tree depth,
+  # adaptive cut-off, samples per pixel, SPD corner mode, and the region of
+  # the image traced (the camera still frames the whole image, so a region
+  # holds exactly the whole render's pixels there). The same settings and
+  # scene give the same bytes for every pixel wherever it is traced.
 
   # The kernel's defaults (`Settings::new` in native/kernel/src/render.rs),
   # read through the NIF when this module compiles: they are written down
   # nowhere else.
   @external_resource "native/kernel/src/render.rs"
+  @external_resource "native/kernel/src/limits.rs"
   @defaults RingTracer.Native.settings_defaults()
+  @limits RingTracer.Native.settings_limits()
 
   @enforce_keys [:width, :height]
   defstruct width: nil,
@@ -49,6 +50,24 @@ defmodule RingTracer.Settings do
           spd: boolean()
         }
   def defaults, do: @defaults
+
+  @doc """
+  The kernel's limits on a render's settings (`native/kernel/src/limits.rs`),
+  read through the NIF: the largest image side and area, samples, depth and
+  frames of an animation.
+
+      iex> l = RingTracer.Settings.limits()
+      iex> {l.max_side, l.max_samples, l.max_depth}
+      {16384, 16, 64}
+  """
+  @spec limits() :: %{
+          max_side: pos_integer(),
+          max_pixels: pos_integer(),
+          max_samples: pos_integer(),
+          max_depth: pos_integer(),
+          max_frames: pos_integer()
+        }
+  def limits, do: @limits
 
   @doc """
   A default as the docs and `--help` show it: the cut-off as a fraction.

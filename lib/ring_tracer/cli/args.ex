@@ -1,9 +1,16 @@
 defmodule RingTracer.CLI.Args do
-  @moduledoc """
-  Command-line parsing shared by every command: `OptionParser` with strict
-  switches, plus what people expect of a command line: `--help`/`-h`, a
-  suggestion for a mistyped option, and errors that name the bad value and
-  what is accepted.
+  @moduledoc false
+  # Command-line parsing shared by every command: `OptionParser` with strict
+  # switches, plus what people expect of a command line: `--help`/`-h`, a
+  # suggestion for a mistyped option, and errors that name the bad value and
+  # what is accepted.
+
+  @typedoc "What each switch accepts, in words, for error messages."
+  @type accepted :: %{optional(atom()) => String.t()}
+
+  @doc """
+  Parses `argv` against `switches` (`OptionParser`'s strict types, with
+  `aliases`). `:help` when `--help` or `-h` is among them.
 
       iex> RingTracer.CLI.Args.parse(["--childs", "4"], [children: :integer], %{})
       {:error, "unknown option --childs (did you mean --children?)"}
@@ -13,14 +20,6 @@ defmodule RingTracer.CLI.Args do
       :help
       iex> RingTracer.CLI.Args.parse(["a.nff", "--children", "3"], [children: :integer], %{})
       {:ok, [children: 3], ["a.nff"]}
-  """
-
-  @typedoc "What each switch accepts, in words, for error messages."
-  @type accepted :: %{optional(atom()) => String.t()}
-
-  @doc """
-  Parses `argv` against `switches` (`OptionParser`'s strict types, with
-  `aliases`). `:help` when `--help` or `-h` is among them.
   """
   @spec parse([String.t()], keyword(), accepted(), keyword()) ::
           {:ok, keyword(), [String.t()]} | :help | {:error, String.t()}

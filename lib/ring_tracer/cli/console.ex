@@ -1,15 +1,14 @@
 defmodule RingTracer.CLI.Console do
-  @moduledoc """
-  Where a command writes and which folder it was called from.
-
-  Booted by the launcher in a VM of its own, a command writes to the VM's
-  stdout and stderr and takes its folder from `RINGTRACER_CWD`. Run by the
-  resident server (`RingTracer.CLI.Server`) for a client, it writes to the
-  client's: the server makes the client's stdout the command's group leader
-  and puts a console naming the client's stderr, folder and umask in the
-  command process (`put/1`). Everything a command writes to stderr goes
-  through `err/0`; the files it creates get `new_file_mode/0`.
-  """
+  @moduledoc false
+  # Where a command writes and which folder it was called from.
+  #
+  # Booted by the launcher in a VM of its own, a command writes to the VM's
+  # stdout and stderr and takes its folder from `RINGTRACER_CWD`. Run by the
+  # resident server (`RingTracer.CLI.Server`) for a client, it writes to the
+  # client's: the server makes the client's stdout the command's group leader
+  # and puts a console naming the client's stderr, folder and umask in the
+  # command process (`put/1`). Everything a command writes to stderr goes
+  # through `err/0`; the files it creates get `new_file_mode/0`.
 
   defstruct err: :standard_error, cwd: nil, tty?: nil, umask: nil, home: nil
 

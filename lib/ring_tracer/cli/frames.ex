@@ -1,26 +1,16 @@
 defmodule RingTracer.CLI.Frames do
-  @moduledoc """
-  Which frames of a scene `ringtracer render` renders, and the file each
-  goes to, from `--frame`, `--frames` and `--out`
-  (`RingTracer.Output.Pattern`).
-
-    * `--frame F`: frame F alone.
-    * `--frames A-B` (or `--frames N`): frames A to B, inclusive, from 1;
-      more than one is a sequence, whose `--out` must hold a run of `#`.
-    * Neither: every frame of an animated scene when `--out` holds a run of
-      `#`, else frame 1 (a still's only frame).
-
-  A run of `#` in `--out` is always the frame number, for one frame too.
-
-      iex> {:ok, plan} = RingTracer.CLI.Frames.plan([], "f_##.png", 3, "orbit.toml")
-      iex> {plan.numbers, plan.sequence?, RingTracer.CLI.Frames.path(plan, 3)}
-      {[1, 2, 3], true, "f_03.png"}
-      iex> {:ok, plan} = RingTracer.CLI.Frames.plan([], "f.png", 3, "orbit.toml")
-      iex> {plan.numbers, plan.sequence?, RingTracer.CLI.Frames.path(plan, 1)}
-      {[1], false, "f.png"}
-      iex> RingTracer.CLI.Frames.plan([frames: "2-3"], "f.png", 3, "orbit.toml")
-      {:usage, "--out f.png: a sequence of 2 frames needs a run of # in the file name for the frame number, e.g. f_####.png"}
-  """
+  @moduledoc false
+  # Which frames of a scene `ringtracer render` renders, and the file each
+  # goes to, from `--frame`, `--frames` and `--out`
+  # (`RingTracer.Output.Pattern`).
+  #
+  #   * `--frame F`: frame F alone.
+  #   * `--frames A-B` (or `--frames N`): frames A to B, inclusive, from 1;
+  #     more than one is a sequence, whose `--out` must hold a run of `#`.
+  #   * Neither: every frame of an animated scene when `--out` holds a run of
+  #     `#`, else frame 1 (a still's only frame).
+  #
+  # A run of `#` in `--out` is always the frame number, for one frame too.
 
   alias RingTracer.Output.Pattern
 
@@ -97,6 +87,15 @@ defmodule RingTracer.CLI.Frames do
       {:usage, "--frames 40-60: orbit.toml has 48 frames (1 to 48)"}
       iex> RingTracer.CLI.Frames.plan([frame: 2, frames: "1-3"], "f_#.png", 48, "orbit.toml")
       {:usage, "give --frame F (one frame) or --frames A-B (a sequence), not both"}
+
+      iex> {:ok, plan} = RingTracer.CLI.Frames.plan([], "f_##.png", 3, "orbit.toml")
+      iex> {plan.numbers, plan.sequence?, RingTracer.CLI.Frames.path(plan, 3)}
+      {[1, 2, 3], true, "f_03.png"}
+      iex> {:ok, plan} = RingTracer.CLI.Frames.plan([], "f.png", 3, "orbit.toml")
+      iex> {plan.numbers, plan.sequence?, RingTracer.CLI.Frames.path(plan, 1)}
+      {[1], false, "f.png"}
+      iex> RingTracer.CLI.Frames.plan([frames: "2-3"], "f.png", 3, "orbit.toml")
+      {:usage, "--out f.png: a sequence of 2 frames needs a run of # in the file name for the frame number, e.g. f_####.png"}
   """
   @spec plan(keyword(), Path.t(), pos_integer(), String.t()) :: {:ok, t()} | {:usage, String.t()}
   def plan(opts, out, count, scene) do

@@ -1,10 +1,9 @@
 defmodule RingTracer.CLI.Paths do
-  @moduledoc """
-  Paths given on the command line, resolved against the folder the user
-  called the command from: the launcher (`bin/ringtracer`) works in the
-  project's folder and says in `RINGTRACER_CWD` where it was called from;
-  the resident server takes it from its client (`RingTracer.CLI.Console`).
-  """
+  @moduledoc false
+  # Paths given on the command line, resolved against the folder the user
+  # called the command from: the launcher (`bin/ringtracer`) works in the
+  # project's folder and says in `RINGTRACER_CWD` where it was called from;
+  # the resident server takes it from its client (`RingTracer.CLI.Console`).
 
   @doc "The caller's folder (see `RingTracer.CLI.Console.cwd/0`)."
   @spec cwd() :: Path.t()

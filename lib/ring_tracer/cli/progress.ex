@@ -1,33 +1,22 @@
 defmodule RingTracer.CLI.Progress do
-  @moduledoc """
-  What a render shows while it runs, on stderr.
-
-    * On a terminal (`:tty`): a bar redrawn every 100 ms with atoms done,
-      rays per second and the time left. Between atoms it moves by the
-      expected progress of the atoms being traced (the mean rate so far),
-      never past what could be done, so a ring of one child does not jump
-      in sixteenths.
-    * Elsewhere (`:log`: a file, a pipe, CI): a plain line every 5 s.
-    * `:quiet`: nothing.
-
-  The state is a struct the render command updates with `atom/3` (from
-  `RingTracer.Telemetry`'s `[:ring_tracer, :atom, :stop]`) and `tick/2`;
-  both return the text to write, if any, so the rules are tested without a
-  terminal.
-
-  A sequence of frames (`frames/3`) shows frames done as well:
-  `frames 6/24, atoms 1536/6144`.
-
-      iex> p = RingTracer.CLI.Progress.new(:log, 4, 0)
-      iex> {p, nil} = RingTracer.CLI.Progress.atom(p, 1_000_000, 1_000)
-      iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
-      iex> IO.iodata_to_binary(line)
-      "ringtracer: 1/4 atoms (25%), 0.2 Mrays/s, about 5 s left\\n"
-      iex> p = RingTracer.CLI.Progress.frames(p, 1, 3)
-      iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
-      iex> IO.iodata_to_binary(line)
-      "ringtracer: frames 1/3, atoms 1/4 (25%), 0.2 Mrays/s, about 5 s left\\n"
-  """
+  @moduledoc false
+  # What a render shows while it runs, on stderr.
+  #
+  #   * On a terminal (`:tty`): a bar redrawn every 100 ms with atoms done,
+  #     rays per second and the time left. Between atoms it moves by the
+  #     expected progress of the atoms being traced (the mean rate so far),
+  #     never past what could be done, so a ring of one child does not jump
+  #     in sixteenths.
+  #   * Elsewhere (`:log`: a file, a pipe, CI): a plain line every 5 s.
+  #   * `:quiet`: nothing.
+  #
+  # The state is a struct the render command updates with `atom/3` (from
+  # `RingTracer.Telemetry`'s `[:ring_tracer, :atom, :stop]`) and `tick/2`;
+  # both return the text to write, if any, so the rules are tested without a
+  # terminal.
+  #
+  # A sequence of frames (`frames/3`) shows frames done as well:
+  # `frames 6/24, atoms 1536/6144`.
 
   @enforce_keys [:mode, :total, :t0]
   defstruct [:mode, :total, :t0, done: 0, rays: 0, last_ms: nil, printed_ms: nil, frames: nil]
@@ -66,7 +55,19 @@ defmodule RingTracer.CLI.Progress do
   @spec frames(t(), non_neg_integer(), pos_integer()) :: t()
   def frames(p, done, total), do: %{p | frames: {done, total}}
 
-  @doc "Time passes: the text to write at `now_ms`, if any."
+  @doc """
+  Time passes: the text to write at `now_ms`, if any.
+
+      iex> p = RingTracer.CLI.Progress.new(:log, 4, 0)
+      iex> {p, nil} = RingTracer.CLI.Progress.atom(p, 1_000_000, 1_000)
+      iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
+      iex> IO.iodata_to_binary(line)
+      "ringtracer: 1/4 atoms (25%), 0.2 Mrays/s, about 5 s left\\n"
+      iex> p = RingTracer.CLI.Progress.frames(p, 1, 3)
+      iex> {_p, line} = RingTracer.CLI.Progress.tick(p, 5_000)
+      iex> IO.iodata_to_binary(line)
+      "ringtracer: frames 1/3, atoms 1/4 (25%), 0.2 Mrays/s, about 5 s left\\n"
+  """
   @spec tick(t(), integer()) :: {t(), iodata() | nil}
   def tick(%{mode: :quiet} = p, _now), do: {p, nil}
 

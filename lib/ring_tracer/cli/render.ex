@@ -1,17 +1,16 @@
 defmodule RingTracer.CLI.Render do
-  @moduledoc """
-  `ringtracer render`: renders a scene file through the ring and writes the
-  image. Shared by the launcher (booted straight from `erl`) and `mix
-  ring_tracer.render`; `help/0` is the text of `--help`.
-
-  Of an animated scene it renders a sequence of frames, one file each
-  (`RingTracer.CLI.Frames`).
-
-  Exit status: 0 the image (every frame of a sequence) was written, 1 the
-  render failed (a bad scene, a failed job, an output that could not be
-  written), 2 a usage error (an unknown option, a bad value), 130
-  interrupted (SIGINT), 143 terminated (SIGTERM).
-  """
+  @moduledoc false
+  # `ringtracer render`: renders a scene file through the ring and writes the
+  # image. Shared by the launcher (booted straight from `erl`) and `mix
+  # ring_tracer.render`; `help/0` is the text of `--help`.
+  #
+  # Of an animated scene it renders a sequence of frames, one file each
+  # (`RingTracer.CLI.Frames`).
+  #
+  # Exit status: 0 the image (every frame of a sequence) was written, 1 the
+  # render failed (a bad scene, a failed job, an output that could not be
+  # written), 2 a usage error (an unknown option, a bad value), 130
+  # interrupted (SIGINT), 143 terminated (SIGTERM).
 
   alias RingTracer.CLI.{Args, Console, Frames, Paths, Progress}
   alias RingTracer.Cluster.Distribution
@@ -52,14 +51,15 @@ defmodule RingTracer.CLI.Render do
   @aliases [o: :out, q: :quiet, w: :width]
 
   @max RingTracer.Options.maxima()
+  @limits RingTracer.Settings.limits()
   @ranges [
     children: 1..@max.children,
     atoms: 1..@max.atoms,
-    width: 1..16_384,
-    height: 1..16_384,
-    depth: 1..64,
-    samples: 1..16,
-    frame: 1..1_000_000,
+    width: 1..@limits.max_side,
+    height: 1..@limits.max_side,
+    depth: 1..@limits.max_depth,
+    samples: 1..@limits.max_samples,
+    frame: 1..@limits.max_frames,
     window: 1..RingTracer.Sequence.max_window(),
     children_per_node: 1..@max.children,
     preview: 0..65_535

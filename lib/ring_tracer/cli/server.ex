@@ -1,23 +1,22 @@
 defmodule RingTracer.CLI.Server do
-  @moduledoc """
-  A resident render node for the command line (`ringtracer serve`).
-
-  A command booted in a VM of its own pays for the boot: the emulator, then
-  loading Elixir and the application, a few tenths of a second before the
-  first atom. A running server has all of that done: `bin/ringtracer render`
-  finds its socket, and a small client (`native/client`, no BEAM) hands it
-  the arguments, the caller's folder and whether stderr is a terminal, then
-  relays what the command writes and its exit status. Interrupts go the
-  same way (the client's first Ctrl-C or SIGTERM cancels the job); a client
-  that goes away cancels its job too.
-
-  The socket is a Unix socket in a folder only its owner can enter (mode
-  0700, checked at start), so only that user (and root) can reach it; the
-  commands run with the server's rights, which are the same user's.
-  Renders on other nodes (`--nodes`, `--tls`, ...) start distribution,
-  which a command's own VM does: the server tells the client to boot one
-  (`RingTracer.CLI.Server.Session`).
-  """
+  @moduledoc false
+  # A resident render node for the command line (`ringtracer serve`).
+  #
+  # A command booted in a VM of its own pays for the boot: the emulator, then
+  # loading Elixir and the application, a few tenths of a second before the
+  # first atom. A running server has all of that done: `bin/ringtracer render`
+  # finds its socket, and a small client (`native/client`, no BEAM) hands it
+  # the arguments, the caller's folder and whether stderr is a terminal, then
+  # relays what the command writes and its exit status. Interrupts go the
+  # same way (the client's first Ctrl-C or SIGTERM cancels the job); a client
+  # that goes away cancels its job too.
+  #
+  # The socket is a Unix socket in a folder only its owner can enter (mode
+  # 0700, checked at start), so only that user (and root) can reach it; the
+  # commands run with the server's rights, which are the same user's.
+  # Renders on other nodes (`--nodes`, `--tls`, ...) start distribution,
+  # which a command's own VM does: the server tells the client to boot one
+  # (`RingTracer.CLI.Server.Session`).
 
   use GenServer
   require Logger

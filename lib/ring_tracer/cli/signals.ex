@@ -1,16 +1,15 @@
 defmodule RingTracer.CLI.Signals do
-  @moduledoc """
-  Interrupting a command booted by the launcher.
-
-  The BEAM cannot catch SIGINT (Ctrl-C opens its break menu), so the
-  launcher boots it with the break handler off (`+Bi`), stays its parent,
-  and turns a SIGINT it receives into SIGUSR2 for the VM; SIGTERM it
-  passes on as is. In the VM this handler, added to OTP's
-  `erl_signal_server`, tells the command's process
-  `{RingTracer.CLI.Signals, :sigint | :sigterm}`, and the command cancels
-  its job and exits with 130 or 143. A second Ctrl-C makes the launcher
-  kill the VM outright.
-  """
+  @moduledoc false
+  # Interrupting a command booted by the launcher.
+  #
+  # The BEAM cannot catch SIGINT (Ctrl-C opens its break menu), so the
+  # launcher boots it with the break handler off (`+Bi`), stays its parent,
+  # and turns a SIGINT it receives into SIGUSR2 for the VM; SIGTERM it
+  # passes on as is. In the VM this handler, added to OTP's
+  # `erl_signal_server`, tells the command's process
+  # `{RingTracer.CLI.Signals, :sigint | :sigterm}`, and the command cancels
+  # its job and exits with 130 or 143. A second Ctrl-C makes the launcher
+  # kill the VM outright.
   @behaviour :gen_event
 
   @doc """

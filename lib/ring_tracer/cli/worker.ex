@@ -1,36 +1,35 @@
 defmodule RingTracer.CLI.Worker do
-  @moduledoc """
-  `ringtracer worker`: a distributed node that hosts children of renders
-  started on other nodes, or, with `--join HEAD`, a farm's worker. Shared
-  by the launcher and `mix ring_tracer.worker`.
-
-  ## Options
-
-    * `--sname NAME` — a short name (on loopback, `NAME@localhost`)
-    * `--name NAME@HOST` — a long name
-    * `--cookie-file PATH` — the cookie, in a file only you can read
-      (default `~/.erlang.cookie`; make one with `ringtracer cookie`)
-    * `--listen ADDR` — the address to listen on (default 127.0.0.1: only
-      this machine can connect)
-    * `--ports MIN-MAX` — the distribution listener's ports, for firewalls
-    * `--tls DIR` — distribution over TLS with the certificates in `DIR`
-      (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS).
-      Without it, TLS with the user's own certificates
-      (`~/.config/ringtracer/tls`, made by `bin/ringtracer` on first use)
-    * `--insecure-plain` — plain TCP distribution instead: whoever answers
-      on port 4369 (any local user, if she starts epmd first) or sits on
-      the network can read and alter the stream
-    * `--allow-foreign-epmd` — with `--insecure-plain`, start even when
-      epmd belongs to another user
-    * `--join HEAD` — joins the farm whose head is `HEAD`
-      (`RingTracer.Farm.join/2`), now or as soon as it can be reached, and
-      again whenever the head restarts; the node may then go unnamed (a
-      name is made up)
-    * `--tags a,b`, `--slots N`, `--speed F` — with `--join`: tags a job may
-      ask for, the children this worker hosts for a job (default: one per
-      core), and a slowdown that emulates a slower machine (1 to
-      `RingTracer.Job.Slowdown.max/0`)
-  """
+  @moduledoc false
+  # `ringtracer worker`: a distributed node that hosts children of renders
+  # started on other nodes, or, with `--join HEAD`, a farm's worker. Shared
+  # by the launcher and `mix ring_tracer.worker`.
+  #
+  # ## Options
+  #
+  #   * `--sname NAME` — a short name (on loopback, `NAME@localhost`)
+  #   * `--name NAME@HOST` — a long name
+  #   * `--cookie-file PATH` — the cookie, in a file only you can read
+  #     (default `~/.erlang.cookie`; make one with `ringtracer cookie`)
+  #   * `--listen ADDR` — the address to listen on (default 127.0.0.1: only
+  #     this machine can connect)
+  #   * `--ports MIN-MAX` — the distribution listener's ports, for firewalls
+  #   * `--tls DIR` — distribution over TLS with the certificates in `DIR`
+  #     (`RingTracer.Cluster.TLS`; the launcher boots the VM with TLS).
+  #     Without it, TLS with the user's own certificates
+  #     (`~/.config/ringtracer/tls`, made by `bin/ringtracer` on first use)
+  #   * `--insecure-plain` — plain TCP distribution instead: whoever answers
+  #     on port 4369 (any local user, if she starts epmd first) or sits on
+  #     the network can read and alter the stream
+  #   * `--allow-foreign-epmd` — with `--insecure-plain`, start even when
+  #     epmd belongs to another user
+  #   * `--join HEAD` — joins the farm whose head is `HEAD`
+  #     (`RingTracer.Farm.join/2`), now or as soon as it can be reached, and
+  #     again whenever the head restarts; the node may then go unnamed (a
+  #     name is made up)
+  #   * `--tags a,b`, `--slots N`, `--speed F` — with `--join`: tags a job may
+  #     ask for, the children this worker hosts for a job (default: one per
+  #     core), and a slowdown that emulates a slower machine (1 to
+  #     `RingTracer.Job.Slowdown.max/0`)
 
   alias RingTracer.CLI.Paths
   alias RingTracer.Cluster.Distribution

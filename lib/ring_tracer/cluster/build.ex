@@ -1,30 +1,29 @@
 defmodule RingTracer.Cluster.Build do
-  @moduledoc """
-  Which build of RingTracer a node runs, so that nodes of different builds
-  never work together.
-
-  A build is the application's version, a hash of its compiled code (the
-  MD5 of each module of `:ring_tracer`, as `module_info(:md5)` gives it,
-  sorted by module and hashed together) and a SHA-256 of the NIF's shared
-  library as it is on disk at the application's start, right after the NIF
-  was loaded. Two nodes of the same version built from different sources,
-  or with a different kernel, have different builds.
-
-  The identity is computed once per node (a few tens of milliseconds), by
-  `RingTracer.Cluster` right after the application's start (or by the first
-  call that needs it sooner), and kept in `:persistent_term`; `identity/0`
-  reads it from there. A node whose application has not started yet tells
-  no build: `check/2` treats it as one that cannot be reached.
-
-  Every place where nodes meet before work compares builds: a node asked
-  to host a job's children (at the start and when the ring grows,
-  `RingTracer.Job.Host`), `RingTracer.Cluster.check/1`, a farm worker
-  joining its head and a submitter queueing a job. A mismatch is
-  refused with an error of reason `:build_mismatch` that names both builds:
-
-      node w1@host runs build 0.1.0+3f2a9c1d, node head@host runs build 0.1.0+77e0b1a4
-      (the code differs); every node of a cluster must run the same build: ...
-  """
+  @moduledoc false
+  # Which build of RingTracer a node runs, so that nodes of different builds
+  # never work together.
+  #
+  # A build is the application's version, a hash of its compiled code (the
+  # MD5 of each module of `:ring_tracer`, as `module_info(:md5)` gives it,
+  # sorted by module and hashed together) and a SHA-256 of the NIF's shared
+  # library as it is on disk at the application's start, right after the NIF
+  # was loaded. Two nodes of the same version built from different sources,
+  # or with a different kernel, have different builds.
+  #
+  # The identity is computed once per node (a few tens of milliseconds), by
+  # `RingTracer.Cluster` right after the application's start (or by the first
+  # call that needs it sooner), and kept in `:persistent_term`; `identity/0`
+  # reads it from there. A node whose application has not started yet tells
+  # no build: `check/2` treats it as one that cannot be reached.
+  #
+  # Every place where nodes meet before work compares builds: a node asked
+  # to host a job's children (at the start and when the ring grows,
+  # `RingTracer.Job.Host`), `RingTracer.Cluster.check/1`, a farm worker
+  # joining its head and a submitter queueing a job. A mismatch is
+  # refused with an error of reason `:build_mismatch` that names both builds:
+  #
+  #     node w1@host runs build 0.1.0+3f2a9c1d, node head@host runs build 0.1.0+77e0b1a4
+  #     (the code differs); every node of a cluster must run the same build: ...
 
   alias RingTracer.Error
 

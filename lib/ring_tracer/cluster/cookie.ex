@@ -1,31 +1,16 @@
 defmodule RingTracer.Cluster.Cookie do
-  @moduledoc """
-  The distribution cookie, read from a file that only its owner can read.
-
-  A cookie grants full code execution on every node that accepts it, so it
-  never goes on a command line (`/proc/PID/cmdline` is readable by every
-  local user) or in the environment: workers and renders read it from a
-  file (`--cookie-file PATH`, default `~/.erlang.cookie`) after the VM has
-  started, and set it with `Node.set_cookie/1`.
-
-  A file that its group or others can read, write or execute is refused, with
-  the command that fixes it. `create/1` makes a new file with mode 0600 and
-  a random cookie.
-
-      iex> dir = Path.join(System.tmp_dir!(), "rt_cookie_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
-      iex> File.mkdir_p!(dir)
-      iex> path = Path.join(dir, "cookie")
-      iex> {:ok, ^path} = RingTracer.Cluster.Cookie.create(path)
-      iex> {:ok, cookie} = RingTracer.Cluster.Cookie.read(path)
-      iex> is_atom(cookie)
-      true
-      iex> File.chmod!(path, 0o644)
-      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Cookie.read(path)
-      iex> message =~ "chmod 600"
-      true
-      iex> File.rm_rf!(dir) |> length()
-      2
-  """
+  @moduledoc false
+  # The distribution cookie, read from a file that only its owner can read.
+  #
+  # A cookie grants full code execution on every node that accepts it, so it
+  # never goes on a command line (`/proc/PID/cmdline` is readable by every
+  # local user) or in the environment: workers and renders read it from a
+  # file (`--cookie-file PATH`, default `~/.erlang.cookie`) after the VM has
+  # started, and set it with `Node.set_cookie/1`.
+  #
+  # A file that its group or others can read, write or execute is refused, with
+  # the command that fixes it. `create/1` makes a new file with mode 0600 and
+  # a random cookie.
 
   alias RingTracer.Error
 
@@ -43,6 +28,20 @@ defmodule RingTracer.Cluster.Cookie do
   blocking (a FIFO is refused at once), checked on that open descriptor
   and read from it, so another local user cannot swap anything in between
   the checks and the read.
+
+      iex> dir = Path.join(System.tmp_dir!(), "rt_cookie_doc_#{Base.url_encode64(:crypto.strong_rand_bytes(9))}")
+      iex> File.mkdir_p!(dir)
+      iex> path = Path.join(dir, "cookie")
+      iex> {:ok, ^path} = RingTracer.Cluster.Cookie.create(path)
+      iex> {:ok, cookie} = RingTracer.Cluster.Cookie.read(path)
+      iex> is_atom(cookie)
+      true
+      iex> File.chmod!(path, 0o644)
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Cluster.Cookie.read(path)
+      iex> message =~ "chmod 600"
+      true
+      iex> File.rm_rf!(dir) |> length()
+      2
   """
   @spec read(Path.t()) :: {:ok, atom()} | {:error, Error.t()}
   def read(path) do

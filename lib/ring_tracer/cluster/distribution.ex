@@ -1,51 +1,50 @@
 defmodule RingTracer.Cluster.Distribution do
-  @moduledoc """
-  Makes this VM a distributed node at run time, safely by default.
-
-    * **Loopback by default.** The distribution listener binds to
-      127.0.0.1, and epmd (started here when none runs) to 127.0.0.1 too,
-      unless `listen:` names another address; `ports:` fixes the
-      listener's port range for firewalls. On loopback, short names get
-      the host `localhost` (`w1` becomes `w1@localhost`), which always
-      resolves to the address the node listens on.
-    * **No cookie on the command line.** The cookie comes from a file
-      (`cookie_file:`, default `~/.erlang.cookie`) that only its owner can
-      read (`RingTracer.Cluster.Cookie`), and is set after the node has
-      started, so `ps` never shows it.
-    * **Mutual TLS, or nothing, by default.** Distribution runs over TLS
-      with mutual authentication (`RingTracer.Cluster.TLS`), chosen when
-      the VM boots: the launcher boots every node with the certificates
-      of `--tls DIR` or, without it, with the user's own private CA and
-      node certificate (made on first use). Here it is checked that the
-      VM was booted so. Plain TCP distribution, which whoever answers on
-      port 4369 can read and alter, needs `insecure_plain: true`.
-    * **epmd's owner.** An epmd (port 4369) that belongs to another user
-      (the kernel's socket tables say whose) is warned about; with plain
-      distribution it is refused unless `allow_foreign_epmd: true`.
-    * **Unique names.** A made-up name holds the OS process id and random
-      bytes; a name already registered with epmd is a clear error.
-
-  A VM that is already distributed (`elixir --sname X -S mix ...`) is used
-  as it is, apart from the cookie when `cookie_file:` is given.
-
-  ## Options
-
-    * `:sname` — a short name (`w1`, or `w1@host`)
-    * `:name` — a long name (`w1@host.example`)
-    * `:generate` — make up a short name when neither is given (default false)
-    * `:cookie_file` — the cookie file (default `~/.erlang.cookie`)
-    * `:listen` — the address to listen on, e.g. `"10.0.0.5"` or `"0.0.0.0"`
-      (default `"127.0.0.1"`)
-    * `:ports` — `{min, max}` ports of the distribution listener (default:
-      any free port)
-    * `:tls` — the node's TLS folder (`RingTracer.Cluster.TLS`); without
-      it, the folder the VM was booted with
-    * `:insecure_plain` — plain TCP distribution instead of TLS: anyone
-      who answers on port 4369, or sits on the network, can read and
-      alter everything the nodes say, and so run code on them
-    * `:allow_foreign_epmd` — with `:insecure_plain`, go on even when epmd
-      belongs to another user
-  """
+  @moduledoc false
+  # Makes this VM a distributed node at run time, safely by default.
+  #
+  #   * **Loopback by default.** The distribution listener binds to
+  #     127.0.0.1, and epmd (started here when none runs) to 127.0.0.1 too,
+  #     unless `listen:` names another address; `ports:` fixes the
+  #     listener's port range for firewalls. On loopback, short names get
+  #     the host `localhost` (`w1` becomes `w1@localhost`), which always
+  #     resolves to the address the node listens on.
+  #   * **No cookie on the command line.** The cookie comes from a file
+  #     (`cookie_file:`, default `~/.erlang.cookie`) that only its owner can
+  #     read (`RingTracer.Cluster.Cookie`), and is set after the node has
+  #     started, so `ps` never shows it.
+  #   * **Mutual TLS, or nothing, by default.** Distribution runs over TLS
+  #     with mutual authentication (`RingTracer.Cluster.TLS`), chosen when
+  #     the VM boots: the launcher boots every node with the certificates
+  #     of `--tls DIR` or, without it, with the user's own private CA and
+  #     node certificate (made on first use). Here it is checked that the
+  #     VM was booted so. Plain TCP distribution, which whoever answers on
+  #     port 4369 can read and alter, needs `insecure_plain: true`.
+  #   * **epmd's owner.** An epmd (port 4369) that belongs to another user
+  #     (the kernel's socket tables say whose) is warned about; with plain
+  #     distribution it is refused unless `allow_foreign_epmd: true`.
+  #   * **Unique names.** A made-up name holds the OS process id and random
+  #     bytes; a name already registered with epmd is a clear error.
+  #
+  # A VM that is already distributed (`elixir --sname X -S mix ...`) is used
+  # as it is, apart from the cookie when `cookie_file:` is given.
+  #
+  # ## Options
+  #
+  #   * `:sname` — a short name (`w1`, or `w1@host`)
+  #   * `:name` — a long name (`w1@host.example`)
+  #   * `:generate` — make up a short name when neither is given (default false)
+  #   * `:cookie_file` — the cookie file (default `~/.erlang.cookie`)
+  #   * `:listen` — the address to listen on, e.g. `"10.0.0.5"` or `"0.0.0.0"`
+  #     (default `"127.0.0.1"`)
+  #   * `:ports` — `{min, max}` ports of the distribution listener (default:
+  #     any free port)
+  #   * `:tls` — the node's TLS folder (`RingTracer.Cluster.TLS`); without
+  #     it, the folder the VM was booted with
+  #   * `:insecure_plain` — plain TCP distribution instead of TLS: anyone
+  #     who answers on port 4369, or sits on the network, can read and
+  #     alter everything the nodes say, and so run code on them
+  #   * `:allow_foreign_epmd` — with `:insecure_plain`, go on even when epmd
+  #     belongs to another user
 
   alias RingTracer.CLI.Console
   alias RingTracer.Cluster.{Cookie, Epmd, TLS}

@@ -1,14 +1,13 @@
 defmodule RingTracer.Cluster.Liveness do
-  @moduledoc """
-  A job's watch on the other nodes it uses. A node that is frozen (stopped
-  with SIGSTOP, swapping, hung) keeps its connection open, so monitors do not
-  fire and distribution's own tick would take about a minute to notice.
-  This process, which ends with the job's parent, asks each node for a trivial
-  answer every `interval` and disconnects a node that has not answered
-  within `timeout` (the `:liveness` option, default 10 s): the monitors on
-  its processes then fire with `:noconnection`, and the job traces that
-  node's atoms elsewhere, as for any lost node.
-  """
+  @moduledoc false
+  # A job's watch on the other nodes it uses. A node that is frozen (stopped
+  # with SIGSTOP, swapping, hung) keeps its connection open, so monitors do not
+  # fire and distribution's own tick would take about a minute to notice.
+  # This process, which ends with the job's parent, asks each node for a trivial
+  # answer every `interval` and disconnects a node that has not answered
+  # within `timeout` (the `:liveness` option, default 10 s): the monitors on
+  # its processes then fire with `:noconnection`, and the job traces that
+  # node's atoms elsewhere, as for any lost node.
 
   require Logger
 

@@ -1,19 +1,18 @@
 defmodule RingTracer.LocalCluster do
-  @moduledoc """
-  Peer nodes on this machine, with OTP's `:peer`, for the distributed tests
-  and the multi-node benchmark: makes this node distributed
-  (`RingTracer.Cluster.Distribution`: loopback, epmd on loopback) and starts
-  peers, each a real OS process, that have this node's code paths and run
-  `:ring_tracer`. Peers listen on 127.0.0.1 and live on the host
-  `localhost`; they read the same cookie file as this node
-  (`~/.erlang.cookie`: nothing secret on their command lines). Each peer
-  stops when its controlling process, or this node, goes. For real
-  clusters, start workers with `ringtracer worker` instead.
-
-  Distribution runs over TLS with mutual authentication: this node must
-  have been booted with it (`bin/ringtracer mix ...` boots Mix's VMs with
-  the user's own certificates), and peers get the same certificates.
-  """
+  @moduledoc false
+  # Peer nodes on this machine, with OTP's `:peer`, for the distributed tests
+  # and the multi-node benchmark: makes this node distributed
+  # (`RingTracer.Cluster.Distribution`: loopback, epmd on loopback) and starts
+  # peers, each a real OS process, that have this node's code paths and run
+  # `:ring_tracer`. Peers listen on 127.0.0.1 and live on the host
+  # `localhost`; they read the same cookie file as this node
+  # (`~/.erlang.cookie`: nothing secret on their command lines). Each peer
+  # stops when its controlling process, or this node, goes. For real
+  # clusters, start workers with `ringtracer worker` instead.
+  #
+  # Distribution runs over TLS with mutual authentication: this node must
+  # have been booted with it (`bin/ringtracer mix ...` boots Mix's VMs with
+  # the user's own certificates), and peers get the same certificates.
 
   alias RingTracer.Cluster.{Distribution, TLS}
 

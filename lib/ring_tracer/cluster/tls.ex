@@ -1,25 +1,24 @@
 defmodule RingTracer.Cluster.TLS do
-  @moduledoc """
-  Distribution over TLS with mutual authentication (OTP's `inet_tls_dist`).
-
-  A node's TLS folder holds three files, made by `ringtracer tls node`:
-
-    * `ca.pem` — the cluster's certificate authority (its key stays with
-      whoever runs `ringtracer tls ca`, never on the nodes);
-    * `node.pem` — this node's certificate, signed by that CA;
-    * `node.key` — its private key, mode 0600.
-
-  Both sides of every connection present their certificate and check the
-  other's against `ca.pem` (`verify_peer`, `fail_if_no_peer_cert`): a node
-  without a certificate, with one from another CA, or speaking plain TCP is
-  refused before any distribution message, and so before the cookie is
-  even asked for. The cookie is still checked after the handshake.
-
-  TLS is chosen when the VM boots (`vm_args/1`: `-proto_dist inet_tls` and
-  the certificate options, file paths only, no secret); the launcher
-  (`bin/ringtracer ... --tls DIR`) passes them, and `check_booted/1` makes
-  sure a node asked for TLS really runs it.
-  """
+  @moduledoc false
+  # Distribution over TLS with mutual authentication (OTP's `inet_tls_dist`).
+  #
+  # A node's TLS folder holds three files, made by `ringtracer tls node`:
+  #
+  #   * `ca.pem` — the cluster's certificate authority (its key stays with
+  #     whoever runs `ringtracer tls ca`, never on the nodes);
+  #   * `node.pem` — this node's certificate, signed by that CA;
+  #   * `node.key` — its private key, mode 0600.
+  #
+  # Both sides of every connection present their certificate and check the
+  # other's against `ca.pem` (`verify_peer`, `fail_if_no_peer_cert`): a node
+  # without a certificate, with one from another CA, or speaking plain TCP is
+  # refused before any distribution message, and so before the cookie is
+  # even asked for. The cookie is still checked after the handshake.
+  #
+  # TLS is chosen when the VM boots (`vm_args/1`: `-proto_dist inet_tls` and
+  # the certificate options, file paths only, no secret); the launcher
+  # (`bin/ringtracer ... --tls DIR`) passes them, and `check_booted/1` makes
+  # sure a node asked for TLS really runs it.
 
   alias RingTracer.Error
 

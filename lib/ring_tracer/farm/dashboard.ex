@@ -1,19 +1,18 @@
 defmodule RingTracer.Farm.Dashboard do
-  @moduledoc """
-  A farm's dashboard, on the head (`RingTracer.Farm.start_head/1`'s
-  `:dashboard`): a page of the farm's workers (speed, slots, tags, state,
-  current job), its jobs (state, frames done of all, progress, time left,
-  a link to each running job's live preview) and its queue.
-
-  Served by the guarded `:httpd` of the live preview
-  (`RingTracer.Preview.Listener`): on 127.0.0.1 unless `:listen` says
-  otherwise, under a random first segment (`:token`, made by
-  `start_head/1` and kept across the head's restarts, so the address stays
-  the same), to requests whose `Host` is its own address only; `GET` only.
-  The page (`priv/farm/`: plain HTML, JavaScript and CSS, nothing loaded
-  from elsewhere) polls `state.json` (`RingTracer.Farm.Dashboard.View`)
-  once a second; nothing the dashboard receives can change the farm.
-  """
+  @moduledoc false
+  # A farm's dashboard, on the head (`RingTracer.Farm.start_head/1`'s
+  # `:dashboard`): a page of the farm's workers (speed, slots, tags, state,
+  # current job), its jobs (state, frames done of all, progress, time left,
+  # a link to each running job's live preview) and its queue.
+  #
+  # Served by the guarded `:httpd` of the live preview
+  # (`RingTracer.Preview.Listener`): on 127.0.0.1 unless `:listen` says
+  # otherwise, under a random first segment (`:token`, made by
+  # `start_head/1` and kept across the head's restarts, so the address stays
+  # the same), to requests whose `Host` is its own address only; `GET` only.
+  # The page (`priv/farm/`: plain HTML, JavaScript and CSS, nothing loaded
+  # from elsewhere) polls `state.json` (`RingTracer.Farm.Dashboard.View`)
+  # once a second; nothing the dashboard receives can change the farm.
 
   use GenServer
 

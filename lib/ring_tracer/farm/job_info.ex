@@ -1,26 +1,25 @@
 defmodule RingTracer.Farm.JobInfo do
-  @moduledoc """
-  A farm job as `RingTracer.Farm.jobs/1` and `RingTracer.Farm.status/2`
-  show it: who submitted it, how it is to run, where it stands.
-
-    * `:state` — `:queued` (waiting for workers), `:running`, `:done`,
-      `:failed` (`:error` says why) or `:cancelled`
-    * `:frames` — the scene's frames it renders (from 1; a still is `[1]`),
-      `:done` those complete and stored on the head
-    * `:workers` — the worker nodes its ring uses now
-    * `:format` — `:png` or `:exr`, what the head stores and
-      `RingTracer.Farm.frame/3` returns; `:out` the submitter's output
-      pattern, kept for `wait` and `fetch`
-    * `:progress` — how much of the job is done, from 0.0 to 1.0: its
-      frames done and, while it runs, its ring's atoms traced
-    * `:time_left` — while it runs and once its ring has traced an atom,
-      an estimate of the milliseconds left, at the ring's rate so far
-      (`estimate/4`); otherwise nil
-    * `:preview` — while it runs on a head with a dashboard, the address
-      of its ring's live preview (`RingTracer.Preview`, on the head's
-      loopback, with its own token)
-    * times in milliseconds since the epoch (`System.os_time(:millisecond)`)
-  """
+  @moduledoc false
+  # A farm job as `RingTracer.Farm.jobs/1` and `RingTracer.Farm.status/2`
+  # show it: who submitted it, how it is to run, where it stands.
+  #
+  #   * `:state` — `:queued` (waiting for workers), `:running`, `:done`,
+  #     `:failed` (`:error` says why) or `:cancelled`
+  #   * `:frames` — the scene's frames it renders (from 1; a still is `[1]`),
+  #     `:done` those complete and stored on the head
+  #   * `:workers` — the worker nodes its ring uses now
+  #   * `:format` — `:png` or `:exr`, what the head stores and
+  #     `RingTracer.Farm.frame/3` returns; `:out` the submitter's output
+  #     pattern, kept for `wait` and `fetch`
+  #   * `:progress` — how much of the job is done, from 0.0 to 1.0: its
+  #     frames done and, while it runs, its ring's atoms traced
+  #   * `:time_left` — while it runs and once its ring has traced an atom,
+  #     an estimate of the milliseconds left, at the ring's rate so far
+  #     (`estimate/4`); otherwise nil
+  #   * `:preview` — while it runs on a head with a dashboard, the address
+  #     of its ring's live preview (`RingTracer.Preview`, on the head's
+  #     loopback, with its own token)
+  #   * times in milliseconds since the epoch (`System.os_time(:millisecond)`)
 
   @enforce_keys [:id, :user, :state]
   defstruct [

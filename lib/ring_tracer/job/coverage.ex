@@ -1,21 +1,9 @@
 defmodule RingTracer.Job.Coverage do
-  @moduledoc """
-  Which parts of each atom the parent holds, as atoms may arrive whole or in
-  pieces (`RingTracer.Layout`, "Pieces"), and after a failure twice or in
-  overlapping pieces. Per atom: the union of the shares received, as
-  disjoint intervals of `[0, 1]` with rational ends.
-
-      iex> alias RingTracer.Job.Coverage
-      iex> {:new, c} = Coverage.add(Coverage.new(), {3, 0, 1, 2})
-      iex> Coverage.complete?(c, 3)
-      false
-      iex> {:duplicate, ^c} = Coverage.add(c, {3, 1, 2, 4})
-      iex> {:new, c} = Coverage.add(c, {3, 1, 2, 2})
-      iex> {Coverage.complete?(c, 3), Coverage.covered?(c, 3)}
-      {true, true}
-      iex> Coverage.add(c, 3) |> elem(0)
-      :duplicate
-  """
+  @moduledoc false
+  # Which parts of each atom the parent holds, as atoms may arrive whole or in
+  # pieces (`RingTracer.Layout`, "Pieces"), and after a failure twice or in
+  # overlapping pieces. Per atom: the union of the shares received, as
+  # disjoint intervals of `[0, 1]` with rational ends.
 
   alias RingTracer.Layout
 
@@ -32,6 +20,17 @@ defmodule RingTracer.Job.Coverage do
   @doc """
   Adds atom or piece `a`: `:new` if it covers anything not covered yet,
   `:duplicate` (and the coverage unchanged) otherwise.
+
+      iex> alias RingTracer.Job.Coverage
+      iex> {:new, c} = Coverage.add(Coverage.new(), {3, 0, 1, 2})
+      iex> Coverage.complete?(c, 3)
+      false
+      iex> {:duplicate, ^c} = Coverage.add(c, {3, 1, 2, 4})
+      iex> {:new, c} = Coverage.add(c, {3, 1, 2, 2})
+      iex> {Coverage.complete?(c, 3), Coverage.covered?(c, 3)}
+      {true, true}
+      iex> Coverage.add(c, 3) |> elem(0)
+      :duplicate
   """
   @spec add(t(), Layout.atom_id()) :: {:new | :duplicate, t()}
   def add(coverage, a) do

@@ -1,21 +1,20 @@
 defmodule RingTracer.Job.Directory do
-  @moduledoc """
-  Where a job's children find each other: one table per node, holding for
-  each running job the pid of every child by its index.
-
-  A child may send to any sibling (an aimed help offer, a steal, a
-  hand-over to an offer's origin), so it needs every sibling's pid. Giving
-  each child its own copy of the ring would cost O(N) per child and O(N²)
-  per job (16,384 children would hold 2 GiB of pids); instead the parent
-  publishes the ring once on each node its children run on, a message sent
-  just before it tells the children of their ring, and a child waits until
-  its node's table holds that ring (`await/3`, at once in the usual case)
-  and looks a sibling up there when it needs one (`sibling/2`, an ETS
-  read, no message).
-
-  This process owns the table and monitors each job's parent: when the
-  parent ends, normally or not, its rows go.
-  """
+  @moduledoc false
+  # Where a job's children find each other: one table per node, holding for
+  # each running job the pid of every child by its index.
+  #
+  # A child may send to any sibling (an aimed help offer, a steal, a
+  # hand-over to an offer's origin), so it needs every sibling's pid. Giving
+  # each child its own copy of the ring would cost O(N) per child and O(N²)
+  # per job (16,384 children would hold 2 GiB of pids); instead the parent
+  # publishes the ring once on each node its children run on, a message sent
+  # just before it tells the children of their ring, and a child waits until
+  # its node's table holds that ring (`await/3`, at once in the usual case)
+  # and looks a sibling up there when it needs one (`sibling/2`, an ETS
+  # read, no message).
+  #
+  # This process owns the table and monitors each job's parent: when the
+  # parent ends, normally or not, its rows go.
   use GenServer
 
   @table RingTracer.Names.directory_table()

@@ -1,17 +1,16 @@
 defmodule RingTracer.Job.Elastic do
-  @moduledoc """
-  The pure rules of an elastic ring (`RingTracer.grow/4`): how many
-  children a running job may gain, and where children that join are
-  linked into the ring.
-
-  Children are numbered on (a job of `n` children gains `n`, `n + 1`,
-  ...) and the ring stays in index order: a child's left sibling is the
-  living child with the next lower index, and the lowest one's is the
-  highest. So the children that join go after the highest living child,
-  and the lowest living child's left sibling becomes the highest of them.
-  An offer that goes past the end of the ring still goes to a higher index
-  (`RingTracer.Strategy.Ring.HelpOffer.hop/3`).
-  """
+  @moduledoc false
+  # The pure rules of an elastic ring (`RingTracer.grow/4`): how many
+  # children a running job may gain, and where children that join are
+  # linked into the ring.
+  #
+  # Children are numbered on (a job of `n` children gains `n`, `n + 1`,
+  # ...) and the ring stays in index order: a child's left sibling is the
+  # living child with the next lower index, and the lowest one's is the
+  # highest. So the children that join go after the highest living child,
+  # and the lowest living child's left sibling becomes the highest of them.
+  # An offer that goes past the end of the ring still goes to a higher index
+  # (`RingTracer.Strategy.Ring.HelpOffer.hop/3`).
 
   @doc """
   Whether a job of `size` children may gain `count` more: at most

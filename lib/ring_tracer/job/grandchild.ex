@@ -1,36 +1,35 @@
 defmodule RingTracer.Job.Grandchild do
-  @moduledoc """
-  A grandchild: spawned and linked by a child on the child's node, it traces
-  one atom at a time through the job's kernel (`RingTracer.Kernel`; the
-  native one runs on a dirty CPU scheduler) and sends the atom's pixels back
-  to its child.
-
-  Its mailbox is the paper's pipe: the child keeps the next atom queued in it,
-  so the grandchild never waits while its child still has atoms.
-
-  A child with speed factor `s > 1` emulates a machine `s` times slower: after
-  each atom its grandchild sleeps `(s - 1)` times the atom's trace time,
-  burning no CPU.
-
-  Before tracing an atom it claims it (`RingTracer.Job.Pipe`): the child
-  may have taken the queued atom back to hand it to a sibling, and then the
-  grandchild skips it.
-
-  A long atom may be traced in parts (`{:trace, atom, n}`: `n` kernel calls,
-  each followed by its slowdown), so that its child can cut off the parts
-  not yet started for a faster sibling (`RingTracer.Job.Pipe.cut/3`); the
-  parts traced come back as one piece (`RingTracer.Layout.parts/4`).
-
-  The pixels go out encoded for the wire in the job's format
-  (`RingTracer.Pixels.encode/2`); with a tint (the ownership map of a job
-  in `:srgb8`), with the pixels mixed with the child's colour beside them
-  (`RingTracer.Pixels.encode_tinted/2`).
-
-  Messages in: `{:trace, atom}`, `{:trace, atom, n}`. Messages out, to the child:
-  `{:traced, self(), atom, pixels, rays, timing}` (pixels: `t:sent/0`;
-  timing: `:trace_us`, `:started_at`, `:ended_at` in system microseconds) or
-  `{:atom_failed, self(), atom, message}`.
-  """
+  @moduledoc false
+  # A grandchild: spawned and linked by a child on the child's node, it traces
+  # one atom at a time through the job's kernel (`RingTracer.Kernel`; the
+  # native one runs on a dirty CPU scheduler) and sends the atom's pixels back
+  # to its child.
+  #
+  # Its mailbox is the paper's pipe: the child keeps the next atom queued in it,
+  # so the grandchild never waits while its child still has atoms.
+  #
+  # A child with speed factor `s > 1` emulates a machine `s` times slower: after
+  # each atom its grandchild sleeps `(s - 1)` times the atom's trace time,
+  # burning no CPU.
+  #
+  # Before tracing an atom it claims it (`RingTracer.Job.Pipe`): the child
+  # may have taken the queued atom back to hand it to a sibling, and then the
+  # grandchild skips it.
+  #
+  # A long atom may be traced in parts (`{:trace, atom, n}`: `n` kernel calls,
+  # each followed by its slowdown), so that its child can cut off the parts
+  # not yet started for a faster sibling (`RingTracer.Job.Pipe.cut/3`); the
+  # parts traced come back as one piece (`RingTracer.Layout.parts/4`).
+  #
+  # The pixels go out encoded for the wire in the job's format
+  # (`RingTracer.Pixels.encode/2`); with a tint (the ownership map of a job
+  # in `:srgb8`), with the pixels mixed with the child's colour beside them
+  # (`RingTracer.Pixels.encode_tinted/2`).
+  #
+  # Messages in: `{:trace, atom}`, `{:trace, atom, n}`. Messages out, to the child:
+  # `{:traced, self(), atom, pixels, rays, timing}` (pixels: `t:sent/0`;
+  # timing: `:trace_us`, `:started_at`, `:ended_at` in system microseconds) or
+  # `{:atom_failed, self(), atom, message}`.
 
   alias RingTracer.Job.{Pipe, Slowdown}
   alias RingTracer.{Layout, Pixels, Rays}

@@ -1,36 +1,35 @@
 defmodule RingTracer.Job.Ledger do
-  @moduledoc """
-  Where the parent believes each atom may be, so that when a child dies it
-  can hand out again, at once, exactly the atoms that died with it.
-
-  Every child starts with its strategy's initial atoms. After that an atom
-  moves only by a hand-over, and whoever moves it tells the parent: a
-  child that gives atoms to a sibling sends the hand-over first and then
-  `{:gave, from, to, atoms}` to the parent; the parent records its own
-  hand-outs as it sends them. Reports from different children can arrive
-  in any order (a sibling may report passing an atom on before the report
-  of it receiving it arrives), so the ledger keeps counts, not places: per
-  child and atom, one for each time it was given the atom and minus one
-  for each time it gave it away. A child may hold an atom if its count is
-  positive; once every report has arrived, exactly one child has a
-  positive count.
-
-  When a child dies the parent hands out again every atom the child may
-  hold and that has not been traced. Because a child reports after it has
-  sent the hand-over, a child that dies between the two leaves its atoms
-  on its own account: they are handed out again and traced twice, never
-  lost. A report of atoms given to a child already dead hands them out
-  again too. Counting what may be held, not what is, errs only towards
-  tracing an atom twice (the parent keeps the first copy).
-
-  A hand-over can also be lost on its way: when the giver's node freezes
-  or drops with the message still in its buffers towards a third node,
-  while its report, on another connection, reached the parent. So the
-  receiver confirms what it got (`{:got, from, to, atoms}`), and atoms a
-  child gave that no receiver has confirmed yet are *in transit*: when the
-  giver dies they are handed out again too (`in_transit/2`), as its own
-  are.
-  """
+  @moduledoc false
+  # Where the parent believes each atom may be, so that when a child dies it
+  # can hand out again, at once, exactly the atoms that died with it.
+  #
+  # Every child starts with its strategy's initial atoms. After that an atom
+  # moves only by a hand-over, and whoever moves it tells the parent: a
+  # child that gives atoms to a sibling sends the hand-over first and then
+  # `{:gave, from, to, atoms}` to the parent; the parent records its own
+  # hand-outs as it sends them. Reports from different children can arrive
+  # in any order (a sibling may report passing an atom on before the report
+  # of it receiving it arrives), so the ledger keeps counts, not places: per
+  # child and atom, one for each time it was given the atom and minus one
+  # for each time it gave it away. A child may hold an atom if its count is
+  # positive; once every report has arrived, exactly one child has a
+  # positive count.
+  #
+  # When a child dies the parent hands out again every atom the child may
+  # hold and that has not been traced. Because a child reports after it has
+  # sent the hand-over, a child that dies between the two leaves its atoms
+  # on its own account: they are handed out again and traced twice, never
+  # lost. A report of atoms given to a child already dead hands them out
+  # again too. Counting what may be held, not what is, errs only towards
+  # tracing an atom twice (the parent keeps the first copy).
+  #
+  # A hand-over can also be lost on its way: when the giver's node freezes
+  # or drops with the message still in its buffers towards a third node,
+  # while its report, on another connection, reached the parent. So the
+  # receiver confirms what it got (`{:got, from, to, atoms}`), and atoms a
+  # child gave that no receiver has confirmed yet are *in transit*: when the
+  # giver dies they are handed out again too (`in_transit/2`), as its own
+  # are.
 
   alias RingTracer.Layout
 

@@ -1,55 +1,54 @@
 defmodule RingTracer.Job.Parent do
-  @moduledoc """
-  The parent of one render job: it starts the children, links them in a
-  ring, receives every atom's pixels, and ends the job.
-
-  The job is complete when the parent holds every atom, whole or in pieces
-  (`RingTracer.Job.Coverage`); that, not the ring's tokens, is the
-  termination test, because atoms handed over between children may still be
-  in flight when an offer returns. An atom (or a piece) that brings nothing
-  new is counted as a duplicate. On completion the parent sends each
-  child the stop message, waits until every child has stopped and reported
-  its statistics (a child kills its grandchild first), sends the result to
-  the caller and stops: no process of the job outlives it.
-
-  ## Frames
-
-  A job of several frames (`RingTracer.Layout`, "Frames") keeps at most
-  its spec's `window` of frames in flight: the first frame's atoms are the
-  children's initial atoms, and each time the oldest frame in flight
-  completes, the next frame is released (`RingTracer.Strategy.parent_frame/3`:
-  by default each child gets its strip of it, queued behind what it holds).
-  A child that runs out goes on with the next frame's atoms or helps its
-  siblings, so the ring does not drain between frames. In a `sequence`,
-  the parent sends each frame to the caller as it completes
-  (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
-  their places in the ledger: memory holds the window, whatever the
-  number of frames. With the spec's `ack`, a frame sent stays in the
-  window until the caller acknowledges it (`{:frame_ack, n}`, e.g. once it
-  is written), so that a caller slower than the ring holds the frames back
-  instead of letting them pile up in its mailbox.
-
-  If the caller dies, the job stops. If a child dies, the atoms it may have
-  held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
-  is re-linked around it; if an atom fails for good, or every child dies,
-  the job fails with the reason.
-
-  ## An elastic ring
-
-  Children can join a running job (`{:grow, from, ref, node, count}`, from
-  `RingTracer.grow/4`): the parent prepares the node if the job has not
-  used it yet (the scene shipped and pinned there), starts the children
-  with the next indices and no atoms, publishes the larger ring on every
-  node, sends each new child `{:ring, ...}` with the highest child before
-  it as its left sibling, and tells the others `{:ring_grown, ...}` (the
-  lowest child's left sibling is now the highest that joined). A new
-  child starts idle and finds work through its strategy
-  (`RingTracer.Strategy.parent_joined/3` for the parent's side); later
-  frames are cut over every child. Children leave (`{:shrink, from, ref,
-  node}`, from `RingTracer.shrink/3`) by the stop message: each reports
-  and stops, and the atoms it may have held are handed out again as a
-  dead child's are, without counting as a failure.
-  """
+  @moduledoc false
+  # The parent of one render job: it starts the children, links them in a
+  # ring, receives every atom's pixels, and ends the job.
+  #
+  # The job is complete when the parent holds every atom, whole or in pieces
+  # (`RingTracer.Job.Coverage`); that, not the ring's tokens, is the
+  # termination test, because atoms handed over between children may still be
+  # in flight when an offer returns. An atom (or a piece) that brings nothing
+  # new is counted as a duplicate. On completion the parent sends each
+  # child the stop message, waits until every child has stopped and reported
+  # its statistics (a child kills its grandchild first), sends the result to
+  # the caller and stops: no process of the job outlives it.
+  #
+  # ## Frames
+  #
+  # A job of several frames (`RingTracer.Layout`, "Frames") keeps at most
+  # its spec's `window` of frames in flight: the first frame's atoms are the
+  # children's initial atoms, and each time the oldest frame in flight
+  # completes, the next frame is released (`RingTracer.Strategy.parent_frame/3`:
+  # by default each child gets its strip of it, queued behind what it holds).
+  # A child that runs out goes on with the next frame's atoms or helps its
+  # siblings, so the ring does not drain between frames. In a `sequence`,
+  # the parent sends each frame to the caller as it completes
+  # (`RingTracer.Frame`) and forgets its pixels, its atoms' coverage and
+  # their places in the ledger: memory holds the window, whatever the
+  # number of frames. With the spec's `ack`, a frame sent stays in the
+  # window until the caller acknowledges it (`{:frame_ack, n}`, e.g. once it
+  # is written), so that a caller slower than the ring holds the frames back
+  # instead of letting them pile up in its mailbox.
+  #
+  # If the caller dies, the job stops. If a child dies, the atoms it may have
+  # held are handed out again at once (`RingTracer.Job.Ledger`) and the ring
+  # is re-linked around it; if an atom fails for good, or every child dies,
+  # the job fails with the reason.
+  #
+  # ## An elastic ring
+  #
+  # Children can join a running job (`{:grow, from, ref, node, count}`, from
+  # `RingTracer.grow/4`): the parent prepares the node if the job has not
+  # used it yet (the scene shipped and pinned there), starts the children
+  # with the next indices and no atoms, publishes the larger ring on every
+  # node, sends each new child `{:ring, ...}` with the highest child before
+  # it as its left sibling, and tells the others `{:ring_grown, ...}` (the
+  # lowest child's left sibling is now the highest that joined). A new
+  # child starts idle and finds work through its strategy
+  # (`RingTracer.Strategy.parent_joined/3` for the parent's side); later
+  # frames are cut over every child. Children leave (`{:shrink, from, ref,
+  # node}`, from `RingTracer.shrink/3`) by the stop message: each reports
+  # and stops, and the atoms it may have held are handed out again as a
+  # dead child's are, without counting as a failure.
   use GenServer, restart: :temporary
 
   alias RingTracer.Job.{Child, Coverage, Directory, Ledger, Spec}
@@ -1188,75 +1187,11 @@ defmodule RingTracer.Job.Parent do
   defp finish(state) do
     %{spec: spec, stopping: stopping} = state
     now = System.monotonic_time(:microsecond)
-    # The makespan ends when the image is complete; stopping the children and
-    # collecting their reports afterwards is reported apart.
-    elapsed = (state.completed || now) - state.started
-
-    reports =
-      for i <- 0..(state.size - 1) do
-        case {state.departed, state.dead} do
-          {%{^i => report}, _} -> report
-          {_, %{^i => failure}} -> dead_report(i, failure)
-          _ -> Map.get(stopping.reports, i)
-        end
-      end
-
-    # A child that died after the image was complete, before it reported,
-    # costs its statistics, not the image.
-    reports =
-      reports
-      |> Enum.with_index()
-      |> Enum.map(fn
-        {nil, i} -> dead_report(i, %{reason: "exited before reporting its statistics"})
-        {report, _} -> report
-      end)
-
-    outcome = stopping.outcome
 
     reply =
-      case outcome do
-        :ok ->
-          pixels =
-            if spec.sequence,
-              do: nil,
-              else: assemble(spec.layout, state.frames[0].results, 0, spec.pixels)
-
-          tinted =
-            if spec.tint and not spec.sequence,
-              do: assemble(spec.layout, state.frames[0].tinted, 0, :srgb8)
-
-          traffic =
-            Enum.reduce(reports, state.traffic, fn r, acc ->
-              Map.merge(acc, r.traffic, fn _, {n1, b1}, {n2, b2} -> {n1 + n2, b1 + b2} end)
-            end)
-
-          {:ok,
-           %{
-             pixels: pixels,
-             pixel_format: spec.pixels,
-             tinted: tinted,
-             frames: Enum.reverse(state.summaries),
-             kept_trace_us: state.kept_trace_us,
-             started_at_us: state.t0,
-             elapsed_us: elapsed,
-             teardown_us: now - state.completed,
-             children: Enum.map(reports, & &1.stats),
-             atoms: kept_atoms(reports, state.traced_by, spec.layout),
-             events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
-             traffic: traffic,
-             duplicates: state.duplicates,
-             failures:
-               state.dead
-               |> Map.drop(MapSet.to_list(state.leaving))
-               |> Map.values()
-               |> Enum.sort_by(& &1.child),
-             redone: state.redone,
-             nodes: node_summary(state, reports),
-             layout: state.spec.layout.order
-           }}
-
-        {:error, message} ->
-          {:error, message}
+      case stopping.outcome do
+        :ok -> {:ok, success(state, final_reports(state), now)}
+        {:error, message} -> {:error, message}
       end
 
     stop_helpers(state.helpers)
@@ -1269,6 +1204,61 @@ defmodule RingTracer.Job.Parent do
 
     send(spec.caller, {@reply_tag, spec.id, reply})
     {:stop, :normal, state}
+  end
+
+  # Every child's report, by index: as it stopped, as it left, or as it
+  # died. A child that died after the image was complete, before it
+  # reported, costs its statistics, not the image.
+  defp final_reports(state) do
+    for i <- 0..(state.size - 1) do
+      case {state.departed, state.dead, state.stopping.reports} do
+        {%{^i => report}, _, _} -> report
+        {_, %{^i => failure}, _} -> dead_report(i, failure)
+        {_, _, %{^i => report}} -> report
+        _ -> dead_report(i, %{reason: "exited before reporting its statistics"})
+      end
+    end
+  end
+
+  # The reply of a job that completed (`t:reply/0`).
+  defp success(state, reports, now) do
+    %{spec: spec} = state
+    first = state.frames[0]
+
+    traffic =
+      Enum.reduce(reports, state.traffic, fn r, acc ->
+        Map.merge(acc, r.traffic, fn _, {n1, b1}, {n2, b2} -> {n1 + n2, b1 + b2} end)
+      end)
+
+    %{
+      pixels:
+        if(spec.sequence, do: nil, else: assemble(spec.layout, first.results, 0, spec.pixels)),
+      pixel_format: spec.pixels,
+      tinted:
+        if(spec.tint and not spec.sequence,
+          do: assemble(spec.layout, first.tinted, 0, :srgb8)
+        ),
+      frames: Enum.reverse(state.summaries),
+      kept_trace_us: state.kept_trace_us,
+      started_at_us: state.t0,
+      # The makespan ends when the image is complete; stopping the children
+      # and collecting their reports afterwards is reported apart.
+      elapsed_us: state.completed - state.started,
+      teardown_us: now - state.completed,
+      children: Enum.map(reports, & &1.stats),
+      atoms: kept_atoms(reports, state.traced_by, spec.layout),
+      events: reports |> Enum.flat_map(& &1.events) |> Enum.sort_by(& &1.at_us),
+      traffic: traffic,
+      duplicates: state.duplicates,
+      failures:
+        state.dead
+        |> Map.drop(MapSet.to_list(state.leaving))
+        |> Map.values()
+        |> Enum.sort_by(& &1.child),
+      redone: state.redone,
+      nodes: node_summary(state, reports),
+      layout: spec.layout.order
+    }
   end
 
   defp stop_helpers(helpers) do

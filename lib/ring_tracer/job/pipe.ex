@@ -1,40 +1,39 @@
 defmodule RingTracer.Job.Pipe do
-  @moduledoc """
-  Who gets the atom queued in a grandchild's pipe: the grandchild, which is
-  about to trace it, or its child, which wants to hand it to a sibling.
-
-  A child keeps two atoms in its grandchild's mailbox: the one being traced
-  and the next one, so that the grandchild never waits. The next one is not
-  yet started, and at the end of a job (or on a slow machine) it is the atom
-  a faster sibling could finish first. Taking it back by message would wait
-  for the grandchild to finish its current atom; instead both sides race for
-  it in this node's ETS table, once, atomically (`:ets.insert_new/2` on the
-  key `{grandchild, atom}`):
-
-    * the grandchild `claim/2`s an atom before tracing it;
-    * the child `revoke/2`s it before handing it over;
-    * whoever inserts first wins; the loser sees `false`.
-
-  The child `release/2`s the entry when the atom's pixels come back; the
-  grandchild deletes a revoked entry when it skips the atom; a child whose
-  grandchild died `forget/1`s everything of that grandchild.
-
-  ## Cutting the atom being traced
-
-  A grandchild may trace a long atom in parts (`RingTracer.Job.Grandchild`):
-  the entry then counts the parts it has started. Before each part after
-  the first it takes the next one (`next/2`); its child may `cut/3` the atom
-  meanwhile, which takes every part not yet started, for a faster sibling.
-  Both are one `:ets.update_counter/3` on the same entry, so each part goes
-  to exactly one side: the cut adds a million to the count, and returns
-  how many parts the grandchild had started; the grandchild's next
-  `next/2` sees the mark, and it stops there.
-
-  The table belongs to this process, started by the application on every
-  node (a grandchild and its child always share a node). A child killed
-  outright cannot forget its grandchild's entries, so this process sweeps
-  out the entries of dead grandchildren once a minute.
-  """
+  @moduledoc false
+  # Who gets the atom queued in a grandchild's pipe: the grandchild, which is
+  # about to trace it, or its child, which wants to hand it to a sibling.
+  #
+  # A child keeps two atoms in its grandchild's mailbox: the one being traced
+  # and the next one, so that the grandchild never waits. The next one is not
+  # yet started, and at the end of a job (or on a slow machine) it is the atom
+  # a faster sibling could finish first. Taking it back by message would wait
+  # for the grandchild to finish its current atom; instead both sides race for
+  # it in this node's ETS table, once, atomically (`:ets.insert_new/2` on the
+  # key `{grandchild, atom}`):
+  #
+  #   * the grandchild `claim/2`s an atom before tracing it;
+  #   * the child `revoke/2`s it before handing it over;
+  #   * whoever inserts first wins; the loser sees `false`.
+  #
+  # The child `release/2`s the entry when the atom's pixels come back; the
+  # grandchild deletes a revoked entry when it skips the atom; a child whose
+  # grandchild died `forget/1`s everything of that grandchild.
+  #
+  # ## Cutting the atom being traced
+  #
+  # A grandchild may trace a long atom in parts (`RingTracer.Job.Grandchild`):
+  # the entry then counts the parts it has started. Before each part after
+  # the first it takes the next one (`next/2`); its child may `cut/3` the atom
+  # meanwhile, which takes every part not yet started, for a faster sibling.
+  # Both are one `:ets.update_counter/3` on the same entry, so each part goes
+  # to exactly one side: the cut adds a million to the count, and returns
+  # how many parts the grandchild had started; the grandchild's next
+  # `next/2` sees the mark, and it stops there.
+  #
+  # The table belongs to this process, started by the application on every
+  # node (a grandchild and its child always share a node). A child killed
+  # outright cannot forget its grandchild's entries, so this process sweeps
+  # out the entries of dead grandchildren once a minute.
   use GenServer
 
   alias RingTracer.Layout

@@ -1,28 +1,19 @@
 defmodule RingTracer.Job.Slowdown do
-  @moduledoc """
-  How a child of speed factor `s > 1` emulates a machine `s` times slower:
-  after each atom it waits `(s - 1)` times the atom's trace time, without
-  burning CPU.
-
-  BEAM timers have millisecond resolution and fire late when the cores are
-  busy: the process must wait for a scheduler thread, which competes with
-  the dirty schedulers tracing other atoms. On this project's 2-core machine
-  with 8 children tracing, a sleep ran 1.4-2.4 ms late on average, so a
-  child of speed 2 waited 53% longer than it should and the emulated
-  machines were slower than their factors. So the wait keeps a balance:
-  each atom adds `(s - 1) x trace` to it, each sleep takes off what it
-  actually lasted (late included), and the next sleep is shortened by what
-  the last overran. Over a job a child waits what its factor says, within
-  one sleep's error.
-
-      iex> alias RingTracer.Job.Slowdown
-      iex> Slowdown.owed(Slowdown.new(1), 5_000)
-      0
-      iex> Slowdown.owed(Slowdown.new(3), 5_000)
-      10_000
-      iex> Slowdown.owed(%{Slowdown.new(3) | balance: -1_500}, 5_000)
-      8_500
-  """
+  @moduledoc false
+  # How a child of speed factor `s > 1` emulates a machine `s` times slower:
+  # after each atom it waits `(s - 1)` times the atom's trace time, without
+  # burning CPU.
+  #
+  # BEAM timers have millisecond resolution and fire late when the cores are
+  # busy: the process must wait for a scheduler thread, which competes with
+  # the dirty schedulers tracing other atoms. On this project's 2-core machine
+  # with 8 children tracing, a sleep ran 1.4-2.4 ms late on average, so a
+  # child of speed 2 waited 53% longer than it should and the emulated
+  # machines were slower than their factors. So the wait keeps a balance:
+  # each atom adds `(s - 1) x trace` to it, each sleep takes off what it
+  # actually lasted (late included), and the next sleep is shortened by what
+  # the last overran. Over a job a child waits what its factor says, within
+  # one sleep's error.
 
   @enforce_keys [:speed]
   defstruct [:speed, balance: 0]
@@ -70,7 +61,17 @@ defmodule RingTracer.Job.Slowdown do
   @spec new(number()) :: t()
   def new(speed) when is_number(speed), do: %__MODULE__{speed: speed}
 
-  @doc "Microseconds to wait after an atom traced in `trace_us`."
+  @doc """
+  Microseconds to wait after an atom traced in `trace_us`.
+
+      iex> alias RingTracer.Job.Slowdown
+      iex> Slowdown.owed(Slowdown.new(1), 5_000)
+      0
+      iex> Slowdown.owed(Slowdown.new(3), 5_000)
+      10_000
+      iex> Slowdown.owed(%{Slowdown.new(3) | balance: -1_500}, 5_000)
+      8_500
+  """
   @spec owed(t(), non_neg_integer()) :: integer()
   def owed(%__MODULE__{speed: speed}, _trace_us) when speed <= 1, do: 0
 

@@ -1,17 +1,16 @@
 defmodule RingTracer.Kernel.Native do
-  @moduledoc """
-  The Rust kernel through the NIF: traces on a dirty CPU scheduler (an atom
-  of a few pixels first on the grandchild's own scheduler, for at most
-  200 µs) with the scene parsed once per node and pinned there while the job
-  runs (`RingTracer.SceneCache`). A panic or error in
-  the kernel comes back as `{:error, message}`, never as a crash of the VM.
-
-  A job of several frames (`RingTracer.Layout`, "Frames") traces each atom
-  in the scene of its frame: the node's cache builds each frame once
-  (`RingTracer.SceneCache.fetch_frame/2`), and a grandchild keeps the last
-  frame it traced (in its process dictionary), so that it looks a frame up
-  only when it moves on to another.
-  """
+  @moduledoc false
+  # The Rust kernel through the NIF: traces on a dirty CPU scheduler (an atom
+  # of a few pixels first on the grandchild's own scheduler, for at most
+  # 200 µs) with the scene parsed once per node and pinned there while the job
+  # runs (`RingTracer.SceneCache`). A panic or error in
+  # the kernel comes back as `{:error, message}`, never as a crash of the VM.
+  #
+  # A job of several frames (`RingTracer.Layout`, "Frames") traces each atom
+  # in the scene of its frame: the node's cache builds each frame once
+  # (`RingTracer.SceneCache.fetch_frame/2`), and a grandchild keeps the last
+  # frame it traced (in its process dictionary), so that it looks a frame up
+  # only when it moves on to another.
   @behaviour RingTracer.Kernel
 
   alias RingTracer.{Layout, Native, Rays, SceneCache, Settings}

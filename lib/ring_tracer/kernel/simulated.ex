@@ -2,24 +2,23 @@ defmodule RingTracer.Kernel.Simulated do
   # An atom's cost, in microseconds, when none is given.
   @default_cost 2000
 
-  @moduledoc """
-  A cost model in place of the ray tracer: each atom "costs" some
-  microseconds, and tracing it is sleeping that long (no CPU burnt), then
-  returning black pixels of the right size. The same parent, children and
-  strategies run on it, so a ring of 1024 children fits on a small machine.
-
-  ## Options
-
-    * `:costs` — per-atom costs in microseconds: a list or tuple indexed by
-      atom (for instance the `:trace_us` of a real render's `:atoms`), a
-      binary of native-endian unsigned 32-bit integers (what `RingTracer.simulate/1`
-      turns a list or tuple into, so that 1024 children share one copy), a
-      function `atom -> microseconds`, or one integer for every atom
-      (default #{@default_cost}).
-
-  In a job of several frames (`RingTracer.Layout`, "Frames") every frame
-  costs alike: costs are indexed by the atom within its frame.
-  """
+  @moduledoc false
+  # A cost model in place of the ray tracer: each atom "costs" some
+  # microseconds, and tracing it is sleeping that long (no CPU burnt), then
+  # returning black pixels of the right size. The same parent, children and
+  # strategies run on it, so a ring of 1024 children fits on a small machine.
+  #
+  # ## Options
+  #
+  #   * `:costs` — per-atom costs in microseconds: a list or tuple indexed by
+  #     atom (for instance the `:trace_us` of a real render's `:atoms`), a
+  #     binary of native-endian unsigned 32-bit integers (what `RingTracer.simulate/1`
+  #     turns a list or tuple into, so that 1024 children share one copy), a
+  #     function `atom -> microseconds`, or one integer for every atom
+  #     (default #{@default_cost}).
+  #
+  # In a job of several frames (`RingTracer.Layout`, "Frames") every frame
+  # costs alike: costs are indexed by the atom within its frame.
   @behaviour RingTracer.Kernel
 
   alias RingTracer.Layout

@@ -1,27 +1,13 @@
 defmodule RingTracer.Output.Pattern do
-  @moduledoc """
-  Numbered output files: a run of `#` in a file name stands for the frame
-  number, zero-padded to the run's length, with more digits when the number
-  needs them (Blender's output pattern). `frames/orbit_####.png` names frame
-  7 `frames/orbit_0007.png` and frame 12345 `frames/orbit_12345.png`.
-
-  Only the file name is a pattern: a `#` in a folder of the path is taken as
-  it is, so every frame goes into the one folder. A name may hold one run of
-  `#` at most (`a_##_#.png` would be ambiguous).
-
-      iex> {:ok, p} = RingTracer.Output.Pattern.parse("frames/orbit_####.png")
-      iex> RingTracer.Output.Pattern.path(p, 7)
-      "frames/orbit_0007.png"
-      iex> RingTracer.Output.Pattern.path(p, 12345)
-      "frames/orbit_12345.png"
-      iex> RingTracer.Output.Pattern.parse("orbit.png")
-      {:error, :none}
-      iex> RingTracer.Output.Pattern.parse("a_##_#.png")
-      {:error, :many}
-      iex> {:ok, p} = RingTracer.Output.Pattern.parse("take#2/f_#.exr")
-      iex> RingTracer.Output.Pattern.path(p, 3)
-      "take#2/f_3.exr"
-  """
+  @moduledoc false
+  # Numbered output files: a run of `#` in a file name stands for the frame
+  # number, zero-padded to the run's length, with more digits when the number
+  # needs them (Blender's output pattern). `frames/orbit_####.png` names frame
+  # 7 `frames/orbit_0007.png` and frame 12345 `frames/orbit_12345.png`.
+  #
+  # Only the file name is a pattern: a `#` in a folder of the path is taken as
+  # it is, so every frame goes into the one folder. A name may hold one run of
+  # `#` at most (`a_##_#.png` would be ambiguous).
 
   @enforce_keys [:dir, :prefix, :digits, :suffix]
   defstruct [:dir, :prefix, :digits, :suffix]
@@ -41,6 +27,19 @@ defmodule RingTracer.Output.Pattern do
   @doc """
   Parses `path`: `{:ok, pattern}` when its file name holds one run of `#`,
   `{:error, :none}` when it holds none, `{:error, :many}` when more than one.
+
+      iex> {:ok, p} = RingTracer.Output.Pattern.parse("frames/orbit_####.png")
+      iex> RingTracer.Output.Pattern.path(p, 7)
+      "frames/orbit_0007.png"
+      iex> RingTracer.Output.Pattern.path(p, 12345)
+      "frames/orbit_12345.png"
+      iex> RingTracer.Output.Pattern.parse("orbit.png")
+      {:error, :none}
+      iex> RingTracer.Output.Pattern.parse("a_##_#.png")
+      {:error, :many}
+      iex> {:ok, p} = RingTracer.Output.Pattern.parse("take#2/f_#.exr")
+      iex> RingTracer.Output.Pattern.path(p, 3)
+      "take#2/f_3.exr"
   """
   @spec parse(Path.t()) :: {:ok, t()} | {:error, :none | :many}
   def parse(path) when is_binary(path) do

@@ -1,25 +1,24 @@
 defmodule RingTracer.Preview.HTTP do
-  @moduledoc """
-  The only module of a preview's `:httpd` server (so no directory listing,
-  no file serving by path, no CGI): it answers `GET` for the page's three
-  files, by fixed name from `priv/preview`, and `GET /events`, the job's
-  Server-Sent Events stream, all under `/TOKEN/`, the preview's random
-  first segment. Anything else is 404 (an unknown path, or one outside the
-  token) or 405 (a method other than GET); a request target that is not a
-  path (the absolute form `GET http://host/...`, or `*`) is 400; a request
-  whose `Host` header names another host than the preview's address
-  (`hosts/1`: a page that rebound its own name to 127.0.0.1) is 421. No
-  response has a `Server` header.
-
-  `/events` streams the log of `RingTracer.Preview.Server` from its first
-  frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
-  up to 256 KB, at most one every #{40} ms, until the job's end frame. The
-  handler reads the log itself: a slow viewer lags without holding any
-  buffer. Every send has a deadline (2 s): a viewer whose connection
-  takes nothing for that long while a chunk waits (so at most one chunk
-  waits in the VM for it) is disconnected; a browser reconnects from its
-  `Last-Event-ID`. Beyond `:max_viewers` streams at once, `/events` is 503.
-  """
+  @moduledoc false
+  # The only module of a preview's `:httpd` server (so no directory listing,
+  # no file serving by path, no CGI): it answers `GET` for the page's three
+  # files, by fixed name from `priv/preview`, and `GET /events`, the job's
+  # Server-Sent Events stream, all under `/TOKEN/`, the preview's random
+  # first segment. Anything else is 404 (an unknown path, or one outside the
+  # token) or 405 (a method other than GET); a request target that is not a
+  # path (the absolute form `GET http://host/...`, or `*`) is 400; a request
+  # whose `Host` header names another host than the preview's address
+  # (`hosts/1`: a page that rebound its own name to 127.0.0.1) is 421. No
+  # response has a `Server` header.
+  #
+  # `/events` streams the log of `RingTracer.Preview.Server` from its first
+  # frame (or after `Last-Event-ID`, when a browser reconnects), in chunks of
+  # up to 256 KB, at most one every #{40} ms, until the job's end frame. The
+  # handler reads the log itself: a slow viewer lags without holding any
+  # buffer. Every send has a deadline (2 s): a viewer whose connection
+  # takes nothing for that long while a chunk waits (so at most one chunk
+  # waits in the VM for it) is disconnected; a browser reconnects from its
+  # `Last-Event-ID`. Beyond `:max_viewers` streams at once, `/events` is 503.
 
   require Record
 

@@ -1,20 +1,19 @@
 defmodule RingTracer.Preview.Listener do
-  @moduledoc """
-  The guarded `:httpd` both the live preview (`RingTracer.Preview`) and the
-  farm's dashboard (`RingTracer.Farm.Dashboard`) serve with: OTP's `:httpd`
-  started stand-alone with one module of the caller's (no directory
-  listing, no file serving by path, no CGI), no `Server` header, one
-  deadline of #{5} s for a request's line and headers, and a random token
-  as the first segment of every path.
-
-  `check/3` is what every request goes through first: a target that is not
-  a path is 400, a `Host` not the server's own address 421, a path outside
-  the token 404, a method other than GET 405; a connection whose request
-  passed them is admitted (it holds the token). `sweep/4` keeps the
-  connections that are neither long-lived streams nor admitted to a few,
-  oldest dropped first. `close/1` stops a server so that its port accepts
-  nothing more.
-  """
+  @moduledoc false
+  # The guarded `:httpd` both the live preview (`RingTracer.Preview`) and the
+  # farm's dashboard (`RingTracer.Farm.Dashboard`) serve with: OTP's `:httpd`
+  # started stand-alone with one module of the caller's (no directory
+  # listing, no file serving by path, no CGI), no `Server` header, one
+  # deadline of #{5} s for a request's line and headers, and a random token
+  # as the first segment of every path.
+  #
+  # `check/3` is what every request goes through first: a target that is not
+  # a path is 400, a `Host` not the server's own address 421, a path outside
+  # the token 404, a method other than GET 405; a connection whose request
+  # passed them is admitted (it holds the token). `sweep/4` keeps the
+  # connections that are neither long-lived streams nor admitted to a few,
+  # oldest dropped first. `close/1` stops a server so that its port accepts
+  # nothing more.
 
   require Record
 

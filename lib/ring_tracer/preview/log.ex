@@ -1,57 +1,56 @@
 defmodule RingTracer.Preview.Log do
-  @moduledoc """
-  The event log of one previewed job: what a browser needs to draw the job
-  from its start, as Server-Sent Events frames, numbered in order.
-
-  A viewer reads the frames after the last one it sent, so a late joiner
-  gets everything so far and a slow one only lags: nothing is buffered per
-  viewer. The log is bounded by the image: one frame per atom (its pixels
-  as 8-bit sRGB, base64), one per hand-over of atoms, protocol events up
-  to `max_events` (later ones are counted, not kept; the final frame has
-  every event), and the job and final frames.
-
-  A sequence (`RingTracer.render_sequence/2`: a layout of several frames,
-  or any frame event) is bounded by its window instead of its length: the
-  log forgets (`forget/1` gives the numbers of the frames to delete) the
-  `release` and `atom` frames of an image once it is complete, but those of
-  the image complete with the highest number (what the page shows when no
-  image is in flight), keeps the `frame` frames of the `strip` images
-  complete with the highest numbers (12 by default: images complete in
-  about their order, so those completed last), counts hand-overs with the protocol events against
-  `max_events`, and its final frame has the atoms and events of the last
-  `strip` images only. What stays: the job frame, the images in flight,
-  one image completed, `strip` thumbnails, at most `max_events` events.
-
-  Frames (`event:` name, `data:` one JSON object):
-
-    * `job` — `width`, `height`, `children`, `total` atoms, `strategy`,
-      `nodes` and `speeds` per child, `palette` (the colour of each child,
-      as in `RingTracer.Report.Palette`), `owners` and `spans`
-      (`[first_pixel, count]`) per atom of one image (`m` of them: atom
-      `a` is atom `a mod m` of image `a div m`), `frames` (images in the
-      job: 1 but for a sequence), `strip` (thumbnails kept)
-    * `atom` — `a` atom, `c` child that traced it, `at` µs since the job's
-      start when it reached the parent, `tus` trace µs, `rays`, `px` its
-      pixels (3 bytes a pixel, sRGB, base64)
-    * `release` — a sequence released an image: `f` its index in the job
-      (from 0; `null` when the preview opened on a running sequence), `n`
-      its frame number in the scene, `at` µs since the job's start
-    * `frame` — a sequence's image is complete: `f` (`null` if unknown),
-      `n`, `at`, `us` from its release to its last pixel, `completed`
-      images so far, `mean_us` the mean `us` of those the preview saw
-      complete, and its thumbnail: `tw`,
-      `th`, `px` (sRGB, base64, as an atom's; `null` when the preview was
-      too far behind to keep it), `flight` the indices of the images still
-      in flight (a viewer that lagged may have missed the `frame` frames,
-      since forgotten, of others)
-    * `ev` — a protocol event of a child: `kind` (`offer`, `pass`, `give`,
-      `back`, `returned`, `steal`, `refuse`), `from`, `to`, `at`
-    * `move` — atoms handed over: `from` (a child or `parent`), `to`, `n`,
-      `at`
-    * `final` — the job's statistics (`elapsed_us`, `children`, `traffic`,
-      `atoms` with their exact times, `events`...), or `error`
-    * `end` — the stream ends
-  """
+  @moduledoc false
+  # The event log of one previewed job: what a browser needs to draw the job
+  # from its start, as Server-Sent Events frames, numbered in order.
+  #
+  # A viewer reads the frames after the last one it sent, so a late joiner
+  # gets everything so far and a slow one only lags: nothing is buffered per
+  # viewer. The log is bounded by the image: one frame per atom (its pixels
+  # as 8-bit sRGB, base64), one per hand-over of atoms, protocol events up
+  # to `max_events` (later ones are counted, not kept; the final frame has
+  # every event), and the job and final frames.
+  #
+  # A sequence (`RingTracer.render_sequence/2`: a layout of several frames,
+  # or any frame event) is bounded by its window instead of its length: the
+  # log forgets (`forget/1` gives the numbers of the frames to delete) the
+  # `release` and `atom` frames of an image once it is complete, but those of
+  # the image complete with the highest number (what the page shows when no
+  # image is in flight), keeps the `frame` frames of the `strip` images
+  # complete with the highest numbers (12 by default: images complete in
+  # about their order, so those completed last), counts hand-overs with the protocol events against
+  # `max_events`, and its final frame has the atoms and events of the last
+  # `strip` images only. What stays: the job frame, the images in flight,
+  # one image completed, `strip` thumbnails, at most `max_events` events.
+  #
+  # Frames (`event:` name, `data:` one JSON object):
+  #
+  #   * `job` — `width`, `height`, `children`, `total` atoms, `strategy`,
+  #     `nodes` and `speeds` per child, `palette` (the colour of each child,
+  #     as in `RingTracer.Report.Palette`), `owners` and `spans`
+  #     (`[first_pixel, count]`) per atom of one image (`m` of them: atom
+  #     `a` is atom `a mod m` of image `a div m`), `frames` (images in the
+  #     job: 1 but for a sequence), `strip` (thumbnails kept)
+  #   * `atom` — `a` atom, `c` child that traced it, `at` µs since the job's
+  #     start when it reached the parent, `tus` trace µs, `rays`, `px` its
+  #     pixels (3 bytes a pixel, sRGB, base64)
+  #   * `release` — a sequence released an image: `f` its index in the job
+  #     (from 0; `null` when the preview opened on a running sequence), `n`
+  #     its frame number in the scene, `at` µs since the job's start
+  #   * `frame` — a sequence's image is complete: `f` (`null` if unknown),
+  #     `n`, `at`, `us` from its release to its last pixel, `completed`
+  #     images so far, `mean_us` the mean `us` of those the preview saw
+  #     complete, and its thumbnail: `tw`,
+  #     `th`, `px` (sRGB, base64, as an atom's; `null` when the preview was
+  #     too far behind to keep it), `flight` the indices of the images still
+  #     in flight (a viewer that lagged may have missed the `frame` frames,
+  #     since forgotten, of others)
+  #   * `ev` — a protocol event of a child: `kind` (`offer`, `pass`, `give`,
+  #     `back`, `returned`, `steal`, `refuse`), `from`, `to`, `at`
+  #   * `move` — atoms handed over: `from` (a child or `parent`), `to`, `n`,
+  #     `at`
+  #   * `final` — the job's statistics (`elapsed_us`, `children`, `traffic`,
+  #     `atoms` with their exact times, `events`...), or `error`
+  #   * `end` — the stream ends
 
   alias RingTracer.{Layout, Pixels}
   alias RingTracer.Report.Palette

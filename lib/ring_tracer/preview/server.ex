@@ -1,28 +1,27 @@
 defmodule RingTracer.Preview.Server do
-  @moduledoc """
-  The process behind one preview (`RingTracer.Preview`): it owns the HTTP
-  server (OTP's `:httpd`, started stand-alone for this preview, with
-  `RingTracer.Preview.HTTP` as its only module) and the job's event log
-  (`RingTracer.Preview.Log`), kept in a protected ETS table that viewers
-  read from, frame by frame.
-
-  It learns about its job from `RingTracer.Telemetry` handlers (atoms,
-  hand-overs and a sequence's frames released and complete from the
-  parent, which runs on this node; help offers from each child's node) and
-  from the parent's description of the job
-  (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
-  before the preview opened. A handler only sends this process a message:
-  the job never waits for the preview, nor for any viewer. While the job
-  runs, the server spends at most `:cpu_share` of one core on atoms (0.01
-  by default: after an atom's work the job's events wait in a queue 99
-  times as long, until the job ends, while the server answers everything
-  else), and it and the viewers run at low process priority. Of a
-  sequence, the queue keeps only what the log would keep: when a frame
-  completes, the queued atoms of the frames complete before it are dropped
-  (but the highest complete's), and only the `strip` highest numbers
-  complete keep their pixels for a thumbnail (`RingTracer.Preview.Backlog`);
-  the log's frames the sequence no longer needs are deleted from the table.
-  """
+  @moduledoc false
+  # The process behind one preview (`RingTracer.Preview`): it owns the HTTP
+  # server (OTP's `:httpd`, started stand-alone for this preview, with
+  # `RingTracer.Preview.HTTP` as its only module) and the job's event log
+  # (`RingTracer.Preview.Log`), kept in a protected ETS table that viewers
+  # read from, frame by frame.
+  #
+  # It learns about its job from `RingTracer.Telemetry` handlers (atoms,
+  # hand-overs and a sequence's frames released and complete from the
+  # parent, which runs on this node; help offers from each child's node) and
+  # from the parent's description of the job
+  # (`RingTracer.Job.Parent.describe/2`), which carries the atoms traced
+  # before the preview opened. A handler only sends this process a message:
+  # the job never waits for the preview, nor for any viewer. While the job
+  # runs, the server spends at most `:cpu_share` of one core on atoms (0.01
+  # by default: after an atom's work the job's events wait in a queue 99
+  # times as long, until the job ends, while the server answers everything
+  # else), and it and the viewers run at low process priority. Of a
+  # sequence, the queue keeps only what the log would keep: when a frame
+  # completes, the queued atoms of the frames complete before it are dropped
+  # (but the highest complete's), and only the `strip` highest numbers
+  # complete keep their pixels for a thumbnail (`RingTracer.Preview.Backlog`);
+  # the log's frames the sequence no longer needs are deleted from the table.
   use GenServer
 
   alias RingTracer.Preview.{Backlog, Listener, Log}

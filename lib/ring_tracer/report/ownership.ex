@@ -1,16 +1,15 @@
 defmodule RingTracer.Report.Ownership do
-  @moduledoc """
-  The rendered image tinted by who computed it: every pixel of an atom is
-  mixed 50/50 (in linear light) with the colour of the child that traced that
-  atom (`RingTracer.Report.Palette`, the colours of
-  `RingTracer.Report.Timeline`). With no load balancing the tints follow the
-  children's strips; atoms handed to a helper show up in the helper's colour.
-
-  A job rendered with `pixels: :srgb8` has no linear values left to mix:
-  rendered with `ownership: true`, its children tint each atom as they send
-  it (the same mix, in the same arithmetic) and the result holds the map
-  in `:tinted`, which `write/3` writes, byte for byte the map of the floats.
-  """
+  @moduledoc false
+  # The rendered image tinted by who computed it: every pixel of an atom is
+  # mixed 50/50 (in linear light) with the colour of the child that traced that
+  # atom (`RingTracer.Report.Palette`, the colours of
+  # `RingTracer.Report.Timeline`). With no load balancing the tints follow the
+  # children's strips; atoms handed to a helper show up in the helper's colour.
+  #
+  # A job rendered with `pixels: :srgb8` has no linear values left to mix:
+  # rendered with `ownership: true`, its children tint each atom as they send
+  # it (the same mix, in the same arithmetic) and the result holds the map
+  # in `:tinted`, which `write/3` writes, byte for byte the map of the floats.
 
   alias RingTracer.{Error, Image, Layout, Pixels, Result}
   alias RingTracer.Report.Palette

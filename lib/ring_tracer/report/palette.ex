@@ -1,17 +1,11 @@
 defmodule RingTracer.Report.Palette do
-  @moduledoc """
-  One colour per child, shared by the reports (`RingTracer.Report.Timeline`
-  bars and `RingTracer.Report.Ownership` tints).
-
-  Child `i` gets hue `i * 137.508°` (the golden angle) at fixed saturation
-  and lightness, so neighbouring children — and any number of them — get
-  well separated hues.
-
-      iex> RingTracer.Report.Palette.hex(0)
-      "#d84141"
-      iex> RingTracer.Report.Palette.hex(0) == RingTracer.Report.Palette.hex(1)
-      false
-  """
+  @moduledoc false
+  # One colour per child, shared by the reports (`RingTracer.Report.Timeline`
+  # bars and `RingTracer.Report.Ownership` tints).
+  #
+  # Child `i` gets hue `i * 137.508°` (the golden angle) at fixed saturation
+  # and lightness, so neighbouring children — and any number of them — get
+  # well separated hues.
 
   @golden_angle 137.50776405003785
   @saturation 0.66
@@ -24,7 +18,14 @@ defmodule RingTracer.Report.Palette do
     hsl_to_rgb(hue, @saturation, @lightness)
   end
 
-  @doc "Child `i`'s colour as a CSS hex string, `\"#rrggbb\"`."
+  @doc """
+  Child `i`'s colour as a CSS hex string, `\"#rrggbb\"`.
+
+      iex> RingTracer.Report.Palette.hex(0)
+      "#d84141"
+      iex> RingTracer.Report.Palette.hex(0) == RingTracer.Report.Palette.hex(1)
+      false
+  """
   @spec hex(non_neg_integer()) :: String.t()
   def hex(i) do
     {r, g, b} = srgb(i)

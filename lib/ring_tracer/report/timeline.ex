@@ -1,26 +1,25 @@
 defmodule RingTracer.Report.Timeline do
-  @moduledoc """
-  An SVG timeline of a render (`RingTracer.Result`).
-
-  One horizontal lane per child, labelled `child i (speed s)`, top to bottom
-  in ring order; the x axis is time since the job's start, in milliseconds.
-
-    * every atom is a bar (`<rect class="atom">`) from its `start_us` to its
-      `end_us` in the lane of the child that traced it, filled with the colour
-      of its original owner (`RingTracer.Report.Palette`); bars traced by a
-      child other than their owner get a dark outline; hovering shows the
-      atom, its owner, who traced it and its times;
-    * protocol events are drawn at their time: `:offer` (solid) and `:pass`
-      (dashed) as grey arrows from lane `from` to lane `to`, `:steal` requests
-      as blue arrows, `:give` as red arrows, `:returned` and `:refuse` as a
-      small mark in lane `from`;
-    * a header gives the strategy, the makespan, the ideal makespan and their
-      ratio; a legend explains the marks.
-
-  Lanes shrink with the number of children (down to 2 px, so 1024 children
-  make a tall but valid SVG); when lanes are too thin for a label each,
-  only every k-th lane is labelled and each lane carries a tooltip instead.
-  """
+  @moduledoc false
+  # An SVG timeline of a render (`RingTracer.Result`).
+  #
+  # One horizontal lane per child, labelled `child i (speed s)`, top to bottom
+  # in ring order; the x axis is time since the job's start, in milliseconds.
+  #
+  #   * every atom is a bar (`<rect class="atom">`) from its `start_us` to its
+  #     `end_us` in the lane of the child that traced it, filled with the colour
+  #     of its original owner (`RingTracer.Report.Palette`); bars traced by a
+  #     child other than their owner get a dark outline; hovering shows the
+  #     atom, its owner, who traced it and its times;
+  #   * protocol events are drawn at their time: `:offer` (solid) and `:pass`
+  #     (dashed) as grey arrows from lane `from` to lane `to`, `:steal` requests
+  #     as blue arrows, `:give` as red arrows, `:returned` and `:refuse` as a
+  #     small mark in lane `from`;
+  #   * a header gives the strategy, the makespan, the ideal makespan and their
+  #     ratio; a legend explains the marks.
+  #
+  # Lanes shrink with the number of children (down to 2 px, so 1024 children
+  # make a tall but valid SVG); when lanes are too thin for a label each,
+  # only every k-th lane is labelled and each lane carries a tooltip instead.
 
   alias RingTracer.{Error, Result}
   alias RingTracer.Report.Palette

@@ -1,9 +1,8 @@
 defmodule RingTracer.Scene.Source do
-  @moduledoc """
-  A scene as bytes, ready to ship to another node: its file name, format,
-  contents, the contents of every file it references, and a content hash
-  that names it in each node's `RingTracer.SceneCache`.
-  """
+  @moduledoc false
+  # A scene as bytes, ready to ship to another node: its file name, format,
+  # contents, the contents of every file it references, and a content hash
+  # that names it in each node's `RingTracer.SceneCache`.
 
   @enforce_keys [:name, :format, :bytes, :includes, :hash]
   defstruct [:name, :format, :bytes, :includes, :hash, packed: nil]

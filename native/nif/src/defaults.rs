@@ -1,7 +1,8 @@
 //! What the Elixir side learns from the kernel when it compiles, so that it writes none of it
-//! down again: the settings' defaults and the ray counters' names.
+//! down again: the settings' defaults, the limits a render's options are checked against, and
+//! the ray counters' names.
 
-use ring_tracer_kernel::{RayStats, Settings};
+use ring_tracer_kernel::{limits, RayStats, Settings};
 use rustler::{Atom, Env, NifMap};
 
 use crate::convert::{atom, RayStatsTerm};
@@ -25,6 +26,29 @@ fn settings_defaults() -> SettingsDefaults {
         cutoff: f64::from(s.cutoff),
         samples: s.samples,
         spd: s.spd,
+    }
+}
+
+/// The kernel's limits on a render's settings ([`limits`]).
+#[derive(NifMap)]
+struct SettingsLimits {
+    max_side: u32,
+    max_pixels: u64,
+    max_samples: u32,
+    max_depth: u32,
+    max_frames: u32,
+}
+
+/// `%{max_side: _, max_pixels: _, max_samples: _, max_depth: _, max_frames: _}`: the bounds the
+/// kernel checks a render's settings and an animation against.
+#[rustler::nif]
+fn settings_limits() -> SettingsLimits {
+    SettingsLimits {
+        max_side: limits::MAX_SIDE,
+        max_pixels: limits::MAX_PIXELS,
+        max_samples: limits::MAX_SAMPLES,
+        max_depth: limits::MAX_DEPTH,
+        max_frames: limits::MAX_FRAMES,
     }
 }
 

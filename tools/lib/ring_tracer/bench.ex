@@ -1,12 +1,11 @@
 defmodule RingTracer.Bench do
-  @moduledoc """
-  What the benchmarks of `mix ring_tracer.bench` share: the behaviour each
-  benchmark module implements, and the helpers that make their tables
-  (medians, number formats, the VM line, column alignment).
-
-  A benchmark is a module under `RingTracer.Bench` with `help/0`, `usage/0`
-  and `run/1`, named by one line in `Mix.Tasks.RingTracer.Bench`'s table.
-  """
+  @moduledoc false
+  # What the benchmarks of `mix ring_tracer.bench` share: the behaviour each
+  # benchmark module implements, and the helpers that make their tables
+  # (medians, number formats, the VM line, column alignment).
+  #
+  # A benchmark is a module under `RingTracer.Bench` with `help/0`, `usage/0`
+  # and `run/1`, named by one line in `Mix.Tasks.RingTracer.Bench`'s table.
 
   @doc "What the benchmark measures and its options: its module's documentation, for `mix help`."
   @callback help() :: String.t()

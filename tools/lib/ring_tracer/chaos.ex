@@ -1,80 +1,79 @@
 defmodule RingTracer.Chaos do
-  @moduledoc """
-  A chaos soak: many concurrent jobs of several scenes across peer nodes on
-  this machine, with grandchildren, children and whole nodes killed and
-  nodes frozen at random moments, every image checked against a clean
-  render. `mix ring_tracer.chaos` runs it and prints `format/1`.
-
-  What happens is a pure function of the seed (`RingTracer.Chaos.Plan`):
-  each job's scene, strategy, ring size, atoms, slowdowns, and its faults,
-  each due at an atom count. A job's driver starts it with
-  `RingTracer.render_async/2` on this node and the peer nodes that are up
-  (`RingTracer.Chaos.Pool`), and when the parent has reported that many
-  atoms it injects the fault from outside the job, as an operator or a
-  failing machine would; nothing in the render path knows about the soak:
-
-    * the job's parent is the child of `RingTracer.Jobs` that monitors the
-      render's caller; its children are the `:children` of its state
-      (`:sys.get_state/2`), which holds the living ones only;
-    * a grandchild is the process its child is linked to besides the
-      node's `RingTracer.Children` supervisor;
-    * processes die by `Process.exit(pid, :kill)`, nodes by SIGKILL of
-      their OS process, and a frozen node gets SIGSTOP, then SIGCONT after
-      `:freeze` ms (longer than the jobs' `:liveness`, so that they must
-      declare it dead). Killed and frozen nodes are replaced.
-
-  Victims are drawn by the plan's pick among the candidates alive when the
-  fault is due (children by index, nodes by name). The soak never takes
-  the last living child on this node, so no job loses every child, nor a
-  third grandchild of one child in one job (a child gives up on an atom
-  after three failed attempts, by design). A fault with no candidate, or
-  due after its job ended, is skipped and counted as such.
-
-  ## What is checked, per job
-
-    * **atoms lost** — atoms of the job whose pixels the caller did not
-      get: for a job that failed or hung, the atoms its parent never
-      received (the job's atom count minus its last progress count); a
-      completed job loses none, since its parent holds every atom before
-      it replies.
-    * **atoms traced twice** — atom results that reached the parent after
-      the atom's first one (`result.duplicates`, of which the parent keeps
-      the first) that no loss explains. After a child or node is lost the
-      parent hands out again the atoms that never arrived
-      (`result.redone`); one of those may arrive twice, once from a tracer
-      whose result was still on its way, and that is allowed (reported
-      apart as *re-traced after a loss*). So a job counts `max(duplicates -
-      redone, 0)`; a job that lost no child counts `max(duplicates, traced
-      - atoms)`, where `traced` sums the children's own counts of atoms
-      traced and sent, so the children and the parent are checked against
-      each other.
-    * **images differing** — completed jobs whose pixels are not
-      byte-for-byte the scene's clean render (this node only, no faults,
-      computed once per scene and checked against the kernel's own
-      whole-image render); for each, the atoms whose pixels differ.
-    * **messages per atom** — `RingTracer.Result.per_atom/1` of each
-      completed job (for a sequence, its messages over all its frames'
-      atoms); the report has the median and the worst.
-
-  ## What is checked, per sequence
-
-  A sequence job (`RingTracer.render_sequence/2`, a share of the jobs set
-  by `:sequences`) renders a few frames of an animated scene through one
-  ring, and meets the same faults, due at atom counts over all its frames.
-  Its atoms are checked as an image's are (lost, traced twice, messages
-  per atom; its progress and its children's counts cover every frame),
-  and its frames as they arrive:
-
-    * **frames lost** — frames asked for that never came (a completed job
-      loses none);
-    * **frames twice** — deliveries of a frame number already delivered
-      (the caller would write that frame twice): there must be none;
-    * **frames differing** — frames that are not byte-for-byte that frame's
-      clean render (this node only, no faults, computed once per frame and
-      checked against the kernel's own whole-image render of that frame),
-      with the atoms whose pixels differ; a frame not asked for counts as
-      differing.
-  """
+  @moduledoc false
+  # A chaos soak: many concurrent jobs of several scenes across peer nodes on
+  # this machine, with grandchildren, children and whole nodes killed and
+  # nodes frozen at random moments, every image checked against a clean
+  # render. `mix ring_tracer.chaos` runs it and prints `format/1`.
+  #
+  # What happens is a pure function of the seed (`RingTracer.Chaos.Plan`):
+  # each job's scene, strategy, ring size, atoms, slowdowns, and its faults,
+  # each due at an atom count. A job's driver starts it with
+  # `RingTracer.render_async/2` on this node and the peer nodes that are up
+  # (`RingTracer.Chaos.Pool`), and when the parent has reported that many
+  # atoms it injects the fault from outside the job, as an operator or a
+  # failing machine would; nothing in the render path knows about the soak:
+  #
+  #   * the job's parent is the child of `RingTracer.Jobs` that monitors the
+  #     render's caller; its children are the `:children` of its state
+  #     (`:sys.get_state/2`), which holds the living ones only;
+  #   * a grandchild is the process its child is linked to besides the
+  #     node's `RingTracer.Children` supervisor;
+  #   * processes die by `Process.exit(pid, :kill)`, nodes by SIGKILL of
+  #     their OS process, and a frozen node gets SIGSTOP, then SIGCONT after
+  #     `:freeze` ms (longer than the jobs' `:liveness`, so that they must
+  #     declare it dead). Killed and frozen nodes are replaced.
+  #
+  # Victims are drawn by the plan's pick among the candidates alive when the
+  # fault is due (children by index, nodes by name). The soak never takes
+  # the last living child on this node, so no job loses every child, nor a
+  # third grandchild of one child in one job (a child gives up on an atom
+  # after three failed attempts, by design). A fault with no candidate, or
+  # due after its job ended, is skipped and counted as such.
+  #
+  # ## What is checked, per job
+  #
+  #   * **atoms lost** — atoms of the job whose pixels the caller did not
+  #     get: for a job that failed or hung, the atoms its parent never
+  #     received (the job's atom count minus its last progress count); a
+  #     completed job loses none, since its parent holds every atom before
+  #     it replies.
+  #   * **atoms traced twice** — atom results that reached the parent after
+  #     the atom's first one (`result.duplicates`, of which the parent keeps
+  #     the first) that no loss explains. After a child or node is lost the
+  #     parent hands out again the atoms that never arrived
+  #     (`result.redone`); one of those may arrive twice, once from a tracer
+  #     whose result was still on its way, and that is allowed (reported
+  #     apart as *re-traced after a loss*). So a job counts `max(duplicates -
+  #     redone, 0)`; a job that lost no child counts `max(duplicates, traced
+  #     - atoms)`, where `traced` sums the children's own counts of atoms
+  #     traced and sent, so the children and the parent are checked against
+  #     each other.
+  #   * **images differing** — completed jobs whose pixels are not
+  #     byte-for-byte the scene's clean render (this node only, no faults,
+  #     computed once per scene and checked against the kernel's own
+  #     whole-image render); for each, the atoms whose pixels differ.
+  #   * **messages per atom** — `RingTracer.Result.per_atom/1` of each
+  #     completed job (for a sequence, its messages over all its frames'
+  #     atoms); the report has the median and the worst.
+  #
+  # ## What is checked, per sequence
+  #
+  # A sequence job (`RingTracer.render_sequence/2`, a share of the jobs set
+  # by `:sequences`) renders a few frames of an animated scene through one
+  # ring, and meets the same faults, due at atom counts over all its frames.
+  # Its atoms are checked as an image's are (lost, traced twice, messages
+  # per atom; its progress and its children's counts cover every frame),
+  # and its frames as they arrive:
+  #
+  #   * **frames lost** — frames asked for that never came (a completed job
+  #     loses none);
+  #   * **frames twice** — deliveries of a frame number already delivered
+  #     (the caller would write that frame twice): there must be none;
+  #   * **frames differing** — frames that are not byte-for-byte that frame's
+  #     clean render (this node only, no faults, computed once per frame and
+  #     checked against the kernel's own whole-image render of that frame),
+  #     with the atoms whose pixels differ; a frame not asked for counts as
+  #     differing.
 
   alias RingTracer.Chaos.{Plan, Pool}
   alias RingTracer.{Layout, Native, Result, Scene, Settings}

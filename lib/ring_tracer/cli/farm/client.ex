@@ -1,20 +1,19 @@
 defmodule RingTracer.CLI.Farm.Client do
-  @moduledoc """
-  What every command that talks to a farm's head shares (`submit`, `jobs`,
-  `status`, `wait`, `cancel`, `fetch`): the head's name from `--farm HEAD`
-  (or `RINGTRACER_FARM`), and this node made a distributed client of it with
-  the farm's credentials: the cookie from a file (`--cookie-file`, default
-  `~/.erlang.cookie`) and the TLS folder the launcher booted the VM with
-  (`--tls DIR`, default the user's own), never a secret on the command line.
-
-  ## Options
-
-    * `--farm HEAD` — the head's node name (`farm@localhost`); a name
-      without `@` is on `localhost`. Default: `$RINGTRACER_FARM`
-    * the distribution switches of `RingTracer.CLI.Worker.switches/0`; this
-      node gets a made-up name unless `--sname` or `--name` gives one (a
-      long one when the head's name is long)
-  """
+  @moduledoc false
+  # What every command that talks to a farm's head shares (`submit`, `jobs`,
+  # `status`, `wait`, `cancel`, `fetch`): the head's name from `--farm HEAD`
+  # (or `RINGTRACER_FARM`), and this node made a distributed client of it with
+  # the farm's credentials: the cookie from a file (`--cookie-file`, default
+  # `~/.erlang.cookie`) and the TLS folder the launcher booted the VM with
+  # (`--tls DIR`, default the user's own), never a secret on the command line.
+  #
+  # ## Options
+  #
+  #   * `--farm HEAD` — the head's node name (`farm@localhost`); a name
+  #     without `@` is on `localhost`. Default: `$RINGTRACER_FARM`
+  #   * the distribution switches of `RingTracer.CLI.Worker.switches/0`; this
+  #     node gets a made-up name unless `--sname` or `--name` gives one (a
+  #     long one when the head's name is long)
 
   alias RingTracer.CLI.Paths
   alias RingTracer.Cluster.Distribution

@@ -1,15 +1,14 @@
 defmodule RingTracer.CLI.Farm.Fetch do
-  @moduledoc """
-  A farm job's frames written on this machine: each file as the head stored
-  it (PNG or EXR, the bytes `ringtracer render` writes), atomically, in its
-  folder held open (`RingTracer.Output.write/3`), named by the output
-  pattern (`RingTracer.CLI.Frames`). Used by `ringtracer submit` (which waits
-  for a still, and for a sequence unless `--no-wait`) and `ringtracer fetch`.
-
-  The frames are fetched by a process of their own, so that an interrupt
-  reaches the command at once: it stops fetching (a file is written whole
-  or not at all) and the job goes on on the farm.
-  """
+  @moduledoc false
+  # A farm job's frames written on this machine: each file as the head stored
+  # it (PNG or EXR, the bytes `ringtracer render` writes), atomically, in its
+  # folder held open (`RingTracer.Output.write/3`), named by the output
+  # pattern (`RingTracer.CLI.Frames`). Used by `ringtracer submit` (which waits
+  # for a still, and for a sequence unless `--no-wait`) and `ringtracer fetch`.
+  #
+  # The frames are fetched by a process of their own, so that an interrupt
+  # reaches the command at once: it stops fetching (a file is written whole
+  # or not at all) and the job goes on on the farm.
 
   alias RingTracer.CLI.{Console, Frames, Signals}
   alias RingTracer.Farm

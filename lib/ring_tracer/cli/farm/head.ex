@@ -1,24 +1,23 @@
 defmodule RingTracer.CLI.Farm.Head do
-  @moduledoc """
-  `ringtracer farm [--sname NAME] [--dir DIR] [options]`: starts a farm's
-  head (`RingTracer.Farm.start_head/1`) on a distributed node, loopback and
-  TLS by default as `ringtracer worker`, prints its name and how to join it,
-  and runs until stopped (Ctrl-C or SIGTERM: 130 or 143).
-
-  ## Options
-
-    * `--sname NAME` — the head's short name (default `farm`: on loopback
-      `farm@localhost`); the queue belongs to the name, so a head restarted
-      must keep it
-    * `--dir DIR` — the head's folder: the queue (Mnesia) and the frames
-      done. Default `$XDG_STATE_HOME/ringtracer/farm/NODE` (`~/.local/state`
-      without it), every folder made mode 0700
-    * `--dashboard-port PORT` — the dashboard's port (default a free one);
-      it listens where the node does (`--listen`), behind a random token
-    * `--no-dashboard` — no dashboard
-    * the distribution switches of `RingTracer.CLI.Worker` (`--name`,
-      `--cookie-file`, `--listen`, `--ports`, `--tls`, `--insecure-plain`)
-  """
+  @moduledoc false
+  # `ringtracer farm [--sname NAME] [--dir DIR] [options]`: starts a farm's
+  # head (`RingTracer.Farm.start_head/1`) on a distributed node, loopback and
+  # TLS by default as `ringtracer worker`, prints its name and how to join it,
+  # and runs until stopped (Ctrl-C or SIGTERM: 130 or 143).
+  #
+  # ## Options
+  #
+  #   * `--sname NAME` — the head's short name (default `farm`: on loopback
+  #     `farm@localhost`); the queue belongs to the name, so a head restarted
+  #     must keep it
+  #   * `--dir DIR` — the head's folder: the queue (Mnesia) and the frames
+  #     done. Default `$XDG_STATE_HOME/ringtracer/farm/NODE` (`~/.local/state`
+  #     without it), every folder made mode 0700
+  #   * `--dashboard-port PORT` — the dashboard's port (default a free one);
+  #     it listens where the node does (`--listen`), behind a random token
+  #   * `--no-dashboard` — no dashboard
+  #   * the distribution switches of `RingTracer.CLI.Worker` (`--name`,
+  #     `--cookie-file`, `--listen`, `--ports`, `--tls`, `--insecure-plain`)
 
   alias RingTracer.CLI.{Args, Paths}
   alias RingTracer.CLI.Worker

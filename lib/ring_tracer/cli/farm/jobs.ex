@@ -1,21 +1,20 @@
 defmodule RingTracer.CLI.Farm.Jobs do
-  @moduledoc """
-  The commands about a farm's jobs, each with `--farm HEAD` and the farm's
-  credentials (`RingTracer.CLI.Farm.Client`):
-
-    * `ringtracer jobs` — the queue (every job, oldest first) and the workers
-    * `ringtracer status ID` — one job in full
-    * `ringtracer wait ID` — until the job ends: 0 done, 1 failed or cancelled
-    * `ringtracer cancel ID` — a running job's ring stops, a queued one never starts
-    * `ringtracer fetch ID [--out PATTERN] [--continue] [--wait]` — writes the
-      frames done to their files (the pattern the job was submitted with,
-      unless `--out`); `--continue` skips the files already there,
-      `--wait` goes on until the job ends
-
-  Exit status as `ringtracer render`'s: 0 ok, 1 failed (no such job, a head
-  that cannot be reached, a job that failed), 2 a usage error, 130/143
-  interrupted.
-  """
+  @moduledoc false
+  # The commands about a farm's jobs, each with `--farm HEAD` and the farm's
+  # credentials (`RingTracer.CLI.Farm.Client`):
+  #
+  #   * `ringtracer jobs` — the queue (every job, oldest first) and the workers
+  #   * `ringtracer status ID` — one job in full
+  #   * `ringtracer wait ID` — until the job ends: 0 done, 1 failed or cancelled
+  #   * `ringtracer cancel ID` — a running job's ring stops, a queued one never starts
+  #   * `ringtracer fetch ID [--out PATTERN] [--continue] [--wait]` — writes the
+  #     frames done to their files (the pattern the job was submitted with,
+  #     unless `--out`); `--continue` skips the files already there,
+  #     `--wait` goes on until the job ends
+  #
+  # Exit status as `ringtracer render`'s: 0 ok, 1 failed (no such job, a head
+  # that cannot be reached, a job that failed), 2 a usage error, 130/143
+  # interrupted.
 
   alias RingTracer.CLI.{Args, Console, Frames, Paths, Render}
   alias RingTracer.CLI.Farm.{Client, Fetch, Show}

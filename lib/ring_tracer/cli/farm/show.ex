@@ -1,9 +1,8 @@
 defmodule RingTracer.CLI.Farm.Show do
-  @moduledoc """
-  A farm's jobs and workers as `ringtracer jobs` and `ringtracer status`
-  print them: plain text, one job a line in the list, pure functions of
-  `RingTracer.Farm.JobInfo` and `RingTracer.Farm.WorkerInfo`.
-  """
+  @moduledoc false
+  # A farm's jobs and workers as `ringtracer jobs` and `ringtracer status`
+  # print them: plain text, one job a line in the list, pure functions of
+  # `RingTracer.Farm.JobInfo` and `RingTracer.Farm.WorkerInfo`.
 
   alias RingTracer.Farm.{JobInfo, WorkerInfo}
 

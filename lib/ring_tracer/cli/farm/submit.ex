@@ -1,18 +1,17 @@
 defmodule RingTracer.CLI.Farm.Submit do
-  @moduledoc """
-  `ringtracer submit SCENE --out FILE --farm HEAD [options]`: queues a still
-  or a sequence on a farm (`RingTracer.Farm.submit/3`) and prints the job's
-  id. The scene, and every file it references, is read here, confined as
-  `ringtracer render` reads it, and travels with the submission. Then it
-  waits and writes each frame to `--out` on this machine as it completes
-  (`RingTracer.CLI.Farm.Fetch`); `--no-wait` returns once the job is queued
-  (`ringtracer fetch ID` gets the frames later).
-
-  Exit status as `ringtracer render`'s: 0 queued (and, when waiting, every
-  frame written), 1 failed (a bad scene, a head that cannot be reached, a
-  job that failed or was cancelled), 2 a usage error, 130/143 interrupted
-  (the job goes on on the farm).
-  """
+  @moduledoc false
+  # `ringtracer submit SCENE --out FILE --farm HEAD [options]`: queues a still
+  # or a sequence on a farm (`RingTracer.Farm.submit/3`) and prints the job's
+  # id. The scene, and every file it references, is read here, confined as
+  # `ringtracer render` reads it, and travels with the submission. Then it
+  # waits and writes each frame to `--out` on this machine as it completes
+  # (`RingTracer.CLI.Farm.Fetch`); `--no-wait` returns once the job is queued
+  # (`ringtracer fetch ID` gets the frames later).
+  #
+  # Exit status as `ringtracer render`'s: 0 queued (and, when waiting, every
+  # frame written), 1 failed (a bad scene, a head that cannot be reached, a
+  # job that failed or was cancelled), 2 a usage error, 130/143 interrupted
+  # (the job goes on on the farm).
 
   alias RingTracer.CLI.{Args, Console, Frames, Paths, Render}
   alias RingTracer.CLI.Farm.{Client, Fetch}

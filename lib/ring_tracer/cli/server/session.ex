@@ -1,26 +1,25 @@
 defmodule RingTracer.CLI.Server.Session do
-  @moduledoc """
-  One client of the resident server (`RingTracer.CLI.Server`): it reads
-  the request, runs the command in a process of its own whose stdout and
-  stderr are the client's, and sends back the exit status.
-
-  The frames (each a 4-byte big-endian length, then a tag byte and the
-  data), client to server: `C` the caller's folder, `A` an argument (one
-  each, in order), `T` `1` if the client's stderr is a terminal, `U` its
-  umask in octal (the files the command creates get the permissions the
-  client's own would give them), `H` its home (`~` in a path), `G` that is all; `Y` go ahead (after the
-  server's `R`); later `I` interrupt (Ctrl-C) and `K` terminate. Server to
-  client: `R` the server takes the command, `O` bytes for stdout, `E` bytes
-  for stderr, `P` (every second while the command runs) still at work, `X`
-  the exit status (one byte), or `F` alone: boot a VM of your own for this
-  command (a render on other nodes, or a command other than `render`).
-
-  The command runs only after the client's `Y`: a client that gave up
-  waiting for `R` (a server stopped or busy for a while) has a VM of its
-  own do the command, and never gets a second run from a server that wakes
-  up late. A client has 5 s to send its request, and 5 s more for its
-  `Y`; one that does not is dropped without running anything.
-  """
+  @moduledoc false
+  # One client of the resident server (`RingTracer.CLI.Server`): it reads
+  # the request, runs the command in a process of its own whose stdout and
+  # stderr are the client's, and sends back the exit status.
+  #
+  # The frames (each a 4-byte big-endian length, then a tag byte and the
+  # data), client to server: `C` the caller's folder, `A` an argument (one
+  # each, in order), `T` `1` if the client's stderr is a terminal, `U` its
+  # umask in octal (the files the command creates get the permissions the
+  # client's own would give them), `H` its home (`~` in a path), `G` that is all; `Y` go ahead (after the
+  # server's `R`); later `I` interrupt (Ctrl-C) and `K` terminate. Server to
+  # client: `R` the server takes the command, `O` bytes for stdout, `E` bytes
+  # for stderr, `P` (every second while the command runs) still at work, `X`
+  # the exit status (one byte), or `F` alone: boot a VM of your own for this
+  # command (a render on other nodes, or a command other than `render`).
+  #
+  # The command runs only after the client's `Y`: a client that gave up
+  # waiting for `R` (a server stopped or busy for a while) has a VM of its
+  # own do the command, and never gets a second run from a server that wakes
+  # up late. A client has 5 s to send its request, and 5 s more for its
+  # `Y`; one that does not is dropped without running anything.
 
   alias RingTracer.CLI.{Console, Render, Signals}
   alias RingTracer.CLI.Server.Device

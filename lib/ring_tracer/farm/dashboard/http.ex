@@ -1,13 +1,12 @@
 defmodule RingTracer.Farm.Dashboard.HTTP do
-  @moduledoc """
-  The only module of the dashboard's `:httpd` server: under `/TOKEN/`, `GET`
-  of the page's three files (by fixed name from `priv/farm`) and of
-  `state.json`, the farm as `RingTracer.Farm.Dashboard.View` shows it, made
-  from `RingTracer.Farm.overview/2` at each request (503 when the head does
-  not answer within 2 s). Everything else is refused as the preview's
-  server refuses it (`RingTracer.Preview.Listener.check/3`: 400, 404, 405,
-  421). No response has a `Server` header or may be cached.
-  """
+  @moduledoc false
+  # The only module of the dashboard's `:httpd` server: under `/TOKEN/`, `GET`
+  # of the page's three files (by fixed name from `priv/farm`) and of
+  # `state.json`, the farm as `RingTracer.Farm.Dashboard.View` shows it, made
+  # from `RingTracer.Farm.overview/2` at each request (503 when the head does
+  # not answer within 2 s). Everything else is refused as the preview's
+  # server refuses it (`RingTracer.Preview.Listener.check/3`: 400, 404, 405,
+  # 421). No response has a `Server` header or may be cached.
 
   alias RingTracer.Farm
   alias RingTracer.Farm.Dashboard.View

@@ -1,25 +1,24 @@
 defmodule RingTracer.Farm.Dashboard.View do
-  @moduledoc """
-  What the dashboard's page shows, made from `RingTracer.Farm.overview/2`
-  (pure), and its JSON (`state.json`):
-
-    * `head` — the head's node, `now` — the head's clock (ms since the epoch)
-    * `workers` — per worker: `node`, `state` (`"idle"` or `"working"`),
-      `job` (its id, or null), `speed`, `slots`, `tags`, `joined_at`
-    * `jobs` — the jobs not ended, in submission order, then the last
-      #{20} ended (`ended_omitted` counts the others): `id`, `user`,
-      `scene`, `state`, `priority`, `tags`, `width`, `height`, `frames`
-      (how many), `done` (how many), `progress` (0 to 1), `time_left`
-      (ms, or null), `preview` (the running job's page, or null), `workers`,
-      `error`, `submitted_at`, `started_at`, `finished_at`
-    * `queue` — the ids of the jobs waiting for workers, higher priority
-      first, then in submission order
-
-  Strings from jobs (users, scene names, errors) are attacker-controlled:
-  the page only ever sets them as text, and the JSON has every `<`, `>` and
-  `&` escaped (`\\u003c`...), so even a browser that sniffed it as HTML
-  would find no markup in it.
-  """
+  @moduledoc false
+  # What the dashboard's page shows, made from `RingTracer.Farm.overview/2`
+  # (pure), and its JSON (`state.json`):
+  #
+  #   * `head` — the head's node, `now` — the head's clock (ms since the epoch)
+  #   * `workers` — per worker: `node`, `state` (`"idle"` or `"working"`),
+  #     `job` (its id, or null), `speed`, `slots`, `tags`, `joined_at`
+  #   * `jobs` — the jobs not ended, in submission order, then the last
+  #     #{20} ended (`ended_omitted` counts the others): `id`, `user`,
+  #     `scene`, `state`, `priority`, `tags`, `width`, `height`, `frames`
+  #     (how many), `done` (how many), `progress` (0 to 1), `time_left`
+  #     (ms, or null), `preview` (the running job's page, or null), `workers`,
+  #     `error`, `submitted_at`, `started_at`, `finished_at`
+  #   * `queue` — the ids of the jobs waiting for workers, higher priority
+  #     first, then in submission order
+  #
+  # Strings from jobs (users, scene names, errors) are attacker-controlled:
+  # the page only ever sets them as text, and the JSON has every `<`, `>` and
+  # `&` escaped (`\\u003c`...), so even a browser that sniffed it as HTML
+  # would find no markup in it.
 
   alias RingTracer.Farm.{JobInfo, WorkerInfo}
 

@@ -1,21 +1,26 @@
 defmodule RingTracer.Farm.Policy.Fair do
-  @moduledoc """
-  The farm's default policy (`RingTracer.Farm.Policy`): priorities first,
-  then fair shares between submitters.
+  @moduledoc false
+  # The farm's default policy (`RingTracer.Farm.Policy`): priorities first,
+  # then fair shares between submitters.
+  #
+  #   * Jobs of a higher priority take the workers they can use before any
+  #     job of a lower one; a lower job gets only workers that no higher job
+  #     can take (for its tags or its cap).
+  #   * Within a priority, the submitters (users) take workers in turns, one
+  #     at a time, so two users with jobs get half the workers each, whatever
+  #     how many jobs each has queued; a user's own jobs are served in the
+  #     order they were submitted.
+  #   * A job takes only workers that have every tag it asks for, and at most
+  #     `max_workers` of them.
+  #   * A worker stays with its job where the shares allow it: a job keeps its
+  #     own workers before it is given others, so a new job or user takes
+  #     workers from the others only down to the fair share.
 
-    * Jobs of a higher priority take the workers they can use before any
-      job of a lower one; a lower job gets only workers that no higher job
-      can take (for its tags or its cap).
-    * Within a priority, the submitters (users) take workers in turns, one
-      at a time, so two users with jobs get half the workers each, whatever
-      how many jobs each has queued; a user's own jobs are served in the
-      order they were submitted.
-    * A job takes only workers that have every tag it asks for, and at most
-      `max_workers` of them.
-    * A worker stays with its job where the shares allow it: a job keeps its
-      own workers before it is given others, so a new job or user takes
-      workers from the others only down to the fair share.
+  @behaviour RingTracer.Farm.Policy
 
+  alias RingTracer.Farm.Policy.View
+
+  @doc """
       iex> alias RingTracer.Farm.Policy.{Fair, View}
       iex> workers = for n <- [:w1, :w2, :w3, :w4], do: %{node: n, tags: [], job: 1}
       iex> running = %{id: 1, user: "ann", priority: 0, tags: [], max_workers: nil, state: :running, workers: [:w1, :w2, :w3, :w4]}
@@ -23,11 +28,6 @@ defmodule RingTracer.Farm.Policy.Fair do
       iex> Fair.assign(%View{jobs: [running, queued], workers: workers})
       [{:release, 1, :w2}, {:release, 1, :w4}, {:start, 2, [:w2, :w4]}]
   """
-
-  @behaviour RingTracer.Farm.Policy
-
-  alias RingTracer.Farm.Policy.View
-
   @impl true
   def assign(%View{jobs: jobs, workers: workers}) do
     nodes = workers |> Enum.map(& &1.node) |> Enum.sort()

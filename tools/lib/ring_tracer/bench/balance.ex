@@ -32,7 +32,7 @@ defmodule RingTracer.Bench.Balance do
   of the job (`tail/1`), for the floor too (`floor/5` keeps its feeders'
   last atoms).
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

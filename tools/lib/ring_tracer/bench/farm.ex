@@ -22,7 +22,7 @@ defmodule RingTracer.Bench.Farm do
 
   Medians of `--runs` runs, each on fresh peers.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -23,7 +23,7 @@ defmodule RingTracer.Bench.Kernel do
   Depth 5, one ray per pixel centre, adaptive cut-off at its default, as
   POV-Ray's own `Max Level 5` and ADC bailout do.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -11,7 +11,7 @@ defmodule RingTracer.Bench.Limits do
   image, printing time, the VM's memory growth and the outcome; then one
   child's cost per atom at 65,536, 262,144 and 1,048,576 one-pixel atoms.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -8,7 +8,7 @@ defmodule RingTracer.Bench.Nodes do
   node alone and on all three, printing both makespans, their ratio and the
   scene bytes each node received (shipped once per node).
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -1,8 +1,7 @@
 defmodule RingTracer.Bench.PovRay do
-  @moduledoc """
-  POV-Ray 3.7 as the benchmarks' reference: whether it is installed, where
-  the `.pov` files of the SPD scenes are, and its own parse and trace times.
-  """
+  @moduledoc false
+  # POV-Ray 3.7 as the benchmarks' reference: whether it is installed, where
+  # the `.pov` files of the SPD scenes are, and its own parse and trace times.
 
   import RingTracer.Bench, only: [median: 1]
 

@@ -36,7 +36,7 @@ defmodule RingTracer.Bench.Preview do
   minutes here; with fewer, the interval is too wide to decide the 3%
   target).
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench, only: [fmt: 1, info: 1]

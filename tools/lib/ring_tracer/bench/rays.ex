@@ -21,7 +21,7 @@ defmodule RingTracer.Bench.Rays do
   `cargo run --release -p ring_tracer_kernel --example big_mesh -- OUT.obj`
   writes a 600k-triangle mesh.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   @impl RingTracer.Bench

@@ -65,7 +65,7 @@ defmodule RingTracer.Bench.Sequence do
   list (`commands: false`), and `:bin` and `:povray`, the executables
   to run instead of `bin/ringtracer` and the `povray` on the PATH.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -13,7 +13,7 @@ defmodule RingTracer.Bench.Startup do
   Targets, through the server: first atom at most 0.2 s, whole command at
   most 0.4x POV-Ray's.
   """
-  @moduledoc @help
+  @moduledoc false
   @behaviour RingTracer.Bench
 
   import RingTracer.Bench

@@ -1,24 +1,23 @@
 defmodule RingTracer.Bench.Targets do
-  @moduledoc """
-  The targets the balance benchmark checks under its table, in one table,
-  each named by what it measures.
-
-  A target compares one figure of the table's rows (`:ratio`, makespan
-  over ideal; `:msgs`, messages per atom) in the scenarios it names:
-
-    * `{:at_most, strategy, figure, bound}` — the strategy's figure is at
-      most `bound`;
-    * `{:below, figure, strategy, other}` — the strategy's figure is below
-      the other's (`:above`: above it);
-    * `{:within, figure, strategy, other, margin}` — the strategy's figure
-      is at most the other's plus `margin`.
-
-  Scenarios: `:real` (the real scenes), `{:real_except, labels}`, `:all`
-  (real and simulated), or `{:one, label}` (a single row, reported "not run
-  (--quick)" when the run left it out). A target of `goal?: false` is shown
-  for comparison only: "yes" or "no" instead of "ok" or "MISSED". A
-  scenario without the rows a check compares says "no row".
-  """
+  @moduledoc false
+  # The targets the balance benchmark checks under its table, in one table,
+  # each named by what it measures.
+  #
+  # A target compares one figure of the table's rows (`:ratio`, makespan
+  # over ideal; `:msgs`, messages per atom) in the scenarios it names:
+  #
+  #   * `{:at_most, strategy, figure, bound}` — the strategy's figure is at
+  #     most `bound`;
+  #   * `{:below, figure, strategy, other}` — the strategy's figure is below
+  #     the other's (`:above`: above it);
+  #   * `{:within, figure, strategy, other, margin}` — the strategy's figure
+  #     is at most the other's plus `margin`.
+  #
+  # Scenarios: `:real` (the real scenes), `{:real_except, labels}`, `:all`
+  # (real and simulated), or `{:one, label}` (a single row, reported "not run
+  # (--quick)" when the run left it out). A target of `goal?: false` is shown
+  # for comparison only: "yes" or "no" instead of "ok" or "MISSED". A
+  # scenario without the rows a check compares says "no row".
 
   import RingTracer.Bench, only: [fmt: 1]
 

@@ -1,44 +1,30 @@
 defmodule RingTracer.Chaos.Plan do
-  @moduledoc """
-  The chaos soak's plan (`RingTracer.Chaos`), a pure function of its seed:
-  for each job, its scene, strategy, ring size, atoms per child, the
-  children's slowdown factors and the faults to inject, each at an atom
-  count (the fault is injected when the job's parent reports that many atoms
-  done) with a number that picks its victim among the candidates alive at
-  that moment (`pick`, taken modulo the number of candidates).
-
-  A share of the jobs (`:sequences`, in percent) are sequences
-  (`RingTracer.render_sequence/2`) of an animated scene: a few of its
-  frames (`:frames`, an ascending list drawn from the scene's), through a
-  window of `:window` frames. Their faults are due at atom counts over the
-  whole sequence (the job's progress counts every frame's atoms), so they
-  land in any of its frames or between two. An image job has `frames: nil`
-  and `window: nil`.
-
-  Fault kinds:
-
-    * `:grandchild` — kill a child's grandchild (the child restarts it and
-      retries its atoms);
-    * `:child` — kill a child (the parent re-links the ring and hands out
-      its atoms again);
-    * `:node` — kill the OS process of a peer node that hosts children of
-      the job (a crashed machine);
-    * `:freeze` — stop a peer node's OS process with SIGSTOP and resume it
-      later (a hung machine: the job's liveness watch must declare it dead).
-
-      iex> plan = RingTracer.Chaos.Plan.new(seed: 7, jobs: 3, scenes: ["a.nff", "b.nff"])
-      iex> length(plan)
-      3
-      iex> plan == RingTracer.Chaos.Plan.new(seed: 7, jobs: 3, scenes: ["a.nff", "b.nff"])
-      true
-      iex> Enum.all?(plan, &(length(&1.faults) == 2))
-      true
-      iex> plan = RingTracer.Chaos.Plan.new(seed: 7, jobs: 20, scenes: ["a.nff"], sequences: 50,
-      ...>   sequence_scene: "orbit.toml", scene_frames: 48, frames: 2..5, window: 1..3)
-      iex> [job | _] = Enum.filter(plan, & &1.frames)
-      iex> {job.scene, length(job.frames) in 2..5, job.frames == Enum.sort(Enum.uniq(job.frames))}
-      {"orbit.toml", true, true}
-  """
+  @moduledoc false
+  # The chaos soak's plan (`RingTracer.Chaos`), a pure function of its seed:
+  # for each job, its scene, strategy, ring size, atoms per child, the
+  # children's slowdown factors and the faults to inject, each at an atom
+  # count (the fault is injected when the job's parent reports that many atoms
+  # done) with a number that picks its victim among the candidates alive at
+  # that moment (`pick`, taken modulo the number of candidates).
+  #
+  # A share of the jobs (`:sequences`, in percent) are sequences
+  # (`RingTracer.render_sequence/2`) of an animated scene: a few of its
+  # frames (`:frames`, an ascending list drawn from the scene's), through a
+  # window of `:window` frames. Their faults are due at atom counts over the
+  # whole sequence (the job's progress counts every frame's atoms), so they
+  # land in any of its frames or between two. An image job has `frames: nil`
+  # and `window: nil`.
+  #
+  # Fault kinds:
+  #
+  #   * `:grandchild` — kill a child's grandchild (the child restarts it and
+  #     retries its atoms);
+  #   * `:child` — kill a child (the parent re-links the ring and hands out
+  #     its atoms again);
+  #   * `:node` — kill the OS process of a peer node that hosts children of
+  #     the job (a crashed machine);
+  #   * `:freeze` — stop a peer node's OS process with SIGSTOP and resume it
+  #     later (a hung machine: the job's liveness watch must declare it dead).
 
   @typedoc "A fault kind."
   @type kind :: :grandchild | :child | :node | :freeze
@@ -102,6 +88,19 @@ defmodule RingTracer.Chaos.Plan do
   sequence options, and a sequence differs from the image job it replaces
   only in its scene, frames, window and its faults' atom counts (their
   kinds and picks are the same).
+
+      iex> plan = RingTracer.Chaos.Plan.new(seed: 7, jobs: 3, scenes: ["a.nff", "b.nff"])
+      iex> length(plan)
+      3
+      iex> plan == RingTracer.Chaos.Plan.new(seed: 7, jobs: 3, scenes: ["a.nff", "b.nff"])
+      true
+      iex> Enum.all?(plan, &(length(&1.faults) == 2))
+      true
+      iex> plan = RingTracer.Chaos.Plan.new(seed: 7, jobs: 20, scenes: ["a.nff"], sequences: 50,
+      ...>   sequence_scene: "orbit.toml", scene_frames: 48, frames: 2..5, window: 1..3)
+      iex> [job | _] = Enum.filter(plan, & &1.frames)
+      iex> {job.scene, length(job.frames) in 2..5, job.frames == Enum.sort(Enum.uniq(job.frames))}
+      {"orbit.toml", true, true}
   """
   @spec new(keyword()) :: [job()]
   def new(opts) do

@@ -1,26 +1,25 @@
 defmodule RingTracer.Chaos.Pool do
-  @moduledoc """
-  The chaos soak's peer nodes (`RingTracer.LocalCluster`, each a real OS
-  process on this machine), kept at a fixed count: a node that is killed,
-  that halts after a freeze, or that drops for any other reason is replaced
-  by a fresh one.
-
-  Jobs `checkout/2` the nodes that are up (waiting, boundedly, until the
-  pool is at full strength) and say when they have `started/2`, that is,
-  when their parent has its ring running (its first atom came in). Node
-  faults wait until no job is starting on their node, so that every fault
-  lands on a running ring (a node lost while a parent is still starting its
-  children fails that job before any work, by design) and a node under a
-  pending fault is given to no new job.
-
-    * `kill/2` sends SIGKILL to the node's OS process: a crashed machine.
-    * `freeze/3` sends SIGSTOP, and SIGCONT after the given time: a hung
-      machine. Distribution's connection stays open, so only the jobs'
-      liveness watch (`RingTracer.Cluster.Liveness`) notices; it disconnects
-      the node, and a `:peer` node that loses its connection to this one
-      halts when it runs again. A frozen node that nobody disconnected is
-      back in service after SIGCONT.
-  """
+  @moduledoc false
+  # The chaos soak's peer nodes (`RingTracer.LocalCluster`, each a real OS
+  # process on this machine), kept at a fixed count: a node that is killed,
+  # that halts after a freeze, or that drops for any other reason is replaced
+  # by a fresh one.
+  #
+  # Jobs `checkout/2` the nodes that are up (waiting, boundedly, until the
+  # pool is at full strength) and say when they have `started/2`, that is,
+  # when their parent has its ring running (its first atom came in). Node
+  # faults wait until no job is starting on their node, so that every fault
+  # lands on a running ring (a node lost while a parent is still starting its
+  # children fails that job before any work, by design) and a node under a
+  # pending fault is given to no new job.
+  #
+  #   * `kill/2` sends SIGKILL to the node's OS process: a crashed machine.
+  #   * `freeze/3` sends SIGSTOP, and SIGCONT after the given time: a hung
+  #     machine. Distribution's connection stays open, so only the jobs'
+  #     liveness watch (`RingTracer.Cluster.Liveness`) notices; it disconnects
+  #     the node, and a `:peer` node that loses its connection to this one
+  #     halts when it runs again. A frozen node that nobody disconnected is
+  #     back in service after SIGCONT.
   use GenServer
 
   alias RingTracer.LocalCluster

@@ -1,22 +1,21 @@
 defmodule RingTracer.Bench.Network.Epmd do
-  @moduledoc """
-  The port mapper of the nodes in the network benchmark's namespaces
-  (`RingTracer.Bench.Network.Lab`), given to their VMs with
-  `-epmd_module Elixir.RingTracer.Bench.Network.Epmd`.
-
-  No epmd runs in the namespaces. Each node knows the whole (fixed) map
-  of the benchmark's nodes, put in `:persistent_term` by `configure/1`
-  before the node starts distribution:
-
-    * its own listen port (`listen_port_please/2`), on the address that
-      `inet_dist_use_interface` names;
-    * for every other node, the address and port where the delaying relay
-      listens on this node's link for connections to that node
-      (`address_please/3`). Every distribution connection therefore goes
-      through the relay, which adds the one-way delay.
-
-  A name that is not in the map is unknown (`{:error, :nxdomain}`).
-  """
+  @moduledoc false
+  # The port mapper of the nodes in the network benchmark's namespaces
+  # (`RingTracer.Bench.Network.Lab`), given to their VMs with
+  # `-epmd_module Elixir.RingTracer.Bench.Network.Epmd`.
+  #
+  # No epmd runs in the namespaces. Each node knows the whole (fixed) map
+  # of the benchmark's nodes, put in `:persistent_term` by `configure/1`
+  # before the node starts distribution:
+  #
+  #   * its own listen port (`listen_port_please/2`), on the address that
+  #     `inet_dist_use_interface` names;
+  #   * for every other node, the address and port where the delaying relay
+  #     listens on this node's link for connections to that node
+  #     (`address_please/3`). Every distribution connection therefore goes
+  #     through the relay, which adds the one-way delay.
+  #
+  # A name that is not in the map is unknown (`{:error, :nxdomain}`).
 
   # The distribution protocol version that OTP 23 and later speak.
   @version 6

@@ -1,40 +1,39 @@
 defmodule RingTracer.Bench.Network.Lab do
-  @moduledoc """
-  A small network of RingTracer nodes in Linux network namespaces, for
-  the network benchmark (`RingTracer.Bench.Network`). Needs root (or
-  CAP_NET_ADMIN and CAP_SYS_ADMIN), `ip` and `tc`.
-
-      node 0 (the parent)   node 1 .. node k (workers)
-          eth0                  eth0
-           |  veth, tbf          |  veth, tbf
-          h0 ------ hub ------- h1 .. hk
-                 (the relay)
-
-  Every node is an `erl` in a namespace of its own, joined by a veth pair
-  to one hub namespace. Both ends of each veth get a `tbf` bandwidth limit
-  (`rate`). No node can reach another directly: the only addresses a node
-  knows are its own and the hub's end of its link, where the delaying
-  relay (`RingTracer.Bench.Network.Relay`, an OS process in the hub)
-  listens for each other node and forwards to it. The nodes' port
-  mapper (`RingTracer.Bench.Network.Epmd`) points every node name at the
-  relay, so every distribution connection, parent to worker and worker to
-  worker, crosses two rate-limited links and one delay.
-
-  This VM controls the nodes through their standard I/O (`:peer`'s
-  `:standard_io` connection) and never joins their distribution. The
-  cookie is a fresh random one in a private file (mode 0600) that the
-  nodes read after they start; nothing secret is on a command line.
-
-  Names hold this VM's OS process id and random bytes, so runs in
-  parallel cannot collide: namespaces `rtnet-PID-ID-hub` and
-  `rtnet-PID-ID-I`, nodes `rtnet_ID_p@rtnet` and `rtnet_ID_wI@rtnet`;
-  interfaces and addresses (10.77.I.1 at the hub, 10.77.I.2 at node I)
-  exist only inside the run's own namespaces. `stop/1` removes
-  everything (nodes, relay, namespaces, and with them the veths), and
-  `with_lab/2` calls it also when the work fails. A run whose VM was
-  killed leaves namespaces whose PID no longer runs; the next `start/1`
-  removes those.
-  """
+  @moduledoc false
+  # A small network of RingTracer nodes in Linux network namespaces, for
+  # the network benchmark (`RingTracer.Bench.Network`). Needs root (or
+  # CAP_NET_ADMIN and CAP_SYS_ADMIN), `ip` and `tc`.
+  #
+  #     node 0 (the parent)   node 1 .. node k (workers)
+  #         eth0                  eth0
+  #          |  veth, tbf          |  veth, tbf
+  #         h0 ------ hub ------- h1 .. hk
+  #                (the relay)
+  #
+  # Every node is an `erl` in a namespace of its own, joined by a veth pair
+  # to one hub namespace. Both ends of each veth get a `tbf` bandwidth limit
+  # (`rate`). No node can reach another directly: the only addresses a node
+  # knows are its own and the hub's end of its link, where the delaying
+  # relay (`RingTracer.Bench.Network.Relay`, an OS process in the hub)
+  # listens for each other node and forwards to it. The nodes' port
+  # mapper (`RingTracer.Bench.Network.Epmd`) points every node name at the
+  # relay, so every distribution connection, parent to worker and worker to
+  # worker, crosses two rate-limited links and one delay.
+  #
+  # This VM controls the nodes through their standard I/O (`:peer`'s
+  # `:standard_io` connection) and never joins their distribution. The
+  # cookie is a fresh random one in a private file (mode 0600) that the
+  # nodes read after they start; nothing secret is on a command line.
+  #
+  # Names hold this VM's OS process id and random bytes, so runs in
+  # parallel cannot collide: namespaces `rtnet-PID-ID-hub` and
+  # `rtnet-PID-ID-I`, nodes `rtnet_ID_p@rtnet` and `rtnet_ID_wI@rtnet`;
+  # interfaces and addresses (10.77.I.1 at the hub, 10.77.I.2 at node I)
+  # exist only inside the run's own namespaces. `stop/1` removes
+  # everything (nodes, relay, namespaces, and with them the veths), and
+  # `with_lab/2` calls it also when the work fails. A run whose VM was
+  # killed leaves namespaces whose PID no longer runs; the next `start/1`
+  # removes those.
 
   alias RingTracer.Bench.Network.{Relay, Remote}
   alias RingTracer.Cluster.Cookie

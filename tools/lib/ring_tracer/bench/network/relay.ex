@@ -1,24 +1,23 @@
 defmodule RingTracer.Bench.Network.Relay do
-  @moduledoc """
-  The network benchmark's stand-in for long links, since this kernel has no
-  `netem`: `ringtracer-relay` (the crate `native/relay`, std-only Rust), a
-  TCP relay that holds every byte for a one-way delay before passing it on.
-
-  It runs as an OS process in the lab's hub namespace (`ip netns exec`),
-  controlled through a port: `set_delay/2` changes the delay of every
-  connection, open or future, and closing the port (`stop/1`, or this VM
-  going) ends it. Each route is a listener that forwards every connection
-  to one target. A thread per direction writes each chunk out at its
-  arrival time plus the delay (the OS sleeps with sub-millisecond
-  precision, which BEAM timers, whole milliseconds and late by one or
-  two, do not have); the delay does not cut the throughput, and a full
-  queue pushes back on the sender through TCP. The relay ends TCP on both
-  sides, so it delays data, not acknowledgements.
-
-  The binary is built with cargo (`cargo build --release -p
-  ring_tracer_relay` in `native/`) when `executable!/0` is first asked for
-  it; cargo rebuilds only when its sources changed.
-  """
+  @moduledoc false
+  # The network benchmark's stand-in for long links, since this kernel has no
+  # `netem`: `ringtracer-relay` (the crate `native/relay`, std-only Rust), a
+  # TCP relay that holds every byte for a one-way delay before passing it on.
+  #
+  # It runs as an OS process in the lab's hub namespace (`ip netns exec`),
+  # controlled through a port: `set_delay/2` changes the delay of every
+  # connection, open or future, and closing the port (`stop/1`, or this VM
+  # going) ends it. Each route is a listener that forwards every connection
+  # to one target. A thread per direction writes each chunk out at its
+  # arrival time plus the delay (the OS sleeps with sub-millisecond
+  # precision, which BEAM timers, whole milliseconds and late by one or
+  # two, do not have); the delay does not cut the throughput, and a full
+  # queue pushes back on the sender through TCP. The relay ends TCP on both
+  # sides, so it delays data, not acknowledgements.
+  #
+  # The binary is built with cargo (`cargo build --release -p
+  # ring_tracer_relay` in `native/`) when `executable!/0` is first asked for
+  # it; cargo rebuilds only when its sources changed.
 
   @typedoc "A route: a listener `{ip, port}` and the `{ip, port}` it forwards to."
   @type route ::

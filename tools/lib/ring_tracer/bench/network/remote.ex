@@ -1,10 +1,9 @@
 defmodule RingTracer.Bench.Network.Remote do
-  @moduledoc """
-  What the network benchmark runs on its nodes (`RingTracer.Bench.Network.Lab`),
-  called through each node's standard I/O (`:peer.call/5`), so that the
-  controlling VM never joins their distribution and adds nothing to the
-  traffic being measured.
-  """
+  @moduledoc false
+  # What the network benchmark runs on its nodes (`RingTracer.Bench.Network.Lab`),
+  # called through each node's standard I/O (`:peer.call/5`), so that the
+  # controlling VM never joins their distribution and adds nothing to the
+  # traffic being measured.
 
   alias RingTracer.Bench.Network.Epmd
   alias RingTracer.Cluster.Cookie

@@ -1,21 +1,14 @@
 defmodule RingTracer.Chaos.Farm.Checker do
-  @moduledoc """
-  The farm soak's verdict, a pure function of what the soak collected: each
-  job's end state, each frame asked for with the hash of what the head
-  stored (`nil`: the head has no such frame) and of the same frame rendered
-  alone, and the head's count of frames stored twice
-  (`RingTracer.Farm.overview/2`'s `:stored_twice`).
-
-      iex> alias RingTracer.Chaos.Farm.Checker
-      iex> alias RingTracer.Chaos.Farm.Checker.{Frame, JobEnd}
-      iex> v = Checker.check([%JobEnd{index: 0, id: 1, state: :done}],
-      ...>   [%Frame{index: 0, number: 1, got: "h", expected: "h"}], 0)
-      iex> {Checker.passed?(v), v.lost, v.mismatches}
-      {true, 0, 0}
-  """
+  @moduledoc false
+  # The farm soak's verdict, a pure function of what the soak collected: each
+  # job's end state, each frame asked for with the hash of what the head
+  # stored (`nil`: the head has no such frame) and of the same frame rendered
+  # alone, and the head's count of frames stored twice
+  # (`RingTracer.Farm.overview/2`'s `:stored_twice`).
 
   defmodule JobEnd do
-    @moduledoc "A job of the soak as it ended: its index in the schedule, id and state."
+    @moduledoc false
+    # A job of the soak as it ended: its index in the schedule, id and state.
     @enforce_keys [:index, :id, :state]
     defstruct [:index, :id, :state, error: nil]
 
@@ -28,10 +21,9 @@ defmodule RingTracer.Chaos.Farm.Checker do
   end
 
   defmodule Frame do
-    @moduledoc """
-    A frame asked for: the hash of the file the head stored (`nil`: none)
-    and of the same frame rendered alone on the soak's node.
-    """
+    @moduledoc false
+    # A frame asked for: the hash of the file the head stored (`nil`: none)
+    # and of the same frame rendered alone on the soak's node.
     @enforce_keys [:index, :number, :got, :expected]
     defstruct [:index, :number, :got, :expected]
 
@@ -61,7 +53,16 @@ defmodule RingTracer.Chaos.Farm.Checker do
           wrong: [non_neg_integer()]
         }
 
-  @doc "The verdict over the jobs' ends, their frames and the frames stored twice."
+  @doc """
+  The verdict over the jobs' ends, their frames and the frames stored twice.
+
+      iex> alias RingTracer.Chaos.Farm.Checker
+      iex> alias RingTracer.Chaos.Farm.Checker.{Frame, JobEnd}
+      iex> v = Checker.check([%JobEnd{index: 0, id: 1, state: :done}],
+      ...>   [%Frame{index: 0, number: 1, got: "h", expected: "h"}], 0)
+      iex> {Checker.passed?(v), v.lost, v.mismatches}
+      {true, 0, 0}
+  """
   @spec check([JobEnd.t()], [Frame.t()], non_neg_integer()) :: t()
   def check(ends, frames, stored_twice) do
     lost = Enum.filter(frames, &is_nil(&1.got))

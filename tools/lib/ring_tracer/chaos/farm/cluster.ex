@@ -1,13 +1,12 @@
 defmodule RingTracer.Chaos.Farm.Cluster do
-  @moduledoc """
-  The farm soak's nodes, each a real OS process on this machine
-  (`RingTracer.LocalCluster`): a head (`RingTracer.Farm.start_head/1`),
-  which `kill_head/1` kills with SIGKILL and starts again under the same
-  node name and folder (so Mnesia recovers its queue), and workers
-  (`RingTracer.Farm.join/2`, all tagged `RingTracer.Chaos.Farm.Schedule.tag/0`),
-  which may be killed (SIGKILL), frozen (SIGSTOP, then SIGCONT by `thaw/2`)
-  and added. Workers join the restarted head by themselves.
-  """
+  @moduledoc false
+  # The farm soak's nodes, each a real OS process on this machine
+  # (`RingTracer.LocalCluster`): a head (`RingTracer.Farm.start_head/1`),
+  # which `kill_head/1` kills with SIGKILL and starts again under the same
+  # node name and folder (so Mnesia recovers its queue), and workers
+  # (`RingTracer.Farm.join/2`, all tagged `RingTracer.Chaos.Farm.Schedule.tag/0`),
+  # which may be killed (SIGKILL), frozen (SIGSTOP, then SIGCONT by `thaw/2`)
+  # and added. Workers join the restarted head by themselves.
 
   alias RingTracer.Chaos.Farm.Schedule
   alias RingTracer.Cluster.Distribution
@@ -17,7 +16,8 @@ defmodule RingTracer.Chaos.Farm.Cluster do
   @down_ms 15_000
 
   defmodule Worker do
-    @moduledoc "A worker node: its `:peer` process, OS pid, and when it thaws if frozen."
+    @moduledoc false
+    # A worker node: its `:peer` process, OS pid, and when it thaws if frozen.
     @enforce_keys [:peer, :os_pid]
     defstruct [:peer, :os_pid, thaw_at: nil]
 

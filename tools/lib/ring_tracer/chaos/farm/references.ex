@@ -1,9 +1,8 @@
 defmodule RingTracer.Chaos.Farm.References do
-  @moduledoc """
-  What each frame of the farm soak must be: the SHA-256 of the file (PNG or
-  EXR) of that frame rendered alone on this node (`RingTracer.render/2`, no
-  farm, no faults), computed once per scene, frame and format.
-  """
+  @moduledoc false
+  # What each frame of the farm soak must be: the SHA-256 of the file (PNG or
+  # EXR) of that frame rendered alone on this node (`RingTracer.render/2`, no
+  # farm, no faults), computed once per scene, frame and format.
 
   alias RingTracer.Chaos
   alias RingTracer.Chaos.Farm.Schedule

@@ -1,18 +1,13 @@
 defmodule RingTracer.Chaos.Farm.Schedule do
-  @moduledoc """
-  The farm soak's schedule (`RingTracer.Chaos.Farm.Soak`), a pure function
-  of its options: the jobs to queue (stills and short sequences, from two
-  users, with drawn priorities, tags and formats) and the faults to inject,
-  each due when the farm has stored a given number of frames in all.
-
-      iex> alias RingTracer.Chaos.Farm.Schedule
-      iex> s = Schedule.new(seed: 3, jobs: 8)
-      iex> {length(s.jobs), s == Schedule.new(seed: 3, jobs: 8)}
-      {8, true}
-  """
+  @moduledoc false
+  # The farm soak's schedule (`RingTracer.Chaos.Farm.Soak`), a pure function
+  # of its options: the jobs to queue (stills and short sequences, from two
+  # users, with drawn priorities, tags and formats) and the faults to inject,
+  # each due when the farm has stored a given number of frames in all.
 
   defmodule JobSpec do
-    @moduledoc "One job of the schedule: what is submitted, and by whom."
+    @moduledoc false
+    # One job of the schedule: what is submitted, and by whom.
     @enforce_keys [:index, :user, :priority, :tags, :scene, :frames, :format]
     defstruct [:index, :user, :priority, :tags, :scene, :frames, :format]
 
@@ -29,10 +24,9 @@ defmodule RingTracer.Chaos.Farm.Schedule do
   end
 
   defmodule Fault do
-    @moduledoc """
-    One fault: its kind, the frames stored in all (over every job) at which
-    it is due, and a number that picks its victim among the workers up then.
-    """
+    @moduledoc false
+    # One fault: its kind, the frames stored in all (over every job) at which
+    # it is due, and a number that picks its victim among the workers up then.
     @enforce_keys [:kind, :at, :pick]
     defstruct [:kind, :at, :pick]
 
@@ -71,6 +65,11 @@ defmodule RingTracer.Chaos.Farm.Schedule do
     * `:faults` — how many of each kind, a keyword list (default, for `n`
       jobs: a head kill per 20 jobs, a worker killed, frozen and added per
       10, at least one each)
+
+      iex> alias RingTracer.Chaos.Farm.Schedule
+      iex> s = Schedule.new(seed: 3, jobs: 8)
+      iex> {length(s.jobs), s == Schedule.new(seed: 3, jobs: 8)}
+      {8, true}
   """
   @spec new(keyword()) :: t()
   def new(opts \\ []) do

@@ -1,22 +1,21 @@
 defmodule RingTracer.Chaos.Farm.Soak do
-  @moduledoc """
-  The chaos soak's farm mode (`mix ring_tracer.chaos --farm`): a head and
-  workers on this machine (`RingTracer.Chaos.Farm.Cluster`), a queue of
-  jobs (`RingTracer.Chaos.Farm.Schedule`: stills and short sequences from
-  two users), and faults on the seed's schedule, each due when the farm has
-  stored so many frames (and one more since the previous fault): the head
-  killed (SIGKILL) and started again, workers killed, frozen and added. At the end every frame the head stored
-  is fetched and hashed, and `RingTracer.Chaos.Farm.Checker` gives the
-  verdict: every job done, no frame lost, none stored twice, every frame
-  byte-identical to the same frame rendered alone.
-
-  The nodes are `:peer` nodes of the calling process: after a failure
-  part-way they stop when it exits.
-
-  A worker is killed or frozen only while at least two are up (the queue
-  never waits on no worker at all): a fault without a victim is counted as
-  skipped, and one still due when the last job ended as late.
-  """
+  @moduledoc false
+  # The chaos soak's farm mode (`mix ring_tracer.chaos --farm`): a head and
+  # workers on this machine (`RingTracer.Chaos.Farm.Cluster`), a queue of
+  # jobs (`RingTracer.Chaos.Farm.Schedule`: stills and short sequences from
+  # two users), and faults on the seed's schedule, each due when the farm has
+  # stored so many frames (and one more since the previous fault): the head
+  # killed (SIGKILL) and started again, workers killed, frozen and added. At the end every frame the head stored
+  # is fetched and hashed, and `RingTracer.Chaos.Farm.Checker` gives the
+  # verdict: every job done, no frame lost, none stored twice, every frame
+  # byte-identical to the same frame rendered alone.
+  #
+  # The nodes are `:peer` nodes of the calling process: after a failure
+  # part-way they stop when it exits.
+  #
+  # A worker is killed or frozen only while at least two are up (the queue
+  # never waits on no worker at all): a fault without a victim is counted as
+  # skipped, and one still due when the last job ended as late.
 
   require Logger
 
@@ -28,7 +27,8 @@ defmodule RingTracer.Chaos.Farm.Soak do
   @tick_ms 100
 
   defmodule Report do
-    @moduledoc "What a farm soak did and its verdict."
+    @moduledoc false
+    # What a farm soak did and its verdict.
     @enforce_keys [:options, :verdict, :faults, :seconds, :ends]
     defstruct [:options, :verdict, :faults, :seconds, :ends]
 
