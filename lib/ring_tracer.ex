@@ -43,23 +43,23 @@ defmodule RingTracer do
       (integers, x1 and y1 excluded) or fractions (floats 0.0 to 1.0, like
       POV-Ray's `+SC +EC +SR +ER`); the result is that part, with exactly the
       pixels the whole render has there
-    * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`
-      (see `RingTracer.Strategies`), or a strategy of your own as `{module,
-      options}` (see `RingTracer.Strategy`)
+    * `:strategy` — `:ring` (default), `:static`, `:master` or `:steal`,
+      a name with its options (`{:ring, split: true}`), or a strategy of
+      your own as `{module, options}` (see `RingTracer.Strategy`). The
+      ring's options: `:hold_after` — hops an offer walks before it may
+      wait at a child about to run out (default
+      #{RingTracer.Strategy.Ring.HelpOffer.default_hold_after()}); `:aim` — whether an
+      idle child sends its offer straight to the sibling it expects to stay
+      busy longest rather than to its left sibling (default: on strips of
+      one image yes, otherwise no; a sequence of several frames refuses
+      `aim: true`); `:split` —
+      adaptive atoms, cut into pieces near the end of a job (default false:
+      they do not yet pay for their messages on this machine). The image is
+      the same whatever the strategy
     * `:layout` — which atoms each child owns at the start: `:strips` (the
       paper's contiguous strips, default) or `:interleaved` (child i owns
       atoms i, i + N, i + 2N, ...; see `RingTracer.Layout`). The image is
       the same; the balance is not
-    * `:hold_after` — ring only: hops an offer walks before it may wait at a
-      child about to run out (default 16; see `RingTracer.Strategy.Ring.HelpOffer`)
-    * `:aim` — ring only: whether an idle child sends its offer straight to
-      the sibling it expects to stay busy longest rather than to its left
-      sibling (default: on strips yes, on interleaved strips no; see
-      `RingTracer.Strategy.Ring.Aim`)
-    * `:split` — ring only: adaptive atoms, cut into pieces near the end of
-      a job (default false: they do not yet pay for their messages on this
-      machine; see `RingTracer.Strategy.Ring`). The image is the
-      same
     * `:speeds` — slowdown factors of the children, e.g. `[1, 1, 4, 1]`
       makes child 2 four times slower (cyclic; default all 1)
     * `:nodes` — other nodes to place children on, round robin with this
@@ -298,8 +298,8 @@ defmodule RingTracer do
 
   ## Options
 
-  Those of `render/2` but `:frame`, `:region`, `:aim` (which works on one
-  image) and `:progress`, and:
+  Those of `render/2` but `:frame`, `:region` and `:progress` (and the
+  ring's `:aim`, which works within one image), and:
 
     * `:frames` — the scene's frames to render, from 1: a range (`10..20`)
       or an ascending list (default: every frame). A subset keeps the
@@ -328,13 +328,14 @@ defmodule RingTracer do
     {sequence, opts} = Keyword.split(opts, [:frames, :window, :ack])
 
     with :ok <- not_for_sequences(opts),
-         {:ok, opts} <- Options.validate(Keyword.put(opts, :aim, false)),
+         {:ok, opts} <- Options.validate(opts),
          :ok <- running(),
          :ok <- RingTracer.Cluster.connect(Enum.uniq(opts[:nodes])),
          {:ok, scene} <- load(scene, opts),
          {:ok, frames, window, ack} <-
            RingTracer.Sequence.options(sequence, scene.frames, scene.source.name),
-         {:ok, settings} <- settings(scene, opts) do
+         {:ok, settings} <- settings(scene, opts),
+         {:ok, _strategy} <- strategy(settings, opts, length(frames)) do
       :ok = SceneCache.put(scene)
       extra = [frames: frames, window: window, sequence: true, ack: ack, announce: true]
 
@@ -352,7 +353,7 @@ defmodule RingTracer do
   end
 
   defp not_for_sequences(opts) do
-    case Enum.find([:frame, :region, :aim, :progress], &Keyword.has_key?(opts, &1)) do
+    case Enum.find([:frame, :region, :progress], &Keyword.has_key?(opts, &1)) do
       nil ->
         :ok
 
@@ -617,8 +618,8 @@ defmodule RingTracer do
 
   ## Options
 
-  Those of `render/2` that concern the job (`:children`, `:atoms`, `:hold_after`,
-  `:aim`, `:split`, `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
+  Those of `render/2` that concern the job (`:children`, `:atoms`,
+  `:strategy`, `:layout`, `:speeds`, `:timeout`), and `:costs`: per-atom costs in
   microseconds (see `RingTracer.Kernel.Simulated`; default
   #{RingTracer.Kernel.Simulated.default_cost()} each).
 
@@ -652,39 +653,51 @@ defmodule RingTracer do
   end
 
   defp run(source, settings, kernel, capacity_cap, opts, extra \\ []) do
-    strategy = RingTracer.Strategies.from_options(opts)
+    frames = Keyword.get(extra, :frames, [opts[:frame] - 1])
+
+    with {:ok, strategy} <- strategy(settings, opts, length(frames)) do
+      spec = %Spec{
+        id: make_ref(),
+        source: source,
+        settings: settings,
+        layout: layout(settings, opts, length(frames)),
+        caller: self(),
+        nodes: opts[:nodes],
+        liveness: opts[:liveness],
+        strategy: strategy,
+        kernel: kernel,
+        speeds: opts[:speeds],
+        progress: opts[:progress],
+        frames: frames,
+        pixels: opts[:pixels],
+        tint: opts[:ownership] and opts[:pixels] == :srgb8
+      }
+
+      spec = struct!(spec, extra)
+      # a sequence has no ownership map
+      spec = %{spec | tint: spec.tint and not spec.sequence}
+
+      preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])
+      {:ok, parent} = Parent.start(spec)
+      ref = Process.monitor(parent)
+      RingTracer.Preview.watch_job(preview, parent)
+      result = await(spec, settings, capacity_cap, ref, opts)
+      RingTracer.Preview.after_job(preview)
+      result
+    end
+  end
+
+  defp layout(settings, opts, frames) do
     {width, height} = Settings.traced_size(settings)
 
-    spec = %Spec{
-      id: make_ref(),
-      source: source,
-      settings: settings,
-      layout: Layout.new(width, height, opts[:children], opts[:atoms], opts[:layout]),
-      caller: self(),
-      nodes: opts[:nodes],
-      liveness: opts[:liveness],
-      strategy: strategy,
-      kernel: kernel,
-      speeds: opts[:speeds],
-      progress: opts[:progress],
-      frames: [opts[:frame] - 1],
-      pixels: opts[:pixels],
-      tint: opts[:ownership] and opts[:pixels] == :srgb8
-    }
-
-    spec = struct!(spec, extra)
-    # a sequence has no ownership map
-    spec = %{spec | tint: spec.tint and not spec.sequence}
-    spec = %{spec | layout: Layout.with_frames(spec.layout, length(spec.frames))}
-
-    preview = RingTracer.Preview.for_job(opts[:preview], spec.id, opts[:nodes])
-    {:ok, parent} = Parent.start(spec)
-    ref = Process.monitor(parent)
-    RingTracer.Preview.watch_job(preview, parent)
-    result = await(spec, settings, capacity_cap, ref, opts)
-    RingTracer.Preview.after_job(preview)
-    result
+    Layout.new(width, height, opts[:children], opts[:atoms], opts[:layout])
+    |> Layout.with_frames(frames)
   end
+
+  # The job's strategy, `{module, options}`, its options checked by the
+  # strategy itself for the job's layout.
+  defp strategy(settings, opts, frames),
+    do: RingTracer.Strategies.resolve(opts[:strategy], layout(settings, opts, frames))
 
   defp await(spec, settings, capacity_cap, ref, opts) do
     receive do
@@ -695,10 +708,9 @@ defmodule RingTracer do
 
         case reply do
           {:ok, raw} ->
-            {module, strategy_opts} = spec.strategy
-            name = if is_atom(opts[:strategy]), do: opts[:strategy], else: module
-            result = Result.new(settings, name, capacity_cap, raw)
-            {:ok, %{result | aim: Keyword.get(strategy_opts, :aim, false)}}
+            {_module, strategy_options} = spec.strategy
+            name = RingTracer.Strategies.name(opts[:strategy])
+            {:ok, Result.new(settings, {name, strategy_options}, capacity_cap, raw)}
 
           {:error, {reason, message}} ->
             {:error, Error.new(reason, message)}

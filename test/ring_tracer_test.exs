@@ -80,7 +80,7 @@ defmodule RingTracerTest do
     # Work units: one per ray, plus the boxes and primitives the rays were tested against.
     assert result.rays.work > result.rays.eye + result.rays.shadow
     # Every child that traced has a speed.
-    for c <- stats, c.traced > 0, do: assert(RingTracer.Job.Child.rate(%{stats: c}) > 0)
+    for c <- stats, c.traced > 0, do: assert(RingTracer.Job.Stats.rate(c) > 0)
   end
 
   test "delayed hand-overs still give the complete, identical image" do

@@ -207,7 +207,7 @@ defmodule RingTracer.Farm do
     {farm, render} = Keyword.split(opts, @farm_keys)
 
     with :ok <- refused(render),
-         {:ok, _} <- Options.validate(Keyword.put(render, :aim, false)),
+         {:ok, _} <- Options.validate(render),
          {:ok, scene} <- load(scene, render),
          {:ok, frames, _window, _ack} <-
            RingTracer.Sequence.options(
@@ -243,7 +243,7 @@ defmodule RingTracer.Farm do
 
   defp refused(render) do
     case Enum.find(
-           Runner.farm_set() ++ [:frame, :region, :aim, :progress, :preview],
+           Runner.farm_set() ++ [:frame, :region, :progress, :preview],
            &Keyword.has_key?(render, &1)
          ) do
       nil -> :ok

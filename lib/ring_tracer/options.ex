@@ -1,9 +1,9 @@
 defmodule RingTracer.Options do
-  @moduledoc """
-  Validation of `RingTracer.render/2`'s options. Every option is checked
-  before a job starts; a bad one is an `{:error, %RingTracer.Error{reason:
-  :invalid_option}}` that names it.
-  """
+  @moduledoc false
+  # Validation of `RingTracer.render/2`'s options. Every option is checked
+  # before a job starts; a bad one is an `{:error, %RingTracer.Error{reason:
+  # :invalid_option}}` that names it. A strategy's own options are its own to
+  # check (`RingTracer.Strategy.options/2`, through `RingTracer.Strategies`).
 
   alias RingTracer.Error
 
@@ -20,9 +20,6 @@ defmodule RingTracer.Options do
     region: {:region, nil},
     nodes: {:nodes, []},
     timeout: {:timeout, :infinity},
-    hold_after: {:pos_integer, RingTracer.Strategy.Ring.HelpOffer.default_hold_after()},
-    aim: {:boolean, nil},
-    split: {:boolean, false},
     strategy: {:strategy, :ring},
     kernel: {:kernel, nil},
     layout: {:layout, :strips},
@@ -36,6 +33,9 @@ defmodule RingTracer.Options do
     pixels: {:pixels, :float},
     ownership: {:boolean, false}
   ]
+
+  # Options that were `render/2`'s and are now the ring's own.
+  @ring_options [:hold_after, :aim, :split]
 
   # Documented maxima, checked before any work. Each is run at full size by
   # `mix ring_tracer.bench limits` (docs/benchmarks.md).
@@ -67,6 +67,9 @@ defmodule RingTracer.Options do
       iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Options.validate(atoms: 0)
       iex> message
       "option :atoms must be a positive integer, got: 0"
+      iex> {:error, %RingTracer.Error{message: message}} = RingTracer.Options.validate(split: true)
+      iex> message
+      "option :split is the ring's own: give it with the strategy, strategy: {:ring, [split: true]}"
   """
   @spec validate(keyword()) :: {:ok, keyword()} | {:error, Error.t()}
   def validate(opts) when is_list(opts) do
@@ -107,8 +110,20 @@ defmodule RingTracer.Options do
          )}
 
       true ->
-        {:ok, opts}
+        early_strategy(opts)
     end
+  end
+
+  # The strategy's own options (`RingTracer.Strategy.options/2`), checked
+  # before any work on a layout of the job's shape, of one frame and of one
+  # row per atom (its image is not known yet): the job checks them again on
+  # its own layout, which only a sequence's frames change.
+  defp early_strategy(opts) do
+    n = opts[:children]
+    k = opts[:atoms]
+    layout = RingTracer.Layout.new(n * k, 1, n, k, opts[:layout])
+
+    with {:ok, _} <- RingTracer.Strategies.resolve(opts[:strategy], layout), do: {:ok, opts}
   end
 
   # Nodes: the local node first unless `local: false`, then the others; with
@@ -144,6 +159,14 @@ defmodule RingTracer.Options do
     case Keyword.keys(opts) -- Keyword.keys(@schema) do
       [] ->
         :ok
+
+      [key | _] when key in @ring_options ->
+        {:error,
+         Error.new(
+           :invalid_option,
+           "option #{inspect(key)} is the ring's own: give it with the strategy, " <>
+             "strategy: {:ring, [#{key}: #{inspect(opts[key])}]}"
+         )}
 
       [key | _] ->
         {:error,
@@ -189,16 +212,7 @@ defmodule RingTracer.Options do
 
   defp check(:nodes, _), do: {:error, "a list of node names (atoms)"}
 
-  defp check(:strategy, {m, o}) when is_atom(m) and is_list(o), do: :ok
-
-  defp check(:strategy, v) do
-    if v in RingTracer.Strategies.names(),
-      do: :ok,
-      else:
-        {:error,
-         "one of #{inspect(RingTracer.Strategies.names())}, or {module, options} " <>
-           "(see RingTracer.Strategy)"}
-  end
+  defp check(:strategy, v), do: RingTracer.Strategies.check(v)
 
   defp check(:kernel, {m, o}) when is_atom(m) and is_list(o), do: :ok
   defp check(:kernel, _), do: {:error, "a kernel as {module, options} (see RingTracer.Kernel)"}

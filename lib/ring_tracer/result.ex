@@ -22,7 +22,7 @@ defmodule RingTracer.Result do
     * `:teardown_us` — from then until every child had stopped and reported;
     * `:ideal_us` — total trace work divided by total capacity (see
       `ideal_us/3`);
-    * `:children` — one map per child, in ring order: `:index`, `:node`,
+    * `:children` — one `t:child/0` per child, in ring order: `:index`, `:node`,
       `:speed`, atoms `:own`, `:given`, `:received`, `:splits` (atoms it cut
       in two to give part of one: adaptive atoms, one item more each, so
       `traced == own - given + received + splits`), `:cuts` (of those, cuts of
@@ -33,7 +33,8 @@ defmodule RingTracer.Result do
       `:grandchild_restarts`, `:busy_us` (wall time its grandchild spent on
       atoms, slowdown included), `:trace_us` (kernel time), `:idle_us`,
       `:first_atom_us` and `:last_atom_us` (from the job's start), `:rays`
-      (its ray counters and work units: `rays.work / busy_us` is its speed);
+      (its ray counters and work units: `rays.work / busy_us` is its speed),
+      `:failed` (`nil`, or why it died mid-job);
     * `:atoms` — one map per atom (none for a sequence): `:atom`, `:owner` (the child whose strip
       it is), `:child` (who traced the copy the parent kept), `:start_us`,
       `:end_us`, `:trace_us`;
@@ -46,9 +47,10 @@ defmodule RingTracer.Result do
       `:reflected`, `:refracted`, `:shadow`, and `:work`, the kernel's work
       units (see `RingTracer.Kernel`);
     * `:strategy` — the strategy's name (its module, for one given as
-      `{module, options}`); `:layout` — `:strips` or
-      `:interleaved` (see `RingTracer.Layout`); `:aim` — whether the ring's
-      children aimed their offers (see `RingTracer.Strategy.Ring.Aim`);
+      `{module, options}`); `:strategy_options` — the options it ran with,
+      its defaults filled in (the ring's `:aim`: whether its children aimed
+      their offers; `RingTracer.render/2`'s `:strategy`); `:layout` —
+      `:strips` or `:interleaved` (see `RingTracer.Layout`);
     * `:duplicates` — atom results that arrived after the atom's first one
       (after a failure the parent may hand out again an atom whose pixels
       were still on their way); the first is kept;
@@ -78,10 +80,10 @@ defmodule RingTracer.Result do
     :rays,
     :settings,
     :strategy,
+    strategy_options: [],
     layout: :strips,
     pixel_format: :float,
     tinted: nil,
-    aim: false,
     duplicates: 0,
     failures: [],
     redone: 0,
@@ -105,32 +107,10 @@ defmodule RingTracer.Result do
         }
 
   @typedoc """
-  A child's statistics, as above; a dead child's have `:failed` set, and
-  `:idle_us` is added once the job's makespan is known.
+  A child's statistics, as above (`:idle_us` is set once the job's
+  makespan is known).
   """
-  @type child :: %{
-          required(:index) => non_neg_integer(),
-          required(:node) => node() | nil,
-          required(:speed) => number(),
-          required(:own) => non_neg_integer(),
-          required(:given) => non_neg_integer(),
-          required(:received) => non_neg_integer(),
-          required(:splits) => non_neg_integer(),
-          required(:cuts) => non_neg_integer(),
-          required(:handovers) => non_neg_integer(),
-          required(:traced) => non_neg_integer(),
-          required(:offers_sent) => non_neg_integer(),
-          required(:offers_passed) => non_neg_integer(),
-          required(:offers_consumed) => non_neg_integer(),
-          required(:grandchild_restarts) => non_neg_integer(),
-          required(:busy_us) => non_neg_integer(),
-          required(:trace_us) => non_neg_integer(),
-          required(:first_atom_us) => integer() | nil,
-          required(:last_atom_us) => integer() | nil,
-          required(:rays) => map(),
-          optional(:failed) => String.t(),
-          optional(:idle_us) => non_neg_integer()
-        }
+  @type child :: RingTracer.Job.Stats.t()
 
   @typedoc "A child that died mid-job: when (microseconds since the parent started), and why."
   @type failure :: %{child: non_neg_integer(), reason: String.t(), at_us: integer()}
@@ -157,10 +137,10 @@ defmodule RingTracer.Result do
           rays: map(),
           settings: RingTracer.Settings.t(),
           strategy: atom(),
+          strategy_options: keyword(),
           layout: RingTracer.Layout.order(),
           pixel_format: :float | :srgb8,
           tinted: binary() | nil,
-          aim: boolean(),
           duplicates: non_neg_integer(),
           failures: [failure()],
           redone: non_neg_integer(),
@@ -171,11 +151,12 @@ defmodule RingTracer.Result do
         }
 
   @doc false
-  @spec new(RingTracer.Settings.t(), atom(), number(), RingTracer.Job.Parent.reply()) :: t()
-  def new(settings, strategy, capacity_cap, raw) do
+  @spec new(RingTracer.Settings.t(), {atom(), keyword()}, number(), RingTracer.Job.Parent.reply()) ::
+          t()
+  def new(settings, {strategy, strategy_options}, capacity_cap, raw) do
     rays = Enum.reduce(raw.children, RingTracer.Rays.zero(), &RingTracer.Rays.add(&2, &1.rays))
 
-    children = Enum.map(raw.children, &Map.put(&1, :idle_us, max(raw.elapsed_us - &1.busy_us, 0)))
+    children = Enum.map(raw.children, &%{&1 | idle_us: max(raw.elapsed_us - &1.busy_us, 0)})
 
     {width, height} = RingTracer.Settings.traced_size(settings)
 
@@ -196,6 +177,7 @@ defmodule RingTracer.Result do
       rays: rays,
       settings: settings,
       strategy: strategy,
+      strategy_options: strategy_options,
       duplicates: raw.duplicates,
       failures: raw.failures,
       redone: raw.redone,

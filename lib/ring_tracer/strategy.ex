@@ -18,7 +18,8 @@ defmodule RingTracer.Strategy do
   A strategy never sees a process's state and never sends a message itself.
 
   A strategy is named in a job's spec as `{module, options}`, like a kernel;
-  its options are its own (the ring's `:hold_after` and `:aim`).
+  its options are its own (the ring's `:hold_after`, `:aim` and `:split`):
+  `options/2` checks them and fills in their defaults before the job starts.
 
   `use RingTracer.Strategy` declares the behaviour and gives every callback a
   default, so that a strategy defines only what it changes: see
@@ -43,8 +44,12 @@ defmodule RingTracer.Strategy do
   @typedoc "The kinds of message a strategy sends, as the job's statistics count them."
   @type kind :: :offer | :control
 
-  @typedoc "A child's counters that only strategies move."
-  @type stat :: :offers_sent | :offers_passed | :offers_consumed
+  # The child's counters that only strategies move (`{:stat, key}`): written
+  # here alone, read by the type below, `is_stat/1` and `RingTracer.Job.Stats`.
+  @stats [:offers_sent, :offers_passed, :offers_consumed]
+
+  @typedoc "A child's counters that only strategies move (`stats/0`)."
+  @type stat :: unquote(Enum.reduce(Enum.reverse(@stats), &{:|, [], [&1, &2]}))
 
   @typedoc """
   What a child's callback asks of its child, carried out in order:
@@ -89,19 +94,30 @@ defmodule RingTracer.Strategy do
     * `{:send, index, kind, message}` — sends `message` to child `index`;
     * `{:hand_out, index, atoms}` — hands atoms to child `index`, recorded in
       the job's `RingTracer.Job.Ledger`;
-    * `{:helper, fun}` — runs `fun` in a process of the job's, which the
-      parent ends and waits for when the job ends.
+    * `{:helper, tag, {module, function, args}}` — applies `function` in a
+      process of the job's, which the parent ends and waits for when the job
+      ends; its value comes back to the strategy as the message
+      `{tag, value}` (`parent_info/3`).
   """
   @type parent_effect ::
           {:send, non_neg_integer(), kind(), term()}
           | {:hand_out, non_neg_integer(), [Layout.atom_id()]}
-          | {:helper, (() -> term())}
+          | {:helper, term(), {module(), atom(), [term()]}}
 
   @typedoc "`{k, d}`: `k` of `d` equal parts of an atom or piece, `0 < k < d`."
   @type part :: {pos_integer(), pos_integer()}
 
   @typedoc "A callback's answer: the strategy's new state and what to do."
   @type result(effect) :: {state(), [effect]}
+
+  @doc """
+  The strategy's options as given (`strategy: {name_or_module, options}`),
+  checked, with its defaults filled in, for a job of layout `layout` (its
+  order and frames are known, its children and atoms): `{:error, message}`
+  names what is wrong, and the job does not start. Pure. Default: the
+  options as given.
+  """
+  @callback options(options(), Layout.t()) :: {:ok, options()} | {:error, String.t()}
 
   @doc "The atoms a child holds at the start (default: its strip)."
   @callback initial_atoms(Layout.t(), index :: non_neg_integer(), options()) :: [Layout.atom_id()]
@@ -173,6 +189,9 @@ defmodule RingTracer.Strategy do
       @behaviour RingTracer.Strategy
 
       @impl RingTracer.Strategy
+      def options(options, _layout), do: {:ok, options}
+
+      @impl RingTracer.Strategy
       def initial_atoms(layout, index, _options), do: RingTracer.Layout.strip(layout, index)
 
       @impl RingTracer.Strategy
@@ -204,7 +223,8 @@ defmodule RingTracer.Strategy do
       @impl RingTracer.Strategy
       def parent_info(_message, _view, state), do: {state, []}
 
-      defoverridable initial_atoms: 3,
+      defoverridable options: 2,
+                     initial_atoms: 3,
                      init: 1,
                      parts: 2,
                      handle_message: 3,
@@ -216,6 +236,34 @@ defmodule RingTracer.Strategy do
                      parent_info: 3
     end
   end
+
+  @doc """
+  The counters a strategy moves with `{:stat, key}`, each a field of a
+  child's statistics (`RingTracer.Job.Stats`).
+
+      iex> RingTracer.Strategy.stats()
+      [:offers_sent, :offers_passed, :offers_consumed]
+  """
+  @spec stats() :: [stat()]
+  def stats, do: @stats
+
+  @doc "Whether `key` is a counter a strategy moves (`stats/0`); allowed in guards."
+  defguard is_stat(key) when key in @stats
+
+  @doc """
+  Options of a strategy that takes none (`options/2`): `[]`, or an error
+  naming the first one given.
+
+      iex> RingTracer.Strategy.no_options([], :steal)
+      {:ok, []}
+      iex> RingTracer.Strategy.no_options([split: true], :steal)
+      {:error, "strategy :steal takes no options, got: [split: true]"}
+  """
+  @spec no_options(options(), atom()) :: {:ok, []} | {:error, String.t()}
+  def no_options([], _name), do: {:ok, []}
+
+  def no_options(options, name),
+    do: {:error, "strategy #{inspect(name)} takes no options, got: #{inspect(options)}"}
 
   @doc """
   Every child's strip of frame `frame`, as the parent's hand-outs (those of

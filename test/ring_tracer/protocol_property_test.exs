@@ -64,15 +64,12 @@ defmodule RingTracer.ProtocolPropertyTest do
           width: w,
           height: h,
           speeds: speeds,
-          strategy: strategy,
-          layout: layout,
           # Small rings: let offers wait after 1-3 hops so that holding is
-          # exercised (the default, 16, needs a ring of 17 or more).
-          hold_after: hold_after,
-          # nil: the default for the layout (see `RingTracer.Strategy.Ring.Aim`).
-          aim: aim,
-          # Adaptive atoms: pieces near the end of the job (ring only).
-          split: split
+          # exercised (the default, 16, needs a ring of 17 or more); aim nil:
+          # the default for the layout (see `RingTracer.Strategy.Ring.Aim`);
+          # adaptive atoms: pieces near the end of the job (ring only).
+          strategy: strategy(strategy, hold_after: hold_after, aim: aim, split: split),
+          layout: layout
         ]
 
         opts = delayed(job, chaos)
@@ -101,7 +98,7 @@ defmodule RingTracer.ProtocolPropertyTest do
               # records with it.
               ids = Enum.map(r.atoms, & &1.atom)
               layout = RingTracer.Layout.new(w, h, n, k)
-              lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
+              lost_records = Enum.any?(r.children, &(&1.failed != nil))
               :counters.add(joined, 1, Enum.count(r.children, &(&1.index >= n and &1.traced > 0)))
 
               r.pixels == reference and length(r.failures) <= length(kill_at) and
@@ -187,7 +184,7 @@ defmodule RingTracer.ProtocolPropertyTest do
           {:ok, r} ->
             ids = Enum.map(r.atoms, & &1.atom)
             :counters.add(cuts, 1, Enum.sum(Enum.map(r.children, &Map.get(&1, :cuts, 0))))
-            lost_records = Enum.any?(r.children, &Map.has_key?(&1, :failed))
+            lost_records = Enum.any?(r.children, &(&1.failed != nil))
             layout = RingTracer.Layout.new(n * k, 1, n, k)
 
             ids == Enum.uniq(ids) and
@@ -237,13 +234,11 @@ defmodule RingTracer.ProtocolPropertyTest do
           width: w,
           height: h,
           speeds: speeds,
-          strategy: strategy,
-          layout: layout,
-          aim: false,
-          split: split
+          strategy: strategy(strategy, split: split),
+          layout: layout
         ]
 
-        opts = job |> delayed(chaos) |> Keyword.delete(:aim)
+        opts = delayed(job, chaos)
 
         total = n * k * length(numbers)
         kill_at = Enum.take_random(1..total, kills)
@@ -292,12 +287,18 @@ defmodule RingTracer.ProtocolPropertyTest do
   # `part_rows`), so that cuts of the atom being traced happen on these
   # tiny jobs.
   defp delayed(job, chaos) do
+    parts = if match?({:ring, _}, job[:strategy]), do: [part_us: 0, part_rows: 0], else: []
+
     Keyword.merge(job,
-      strategy:
-        RingTracer.Test.DelayedStrategy.wrap(job, jitter: chaos, part_us: 0, part_rows: 0),
+      strategy: RingTracer.Test.DelayedStrategy.wrap(job, [jitter: chaos] ++ parts),
       kernel: {RingTracer.Test.FaultyKernel, jitter: chaos}
     )
   end
+
+  # The job's strategy: the ring with its own options (nil: its default),
+  # any other by name.
+  defp strategy(:ring, options), do: {:ring, Enum.reject(options, &is_nil(elem(&1, 1)))}
+  defp strategy(name, _options), do: name
 
   defp kill_a_child do
     case children() do

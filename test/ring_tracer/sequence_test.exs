@@ -64,9 +64,12 @@ defmodule RingTracer.SequenceTest do
           height: @h,
           children: 3,
           atoms: 3,
-          strategy: unquote(strategy),
+          strategy:
+            if(unquote(strategy) == :ring,
+              do: {:ring, split: unquote(split)},
+              else: unquote(strategy)
+            ),
           layout: unquote(layout),
-          split: unquote(split),
           speeds: [1, 3]
         )
 
@@ -222,7 +225,8 @@ defmodule RingTracer.SequenceTest do
           {[frames: [3, 2]], "option :frames must be a range"},
           {[window: 0], "option :window must be an integer from 1 to 64"},
           {[frame: 2], "option :frame is not one of a sequence's"},
-          {[aim: true], "option :aim is not one of a sequence's"},
+          {[aim: true], "option :aim is the ring's own"},
+          {[strategy: {:ring, aim: true}], "the ring's :aim works within one image"},
           {[children: 0], "option :children must be a positive integer"}
         ] do
       assert {:error, %RingTracer.Error{reason: :invalid_option, message: got}} =

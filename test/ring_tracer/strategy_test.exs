@@ -12,12 +12,12 @@ defmodule RingTracer.StrategyTest do
 
     for strategy <- RingTracer.Strategies.names(),
         speeds <- [[], [1, 3, 1]],
-        split <- [false, true] do
+        # adaptive atoms are the ring's
+        split <- if(strategy == :ring, do: [false, true], else: [false]) do
       {:ok, result} =
         RingTracer.render(TestScenes.path(@scene),
-          strategy: strategy,
+          strategy: if(split, do: {:ring, split: true}, else: strategy),
           speeds: speeds,
-          split: split,
           children: 3,
           atoms: 6,
           width: 40,
@@ -118,7 +118,12 @@ defmodule RingTracer.StrategyTest do
   test "message counts in the stats equal the sends a tracer observes" do
     # hold_after: 1, so that held offers leave in shared messages too.
     {result, observed} =
-      render_traced(children: 6, atoms: 6, speeds: [1, 5, 1, 1, 3, 1], hold_after: 1)
+      render_traced(
+        children: 6,
+        atoms: 6,
+        speeds: [1, 5, 1, 1, 3, 1],
+        strategy: {:ring, hold_after: 1}
+      )
 
     assert observed[:result] == result.messages.result.count
     assert Map.get(observed, :offer, 0) == Map.get(result.messages, :offer, %{count: 0}).count
@@ -132,7 +137,7 @@ defmodule RingTracer.StrategyTest do
 
     for {aim, boards} <- [{true, 2}, {false, 0}] do
       {result, _observed} =
-        render_traced(children: 5, atoms: 6, speeds: [1, 3, 1, 2, 1], aim: aim)
+        render_traced(children: 5, atoms: 6, speeds: [1, 3, 1, 2, 1], strategy: {:ring, aim: aim})
 
       assert result.pixels == reference
 
@@ -147,7 +152,7 @@ defmodule RingTracer.StrategyTest do
             atoms: 6,
             costs: 20_000,
             speeds: [1, 3, 1, 2, 1],
-            aim: aim
+            strategy: {:ring, aim: aim}
           )
         end)
 
@@ -159,14 +164,53 @@ defmodule RingTracer.StrategyTest do
     for {layout, opts, aimed?} <- [
           {:strips, [], true},
           {:interleaved, [], false},
-          {:interleaved, [aim: true], true},
-          {:strips, [aim: false], false},
+          {:interleaved, [strategy: {:ring, aim: true}], true},
+          {:strips, [strategy: {:ring, aim: false}], false},
           {:strips, [strategy: :master], false}
         ] do
       {:ok, result} =
         RingTracer.simulate([children: 3, atoms: 4, costs: 500, layout: layout] ++ opts)
 
-      assert result.aim == aimed?, "#{layout} #{inspect(opts)}"
+      assert Keyword.get(result.strategy_options, :aim, false) == aimed?,
+             "#{layout} #{inspect(opts)}"
+    end
+  end
+
+  test "a result names its strategy and the options it ran with, defaults filled in" do
+    {:ok, ring} = RingTracer.simulate(children: 2, atoms: 2, costs: 100)
+    assert ring.strategy == :ring
+    assert ring.strategy_options[:hold_after] == 16
+    assert ring.strategy_options[:split] == false
+
+    {:ok, split} =
+      RingTracer.simulate(children: 2, atoms: 2, costs: 100, strategy: {:ring, split: true})
+
+    assert {split.strategy, split.strategy_options[:split]} == {:ring, true}
+
+    {:ok, steal} = RingTracer.simulate(children: 2, atoms: 2, costs: 100, strategy: :steal)
+    assert {steal.strategy, steal.strategy_options} == {:steal, []}
+  end
+
+  test "a strategy's options are its own to check; the ring's moved from render/2's" do
+    for {opts, message} <- [
+          {[split: true],
+           "option :split is the ring's own: give it with the strategy, " <>
+             "strategy: {:ring, [split: true]}"},
+          {[hold_after: 2], "strategy: {:ring, [hold_after: 2]}"},
+          {[aim: false], "strategy: {:ring, [aim: false]}"},
+          {[strategy: {:ring, hold_after: 0}],
+           "the ring's :hold_after must be a positive integer"},
+          {[strategy: {:ring, aim: :yes}], "the ring's :aim must be a boolean"},
+          {[strategy: {:ring, hold: 2}], "the ring has no option :hold"},
+          {[strategy: {:steal, split: true}], "strategy :steal takes no options"},
+          {[strategy: {:lottery, []}], "RingTracer.Strategy"},
+          {[strategy: {String, []}], "String is not a RingTracer.Strategy"},
+          {[strategy: {:ring, [:split]}], "option :strategy"}
+        ] do
+      assert {:error, %RingTracer.Error{reason: :invalid_option, message: m}} =
+               RingTracer.simulate([children: 2, atoms: 2] ++ opts)
+
+      assert m =~ message, "#{inspect(opts)}: #{m}"
     end
   end
 

@@ -14,14 +14,31 @@ defmodule RingTracer.Test.DelayedStrategy do
   """
   use RingTracer.Strategy
 
-  @doc "Wraps the strategy of `render/2`'s options `opts` with `delays`."
+  @doc """
+  Wraps the strategy of `render/2`'s options `opts` (`:strategy`, default
+  `:ring`) with `delays`; the ring's `:part_us`, `:part_rows` and
+  `:cut_faster` among them go to the inner strategy.
+  """
   @spec wrap(keyword(), keyword()) :: RingTracer.Strategy.t()
   def wrap(opts, delays) do
-    {:ok, valid} = RingTracer.Options.validate(opts)
-    # Options of the inner strategy's own that `render/2` does not take.
     {own, delays} = Keyword.split(delays, [:part_us, :part_rows, :cut_faster])
-    {module, inner} = RingTracer.Strategies.from_options(valid)
-    {__MODULE__, [inner: {module, inner ++ own}] ++ delays}
+
+    inner =
+      case Keyword.get(opts, :strategy, :ring) do
+        {name, options} -> {name, options ++ own}
+        name -> {name, own}
+      end
+
+    {__MODULE__, [inner: inner] ++ delays}
+  end
+
+  # The inner strategy checks and completes its own options.
+  @impl true
+  def options(options, layout) do
+    case RingTracer.Strategies.resolve(options[:inner], layout) do
+      {:ok, inner} -> {:ok, Keyword.put(options, :inner, inner)}
+      {:error, error} -> {:error, error.message}
+    end
   end
 
   @impl true

@@ -364,10 +364,27 @@ defmodule RingTracer.CLI.Render do
       ])
 
     with {:ok, o} <- choice(base, :strategy, RingTracer.Strategies.names()),
+         {:ok, o} <- ring_options(o),
          {:ok, o} <- choice(o, :layout, RingTracer.Layout.orders()),
          {:ok, o} <- speeds(o),
          {:ok, o} <- region(o) do
       {:ok, o |> nodes() |> preview(opts)}
+    end
+  end
+
+  # `--aim`, `--no-aim`, `--split`: the ring's own options, given with it.
+  defp ring_options(opts) do
+    {ring, opts} = Keyword.split(opts, [:aim, :split])
+
+    case {ring, opts[:strategy]} do
+      {[], _} ->
+        {:ok, opts}
+
+      {ring, strategy} when strategy in [nil, :ring] ->
+        {:ok, Keyword.put(opts, :strategy, {:ring, ring})}
+
+      {[{flag, _} | _], strategy} ->
+        {:usage, "--#{flag} is the ring's own option, not for --strategy #{strategy}"}
     end
   end
 

@@ -6,6 +6,10 @@ defmodule RingTracer.CLI.Report do
 
   alias RingTracer.{Rays, Result}
 
+  # A child's atom counts on its line; then the strategy's counters
+  # (`RingTracer.Strategy.stats/0`), each named without its prefix.
+  @atom_counts [:own, :given, :received, :traced]
+
   @doc """
   The job's statistics: parse and trace times, rays by kind and the rate,
   peak memory, a line per child. Works for a sequence's result too (no
@@ -22,9 +26,8 @@ defmodule RingTracer.CLI.Report do
       for c <- children do
         node = if c.node != node(), do: " on #{c.node}", else: ""
 
-        "  child #{c.index}#{node}: own #{c.own}, given #{c.given}, received #{c.received}, " <>
-          "traced #{c.traced}; offers sent #{c.offers_sent}, passed #{c.offers_passed}, " <>
-          "consumed #{c.offers_consumed}\n"
+        "  child #{c.index}#{node}: #{counts(c, @atom_counts, "")}; " <>
+          "offers #{counts(c, RingTracer.Strategy.stats(), "offers_")}\n"
       end
 
     [
@@ -35,6 +38,15 @@ defmodule RingTracer.CLI.Report do
       lines
     ]
   end
+
+  # "own 4, given 1": each count of `keys` in `stats`, named without `prefix`.
+  defp counts(stats, keys, prefix),
+    do:
+      Enum.map_join(
+        keys,
+        ", ",
+        &"#{String.replace_prefix(to_string(&1), prefix, "")} #{Map.get(stats, &1)}"
+      )
 
   @doc "A line for each report file of `opts` (`--stats`, `--timeline`, `--ownership`)."
   @spec reports_written(keyword()) :: iodata()

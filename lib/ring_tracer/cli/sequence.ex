@@ -30,8 +30,7 @@ defmodule RingTracer.CLI.Sequence do
   def run(scene, job, plan, numbers, dir, load_us) do
     opts =
       job.render_opts
-      # --no-aim is what a sequence does (Render refuses --aim with one)
-      |> Keyword.drop([:frame, :region, :aim, :window])
+      |> Keyword.drop([:frame, :region, :window])
       |> Keyword.merge(frames: numbers, ack: true)
       |> then(&if w = job.opts[:window], do: Keyword.put(&1, :window, w), else: &1)
 

@@ -1,38 +1,40 @@
 defmodule RingTracer.Job.Child do
-  @moduledoc """
-  A child: one member of the ring, owner of one strip of the image.
+  @moduledoc false
+  # A child: one member of the ring, owner of one strip of the image.
+  #
+  # Started by the job's parent under `RingTracer.Children` on the node the
+  # child runs on (a supervision tree cannot span nodes; the child's life is
+  # tied to its parent's by a monitor). It prepares its kernel (for the native
+  # kernel: the parsed scene from its node's `RingTracer.SceneCache`), then
+  # waits for `{:ring, ...}` from the parent, naming its left sibling.
+  #
+  # Then, as the paper has it:
+  #
+  #   * it spawns a grandchild and keeps two atoms in its pipe (one being
+  #     traced, one queued), so the grandchild never waits;
+  #   * every traced atom's pixels go to the parent at once;
+  #   * when it holds no more atoms, its strategy (`RingTracer.Strategy`)
+  #     decides what to do: for the ring, send a help offer to the left;
+  #   * atoms handed over (`{:handover, from, atoms}`) are queued and traced.
+  #
+  # A strategy sees the child through a read-only `RingTracer.Strategy.View`
+  # and answers with effects, which the child carries out in one place
+  # (`effect/2`): the strategy decides, the child sends,
+  # counts, takes atoms from its queue and records events.
+  #
+  # A grandchild that dies is restarted and its atoms retried, at most three
+  # times per atom; then the child reports the atom as failed to the parent,
+  # which fails the job.
+  #
+  # Every message a child sends to another process of the job goes through
+  # `send_counted/4`, which counts it and its size by kind: `:result`,
+  # `:handover`, `:offer`, `:control`.
 
-  Started by the job's parent under `RingTracer.Children` on the node the
-  child runs on (a supervision tree cannot span nodes; the child's life is
-  tied to its parent's by a monitor). It prepares its kernel (for the native
-  kernel: the parsed scene from its node's `RingTracer.SceneCache`), then
-  waits for `{:ring, ...}` from the parent, naming its left sibling.
-
-  Then, as the paper has it:
-
-    * it spawns a grandchild and keeps two atoms in its pipe (one being
-      traced, one queued), so the grandchild never waits;
-    * every traced atom's pixels go to the parent at once;
-    * when it holds no more atoms, its strategy (`RingTracer.Strategy`)
-      decides what to do: for the ring, send a help offer to the left;
-    * atoms handed over (`{:handover, from, atoms}`) are queued and traced.
-
-  A strategy sees the child through a read-only `RingTracer.Strategy.View`
-  and answers with effects, which the child carries out in one place
-  (`strategy_message/2`, `idle/1`): the strategy decides, the child sends,
-  counts, takes atoms from its queue and records events.
-
-  A grandchild that dies is restarted and its atoms retried, at most three
-  times per atom; then the child reports the atom as failed to the parent,
-  which fails the job.
-
-  Every message a child sends to another process of the job goes through
-  `send_counted/4`, which counts it and its size by kind: `:result`,
-  `:handover`, `:offer`, `:control`.
-  """
   use GenServer, restart: :temporary
 
-  alias RingTracer.Job.{Directory, Grandchild, Pipe, Queue, Slowdown, Spec}
+  require RingTracer.Strategy
+
+  alias RingTracer.Job.{Directory, Grandchild, Pipe, Queue, Slowdown, Spec, Stats}
   alias RingTracer.Layout
   alias RingTracer.Strategy.View
 
@@ -121,8 +123,8 @@ defmodule RingTracer.Job.Child do
   @typedoc "One traced atom's record (see `RingTracer.Result`)."
   @type atom_record :: RingTracer.Result.atom_record()
 
-  @typedoc "A child's statistics (see `RingTracer.Result`)."
-  @type stats :: RingTracer.Result.child()
+  @typedoc "A child's statistics."
+  @type stats :: Stats.t()
 
   @typedoc "What a child reports to its parent when it stops."
   @type report :: %{
@@ -155,9 +157,7 @@ defmodule RingTracer.Job.Child do
     count(state, kind, msg)
   end
 
-  @doc false
-  @spec count(state, atom(), term()) :: state when state: counting()
-  def count(state, kind, msg) do
+  defp count(state, kind, msg) do
     bytes = :erlang.external_size(msg)
 
     %{
@@ -166,7 +166,7 @@ defmodule RingTracer.Job.Child do
     }
   end
 
-  defp bump(state, key), do: update_in(state.stats[key], &(&1 + 1))
+  defp bump(state, key), do: %{state | stats: Map.update!(state.stats, key, &(&1 + 1))}
 
   # A protocol event (offer sent, passed, consumed...) for the timeline.
   defp event(state, kind, to) do
@@ -297,15 +297,12 @@ defmodule RingTracer.Job.Child do
     update_in(state.stats.given, &(&1 + length(atoms)))
   end
 
-  @doc """
-  Queues atoms handed over to this child and starts on them. An atom it
-  already holds (queued or in its grandchild's pipe) is not queued twice:
-  after a failure the parent may hand out again an atom whose pixels are
-  still on their way, and one atom twice in a pipe would meet its own claim
-  (`RingTracer.Job.Pipe`) and be skipped.
-  """
-  @spec receive_atoms(t(), [Layout.atom_id()]) :: t()
-  def receive_atoms(state, atoms) do
+  # Queues atoms handed over to this child and starts on them. An atom it
+  # already holds (queued or in its grandchild's pipe) is not queued twice:
+  # after a failure the parent may hand out again an atom whose pixels are
+  # still on their way, and one atom twice in a pipe would meet its own claim
+  # (`RingTracer.Job.Pipe`) and be skipped.
+  defp receive_atoms(state, atoms) do
     {queue, atoms} = Queue.append(state.queue, atoms, MapSet.new(state.in_flight))
 
     last_frame =
@@ -322,39 +319,10 @@ defmodule RingTracer.Job.Child do
     |> maybe_idle()
   end
 
-  @doc "A child's statistics before its first atom (also what a dead child reports)."
-  @spec new_stats(non_neg_integer(), node() | nil, number(), non_neg_integer()) :: stats()
-  def new_stats(index, node, speed, own) do
-    %{
-      index: index,
-      node: node,
-      speed: speed,
-      own: own,
-      given: 0,
-      received: 0,
-      splits: 0,
-      cuts: 0,
-      handovers: 0,
-      traced: 0,
-      offers_sent: 0,
-      offers_passed: 0,
-      offers_consumed: 0,
-      grandchild_restarts: 0,
-      busy_us: 0,
-      trace_us: 0,
-      first_atom_us: nil,
-      last_atom_us: nil,
-      rays: RingTracer.Kernel.no_rays()
-    }
-  end
-
   ## The strategy: a view in, effects out, carried out here and nowhere else
 
-  @doc """
-  What the child's strategy sees of it (`RingTracer.Strategy.View`).
-  """
-  @spec view(t()) :: View.t()
-  def view(%__MODULE__{} = state) do
+  # What the child's strategy sees of it (`RingTracer.Strategy.View`).
+  defp view(%__MODULE__{} = state) do
     {remaining, in_flight} = giveable(state)
     {_, options} = state.spec.strategy
 
@@ -409,20 +377,14 @@ defmodule RingTracer.Job.Child do
   defp view_status(:waiting), do: :working
   defp view_status(status), do: status
 
-  @doc """
-  Hands `msg` to the child's strategy and carries out what it answers
-  (`RingTracer.Strategy.handle_message/3`).
-  """
-  @spec strategy_message(t(), term()) :: t()
-  def strategy_message(state, msg),
+  # Hands `msg` to the child's strategy and carries out what it answers
+  # (`RingTracer.Strategy.handle_message/3`).
+  defp strategy_message(state, msg),
     do: run_strategy(state, &state.strategy.handle_message(msg, &1, &2))
 
-  @doc """
-  Tells the child's strategy that the child ran out of atoms, and carries
-  out what it answers (`RingTracer.Strategy.idle/2`).
-  """
-  @spec idle(t()) :: t()
-  def idle(state), do: run_strategy(%{state | status: :idle}, &state.strategy.idle/2)
+  # Tells the child's strategy that the child ran out of atoms, and carries
+  # out what it answers (`RingTracer.Strategy.idle/2`).
+  defp idle(state), do: run_strategy(%{state | status: :idle}, &state.strategy.idle/2)
 
   defp run_strategy(state, callback) do
     {strategy_state, effects} = callback.(view(state), state.strategy_state)
@@ -453,8 +415,7 @@ defmodule RingTracer.Job.Child do
   defp effect(state, :finished), do: %{state | status: :finished}
   defp effect(state, {:event, kind, to}), do: event(state, kind, to)
 
-  defp effect(state, {:stat, key}) when key in [:offers_sent, :offers_passed, :offers_consumed],
-    do: bump(state, key)
+  defp effect(state, {:stat, key}) when RingTracer.Strategy.is_stat(key), do: bump(state, key)
 
   defp effect(state, {:continue, msg}), do: strategy_message(state, msg)
 
@@ -482,7 +443,7 @@ defmodule RingTracer.Job.Child do
       strategy_state: strategy.init(options),
       queue: Queue.new(queue),
       stats:
-        new_stats(
+        Stats.new(
           index,
           node(),
           Spec.speed(List.to_tuple(spec.speeds), index) * Slowdown.node_speed(),
@@ -785,38 +746,12 @@ defmodule RingTracer.Job.Child do
 
   defp now, do: System.monotonic_time(:microsecond)
 
-  @doc """
-  The child's speed: kernel work units traced (its `:rays` counters'
-  `:work`) per microsecond its grandchild spent on atoms (wall time,
-  slowdown included); `nil` until it has traced work. Unlike a count of
-  atoms, it does not take a child that traced cheap atoms for a fast one.
+  defp rate(state), do: Stats.rate(state.stats)
+  defp mean_atom_us(state), do: Stats.mean_atom_us(state.stats)
 
-      iex> stats = RingTracer.Job.Child.new_stats(0, node(), 1, 4)
-      iex> RingTracer.Job.Child.rate(%{stats: stats})
-      nil
-      iex> RingTracer.Job.Child.rate(%{stats: %{stats | busy_us: 2_000, rays: %{stats.rays | work: 5_000}}})
-      2.5
-  """
-  @spec rate(map()) :: float() | nil
-  def rate(%{stats: %{rays: %{work: work}, busy_us: busy}}) when work > 0 and busy > 0,
-    do: work / busy
-
-  def rate(_state), do: nil
-
-  @doc """
-  The child's mean wall time per atom (slowdown included), `nil` before its
-  first atom.
-  """
-  @spec mean_atom_us(map()) :: non_neg_integer() | nil
-  def mean_atom_us(%{stats: %{traced: 0}}), do: nil
-  def mean_atom_us(%{stats: %{busy_us: busy, traced: n}}), do: div(busy, n)
-
-  @doc """
-  How long the atom its grandchild is tracing should still take, from the
-  child's mean time per atom (`nil` before its first atom).
-  """
-  @spec expected_remaining_us(map()) :: non_neg_integer() | nil
-  def expected_remaining_us(state) do
+  # How long the atom its grandchild is tracing should still take, from the
+  # child's mean time per atom (`nil` before its first atom).
+  defp expected_remaining_us(state) do
     case mean_atom_us(state) do
       nil -> nil
       mean -> max(mean - (now() - state.current_since), 0)

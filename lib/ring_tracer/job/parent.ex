@@ -240,11 +240,13 @@ defmodule RingTracer.Job.Parent do
     )
   end
 
-  # Runs `fun` in a process of the job's (for a strategy: the ring's work
-  # preview), monitored by the parent, which ends it and waits for it when
-  # the job ends: no process of a job outlives it.
-  defp start_helper(state, fun) do
-    {pid, ref} = spawn_monitor(fun)
+  # Applies `{m, f, a}` in a process of the job's (for a strategy: the ring's
+  # work preview), which sends the parent `{tag, value}`; monitored by the
+  # parent, which ends it and waits for it when the job ends: no process of
+  # a job outlives it.
+  defp start_helper(state, tag, {m, f, a}) do
+    parent = self()
+    {pid, ref} = spawn_monitor(fn -> send(parent, {tag, apply(m, f, a)}) end)
     %{state | helpers: [{pid, ref} | state.helpers]}
   end
 
@@ -277,7 +279,7 @@ defmodule RingTracer.Job.Parent do
 
   # A dead child's share (its strip of a new frame): spread over the living.
   defp effect(state, {:hand_out, _index, atoms}), do: spread(state, atoms)
-  defp effect(state, {:helper, fun}), do: start_helper(state, fun)
+  defp effect(state, {:helper, tag, mfa}), do: start_helper(state, tag, mfa)
 
   @doc """
   What a preview (`RingTracer.Preview`) needs of a running job: its id,
@@ -1098,7 +1100,7 @@ defmodule RingTracer.Job.Parent do
   end
 
   defp dead_report(i, failure) do
-    stats = i |> Child.new_stats(nil, 1, 0) |> Map.put(:failed, failure.reason)
+    stats = %{RingTracer.Job.Stats.new(i, nil, 1, 0) | failed: failure.reason}
     %{stats: stats, traffic: %{}, events: [], atoms: []}
   end
 

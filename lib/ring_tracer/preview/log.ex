@@ -506,10 +506,7 @@ defmodule RingTracer.Preview.Log do
     rays = Map.new(s.rays, fn {k, v} -> {k, v} end)
 
     s
-    |> Map.take(
-      [:index, :speed, :own, :given, :received, :handovers, :traced, :offers_sent] ++
-        [:offers_passed, :offers_consumed, :grandchild_restarts, :busy_us, :trace_us]
-    )
+    |> Map.take(RingTracer.Job.Stats.columns())
     |> Map.put(:node, if(s.node, do: Atom.to_string(s.node), else: nil))
     |> Map.put(:rays, rays)
     |> Map.put(:failed, Map.get(s, :failed))

@@ -1,39 +1,21 @@
 defmodule RingTracer.Report.Stats do
-  @moduledoc """
-  Numbers about a render (`RingTracer.Result`), as a map, JSON or CSV.
-
-  `summary/1` gives the makespan and the ideal makespan, their ratio, the
-  idle share, messages and bytes by kind and per atom, the per-child stats,
-  image size, atom count and ray counters. `write/2` writes the summary as
-  JSON (`.json`) or the per-child table as CSV (`.csv`).
-  """
+  @moduledoc false
+  # Numbers about a render (`RingTracer.Result`), as a map, JSON or CSV.
+  #
+  # `summary/1` gives the makespan and the ideal makespan, their ratio, the
+  # idle share, messages and bytes by kind and per atom, the per-child stats,
+  # image size, atom count and ray counters. `write/2` writes the summary as
+  # JSON (`.json`) or the per-child table as CSV (`.csv`).
 
   alias RingTracer.{Error, Result}
 
-  @child_columns [
-    :index,
-    :node,
-    :speed,
-    :own,
-    :given,
-    :received,
-    :handovers,
-    :traced,
-    :offers_sent,
-    :offers_passed,
-    :offers_consumed,
-    :grandchild_restarts,
-    :busy_us,
-    :trace_us,
-    :idle_us,
-    :first_atom_us,
-    :last_atom_us
-  ]
+  # A child's statistics, one column each (`RingTracer.Job.Stats`).
+  @child_columns RingTracer.Job.Stats.columns()
 
   @doc """
   A summary of `result`:
 
-    * `:strategy`, `:layout`, `:aim`, `:width`, `:height`, `:atoms` (count), `:children_count`;
+    * `:strategy`, `:strategy_options` (a map), `:layout`, `:width`, `:height`, `:atoms` (count), `:children_count`;
     * `:started_at_us` (wall clock, when the job started), `:first_atom_us`
       (when the first atom's pixels were ready, from the start);
     * `:makespan_us`, `:ideal_us`, `:ratio` (makespan / ideal, `nil` when the
@@ -53,7 +35,7 @@ defmodule RingTracer.Report.Stats do
     n = length(children)
     makespan = result.elapsed_us || 0
     ideal = result.ideal_us || 0
-    idle = Enum.reduce(children, 0, &((&1[:idle_us] || 0) + &2))
+    idle = Enum.reduce(children, 0, &((Map.get(&1, :idle_us) || 0) + &2))
     per = max(atoms, 1)
 
     {count, bytes} =
@@ -62,7 +44,7 @@ defmodule RingTracer.Report.Stats do
     %{
       strategy: result.strategy,
       layout: result.layout,
-      aim: result.aim,
+      strategy_options: Map.new(result.strategy_options || []),
       width: result.width,
       height: result.height,
       atoms: atoms,
@@ -82,10 +64,17 @@ defmodule RingTracer.Report.Stats do
         by_kind:
           Map.new(messages, fn {k, m} -> {k, %{count: m.count / per, bytes: m.bytes / per}} end)
       },
-      children: Enum.map(children, &Map.update(&1, :node, nil, fn node -> to_string(node) end)),
+      children: Enum.map(children, &child/1),
       rays: result.rays,
       duplicates: result.duplicates
     }
+  end
+
+  # A child's statistics as a plain map, its node as a string.
+  defp child(stats) do
+    stats
+    |> Map.delete(:__struct__)
+    |> Map.update(:node, nil, &to_string/1)
   end
 
   @doc """
@@ -120,18 +109,19 @@ defmodule RingTracer.Report.Stats do
   def csv(%Result{children: children}) do
     children = children || []
 
-    ray_keys =
-      children |> Enum.flat_map(&Map.keys(&1[:rays] || %{})) |> Enum.uniq() |> Enum.sort()
+    ray_keys = children |> Enum.flat_map(&Map.keys(rays(&1))) |> Enum.uniq() |> Enum.sort()
 
     header = Enum.map(@child_columns, &Atom.to_string/1) ++ Enum.map(ray_keys, &"rays_#{&1}")
 
     rows =
       Enum.map(children, fn child ->
-        Enum.map(@child_columns, &child[&1]) ++ Enum.map(ray_keys, &(child[:rays] || %{})[&1])
+        Enum.map(@child_columns, &Map.get(child, &1)) ++ Enum.map(ray_keys, &rays(child)[&1])
       end)
 
     Enum.map([header | rows], fn row -> [Enum.map_join(row, ",", &field/1), "\n"] end)
   end
+
+  defp rays(child), do: Map.get(child, :rays) || %{}
 
   defp field(nil), do: ""
   defp field(x) when is_float(x), do: :erlang.float_to_binary(x, [:compact, decimals: 6])

@@ -1,14 +1,17 @@
 defmodule RingTracer.Strategy.Master do
-  @moduledoc """
-  Master/worker: the parent holds every atom and hands them out one at a
-  time. Each child has one atom queued ahead (two in its pipe), and each
-  atom result it sends doubles as the request for the next one. In a job
-  of several frames, the parent queues each frame's atoms as it is
-  released, and a child that asked while the queue was empty gets the new
-  frame's first atoms. A child that joins a running job asks for two
-  atoms as the first ones did.
-  """
+  @moduledoc false
+  # Master/worker: the parent holds every atom and hands them out one at a
+  # time. Each child has one atom queued ahead (two in its pipe), and each
+  # atom result it sends doubles as the request for the next one. In a job
+  # of several frames, the parent queues each frame's atoms as it is
+  # released, and a child that asked while the queue was empty gets the new
+  # frame's first atoms. A child that joins a running job asks for two
+  # atoms as the first ones did.
+
   use RingTracer.Strategy
+
+  @impl true
+  def options(options, _layout), do: RingTracer.Strategy.no_options(options, :master)
 
   alias RingTracer.Layout
 

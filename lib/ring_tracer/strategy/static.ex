@@ -1,6 +1,11 @@
 defmodule RingTracer.Strategy.Static do
-  @moduledoc "Static division: each child traces its own strip and nothing else."
+  @moduledoc false
+  # Static division: each child traces its own strip and nothing else.
+
   use RingTracer.Strategy
+
+  @impl true
+  def options(options, _layout), do: RingTracer.Strategy.no_options(options, :static)
 
   @impl true
   def idle(_view, state), do: {state, [:finished]}

@@ -1,13 +1,16 @@
 defmodule RingTracer.Strategy.Steal do
-  @moduledoc """
-  Random work stealing, as a modern reference point: an idle child asks a
-  random sibling it has not asked since its last success for half of that
-  sibling's queued atoms. The sibling replies with a hand-over, empty if it
-  has nothing to spare. A child that every sibling has refused is finished.
-  The order of victims is random but seeded by the child's index, so a job is
-  repeatable.
-  """
+  @moduledoc false
+  # Random work stealing, as a modern reference point: an idle child asks a
+  # random sibling it has not asked since its last success for half of that
+  # sibling's queued atoms. The sibling replies with a hand-over, empty if it
+  # has nothing to spare. A child that every sibling has refused is finished.
+  # The order of victims is random but seeded by the child's index, so a job is
+  # repeatable.
+
   use RingTracer.Strategy
+
+  @impl true
+  def options(options, _layout), do: RingTracer.Strategy.no_options(options, :steal)
 
   @impl true
   def idle(view, state) do

@@ -77,9 +77,4 @@ defmodule RingTracer.Strategy.Ring.HelpOfferTest do
     # An older report does not undo a newer one.
     assert HelpOffer.learn(known, [{9.0, 1, 4}]) == known
   end
-
-  test "the atoms given are the last ones queued" do
-    assert HelpOffer.split_queue([5, 6, 7], 0) == {[5, 6, 7], []}
-    assert HelpOffer.split_queue([5, 6, 7], 3) == {[], [5, 6, 7]}
-  end
 end

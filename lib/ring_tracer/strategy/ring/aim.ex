@@ -3,56 +3,46 @@ defmodule RingTracer.Strategy.Ring.Aim do
   @known_max 8
   @board_to 2
 
-  @moduledoc """
-  Aiming (our addition to the paper): where an idle child sends its help
-  offer.
-
-  The paper sends every offer to the left sibling. On the paper's strips that
-  drains the cheap work first: with speeds 1..8 in child order, the fastest
-  child, done with the sky, helps its left neighbours, the slowest children,
-  whose strips are cheap too, while the expensive middle strips stay with
-  their owners and move last, in expensive atoms that end the job late. So an
-  idle child sends its offer straight to the sibling it expects to stay busy
-  longest, if that is not its left sibling anyway. A sibling so aimed at
-  consumes the offer as any other; if it has nothing to give (a miss), it
-  sends the offer on to its origin's left sibling (which the offer names),
-  as if the origin had sent it there, and from there it walks the ring as
-  the paper's offers do: a child is still finished only once an offer of
-  its own has asked every sibling. (Sending a miss back to its origin,
-  which then sent a new offer, cost one message more per miss.)
-
-  ## What a child knows
-
-  *Loads*: `{index, end_us, at_us, queued}`, an estimate made at job time
-  `at_us` of when a sibling will have traced everything it holds (`end_us`)
-  and how many atoms it had queued. A child's own: its queued atoms times its
-  mean time per atom, plus what its atom in flight should still take. Offers
-  carry the #{@loads_max} latest-ending loads their children know of, and so do
-  hand-overs (the giver's own load, just lowered, first among them); every
-  child an offer or a hand-over reaches adds its own and keeps the #{@known_max}
-  latest-ending ones, the newest report per sibling. A report ages: by the
-  time per atom it implies, the sibling has started atoms since, and one
-  that should have no atom queued any more is not aimed at.
-
-  *The board*: before any offer has been anywhere, nobody knows anything,
-  and the first offers of a job decide where the middle strips go. So the
-  parent, which receives every atom, makes one board once each child has
-  sent it an atom: for each child, the work left in its own atoms (from a
-  preview of the image, the kernel's optional `atom_work/2`) over the work
-  per microsecond it has delivered so far. It sends it only to the #{@board_to}
-  children expected to run out first, the first to offer; their offers
-  carry it on. (Sending it to every child cost more messages in misses than
-  it saved, measured on `8, speeds 1..8`.)
-
-      iex> alias RingTracer.Strategy.Ring.Aim
-      iex> known = Aim.learn([{1, 900, 100, 3}], [{1, 500, 200, 1}, {2, 800, 150, 4}])
-      [{2, 800, 150, 4}, {1, 500, 200, 1}]
-      iex> view = %{index: 0, left_index: 3, dead: [], now: 300, min_us: 100}
-      iex> Aim.target(known, view)
-      2
-      iex> Aim.target(known, %{view | left_index: 2})
-      nil
-  """
+  @moduledoc false
+  # Aiming (our addition to the paper): where an idle child sends its help
+  # offer.
+  #
+  # The paper sends every offer to the left sibling. On the paper's strips that
+  # drains the cheap work first: with speeds 1..8 in child order, the fastest
+  # child, done with the sky, helps its left neighbours, the slowest children,
+  # whose strips are cheap too, while the expensive middle strips stay with
+  # their owners and move last, in expensive atoms that end the job late. So an
+  # idle child sends its offer straight to the sibling it expects to stay busy
+  # longest, if that is not its left sibling anyway. A sibling so aimed at
+  # consumes the offer as any other; if it has nothing to give (a miss), it
+  # sends the offer on to its origin's left sibling (which the offer names),
+  # as if the origin had sent it there, and from there it walks the ring as
+  # the paper's offers do: a child is still finished only once an offer of
+  # its own has asked every sibling. (Sending a miss back to its origin,
+  # which then sent a new offer, cost one message more per miss.)
+  #
+  # ## What a child knows
+  #
+  # *Loads*: `{index, end_us, at_us, queued}`, an estimate made at job time
+  # `at_us` of when a sibling will have traced everything it holds (`end_us`)
+  # and how many atoms it had queued. A child's own: its queued atoms times its
+  # mean time per atom, plus what its atom in flight should still take. Offers
+  # carry the 3 (`@loads_max`) latest-ending loads their children know of, and so do
+  # hand-overs (the giver's own load, just lowered, first among them); every
+  # child an offer or a hand-over reaches adds its own and keeps the 8 (`@known_max`)
+  # latest-ending ones, the newest report per sibling. A report ages: by the
+  # time per atom it implies, the sibling has started atoms since, and one
+  # that should have no atom queued any more is not aimed at.
+  #
+  # *The board*: before any offer has been anywhere, nobody knows anything,
+  # and the first offers of a job decide where the middle strips go. So the
+  # parent, which receives every atom, makes one board once each child has
+  # sent it an atom: for each child, the work left in its own atoms (from a
+  # preview of the image, the kernel's optional `atom_work/2`) over the work
+  # per microsecond it has delivered so far. It sends it only to the 2 (`@board_to`)
+  # children expected to run out first, the first to offer; their offers
+  # carry it on. (Sending it to every child cost more messages in misses than
+  # it saved, measured on `8, speeds 1..8`.)
 
   alias RingTracer.Layout
 
@@ -107,6 +97,17 @@ defmodule RingTracer.Strategy.Ring.Aim do
       2
       iex> RingTracer.Strategy.Ring.Aim.target(known, %{view | dead: [2]})
       nil
+
+  What a child knows (`learn/2`, latest-ending first) decides:
+
+    iex> alias RingTracer.Strategy.Ring.Aim
+    iex> known = Aim.learn([{1, 900, 100, 3}], [{1, 500, 200, 1}, {2, 800, 150, 4}])
+    [{2, 800, 150, 4}, {1, 500, 200, 1}]
+    iex> view = %{index: 0, left_index: 3, dead: [], now: 300, min_us: 100}
+    iex> Aim.target(known, view)
+    2
+    iex> Aim.target(known, %{view | left_index: 2})
+    nil
   """
   @spec target([load()], map()) :: non_neg_integer() | nil
   def target(known, view) do

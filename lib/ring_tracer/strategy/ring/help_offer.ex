@@ -1,133 +1,132 @@
 defmodule RingTracer.Strategy.Ring.HelpOffer do
-  @moduledoc """
-  The help offer (the ring's token) and what a child does when one reaches it.
-
-  A child that has traced every atom it holds sends an offer to its left
-  sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
-  per busy microsecond, see `RingTracer.Strategy.Ring.Share`; `nil` until it has
-  traced work), its mean wall time per atom (`atom_us`, `nil` before its
-  first atom), the fastest siblings heard of along its way (`heard`, see
-  "Gossip") and a sequence number (`seq`) so that a child can tell its
-  current offer from a stale one; `wrapped` is set once the offer has gone
-  past the end of the ring (from a child to one with a higher index, see
-  "Parking"), `hops` counts the siblings it has been sent to and `held`
-  whether it has waited once (see "Holding"). Only the origin's own offers
-  carry its pid: atoms are handed over directly to it, not along the ring.
-  `via` is the last child that sent the offer on (see "Splicing" below).
-  `aimed` is the sibling an offer was sent straight to, if not its child's
-  left one, `home_left` that child's left sibling (`{pid, index}`) for the
-  walk a miss turns it into, and `loads` the siblings' loads it carries
-  (all three `RingTracer.Strategy.Ring.Aim`).
-
-  `decide/2` is the whole rule, pure:
-
-    * the offer is the child's own and current -> `:returned`: nobody needed
-      help, the child is finished and waits for the parent's stop message;
-    * an old offer of its own (superseded) -> `:drop`;
-    * the share rule gives at least one atom -> `{:give, g}`: the token is
-      consumed, and the child sends its last `g` queued atoms to the offerer;
-      with adaptive atoms (`split: true` in the view), `{:give, g, {k, 8}}`:
-      `k` eighths of the next one too, near the end of the giver's atoms or
-      (`g` 0) to an offerer too slow for a whole atom
-      (`RingTracer.Strategy.Ring.Share.part/7`);
-    * with adaptive atoms, nothing queued to give, and the atom being traced
-      in parts with parts not yet started (`cuttable` in the view), to an
-      offerer at least 1.5x faster -> `{:cut, keep}`: the child cuts that
-      atom, keeps the `keep` share of its parts not started (both then end
-      together, `keep` = giver's rate / both rates) and hands the rest over
-      (`RingTracer.Job.Pipe.cut/3`): a fast child does not wait for a slow
-      one's last atom;
-    * the child is idle itself, its own offer still out, and the offer has
-      not wrapped -> `:park`;
-    * the child is tracing its last atom, which should end within half of
-      one of the offerer's atoms, and the offer has walked `hold_after` hops
-      without finding work -> `:hold`;
-    * the offer has walked as many hops as the ring has live children
-      without reaching its origin -> `:home` (see "Strays");
-    * otherwise -> `:pass` to the left sibling.
-
-  ## Gossip (our addition to the paper)
-
-  The share rule plans for one more helper than the giver and the offerer:
-  the fastest sibling the giver has heard of. Every offer carries the three
-  fastest siblings heard of on its way, each as `{rate, index, done}` (what
-  it had `done`, atoms computed, when it told its rate: the newest report
-  of a sibling wins). Its origin puts itself in; a child adds what each
-  offer that reaches it carries to what it knows, and the offers it sends
-  or passes on carry the result. Until it has heard of anyone else, a giver
-  in a ring of three or more assumes a helper as fast as the faster of
-  itself and the offerer.
-
-  More than one offer can be in the ring at once (one per idle child); they
-  cross freely.
-
-  ## Parking (our addition to the paper)
-
-  An idle child whose own offer is out has nothing to give, and its own offer
-  is ahead of the one that just reached it, asking the same siblings the same
-  question. So it keeps the newcomer instead of passing it on: when its own
-  offer is consumed it has atoms again and applies the share rule to what it
-  parked (give, or send the offer on to the sibling that just gave: the ones
-  in between had nothing a moment ago, and the giver may have more); when
-  its own offer comes back it is finished,
-  and it sends each parked offer back to its origin, which is then finished
-  too (the parker's offer visited every sibling after the parked offer was
-  made). Without parking, every child's last offer travels the whole ring:
-  N² messages at the end of a job, which with 1024 children is more than the
-  atoms themselves.
-
-  "Finished too" is an approximation when the parked offer's origin is
-  faster than its parker: the share rule gives a faster offerer more, so a
-  sibling that had nothing for the parker might have had an atom for it.
-  Sending such offers on instead of home took 3,000-4,800 offer messages in
-  a job of 256 children x 8 atoms against 2,300-2,900 (both measured before
-  holding), for no balance gain we could measure, so they go home.
-
-  A wrapped offer is never parked. Two idle children could otherwise each
-  hold the other's offer and both wait, idle, to the end of the job (we saw
-  the fastest of 8 children stranded so for the last tenth of a render). A
-  cycle of parked offers needs an offer that went all the way round to a
-  child on its origin's right, so past the end of the ring; with wrapped
-  offers passed on, no cycle forms and some offer always walks on.
-
-  ## Holding (our addition to the paper)
-
-  Near the end of a large job most children are tracing their last atom and
-  have nothing to give; an offer walks past them one message at a time, and
-  every idle child's offer makes that walk. So an offer that has walked
-  `hold_after` hops (default 16) without finding work waits, once, at a
-  child tracing its last atom, if that atom should end within half of one of
-  the offerer's own atoms (the child's mean time per atom minus what the atom
-  has run, against the offerer's mean time per atom, `atom_us`). When the child
-  runs out it sends its own offer, and the offers it held travel with it, in
-  one message (`{:help_offers, [...]}`): several offers walk for the price
-  of one. A child never waits on a held offer, so holding makes no cycles.
-  In a ring of a few children an offer goes home long before it has walked
-  16 hops, so there it does not wait.
-
-  ## Strays (our addition to the paper)
-
-  In a ring of L live children an offer is back at its origin after at most
-  L hops (fewer where finished children were spliced out or a giver took a
-  parked offer on). One that has walked L hops and is still elsewhere walks
-  a ring its origin is no longer on: after a failure the parent hands the
-  lost atoms to children that had finished, and that their siblings had
-  spliced out; such a child's next offer would circle the others until the
-  job ends (thousands of messages, or a child passing an offer to itself
-  when it is the last one left). So it goes straight home, where it counts
-  as returned: every live child it visited had nothing to give. An offer
-  whose origin has died is dropped by the first child that knows of the
-  death.
-
-  ## Splicing (our addition to the paper)
-
-  A finished child will never have atoms to give, so offers gain nothing by
-  visiting it. When one passes through it, it tells the sender (`via`) to
-  skip it: `{:ring_skip, me, my_left, my_left_index}`; a sender whose left is
-  still that child adopts the new left, and otherwise ignores the message.
-  The ring shrinks to the children that may still give; every offer still
-  visits each of them.
-  """
+  @moduledoc false
+  # The help offer (the ring's token) and what a child does when one reaches it.
+  #
+  # A child that has traced every atom it holds sends an offer to its left
+  # sibling: who made it (`origin`, `pid`), its speed (`rate`, kernel work
+  # per busy microsecond, see `RingTracer.Strategy.Ring.Share`; `nil` until it has
+  # traced work), its mean wall time per atom (`atom_us`, `nil` before its
+  # first atom), the fastest siblings heard of along its way (`heard`, see
+  # "Gossip") and a sequence number (`seq`) so that a child can tell its
+  # current offer from a stale one; `wrapped` is set once the offer has gone
+  # past the end of the ring (from a child to one with a higher index, see
+  # "Parking"), `hops` counts the siblings it has been sent to and `held`
+  # whether it has waited once (see "Holding"). Only the origin's own offers
+  # carry its pid: atoms are handed over directly to it, not along the ring.
+  # `via` is the last child that sent the offer on (see "Splicing" below).
+  # `aimed` is the sibling an offer was sent straight to, if not its child's
+  # left one, `home_left` that child's left sibling (`{pid, index}`) for the
+  # walk a miss turns it into, and `loads` the siblings' loads it carries
+  # (all three `RingTracer.Strategy.Ring.Aim`).
+  #
+  # `decide/2` is the whole rule, pure:
+  #
+  #   * the offer is the child's own and current -> `:returned`: nobody needed
+  #     help, the child is finished and waits for the parent's stop message;
+  #   * an old offer of its own (superseded) -> `:drop`;
+  #   * the share rule gives at least one atom -> `{:give, g}`: the token is
+  #     consumed, and the child sends its last `g` queued atoms to the offerer;
+  #     with adaptive atoms (`split: true` in the view), `{:give, g, {k, 8}}`:
+  #     `k` eighths of the next one too, near the end of the giver's atoms or
+  #     (`g` 0) to an offerer too slow for a whole atom
+  #     (`RingTracer.Strategy.Ring.Share.part/7`);
+  #   * with adaptive atoms, nothing queued to give, and the atom being traced
+  #     in parts with parts not yet started (`cuttable` in the view), to an
+  #     offerer at least 1.5x faster -> `{:cut, keep}`: the child cuts that
+  #     atom, keeps the `keep` share of its parts not started (both then end
+  #     together, `keep` = giver's rate / both rates) and hands the rest over
+  #     (`RingTracer.Job.Pipe.cut/3`): a fast child does not wait for a slow
+  #     one's last atom;
+  #   * the child is idle itself, its own offer still out, and the offer has
+  #     not wrapped -> `:park`;
+  #   * the child is tracing its last atom, which should end within half of
+  #     one of the offerer's atoms, and the offer has walked `hold_after` hops
+  #     without finding work -> `:hold`;
+  #   * the offer has walked as many hops as the ring has live children
+  #     without reaching its origin -> `:home` (see "Strays");
+  #   * otherwise -> `:pass` to the left sibling.
+  #
+  # ## Gossip (our addition to the paper)
+  #
+  # The share rule plans for one more helper than the giver and the offerer:
+  # the fastest sibling the giver has heard of. Every offer carries the three
+  # fastest siblings heard of on its way, each as `{rate, index, done}` (what
+  # it had `done`, atoms computed, when it told its rate: the newest report
+  # of a sibling wins). Its origin puts itself in; a child adds what each
+  # offer that reaches it carries to what it knows, and the offers it sends
+  # or passes on carry the result. Until it has heard of anyone else, a giver
+  # in a ring of three or more assumes a helper as fast as the faster of
+  # itself and the offerer.
+  #
+  # More than one offer can be in the ring at once (one per idle child); they
+  # cross freely.
+  #
+  # ## Parking (our addition to the paper)
+  #
+  # An idle child whose own offer is out has nothing to give, and its own offer
+  # is ahead of the one that just reached it, asking the same siblings the same
+  # question. So it keeps the newcomer instead of passing it on: when its own
+  # offer is consumed it has atoms again and applies the share rule to what it
+  # parked (give, or send the offer on to the sibling that just gave: the ones
+  # in between had nothing a moment ago, and the giver may have more); when
+  # its own offer comes back it is finished,
+  # and it sends each parked offer back to its origin, which is then finished
+  # too (the parker's offer visited every sibling after the parked offer was
+  # made). Without parking, every child's last offer travels the whole ring:
+  # N² messages at the end of a job, which with 1024 children is more than the
+  # atoms themselves.
+  #
+  # "Finished too" is an approximation when the parked offer's origin is
+  # faster than its parker: the share rule gives a faster offerer more, so a
+  # sibling that had nothing for the parker might have had an atom for it.
+  # Sending such offers on instead of home took 3,000-4,800 offer messages in
+  # a job of 256 children x 8 atoms against 2,300-2,900 (both measured before
+  # holding), for no balance gain we could measure, so they go home.
+  #
+  # A wrapped offer is never parked. Two idle children could otherwise each
+  # hold the other's offer and both wait, idle, to the end of the job (we saw
+  # the fastest of 8 children stranded so for the last tenth of a render). A
+  # cycle of parked offers needs an offer that went all the way round to a
+  # child on its origin's right, so past the end of the ring; with wrapped
+  # offers passed on, no cycle forms and some offer always walks on.
+  #
+  # ## Holding (our addition to the paper)
+  #
+  # Near the end of a large job most children are tracing their last atom and
+  # have nothing to give; an offer walks past them one message at a time, and
+  # every idle child's offer makes that walk. So an offer that has walked
+  # `hold_after` hops (default 16) without finding work waits, once, at a
+  # child tracing its last atom, if that atom should end within half of one of
+  # the offerer's own atoms (the child's mean time per atom minus what the atom
+  # has run, against the offerer's mean time per atom, `atom_us`). When the child
+  # runs out it sends its own offer, and the offers it held travel with it, in
+  # one message (`{:help_offers, [...]}`): several offers walk for the price
+  # of one. A child never waits on a held offer, so holding makes no cycles.
+  # In a ring of a few children an offer goes home long before it has walked
+  # 16 hops, so there it does not wait.
+  #
+  # ## Strays (our addition to the paper)
+  #
+  # In a ring of L live children an offer is back at its origin after at most
+  # L hops (fewer where finished children were spliced out or a giver took a
+  # parked offer on). One that has walked L hops and is still elsewhere walks
+  # a ring its origin is no longer on: after a failure the parent hands the
+  # lost atoms to children that had finished, and that their siblings had
+  # spliced out; such a child's next offer would circle the others until the
+  # job ends (thousands of messages, or a child passing an offer to itself
+  # when it is the last one left). So it goes straight home, where it counts
+  # as returned: every live child it visited had nothing to give. An offer
+  # whose origin has died is dropped by the first child that knows of the
+  # death.
+  #
+  # ## Splicing (our addition to the paper)
+  #
+  # A finished child will never have atoms to give, so offers gain nothing by
+  # visiting it. When one passes through it, it tells the sender (`via`) to
+  # skip it: `{:ring_skip, me, my_left, my_left_index}`; a sender whose left is
+  # still that child adopts the new left, and otherwise ignores the message.
+  # The ring shrinks to the children that may still give; every offer still
+  # visits each of them.
 
   alias RingTracer.Strategy.Ring.Share
 
@@ -379,15 +378,4 @@ defmodule RingTracer.Strategy.Ring.HelpOffer do
   @spec hop(t(), non_neg_integer(), non_neg_integer()) :: t()
   def hop(%__MODULE__{} = offer, from, to),
     do: %{offer | wrapped: offer.wrapped or to > from, hops: offer.hops + 1}
-
-  @doc """
-  Splits the queued atoms into the ones kept and the `g` given away (the last
-  ones of the queue, farthest from being traced).
-
-      iex> RingTracer.Strategy.Ring.HelpOffer.split_queue([1, 2, 3, 4, 5], 2)
-      {[1, 2, 3], [4, 5]}
-  """
-  @spec split_queue([non_neg_integer()], non_neg_integer()) ::
-          {[non_neg_integer()], [non_neg_integer()]}
-  def split_queue(queue, g), do: Enum.split(queue, length(queue) - g)
 end

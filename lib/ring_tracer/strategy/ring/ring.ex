@@ -1,65 +1,49 @@
 defmodule RingTracer.Strategy.Ring do
-  @moduledoc """
-  The paper's ring: an idle child sends a help offer to its left sibling; a
-  sibling with atoms to spare consumes it and hands a share sized to the
-  children's speeds directly to the offerer, or passes it on; a child whose
-  own offer comes back is finished. The rules are `RingTracer.Strategy.Ring.HelpOffer`
-  and `RingTracer.Strategy.Ring.Share`; so are our additions: speeds measured in
-  kernel work per busy microsecond, a share planned with one more helper
-  than the two children (gossip: offers carry the fastest siblings heard
-  of), parking (an idle child keeps the offers that reach it until its own
-  offer is answered), holding (in a large ring, an offer that walked far
-  waits for a child about to run out and leaves with that child's own
-  offer, in one message), splicing (offers stop visiting finished
-  children, once a job has no frames left to come) and aiming (on strips, an idle child's offer goes straight to
-  the sibling it expects to stay busy longest: `RingTracer.Strategy.Ring.Aim`).
+  @moduledoc false
+  # The paper's ring: an idle child sends a help offer to its left sibling; a
+  # sibling with atoms to spare consumes it and hands a share sized to the
+  # children's speeds directly to the offerer, or passes it on; a child whose
+  # own offer comes back is finished. The rules are `RingTracer.Strategy.Ring.HelpOffer`
+  # and `RingTracer.Strategy.Ring.Share`; so are our additions: speeds measured in
+  # kernel work per busy microsecond, a share planned with one more helper
+  # than the two children (gossip: offers carry the fastest siblings heard
+  # of), parking (an idle child keeps the offers that reach it until its own
+  # offer is answered), holding (in a large ring, an offer that walked far
+  # waits for a child about to run out and leaves with that child's own
+  # offer, in one message), splicing (offers stop visiting finished
+  # children, once a job has no frames left to come) and aiming (on strips, an idle child's offer goes straight to
+  # the sibling it expects to stay busy longest: `RingTracer.Strategy.Ring.Aim`).
+  #
+  # ## Options
+  #
+  # Checked and completed by `options/2` (`RingTracer.Strategy.Ring.Options`):
+  # `:hold_after`, `:aim`, `:split`, `:part_us`, `:part_rows`, `:cut_faster`.
+  #
+  # ## State
+  #
+  # A child's: its offers' sequence numbers (`:seq`, `:current`) and where
+  # its current offer went (`:sent_to`), the offers it keeps (`:parked`,
+  # `:held`) or is about to pass on (`:outbox`), what it has heard of the
+  # fastest siblings (`:heard`) and of their loads (`:loads`). The parent's:
+  # the board (`RingTracer.Strategy.Ring.Aim.board/4`) it makes once.
 
-  ## Options
-
-    * `:hold_after` — hops an offer walks before it may wait at a child
-      about to run out (default #{RingTracer.Strategy.Ring.HelpOffer.default_hold_after()}; see
-      `RingTracer.Strategy.Ring.HelpOffer`);
-    * `:aim` — whether an idle child sends its offer straight to the sibling
-      it expects to stay busy longest (default false; see
-      `RingTracer.Strategy.Ring.Aim`);
-    * `:split` — adaptive atoms: a hand-over can give part of an atom,
-      near the end of the giver's atoms or to an offerer too slow for a
-      whole one (`RingTracer.Strategy.Ring.Share.part/7`); `false` keeps
-      atoms whole, as the paper does. Absent here it is true, but
-      `RingTracer.render/2` and `RingTracer.simulate/1` pass `false` unless
-      asked for `split: true` (`RingTracer.Strategies`), so renders keep
-      atoms whole by default. With it, a child slower than a sibling it
-      has heard of traces its atoms in parts, and an offer from a sibling
-      at least 1.5x faster can take the parts of its atom not yet started
-      (`RingTracer.Job.Pipe.cut/3`);
-    * `:part_us`, `:part_rows` — with `:split`, the shortest part worth a
-      kernel call of its own, in microseconds of the child's wall time per
-      atom (default 2000) and in image rows (default 4); `:cut_faster` —
-      how much faster than a child an offerer must be to take parts of its
-      atom being traced (default #{RingTracer.Strategy.Ring.HelpOffer.default_cut_faster()}).
-
-  ## State
-
-  A child's: its offers' sequence numbers (`:seq`, `:current`) and where
-  its current offer went (`:sent_to`), the offers it keeps (`:parked`,
-  `:held`) or is about to pass on (`:outbox`), what it has heard of the
-  fastest siblings (`:heard`) and of their loads (`:loads`). The parent's:
-  the board (`RingTracer.Strategy.Ring.Aim.board/4`) it makes once.
-  """
   use RingTracer.Strategy
 
   alias RingTracer.Strategy.Ring.{Aim, HelpOffer}
+  alias RingTracer.Strategy.Ring.Options, as: RingOptions
   alias RingTracer.Strategy.View
 
   # Offers in a list leave one at a time (each may give atoms, and the next
   # one sees what is left), then together (`flush/1`).
   @answer {__MODULE__, :answer}
 
-  # Adaptive atoms: at most this many parts per atom, each at least this long.
+  # Adaptive atoms: at most this many parts per atom; before a child's
+  # first atom is back, this many.
   @max_parts 8
-  @part_us 2_000
-  @part_rows 4
   @first_parts 4
+
+  @impl true
+  def options(options, layout), do: RingOptions.validate(options, layout)
 
   ## The parent's side of aiming: a preview of each atom's work, traced beside
   ## the children's first atoms where the kernel can make one, then one board
@@ -70,15 +54,13 @@ defmodule RingTracer.Strategy.Ring do
     # The board is one image's (each atom's work, from a preview of it): a
     # job of several frames goes without, its children aim by what they
     # hear from each other.
-    if Keyword.get(options, :aim, false) and view.spec.layout.frames == 1 do
-      %{spec: %{kernel: {kernel, opts}} = spec, pid: parent} = view
+    if Keyword.fetch!(options, :aim) and view.spec.layout.frames == 1 do
+      %{spec: %{kernel: {kernel, opts}} = spec} = view
       {:module, _} = Code.ensure_loaded(kernel)
 
       effects =
         if function_exported?(kernel, :atom_work, 2),
-          do: [
-            {:helper, fn -> send(parent, {:atom_work, spec.id, kernel.atom_work(spec, opts)}) end}
-          ],
+          do: [{:helper, {:atom_work, spec.id}, {kernel, :atom_work, [spec, opts]}}],
           else: []
 
       {%{work: nil, heard_from: MapSet.new(), board: false}, effects}
@@ -94,7 +76,7 @@ defmodule RingTracer.Strategy.Ring do
   def parent_atom_done(_view, state, _index), do: {state, []}
 
   @impl true
-  def parent_info({:atom_work, id, result}, view, %{board: false} = board)
+  def parent_info({{:atom_work, id}, result}, view, %{board: false} = board)
       when id == view.spec.id do
     case result do
       {:ok, work} -> board(view, %{board | work: work})
@@ -137,7 +119,7 @@ defmodule RingTracer.Strategy.Ring do
   # slow machine: those go in 4 parts.
   @impl true
   def parts(view, state) do
-    part_rows = max(Keyword.get(view.options, :part_rows, @part_rows), 1.0e-9)
+    part_rows = max(Keyword.fetch!(view.options, :part_rows), 1.0e-9)
 
     cond do
       not split?(view) ->
@@ -147,7 +129,7 @@ defmodule RingTracer.Strategy.Ring do
         power_of_two(min(@first_parts, view.next_rows / part_rows))
 
       true ->
-        part_us = max(Keyword.get(view.options, :part_us, @part_us), 1)
+        part_us = max(Keyword.fetch!(view.options, :part_us), 1)
         faster = faster(view, Map.get(state, :heard, []))
         power_of_two(Enum.min([faster, view.mean_atom_us / part_us, view.next_rows / part_rows]))
     end
@@ -302,8 +284,13 @@ defmodule RingTracer.Strategy.Ring do
     {heard, state} = hear(view, state, offer.heard)
     {known, state} = learn_loads(view, state, offer.loads)
     offer = %{offer | heard: heard, loads: Aim.news(known)}
+    decision = HelpOffer.decide(decision_view(view, state, heard), offer)
+    act(decision, offer, view, state, {known, released_by})
+  end
 
-    decision_view = %{
+  # What `HelpOffer.decide/2` weighs, from the view and what we know.
+  defp decision_view(view, state, heard) do
+    %{
       index: view.index,
       remaining: view.remaining,
       in_flight: view.in_flight,
@@ -312,81 +299,67 @@ defmodule RingTracer.Strategy.Ring do
       ring_size: view.ring_size - length(view.dead),
       offer_seq: if(view.status == :idle, do: state[:current]),
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
-      hold_after: Keyword.get(view.options, :hold_after, HelpOffer.default_hold_after()),
+      hold_after: Keyword.fetch!(view.options, :hold_after),
       split: split?(view),
       last_share: view.last_share,
       cuttable: view.cuttable,
-      cut_faster: Keyword.get(view.options, :cut_faster, HelpOffer.default_cut_faster())
+      cut_faster: Keyword.fetch!(view.options, :cut_faster)
     }
-
-    case HelpOffer.decide(decision_view, offer) do
-      :returned when offer.aimed != nil ->
-        # Our aimed offer missed and its target could not send it on to our
-        # left sibling (dead, as far as it knew): walk the ring from here.
-        idle(view, state, false)
-
-      :returned ->
-        {parked, state} = take_offers(view, state, :parked)
-
-        # Every sibling was asked after these offers were made: their origins
-        # are finished too.
-        {state, [{:event, :returned, view.index}, :finished | Enum.flat_map(parked, &home/1)]}
-
-      :drop ->
-        {state, []}
-
-      {:give, g} ->
-        {state,
-         [
-           {:give, offer.pid, offer.origin, g},
-           {:event, :give, offer.origin},
-           {:stat, :offers_consumed}
-         ]}
-
-      {:cut, keep} ->
-        {state,
-         [
-           {:cut, offer.pid, offer.origin, keep},
-           {:event, :give, offer.origin},
-           {:stat, :offers_consumed}
-         ]}
-
-      {:give, g, part} ->
-        {state,
-         [
-           {:give, offer.pid, offer.origin, g, part},
-           {:event, :give, offer.origin},
-           {:stat, :offers_consumed}
-         ]}
-
-      _ when offer.aimed == view.index ->
-        # Aimed here and nothing to give (a miss): the offer walks the ring
-        # from its origin's left sibling, as if its origin had sent it there,
-        # with our own load first among those it carries.
-        {state, miss(view, %{offer | loads: Aim.news(known, own_load(view))})}
-
-      :park ->
-        {keep(state, :parked, offer), []}
-
-      :home ->
-        {state, home(offer)}
-
-      :hold ->
-        {keep(state, :held, %{offer | held: true}), []}
-
-      :pass ->
-        {to, to_index} =
-          if is_integer(released_by) and released_by != view.index and
-               released_by not in view.dead,
-             do: {{:sibling, released_by}, released_by},
-             else: {view.left, view.left_index}
-
-        passed = HelpOffer.hop(%{offer | via: view.pid}, view.index, to_index)
-
-        {keep(state, :outbox, {to, to_index, passed}),
-         splice(view, offer) ++ [{:event, :pass, to_index}]}
-    end
   end
+
+  # A decision carried out: `{known, released_by}` are the loads we know and
+  # the sibling whose hand-over released the offer, if any.
+  defp act(:returned, %HelpOffer{aimed: aimed}, view, state, _) when aimed != nil,
+    # Our aimed offer missed and its target could not send it on to our left
+    # sibling (dead, as far as it knew): walk the ring from here.
+    do: idle(view, state, false)
+
+  defp act(:returned, _offer, view, state, _) do
+    {parked, state} = take_offers(view, state, :parked)
+
+    # Every sibling was asked after these offers were made: their origins
+    # are finished too.
+    {state, [{:event, :returned, view.index}, :finished | Enum.flat_map(parked, &home/1)]}
+  end
+
+  defp act(:drop, _offer, _view, state, _), do: {state, []}
+
+  defp act({:give, g}, offer, _view, state, _),
+    do: {state, consume({:give, offer.pid, offer.origin, g}, offer)}
+
+  defp act({:cut, keep}, offer, _view, state, _),
+    do: {state, consume({:cut, offer.pid, offer.origin, keep}, offer)}
+
+  defp act({:give, g, part}, offer, _view, state, _),
+    do: {state, consume({:give, offer.pid, offer.origin, g, part}, offer)}
+
+  # Aimed here and nothing to give (a miss): the offer walks the ring from
+  # its origin's left sibling, as if its origin had sent it there, with our
+  # own load first among those it carries.
+  defp act(_decision, %HelpOffer{aimed: index} = offer, %View{index: index} = view, state, ctx) do
+    {known, _released_by} = ctx
+    {state, miss(view, %{offer | loads: Aim.news(known, own_load(view))})}
+  end
+
+  defp act(:park, offer, _view, state, _), do: {keep(state, :parked, offer), []}
+  defp act(:home, offer, _view, state, _), do: {state, home(offer)}
+  defp act(:hold, offer, _view, state, _), do: {keep(state, :held, %{offer | held: true}), []}
+
+  defp act(:pass, offer, view, state, {_known, released_by}) do
+    {to, to_index} =
+      if is_integer(released_by) and released_by != view.index and
+           released_by not in view.dead,
+         do: {{:sibling, released_by}, released_by},
+         else: {view.left, view.left_index}
+
+    passed = HelpOffer.hop(%{offer | via: view.pid}, view.index, to_index)
+
+    {keep(state, :outbox, {to, to_index, passed}),
+     splice(view, offer) ++ [{:event, :pass, to_index}]}
+  end
+
+  # An offer consumed: what we give, as the event and counter say.
+  defp consume(give, offer), do: [give, {:event, :give, offer.origin}, {:stat, :offers_consumed}]
 
   # An offer sent back to its origin.
   defp home(offer) do
@@ -491,7 +464,7 @@ defmodule RingTracer.Strategy.Ring do
     })
   end
 
-  defp aim?(view), do: Keyword.get(view.options, :aim, false)
+  defp aim?(view), do: Keyword.fetch!(view.options, :aim)
 
-  defp split?(view), do: Keyword.get(view.options, :split, true)
+  defp split?(view), do: Keyword.fetch!(view.options, :split)
 end

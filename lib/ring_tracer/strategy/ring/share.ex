@@ -1,60 +1,46 @@
 defmodule RingTracer.Strategy.Ring.Share do
-  @moduledoc """
-  The help-offer share rule: how many atoms a child gives to a sibling that
-  offered help.
-
-  ## Speeds
-
-  The paper has the giver compare the offerer's count of computed atoms with
-  its own. Atoms differ in cost, though (on the SPD `balls` scene by 6x from
-  the sky to the reflective spheres), so a slow child that happened to trace
-  cheap atoms passes for a fast one. We compare speeds measured as kernel work
-  units per busy microsecond (`RingTracer.Job.Child.rate/1`): work units cost
-  the same on every machine, and time is what a machine spends on them.
-
-  ## The plan
-
-  The giver plans where each of its `remaining` queued atoms would be
-  finished first, among:
-
-    * itself, behind the `in_flight` atoms already in its grandchild's pipe;
-    * the offerer, idle;
-    * in a ring of three or more, one more helper (`helper_rate`): the
-      fastest other sibling it has heard of (offers carry what they heard,
-      see `RingTracer.Strategy.Ring.HelpOffer`).
-
-  Atoms go one at a time to whoever would complete one more soonest
-  (`(n + 1) / rate`; the giver first on ties, then the offerer), which is
-  list scheduling on machines of different speeds: for atoms of one cost,
-  the earliest common finish. The offerer gets the atoms planned for it, and,
-  if it is faster than the giver, the helper's as well: they wait where they
-  would be traced sooner, and go on from there when the helper's own offer
-  comes. A slower offerer does not take the helper's atoms: an atom handed to
-  a slow child ends late, while one left queued is there for the next offer.
-
-  Without the helper, the rule would split the atoms as if nobody else would
-  help either child. Near the end of a job everybody does, and the pairwise
-  split handed slow children expensive atoms that ended after all the others
-  (8 children of speeds 1..8 on two cores: makespan / ideal 1.17-1.20 with
-  the pairwise rule on atom counts, 1.13-1.14 with this one).
-
-  No rate yet: a giver that has not finished an atom gives all it has queued
-  (its offerer, which finished its own work, is faster); an offerer with no
-  rate counts as fast as the giver. Atoms in flight are never given.
-
-      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0)
-      10
-      iex> RingTracer.Strategy.Ring.Share.give(6, 2, 1.0, 1.0)
-      4
-      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0, 1.0)
-      7
-      iex> RingTracer.Strategy.Ring.Share.give(20, 0, 2.0, 1.0, 1.0)
-      15
-      iex> RingTracer.Strategy.Ring.Share.give(3, 1, 0.2, 1.0, 4.0)
-      0
-      iex> RingTracer.Strategy.Ring.Share.give(5, 1, 1.0, nil)
-      5
-  """
+  @moduledoc false
+  # The help-offer share rule: how many atoms a child gives to a sibling that
+  # offered help.
+  #
+  # ## Speeds
+  #
+  # The paper has the giver compare the offerer's count of computed atoms with
+  # its own. Atoms differ in cost, though (on the SPD `balls` scene by 6x from
+  # the sky to the reflective spheres), so a slow child that happened to trace
+  # cheap atoms passes for a fast one. We compare speeds measured as kernel work
+  # units per busy microsecond (`RingTracer.Job.Stats.rate/1`): work units cost
+  # the same on every machine, and time is what a machine spends on them.
+  #
+  # ## The plan
+  #
+  # The giver plans where each of its `remaining` queued atoms would be
+  # finished first, among:
+  #
+  #   * itself, behind the `in_flight` atoms already in its grandchild's pipe;
+  #   * the offerer, idle;
+  #   * in a ring of three or more, one more helper (`helper_rate`): the
+  #     fastest other sibling it has heard of (offers carry what they heard,
+  #     see `RingTracer.Strategy.Ring.HelpOffer`).
+  #
+  # Atoms go one at a time to whoever would complete one more soonest
+  # (`(n + 1) / rate`; the giver first on ties, then the offerer), which is
+  # list scheduling on machines of different speeds: for atoms of one cost,
+  # the earliest common finish. The offerer gets the atoms planned for it, and,
+  # if it is faster than the giver, the helper's as well: they wait where they
+  # would be traced sooner, and go on from there when the helper's own offer
+  # comes. A slower offerer does not take the helper's atoms: an atom handed to
+  # a slow child ends late, while one left queued is there for the next offer.
+  #
+  # Without the helper, the rule would split the atoms as if nobody else would
+  # help either child. Near the end of a job everybody does, and the pairwise
+  # split handed slow children expensive atoms that ended after all the others
+  # (8 children of speeds 1..8 on two cores: makespan / ideal 1.17-1.20 with
+  # the pairwise rule on atom counts, 1.13-1.14 with this one).
+  #
+  # No rate yet: a giver that has not finished an atom gives all it has queued
+  # (its offerer, which finished its own work, is faster); an offerer with no
+  # rate counts as fast as the giver. Atoms in flight are never given.
 
   @typedoc "Kernel work units per microsecond; `nil` until a child has traced work."
   @type rate :: float() | nil
@@ -74,6 +60,19 @@ defmodule RingTracer.Strategy.Ring.Share do
   with whichever is faster by a hair: the result jumps there (from the
   offerer's own atoms to those plus the helper's). Both places are as good,
   so nothing is lost but the symmetry.
+
+    iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0)
+    10
+    iex> RingTracer.Strategy.Ring.Share.give(6, 2, 1.0, 1.0)
+    4
+    iex> RingTracer.Strategy.Ring.Share.give(20, 0, 1.0, 1.0, 1.0)
+    7
+    iex> RingTracer.Strategy.Ring.Share.give(20, 0, 2.0, 1.0, 1.0)
+    15
+    iex> RingTracer.Strategy.Ring.Share.give(3, 1, 0.2, 1.0, 4.0)
+    0
+    iex> RingTracer.Strategy.Ring.Share.give(5, 1, 1.0, nil)
+    5
   """
   @spec give(non_neg_integer(), non_neg_integer(), rate(), rate(), rate()) :: non_neg_integer()
   def give(remaining, in_flight, offerer_rate, self_rate, helper_rate \\ nil)

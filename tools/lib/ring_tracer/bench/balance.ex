@@ -16,8 +16,8 @@ defmodule RingTracer.Bench.Balance do
   ...; see `RingTracer.Layout`), which shows how much of the ring's loss
   comes with the paper's contiguous strips, and every scenario runs it
   once more on strips with every offer sent to the left sibling as in the
-  paper (`ring/left`, `aim: false`; see `RingTracer.Strategy.Ring.Aim`), and with
-  atoms cut in pieces near the end (`ring/split`, `split: true`: adaptive atoms, see
+  paper (`ring/left`, `strategy: {:ring, aim: false}`; see `RingTracer.Strategy.Ring.Aim`), and with
+  atoms cut in pieces near the end (`ring/split`, `strategy: {:ring, split: true}`: adaptive atoms, see
   `RingTracer.Strategy.Ring`). For each real
   scenario a `floor` row runs the same atoms and speeds with no protocol at
   all (`floor/5`: N grandchildren fed from one shared counter): the
@@ -81,15 +81,15 @@ defmodule RingTracer.Bench.Balance do
     ]
 
     # Per scenario: every strategy on the paper's strips, the ring once more
-    # with offers to the left sibling only (`aim: false`) and once on
+    # with offers to the left sibling only (`{:ring, aim: false}`) and once on
     # interleaved strips (`layout: :interleaved`), then the floor: the same
     # atoms and speeds with no protocol at all. Each row: one warm-up, then
     # the median of `runs`.
     runs_of =
       Enum.map(RingTracer.Strategies.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
         [
-          {"ring/split", [strategy: :ring, split: true]},
-          {"ring/left", [strategy: :ring, aim: false]},
+          {"ring/split", [strategy: {:ring, split: true}]},
+          {"ring/left", [strategy: {:ring, aim: false}]},
           {"ring/interleaved", [strategy: :ring, layout: :interleaved]}
         ]
 
@@ -129,8 +129,8 @@ defmodule RingTracer.Bench.Balance do
     sim_runs =
       Enum.map(RingTracer.Strategies.names(), &{Atom.to_string(&1), [strategy: &1]}) ++
         [
-          {"ring/split", [strategy: :ring, split: true]},
-          {"ring/left", [strategy: :ring, aim: false]}
+          {"ring/split", [strategy: {:ring, split: true}]},
+          {"ring/left", [strategy: {:ring, aim: false}]}
         ]
 
     sim_rows =

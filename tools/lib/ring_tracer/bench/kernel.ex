@@ -170,8 +170,8 @@ defmodule RingTracer.Bench.Kernel do
     jobs = [
       one: [strategy: :static, atoms: 1],
       static: [strategy: :static],
-      ring: [aim: false],
-      aimed: [aim: true]
+      ring: [strategy: {:ring, aim: false}],
+      aimed: [strategy: {:ring, aim: true}]
     ]
 
     render = fn how -> elem(RingTracer.render(scene, Keyword.merge(job, how)), 1) end
