@@ -52,7 +52,7 @@ defmodule RingTracer.Job.ChildTest do
       done: 4,
       status: :working,
       dead: [],
-      strategy_state: %{},
+      strategy_state: %RingTracer.Strategy.Ring.State{},
       traffic: %{},
       events: [],
       # 4 atoms traced, 1 work unit per microsecond.
@@ -84,7 +84,9 @@ defmodule RingTracer.Job.ChildTest do
   end
 
   test "a child gives its farthest atoms, once atoms come to the offers it parked while idle" do
-    idle = child(status: :idle, strategy_state: %{seq: 1, current: 1})
+    idle =
+      child(status: :idle, strategy_state: %RingTracer.Strategy.Ring.State{seq: 1, current: 1})
+
     parked = handle(idle, {:help_offer, offer(2)})
     refute_received {:help_offer, _}
 
@@ -101,7 +103,9 @@ defmodule RingTracer.Job.ChildTest do
   end
 
   test "its own offer back, a child is finished and counts the parked offers it sends home" do
-    idle = child(status: :idle, strategy_state: %{seq: 1, current: 1})
+    idle =
+      child(status: :idle, strategy_state: %RingTracer.Strategy.Ring.State{seq: 1, current: 1})
+
     c = idle |> handle({:help_offer, offer(2)}) |> handle({:help_offer, offer(3)})
 
     finished = handle(c, {:help_offer, offer(1)})

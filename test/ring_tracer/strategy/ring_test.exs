@@ -7,7 +7,7 @@ defmodule RingTracer.Strategy.RingTest do
   doctest RingTracer.Strategy.Ring.Options
 
   alias RingTracer.Strategy.Ring
-  alias RingTracer.Strategy.Ring.HelpOffer
+  alias RingTracer.Strategy.Ring.{HelpOffer, State}
   alias RingTracer.Strategy.View
 
   @layout RingTracer.Layout.new(640, 1, 4, 16)
@@ -57,7 +57,7 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "an idle child parks an offer, and gives it a share once its own offer brings atoms" do
     idle = view(status: :idle)
-    {parked, effects} = handle({idle, %{seq: 1, current: 1}}, {:help_offer, offer(2)})
+    {parked, effects} = handle({idle, %State{seq: 1, current: 1}}, {:help_offer, offer(2)})
 
     assert [%HelpOffer{origin: 2}] = parked.parked
     assert effects == []
@@ -69,7 +69,7 @@ defmodule RingTracer.Strategy.RingTest do
     assert {state, [{:queue, ^atoms}, {:continue, answer}]} =
              handle({idle, parked}, {:handover, 0, atoms})
 
-    refute Map.has_key?(state, :parked)
+    assert state.parked == []
 
     # Two atoms went to the grandchild's pipe: four queued, five it could
     # give. The parked offerer (as fast as us) gets two, as much as the
@@ -82,7 +82,7 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "parked offers it cannot serve go straight to the sibling that just gave" do
     idle = view(status: :idle)
-    {parked, []} = handle({idle, %{seq: 1, current: 1}}, {:help_offer, offer(2)})
+    {parked, []} = handle({idle, %State{seq: 1, current: 1}}, {:help_offer, offer(2)})
     {state, [{:queue, [10]}, {:continue, answer}]} = handle({idle, parked}, {:handover, 0, [10]})
 
     # One atom: it went to the grandchild's pipe, nothing to spare.
@@ -94,7 +94,7 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "when its own offer comes back, a child is finished and sends parked offers home" do
     idle = view(status: :idle)
-    {state, []} = handle({idle, %{seq: 1, current: 1}}, {:help_offer, offer(2)})
+    {state, []} = handle({idle, %State{seq: 1, current: 1}}, {:help_offer, offer(2)})
     {state, []} = handle({idle, state}, {:help_offer, offer(3)})
 
     {_, effects} = handle({idle, state}, {:help_offer, offer(1)})
@@ -112,14 +112,14 @@ defmodule RingTracer.Strategy.RingTest do
     c0 = view(index: 0, left_index: 1, status: :idle, rate: nil, mean_atom_us: nil)
     c1 = view(index: 1, left_index: 0, status: :idle)
 
-    {s0, e0} = Ring.idle(c0, %{})
+    {s0, e0} = Ring.idle(c0, %State{})
     assert [{:help_offer, %HelpOffer{origin: 0, wrapped: true} = from0}] = offers_to(e0, self())
-    {s1, e1} = Ring.idle(c1, %{})
+    {s1, e1} = Ring.idle(c1, %State{})
     assert [{:help_offer, %HelpOffer{origin: 1, wrapped: false} = from1}] = offers_to(e1, self())
 
     # Child 1 passes child 0's offer (it went past the end of the ring)...
     {s1, passed} = handle({c1, s1}, {:help_offer, from0})
-    refute Map.has_key?(s1, :parked)
+    assert s1.parked == []
     assert [{:help_offer, %HelpOffer{origin: 0, wrapped: true}}] = offers_to(passed, self())
 
     # ...and child 0 parks child 1's: one of the two offers always walks on.
@@ -138,7 +138,7 @@ defmodule RingTracer.Strategy.RingTest do
   defp far_offer, do: %{offer(2) | hops: 16, atom_us: 30_000}
 
   test "an offer that walked far waits at a child about to run out, and leaves with its offer" do
-    {held, effects} = handle({on_last_atom(), %{}}, {:help_offer, far_offer()})
+    {held, effects} = handle({on_last_atom(), %State{}}, {:help_offer, far_offer()})
     assert effects == []
     assert [%HelpOffer{origin: 2, held: true}] = held.held
 
@@ -148,7 +148,7 @@ defmodule RingTracer.Strategy.RingTest do
     assert [{_, {:help_offers, [%HelpOffer{origin: 1}, %HelpOffer{origin: 2, hops: 17}]}}] =
              sends(effects)
 
-    refute Map.has_key?(out, :held)
+    assert out.held == []
   end
 
   test "an offer does not wait twice, nor for a child far from done, nor before it walked far" do
@@ -163,8 +163,8 @@ defmodule RingTracer.Strategy.RingTest do
     ]
 
     for {view, o} <- cases do
-      {passed, effects} = handle({view, %{}}, {:help_offer, o})
-      refute Map.has_key?(passed, :held)
+      {passed, effects} = handle({view, %State{}}, {:help_offer, o})
+      assert passed.held == []
       assert [{:help_offer, %HelpOffer{origin: 2}}] = offers_to(effects, self())
     end
   end
@@ -172,7 +172,7 @@ defmodule RingTracer.Strategy.RingTest do
   test "a finished child passes offers on and asks the sender to skip it" do
     sender = spawn(fn -> :ok end)
     finished = view(status: :finished)
-    {_, effects} = handle({finished, %{}}, {:help_offer, offer(2, 1, sender)})
+    {_, effects} = handle({finished, %State{}}, {:help_offer, offer(2, 1, sender)})
 
     me = self()
     assert [{:ring_skip, ^me, ^me, 0}] = offers_to(effects, sender)
@@ -184,7 +184,7 @@ defmodule RingTracer.Strategy.RingTest do
   test "a finished child that may get atoms of a frame to come is not skipped" do
     sender = spawn(fn -> :ok end)
     finished = view(status: :finished, more_frames: true)
-    {_, effects} = handle({finished, %{}}, {:help_offer, offer(2, 1, sender)})
+    {_, effects} = handle({finished, %State{}}, {:help_offer, offer(2, 1, sender)})
     assert offers_to(effects, sender) == []
   end
 
@@ -193,17 +193,17 @@ defmodule RingTracer.Strategy.RingTest do
     next = spawn(fn -> :ok end)
     c = view(left: gone, left_index: 2)
 
-    assert {_, [{:left, ^next, 3}]} = handle({c, %{}}, {:ring_skip, gone, next, 3})
-    assert {_, []} = handle({c, %{}}, {:ring_skip, self(), next, 3})
+    assert {_, [{:left, ^next, 3}]} = handle({c, %State{}}, {:ring_skip, gone, next, 3})
+    assert {_, []} = handle({c, %State{}}, {:ring_skip, self(), next, 3})
     # Never to a child known to be dead.
-    assert {_, []} = handle({%{c | dead: [3]}, %{}}, {:ring_skip, gone, next, 3})
+    assert {_, []} = handle({%{c | dead: [3]}, %State{}}, {:ring_skip, gone, next, 3})
   end
 
   test "the atom waiting in the grandchild's pipe is the one a child can give" do
     # Atoms 5 (being traced) and 6 (waiting) in the pipe, none queued: the
     # child can give one, which `{:give, ...}` takes from the pipe.
     busy = view(in_flight: 1, remaining: 1, last_share: 1.0, remaining_us: 10_000)
-    assert {_, [{:give, _, 2, 1} | _]} = handle({busy, %{}}, {:help_offer, offer(2)})
+    assert {_, [{:give, _, 2, 1} | _]} = handle({busy, %State{}}, {:help_offer, offer(2)})
   end
 
   test "adaptive atoms: an offer from a much faster sibling cuts the atom being traced in parts" do
@@ -213,19 +213,19 @@ defmodule RingTracer.Strategy.RingTest do
     # 4x faster than us: of the 5 parts not started we keep 1 (a fifth), and
     # the other 4 (half the atom) go to the offerer.
     assert {_, [{:cut, _, 2, keep}, {:event, :give, 2}, {:stat, :offers_consumed}]} =
-             handle({busy, %{}}, {:help_offer, %{offer(2) | rate: 4.0}})
+             handle({busy, %State{}}, {:help_offer, %{offer(2) | rate: 4.0}})
 
     assert_in_delta keep, 0.2, 1.0e-9
 
     # An offer from a sibling as fast as we are does not cut: it is passed.
-    {_, effects} = handle({busy, %{}}, {:help_offer, offer(2)})
+    {_, effects} = handle({busy, %State{}}, {:help_offer, offer(2)})
     refute Enum.any?(effects, &match?({:cut, _, _, _}, &1))
     assert [{:help_offer, %HelpOffer{origin: 2}}] = offers_to(effects, self())
 
     # Nor does any offer where atoms are kept whole.
     {_, effects} =
       handle(
-        {%{busy | options: options(split: false)}, %{}},
+        {%{busy | options: options(split: false)}, %State{}},
         {:help_offer, %{offer(2) | rate: 4.0}}
       )
 
@@ -234,26 +234,29 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "adaptive atoms: a child traces its atoms in parts once it has heard of a faster sibling" do
     view = fn fields -> view(fields) end
-    heard = %{heard: [{4.0, 2, 9}]}
+    heard = %State{heard: [{4.0, 2, 9}]}
     # 1 work unit per µs, 10 ms per atom, 16 rows: the sibling is 4x faster.
     assert Ring.parts(view.(next_rows: 16.0), heard) == 4
     # Not shorter than 2 ms, nor than 4 rows; a power of two.
     assert Ring.parts(view.(next_rows: 16.0, mean_atom_us: 6_000), heard) == 2
     assert Ring.parts(view.(next_rows: 12.0), heard) == 2
-    assert Ring.parts(view.(next_rows: 16.0), %{heard: [{64.0, 2, 9}]}) == 4
-    assert Ring.parts(view.(next_rows: 64.0, mean_atom_us: 20_000), %{heard: [{64.0, 2, 9}]}) == 8
+    assert Ring.parts(view.(next_rows: 16.0), %State{heard: [{64.0, 2, 9}]}) == 4
+
+    assert Ring.parts(view.(next_rows: 64.0, mean_atom_us: 20_000), %State{heard: [{64.0, 2, 9}]}) ==
+             8
+
     # Before the first atom is back: 4 parts (of at least 4 rows).
-    assert Ring.parts(view.(next_rows: 16.0, mean_atom_us: nil), %{}) == 4
-    assert Ring.parts(view.(next_rows: 8.0, mean_atom_us: nil), %{}) == 2
+    assert Ring.parts(view.(next_rows: 16.0, mean_atom_us: nil), %State{}) == 4
+    assert Ring.parts(view.(next_rows: 8.0, mean_atom_us: nil), %State{}) == 2
     # Whole: nobody faster heard of, or whole atoms asked for.
-    assert Ring.parts(view.(next_rows: 16.0), %{}) == 1
-    assert Ring.parts(view.(next_rows: 16.0), %{heard: [{1.5, 2, 9}]}) == 1
+    assert Ring.parts(view.(next_rows: 16.0), %State{}) == 1
+    assert Ring.parts(view.(next_rows: 16.0), %State{heard: [{1.5, 2, 9}]}) == 1
     assert Ring.parts(view.(next_rows: 16.0, options: [split: false]), heard) == 1
   end
 
   test "offers carry on what the children they pass have heard of the fastest siblings" do
     busy = view(in_flight: 1, remaining_us: 10_000)
-    state = %{heard: [{5.0, 3, 7}, {0.5, 0, 2}]}
+    state = %State{heard: [{5.0, 3, 7}, {0.5, 0, 2}]}
 
     {passed, effects} =
       handle({busy, state}, {:help_offer, %{offer(2) | heard: [{2.0, 1, 1}, {1.0, 2, 4}]}})
@@ -278,14 +281,15 @@ defmodule RingTracer.Strategy.RingTest do
   end
 
   test "a dead sibling's rate is no longer told" do
-    {_, effects} = Ring.idle(view(status: :idle, dead: [3]), %{heard: [{5.0, 3, 7}, {2.0, 0, 2}]})
+    {_, effects} =
+      Ring.idle(view(status: :idle, dead: [3]), %State{heard: [{5.0, 3, 7}, {2.0, 0, 2}]})
 
     assert [{:help_offer, %HelpOffer{origin: 1, heard: [{2.0, 0, 2}, {1.0, 1, 4}]}}] =
              offers_to(effects, self())
   end
 
   test "a dead sibling is never counted on as the third helper" do
-    heard = %{heard: [{50.0, 3, 9}]}
+    heard = %State{heard: [{50.0, 3, 9}]}
     slow = %{offer(2) | rate: 0.5}
     # Six atoms queued behind the one being traced.
     busy = view(in_flight: 1, queued: 6, remaining: 6, last_share: 1.0, remaining_us: 10_000)
@@ -303,13 +307,13 @@ defmodule RingTracer.Strategy.RingTest do
 
   test "a working child with nothing to spare passes the offer to its left" do
     {_, effects} =
-      handle({view(in_flight: 1, remaining_us: 10_000), %{}}, {:help_offer, offer(2)})
+      handle({view(in_flight: 1, remaining_us: 10_000), %State{}}, {:help_offer, offer(2)})
 
     assert [{:help_offer, %HelpOffer{origin: 2}}] = offers_to(effects, self())
   end
 
   test "an offer whose origin has died goes no further" do
-    {_, effects} = handle({view(in_flight: 1, dead: [2]), %{}}, {:help_offer, offer(2)})
+    {_, effects} = handle({view(in_flight: 1, dead: [2]), %State{}}, {:help_offer, offer(2)})
     assert effects == []
   end
 
@@ -321,7 +325,7 @@ defmodule RingTracer.Strategy.RingTest do
       # Sibling 3 said, just now, that it holds 8 queued atoms and should end
       # in a second; sibling 2 ends sooner. Our left sibling is 0.
       loads = [{3, 1_000_000, 0, 8}, {2, 500_000, 0, 8}]
-      {_, effects} = Ring.idle(aiming(status: :idle), %{loads: loads})
+      {_, effects} = Ring.idle(aiming(status: :idle), %State{loads: loads})
 
       assert [{{:sibling, 3}, {:help_offer, %HelpOffer{origin: 1, aimed: 3} = o}}] =
                sends(effects)
@@ -335,12 +339,12 @@ defmodule RingTracer.Strategy.RingTest do
     test "with nobody expected to have atoms queued, the offer goes to the left sibling" do
       # Sibling 3 ends late, but has started its last queued atom since it said so.
       loads = [{3, 1_000_000, -900_000, 1}]
-      {_, effects} = Ring.idle(aiming(status: :idle), %{loads: loads})
+      {_, effects} = Ring.idle(aiming(status: :idle), %State{loads: loads})
       assert [{:help_offer, %HelpOffer{origin: 1, aimed: nil}}] = offers_to(effects, self())
     end
 
     test "without aiming, offers go left and carry no loads" do
-      {_, effects} = Ring.idle(view(status: :idle), %{loads: [{3, 1_000_000, 0, 8}]})
+      {_, effects} = Ring.idle(view(status: :idle), %State{loads: [{3, 1_000_000, 0, 8}]})
 
       assert [{:help_offer, %HelpOffer{origin: 1, aimed: nil, loads: []}}] =
                offers_to(effects, self())
@@ -352,7 +356,7 @@ defmodule RingTracer.Strategy.RingTest do
       # Tracing its last atom: nothing to give.
       target = aiming(index: 3, left: target_left, left_index: 2, in_flight: 1)
       aimed = %{offer(1) | aimed: 3, home_left: {origin_left, 0}, wrapped: true, hops: 1}
-      {_, effects} = handle({target, %{}}, {:help_offer, aimed})
+      {_, effects} = handle({target, %State{}}, {:help_offer, aimed})
 
       # As if child 1 had sent it to child 0 itself, with our load first.
       me = self()
@@ -367,7 +371,7 @@ defmodule RingTracer.Strategy.RingTest do
       gone = spawn(fn -> :ok end)
 
       {_, effects} =
-        handle({target, %{}}, {:help_offer, %{offer(1) | aimed: 3, home_left: {gone, 0}}})
+        handle({target, %State{}}, {:help_offer, %{offer(1) | aimed: 3, home_left: {gone, 0}}})
 
       assert [{:help_offer, %HelpOffer{origin: 1, aimed: 3, loads: [{3, _, _, 0} | _]}}] =
                offers_to(effects, self())
@@ -376,7 +380,7 @@ defmodule RingTracer.Strategy.RingTest do
     test "an aimed offer that comes home is followed by one that walks the ring" do
       home = aiming(status: :idle)
       back = %{offer(1) | aimed: 3, loads: [{3, 100, 50, 0}]}
-      {walking, effects} = handle({home, %{seq: 1, current: 1}}, {:help_offer, back})
+      {walking, effects} = handle({home, %State{seq: 1, current: 1}}, {:help_offer, back})
 
       assert [{:help_offer, %HelpOffer{origin: 1, seq: 2, aimed: nil}}] =
                offers_to(effects, self())
@@ -388,16 +392,16 @@ defmodule RingTracer.Strategy.RingTest do
 
     test "a giver tells the offerer its load, just lowered, in the hand-over" do
       busy = aiming(in_flight: 1, queued: 6, remaining: 6, last_share: 1.0, remaining_us: 10_000)
-      assert {_, [{:give, _, 2, n} | _]} = handle({busy, %{}}, {:help_offer, offer(2)})
+      assert {_, [{:give, _, 2, n} | _]} = handle({busy, %State{}}, {:help_offer, offer(2)})
       assert n > 0
 
       # What the hand-over carries, from the view once the atoms have left.
       after_give = %{busy | queued: 6 - n, remaining: 6 - n}
-      {[{1, _end, _at, queued} | _], _} = Ring.handover_news(after_give, %{})
+      {[{1, _end, _at, queued} | _], _} = Ring.handover_news(after_give, %State{})
       assert queued == 6 - n
 
       # Without aiming, nothing.
-      assert {nil, %{}} = Ring.handover_news(view(), %{})
+      assert {nil, %State{}} = Ring.handover_news(view(), %State{})
     end
   end
 

@@ -29,7 +29,7 @@ defmodule RingTracer.Strategy.Ring do
 
   use RingTracer.Strategy
 
-  alias RingTracer.Strategy.Ring.{Aim, HelpOffer}
+  alias RingTracer.Strategy.Ring.{Aim, HelpOffer, State}
   alias RingTracer.Strategy.Ring.Options, as: RingOptions
   alias RingTracer.Strategy.View
 
@@ -44,6 +44,9 @@ defmodule RingTracer.Strategy.Ring do
 
   @impl true
   def options(options, layout), do: RingOptions.validate(options, layout)
+
+  @impl true
+  def init(_options), do: %State{}
 
   ## The parent's side of aiming: a preview of each atom's work, traced beside
   ## the children's first atoms where the kernel can make one, then one board
@@ -130,7 +133,7 @@ defmodule RingTracer.Strategy.Ring do
 
       true ->
         part_us = max(Keyword.fetch!(view.options, :part_us), 1)
-        faster = faster(view, Map.get(state, :heard, []))
+        faster = faster(view, state.heard)
         power_of_two(Enum.min([faster, view.mean_atom_us / part_us, view.next_rows / part_rows]))
     end
   end
@@ -152,7 +155,7 @@ defmodule RingTracer.Strategy.Ring do
 
   # `aim?` false: the offer goes to the left sibling, as after a miss.
   defp idle(view, state, aim?) do
-    seq = Map.get(state, :seq, 0) + 1
+    seq = state.seq + 1
     {heard, state} = hear(view, state, [])
     {known, state} = learn_loads(view, state, [])
     target = if aim?, do: aim(view, known)
@@ -198,7 +201,7 @@ defmodule RingTracer.Strategy.Ring do
         Enum.map(held, fn _ -> {:event, :pass, view.left_index} end) ++
         [{:stat, :offers_sent}]
 
-    {Map.merge(state, %{seq: seq, current: seq, sent_to: to_index}), effects}
+    {%{state | seq: seq, current: seq, sent_to: to_index}, effects}
   end
 
   defp send_offers(_to, []), do: []
@@ -241,7 +244,7 @@ defmodule RingTracer.Strategy.Ring do
   # every idle child's offers after each failure; the job ends anyway, since
   # the parent hands the dead child's atoms out again itself.)
   def handle_message({:siblings_died, dead}, %View{status: :idle} = view, state) do
-    if Map.get(state, :sent_to, hd(dead)) in dead, do: idle(view, state), else: {state, []}
+    if (state.sent_to || hd(dead)) in dead, do: idle(view, state), else: {state, []}
   end
 
   def handle_message(_message, _view, state), do: {state, []}
@@ -297,7 +300,7 @@ defmodule RingTracer.Strategy.Ring do
       rate: view.rate,
       heard: heard,
       ring_size: view.ring_size - length(view.dead),
-      offer_seq: if(view.status == :idle, do: state[:current]),
+      offer_seq: if(view.status == :idle, do: state.current),
       remaining_us: if(view.in_flight > 0, do: view.remaining_us),
       hold_after: Keyword.fetch!(view.options, :hold_after),
       split: split?(view),
@@ -393,7 +396,7 @@ defmodule RingTracer.Strategy.Ring do
 
   defp splice(_view, _offer), do: []
 
-  defp keep(state, key, item), do: Map.update(state, key, [item], &(&1 ++ [item]))
+  defp keep(state, key, item), do: Map.update!(state, key, &(&1 ++ [item]))
 
   # One offer travels alone, several in one message.
   defp offers_message([offer]), do: {:help_offer, offer}
@@ -401,14 +404,14 @@ defmodule RingTracer.Strategy.Ring do
 
   # Parked or held offers, less those whose origin has died since.
   defp take_offers(view, state, key) do
-    {offers, state} = Map.pop(state, key, [])
-    {Enum.reject(offers, &(&1.origin in view.dead)), state}
+    offers = Map.fetch!(state, key)
+    {Enum.reject(offers, &(&1.origin in view.dead)), Map.put(state, key, [])}
   end
 
   # Offers passed on while handling one message leave together: one message
   # per sibling they go to.
   defp flush(state) do
-    {outbox, state} = Map.pop(state, :outbox, [])
+    {outbox, state} = {state.outbox, %{state | outbox: []}}
 
     effects =
       outbox
@@ -427,20 +430,20 @@ defmodule RingTracer.Strategy.Ring do
   # newest rate added and dead siblings left out; kept, and returned.
   defp hear(view, state, news) do
     mine = {view.rate, view.index, view.done}
-    known = Map.get(state, :heard, [])
+    known = state.heard
 
     dead? = fn {_, i, _} -> i in view.dead end
     heard = HelpOffer.learn(Enum.reject(known, dead?), Enum.reject([mine | news], dead?))
 
-    {heard, Map.put(state, :heard, heard)}
+    {heard, %{state | heard: heard}}
   end
 
   # What a child knows of its siblings' loads, with `news` and its own load
   # added; kept, and returned. Without aiming, nothing.
   defp learn_loads(view, state, news) do
     if aim?(view) do
-      known = Aim.learn(Map.get(state, :loads, []), [own_load(view) | news])
-      {known, Map.put(state, :loads, known)}
+      known = Aim.learn(state.loads, [own_load(view) | news])
+      {known, %{state | loads: known}}
     else
       {[], state}
     end
