@@ -26,6 +26,43 @@ defmodule RingTracer.Chaos.Pool do
 
   @full_strength_wait 20_000
 
+  @enforce_keys [:prefix, :log_level, :count]
+  defstruct @enforce_keys ++
+              [
+                nodes: %{},
+                starting: %{},
+                boots: MapSet.new(),
+                thaws: [],
+                pending: [],
+                waiting: [],
+                started: 0,
+                replaced: 0,
+                unplanned: []
+              ]
+
+  @typedoc """
+  The pool: how its nodes are named and log, how many it keeps, each
+  node's peer, OS pid and status (`:up`, `:doomed` under a pending fault,
+  `:frozen`, `:killed`), the jobs starting on each node, the processes
+  booting a replacement and those that will resume a frozen node, the
+  faults waiting for a node's jobs to start, the checkouts waiting for full
+  strength, and the counts `stats/1` reports.
+  """
+  @type t :: %__MODULE__{
+          prefix: String.t(),
+          log_level: Logger.level(),
+          count: non_neg_integer(),
+          nodes: %{node() => %{peer: pid(), os_pid: String.t(), status: atom()}},
+          starting: %{reference() => [node()]},
+          boots: MapSet.t(pid()),
+          thaws: [pid()],
+          pending: [term()],
+          waiting: [{reference(), GenServer.from(), reference()}],
+          started: non_neg_integer(),
+          replaced: non_neg_integer(),
+          unplanned: [String.t()]
+        }
+
   @typedoc "What `stats/1` returns."
   @type stats :: %{
           started: non_neg_integer(),
@@ -98,23 +135,7 @@ defmodule RingTracer.Chaos.Pool do
     Process.group_leader(self(), Process.whereis(:user))
     LocalCluster.ensure_distributed()
 
-    state = %{
-      prefix: prefix,
-      log_level: log_level,
-      count: count,
-      # node => %{peer, os_pid, status: :up | :doomed | :frozen | :killed}
-      nodes: %{},
-      starting: %{},
-      # processes booting a replacement node
-      boots: MapSet.new(),
-      # processes that will resume a frozen node
-      thaws: [],
-      pending: [],
-      waiting: [],
-      started: 0,
-      replaced: 0,
-      unplanned: []
-    }
+    state = %__MODULE__{prefix: prefix, log_level: log_level, count: count}
 
     # The first nodes boot one after the other: on a small machine several
     # VMs booting at once can each take longer than :peer's boot timeout.
