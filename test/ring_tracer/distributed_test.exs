@@ -1,5 +1,5 @@
 defmodule RingTracer.DistributedTest do
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   @moduletag :distributed
   @moduletag timeout: 120_000

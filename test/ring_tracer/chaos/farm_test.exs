@@ -1,5 +1,5 @@
 defmodule RingTracer.Chaos.FarmTest do
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   @moduletag :distributed
   @moduletag timeout: 180_000
