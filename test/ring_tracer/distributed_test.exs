@@ -1,5 +1,5 @@
 defmodule RingTracer.DistributedTest do
-  use ExUnit.Case, async: true
+  use ExUnit.Case, async: false
 
   @moduletag :distributed
   @moduletag timeout: 120_000

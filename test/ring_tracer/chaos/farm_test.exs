@@ -1,5 +1,5 @@
 defmodule RingTracer.Chaos.FarmTest do
-  use ExUnit.Case, async: true
+  use ExUnit.Case, async: false
 
   @moduletag :distributed
   @moduletag timeout: 180_000

@@ -2,7 +2,7 @@ defmodule RingTracer.CLI.Farm.WorkerTest do
   # `ringtracer worker --join HEAD` (RingTracer.CLI.Worker.start/1, as the
   # launcher calls it) in a peer: it joins, and joins again by itself after
   # `kill -9` of the head and a restart under the same name.
-  use ExUnit.Case, async: true
+  use ExUnit.Case, async: false
 
   @moduletag :distributed
   @moduletag timeout: 180_000
