@@ -1,7 +1,7 @@
 defmodule RingTracer.CLITest do
   # The launcher as users run it: a real OS process, from another folder,
   # through a symlink on the PATH, interrupted with real signals.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
 

@@ -5,7 +5,7 @@ defmodule RingTracer.ReleaseTest do
   # the image the checkout renders, it hosts the children of a render the
   # checkout runs, and it works for a checkout's farm head. Needs root (and
   # unshare); skipped, saying why, elsewhere.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import Bitwise, only: [&&&: 2]
   import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]

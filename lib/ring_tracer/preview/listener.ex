@@ -31,7 +31,8 @@ defmodule RingTracer.Preview.Listener do
           admitted: :ets.tid()
         }
 
-  # Seconds a connection has to send its request line and headers.
+  # Seconds a connection has to send its request line and headers; the
+  # application's `:request_deadline_s` sets it where a test needs less.
   @request_deadline_s 5
 
   @doc "A new random token: 128 bits, URL-safe base64."
@@ -76,7 +77,8 @@ defmodule RingTracer.Preview.Listener do
       # and cancels it only when the request is whole, so a client that
       # trickles its request a byte at a time is cut off at the deadline.
       # It is also how long a kept-alive connection may idle.
-      keep_alive_timeout: @request_deadline_s,
+      keep_alive_timeout:
+        Application.get_env(:ring_tracer, :request_deadline_s, @request_deadline_s),
       # A token is never in httpd's configuration, which httpd prints when
       # it cannot start: it is in a table of the caller's, in `data`.
       ring_tracer_listener: data,

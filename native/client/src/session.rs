@@ -34,6 +34,37 @@ pub const STOP_WAIT: Duration = Duration::from_millis(800);
 pub const SILENCE_WAIT: Duration = Duration::from_secs(30);
 #[cfg(test)]
 pub const SILENCE_WAIT: Duration = Duration::from_secs(1);
+/// Sets the silence allowed, in whole seconds, where a test needs less than `SILENCE_WAIT`.
+const SILENCE_WAIT_VAR: &str = "RINGTRACER_SILENCE_WAIT";
+
+/// The silence allowed: `RINGTRACER_SILENCE_WAIT` seconds (a whole number
+/// from 1) when set, else `SILENCE_WAIT`; a value that is not one is named
+/// on stderr, and the default holds.
+fn silence_wait() -> Duration {
+    let Some(value) = std::env::var_os(SILENCE_WAIT_VAR) else {
+        return SILENCE_WAIT;
+    };
+    match silence_from(&value.to_string_lossy()) {
+        Some(wait) => wait,
+        None => {
+            eprintln!(
+                "ringtracer: {SILENCE_WAIT_VAR}={} is not a whole number of seconds from 1; \
+                 waiting {} s",
+                value.to_string_lossy(),
+                SILENCE_WAIT.as_secs()
+            );
+            SILENCE_WAIT
+        }
+    }
+}
+
+fn silence_from(value: &str) -> Option<Duration> {
+    value
+        .parse::<u64>()
+        .ok()
+        .filter(|s| *s >= 1)
+        .map(Duration::from_secs)
+}
 
 /// What the client waits for: a frame, the end of the stream, a signal
 /// (`b'I'` an interrupt, `b'K'` SIGTERM).
@@ -212,15 +243,16 @@ fn relay(socket: &Path, stream: &mut UnixStream, rx: &Receiver<Event>) -> u8 {
     // Set by an interrupt: its tag, and when the server must have ended the command.
     let mut stopping: Option<(u8, Instant)> = None;
     let mut heard = Instant::now();
+    let silence = silence_wait();
     loop {
-        let deadline = stopping.map_or(heard + SILENCE_WAIT, |(_, d)| d);
+        let deadline = stopping.map_or(heard + silence, |(_, d)| d);
         let Some(event) = next(rx, deadline) else {
             let Some((tag, _)) = stopping else {
                 let _ = out.flush();
                 eprintln!(
                     "ringtracer: the server has sent nothing for {} s (stopped or wedged?); \
                      giving up on this command (the server cancels it once it sees this client gone)",
-                    SILENCE_WAIT.as_secs()
+                    silence.as_secs()
                 );
                 return 1;
             };
@@ -364,6 +396,15 @@ mod tests {
         server.join().unwrap();
         assert_eq!(status, FALLBACK);
         let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    #[test]
+    fn the_silence_allowed_is_whole_seconds_from_one() {
+        assert_eq!(silence_from("5"), Some(Duration::from_secs(5)));
+        assert_eq!(silence_from("0"), None);
+        assert_eq!(silence_from("-1"), None);
+        assert_eq!(silence_from("2.5"), None);
+        assert_eq!(silence_from(""), None);
     }
 
     /// A server that takes the command and then goes silent (stopped

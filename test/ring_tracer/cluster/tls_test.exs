@@ -1,7 +1,7 @@
 defmodule RingTracer.Cluster.TLSTest do
   # Real OS processes on loopback, every one a node with TLS distribution
   # (or deliberately without), controlled through its standard I/O.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   @moduletag :distributed
   @moduletag timeout: 240_000

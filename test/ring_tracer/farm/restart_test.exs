@@ -1,5 +1,5 @@
 defmodule RingTracer.Farm.RestartTest do
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   @moduletag :distributed
   @moduletag timeout: 240_000

@@ -10,8 +10,14 @@ defmodule RingTracer.Preview.HTTPTest do
 
   @scene "priv/scenes/tetra_s1.nff"
 
-  setup do
+  # `@tag request_deadline_s: n`: the preview's request deadline is n s, not 5.
+  setup ctx do
+    if ctx[:request_deadline_s] do
+      Application.put_env(:ring_tracer, :request_deadline_s, ctx.request_deadline_s)
+    end
+
     {:ok, preview} = Preview.start()
+    Application.delete_env(:ring_tracer, :request_deadline_s)
     on_exit(fn -> Preview.stop(preview, 0) end)
     {:ok, preview: preview}
   end
@@ -223,18 +229,22 @@ defmodule RingTracer.Preview.HTTPTest do
     end
   end
 
+  # The deadline is 5 s; 2 s here, and the trickle and its bounds scaled to it.
+  @tag request_deadline_s: 2
   test "a request trickled a byte at a time is cut off at one deadline", %{preview: p} do
     me = self()
-    pid = spawn_link(fn -> trickler(p.port, 200, me) end)
-    # Still sending, byte after byte, it is cut off 5 s after it connected
+    pid = spawn_link(fn -> trickler(p.port, 80, me) end)
+    # Still sending, byte after byte, it is cut off 2 s after it connected
     # (httpd's one timer for the whole request; it was 60 s).
-    assert_receive {:cut, ms, sent}, 12_000
+    assert_receive {:cut, ms, sent}, 9_000
     Process.unlink(pid)
     Process.exit(pid, :kill)
-    assert ms >= 4_500 and ms < 10_000, "cut after #{ms} ms"
+    assert ms >= 1_800 and ms < 7_000, "cut after #{ms} ms"
     assert sent >= 10
   end
 
+  # The deadline is 2 s here (5 s by default): the loop below spans it.
+  @tag request_deadline_s: 2
   test "clients that hold connections without the token do not keep the owner from the page",
        %{preview: p} do
     me = self()
@@ -244,7 +254,7 @@ defmodule RingTracer.Preview.HTTPTest do
     Process.sleep(1_500)
 
     try do
-      # Over 7 s, through the deadline and the tricklers' reconnections, the
+      # Over 4 s, through the deadline and the tricklers' reconnections, the
       # page and its stream answer every time (before: 503, heavy load).
       for _ <- 1..10 do
         assert {200, _, body} = get(p.url)
@@ -255,7 +265,7 @@ defmodule RingTracer.Preview.HTTPTest do
         :ok = :gen_tcp.send(sock, "GET #{path}events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
         assert {:ok, "HTTP/1.1 200 " <> _} = :gen_tcp.recv(sock, 0, 5_000)
         :gen_tcp.close(sock)
-        Process.sleep(700)
+        Process.sleep(400)
       end
 
       # They were cut off, and came back.

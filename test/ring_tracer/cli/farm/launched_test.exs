@@ -2,7 +2,7 @@ defmodule RingTracer.CLI.Farm.LaunchedTest do
   # A farm as users run it: `bin/ringtracer farm`, `worker --join` and
   # `submit`, each a real OS process of the launcher (TLS with the user's
   # own certificates, the default cookie file), from another folder.
-  use ExUnit.Case, async: false
+  use ExUnit.Case, async: true
 
   import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
 
