@@ -153,7 +153,9 @@ defmodule RingTracer.Cluster.ForeignEpmdTest do
   end
 
   # A piece of the scene's text, which a reader of the stream would see.
-  defp scene_text, do: binary_part(File.read!(@scene), 200, 40)
+  # What a job says of its scene in the clear: its file's name (the scene's
+  # contents travel compressed, to a node that lacks them).
+  defp scene_text, do: Path.basename(@scene)
 
   test "with plain distribution her epmd is refused, naming her", %{ns: ns, cookie: cookie} do
     {status, output} =
