@@ -555,7 +555,8 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     probe::NODES.with(|c| c.set(c.get() + 1));
     #[cfg(target_arch = "x86_64")]
     let hit = if AVX {
-        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA.
+        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA,
+        // and by callers of traverse_compiled compiled for them and entered only there.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
         hit_portable(node, pre, tmax)
@@ -876,6 +877,22 @@ impl Bvh {
         self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit, prefetch)
     }
 
+    /// [`Bvh::traverse_prefetching`] for a caller that chose the node test itself: `AVX` only
+    /// in a function compiled for AVX2 and FMA (`#[target_feature]`, entered where the CPU has
+    /// them), into which the whole loop is then inlined, the visit's leaf tests with it.
+    #[inline(always)]
+    pub(crate) fn traverse_compiled<const ORDERED: bool, const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        self.traverse_loop::<ORDERED, AVX>(ray, tmax, stack, work, visit, prefetch)
+    }
+
     /// [`Bvh::traverse_loop`] compiled with AVX2 and FMA.
     ///
     /// # Safety
@@ -1016,12 +1033,15 @@ impl Bvh {
     }
 
     /// Any-hit traversal, which stops at the first visit that returns a negative value. Leaves
-    /// and inner nodes go through one stack of `(child, count, entry distance)`, in no order of
-    /// distance: per node, the last child entered is handled next, whether leaf or node, and
-    /// the others are stacked in slot order. The first two of those are stacked without a
-    /// branch (nearly every node enters at most three children), so a node costs one SIMD box
-    /// test and about one unpredictable branch, the one between leaf and node. The stack is
-    /// addressed modulo [`STACK_CAP`], which the build's depth cap keeps it below.
+    /// and inner nodes go through one stack of `(child, count)`, in no order of distance: per
+    /// node, the last child entered is handled next, whether leaf or node, and the others are
+    /// stacked in slot order. The first two of those are stacked without a branch (nearly every
+    /// node enters at most three children), so a node costs one SIMD box test and about one
+    /// unpredictable branch, the one between leaf and node. No entry distance is kept: an
+    /// any-hit visit leaves the bound as it is until it stops the traversal, so a stacked child
+    /// is never skipped when popped (a visit that lowers the bound still gets the lower bound,
+    /// and so do the node tests after it). The stack is addressed modulo [`STACK_CAP`], which
+    /// the build's depth cap keeps it below.
     #[inline(always)]
     fn any_loop<const AVX: bool>(
         &self,
@@ -1041,8 +1061,8 @@ impl Bvh {
         let nodes = &self.nodes[..];
         let pre = RayPre::new(ray);
         let mut sp = 0usize;
-        // the child handled next: (index, count as in Node8, entry distance)
-        let mut cur = (0u32, 0u32, 0.0f32);
+        // the child handled next: (index, count as in Node8)
+        let mut cur = (0u32, 0u32);
         // the work is counted here and added once (not stored to memory per node)
         let mut w = 0u64;
         let t = 'run: loop {
@@ -1055,7 +1075,7 @@ impl Bvh {
                 if self.prefetch {
                     prefetch_line(node.child.as_ptr());
                 }
-                let (tn, mask) = node_test::<AVX>(node, &pre, tmax);
+                let (_, mask) = node_test::<AVX>(node, &pre, tmax);
                 // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
                 let near = 31 - (mask | 1).leading_zeros() as usize;
                 let mut rest = mask & !(1u32 << near);
@@ -1072,19 +1092,21 @@ impl Bvh {
                 // harmless), then any others
                 for _ in 0..2 {
                     let i = rest.trailing_zeros() as usize & 7;
-                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    let e = &mut st[sp & (STACK_CAP - 1)];
+                    (e.0, e.1) = (node.child[i], node.count[i]);
                     sp += (rest != 0) as usize;
                     rest &= rest.wrapping_sub(1);
                 }
                 while rest != 0 {
                     let i = rest.trailing_zeros() as usize & 7;
-                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    let e = &mut st[sp & (STACK_CAP - 1)];
+                    (e.0, e.1) = (node.child[i], node.count[i]);
                     sp += 1;
                     rest &= rest - 1;
                 }
                 if mask != 0 {
                     let i = near & 7;
-                    cur = (node.child[i], node.count[i], tn[i]);
+                    cur = (node.child[i], node.count[i]);
                     continue;
                 }
             } else {
@@ -1094,10 +1116,12 @@ impl Bvh {
                     break 'run tmax;
                 }
             }
-            match pop(st, &mut sp, tmax) {
-                Some(e) => cur = e,
-                None => break 'run tmax,
+            if sp == 0 {
+                break 'run tmax;
             }
+            sp -= 1;
+            let e = st[sp & (STACK_CAP - 1)];
+            cur = (e.0, e.1);
         };
         *work += w;
         t

@@ -2,7 +2,7 @@
 //! tree depth) kept in the caller's [`Scratch`].
 
 use super::{Hit, Mailbox, Scene};
-use crate::bvh::Scratch;
+use crate::bvh::{has_avx2_fma, Scratch};
 use crate::geometry::Shape;
 use crate::ray::Ray;
 use crate::tri4::RayLanes;
@@ -35,7 +35,45 @@ fn set_cache(scratch: &mut Scratch, entry: Option<usize>, occluder: (u32, u32), 
 impl Scene {
     /// Any-hit query with a shadow cache: `slot` (e.g. light and tree depth) remembers the last
     /// occluder found, which is tested first. The answer does not depend on the cache.
+    ///
+    /// Where the CPU has AVX2 and FMA, the whole query (the BVH's traversal and its leaf tests
+    /// included) is one function compiled for them, so a shadow ray pays one call.
+    #[inline]
     pub(crate) fn occluded_cached(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+        slot: usize,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.occluded_cached_avx(ray, tmax, scratch, slot) };
+        }
+        self.occluded_in::<false>(ray, tmax, scratch, slot)
+    }
+
+    /// [`Scene::occluded_in`] compiled with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,fma")]
+    unsafe fn occluded_cached_avx(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+        slot: usize,
+    ) -> bool {
+        self.occluded_in::<true>(ray, tmax, scratch, slot)
+    }
+
+    /// [`Scene::occluded_cached`], with the AVX node test when `AVX` is set (only by
+    /// [`Scene::occluded_cached_avx`]).
+    #[inline(always)]
+    fn occluded_in<const AVX: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
@@ -54,7 +92,7 @@ impl Scene {
             }
             return true;
         }
-        if let Some(found) = self.occluder_in_bvh(ray, tmax, scratch) {
+        if let Some(found) = self.occluder_in_bvh::<AVX>(ray, tmax, scratch) {
             self::set_cache(scratch, entry, found, 0);
             return true;
         }
@@ -97,9 +135,15 @@ impl Scene {
     }
 
     /// The first of the scene's own primitives found to block `ray` before `tmax`, through
-    /// its BVH, as a shadow-cache entry; `None` if none does.
+    /// its BVH, as a shadow-cache entry; `None` if none does. `AVX` as for
+    /// [`Scene::occluded_in`].
     #[inline(always)]
-    fn occluder_in_bvh(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<(u32, u32)> {
+    fn occluder_in_bvh<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<(u32, u32)> {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         let mut found = NO_CACHE;
@@ -107,7 +151,7 @@ impl Scene {
         let blocks = &self.tri_blocks;
         // made at the first triangle leaf: most shadow rays of an analytic scene meet none
         let mut lanes = None;
-        let r = self.bvh.traverse_prefetching::<false>(
+        let r = self.bvh.traverse_compiled::<false, AVX>(
             ray,
             tmax,
             &mut scratch.stack,
