@@ -1060,6 +1060,8 @@ impl Bvh {
         };
         let nodes = &self.nodes[..];
         let pre = RayPre::new(ray);
+        // read once: the visits may write memory, which the flag's address might name
+        let prefetching = self.prefetch;
         let mut sp = 0usize;
         // the child handled next: (index, count as in Node8)
         let mut cur = (0u32, 0u32);
@@ -1072,14 +1074,14 @@ impl Bvh {
                     break 'run tmax;
                 };
                 w += 1;
-                if self.prefetch {
+                if prefetching {
                     prefetch_line(node.child.as_ptr());
                 }
                 let (_, mask) = node_test::<AVX>(node, &pre, tmax);
                 // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
                 let near = 31 - (mask | 1).leading_zeros() as usize;
                 let mut rest = mask & !(1u32 << near);
-                if self.prefetch {
+                if prefetching {
                     // the stacked children's memory, asked for as they are stacked
                     let mut m = rest;
                     while m != 0 {

@@ -96,7 +96,12 @@ impl Scene {
             self::set_cache(scratch, entry, found, 0);
             return true;
         }
-        let beyond = self.occluded_beyond_bvh(ray, tmax, scratch);
+        // the instances and planes: no call where there are none (most scenes)
+        let beyond = if self.instances.is_empty() && self.planes.is_empty() {
+            None
+        } else {
+            self.occluded_beyond_bvh(ray, tmax, scratch)
+        };
         if let Some(f) = beyond.filter(|&f| f != NO_CACHE) {
             self::set_cache(scratch, entry, f, 0);
             return true;
