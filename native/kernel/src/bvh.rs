@@ -1042,8 +1042,29 @@ impl Bvh {
     /// is never skipped when popped (a visit that lowers the bound still gets the lower bound,
     /// and so do the node tests after it). The stack is addressed modulo [`STACK_CAP`], which
     /// the build's depth cap keeps it below.
+    ///
+    /// Hierarchies that prefetch ([`Bvh::prefetch`]) and those that do not get a loop each, so
+    /// that neither tests the flag per node.
     #[inline(always)]
     fn any_loop<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        if self.prefetch {
+            self.any_walk::<AVX, true>(ray, tmax, stack, work, visit, prefetch)
+        } else {
+            self.any_walk::<AVX, false>(ray, tmax, stack, work, visit, prefetch)
+        }
+    }
+
+    /// [`Bvh::any_loop`] for a hierarchy that prefetches (`PREFETCH`) or does not.
+    #[inline(always)]
+    fn any_walk<const AVX: bool, const PREFETCH: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -1060,8 +1081,6 @@ impl Bvh {
         };
         let nodes = &self.nodes[..];
         let pre = RayPre::new(ray);
-        // read once: the visits may write memory, which the flag's address might name
-        let prefetching = self.prefetch;
         let mut sp = 0usize;
         // the child handled next: (index, count as in Node8)
         let mut cur = (0u32, 0u32);
@@ -1074,14 +1093,14 @@ impl Bvh {
                     break 'run tmax;
                 };
                 w += 1;
-                if prefetching {
+                if PREFETCH {
                     prefetch_line(node.child.as_ptr());
                 }
                 let (_, mask) = node_test::<AVX>(node, &pre, tmax);
                 // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
                 let near = 31 - (mask | 1).leading_zeros() as usize;
                 let mut rest = mask & !(1u32 << near);
-                if prefetching {
+                if PREFETCH {
                     // the stacked children's memory, asked for as they are stacked
                     let mut m = rest;
                     while m != 0 {
