@@ -29,7 +29,9 @@
 //! closer hit was found meanwhile. Shadow rays use the unordered any-hit loop, which stops at
 //! the first occluder: the last child entered is handled next and the first two others are
 //! stacked without a branch, so that an incoherent ray pays about one unpredictable branch per
-//! node. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
+//! node, and no entry distance is kept (the bound does not shrink before the first hit, which
+//! ends the query). The scene's shadow query inlines this loop, its leaf tests with it, into one
+//! function compiled for AVX2 and FMA. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
 //! Hierarchies too big for a core's L2 cache prefetch what a ray stacks, as it stacks it (a
 //! child node's four cache lines, a leaf's triangle blocks), so that the memory of the nodes
 //! it comes back to is on its way while it works on the nearest ones.
@@ -556,7 +558,7 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     #[cfg(target_arch = "x86_64")]
     let hit = if AVX {
         // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA,
-        // and by callers of traverse_compiled compiled for them and entered only there.
+        // and by the callers of traverse_compiled, whose contract is the same.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
         hit_portable(node, pre, tmax)
@@ -692,6 +694,16 @@ fn prefetch_child(nodes: &[Node8], child: u32, count: u32, leaf: &impl Fn(usize,
         leaf(child as usize, count as usize);
     } else if let Some(c) = nodes.get(child as usize) {
         prefetch_lines(c);
+    }
+}
+
+/// [`prefetch_child`] for each child of `node` in `mask`.
+#[inline(always)]
+fn prefetch_children(nodes: &[Node8], node: &Node8, mut mask: u32, leaf: &impl Fn(usize, usize)) {
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize & 7;
+        mask &= mask - 1;
+        prefetch_child(nodes, node.child[i], node.count[i], leaf);
     }
 }
 
@@ -877,11 +889,14 @@ impl Bvh {
         self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit, prefetch)
     }
 
-    /// [`Bvh::traverse_prefetching`] for a caller that chose the node test itself: `AVX` only
-    /// in a function compiled for AVX2 and FMA (`#[target_feature]`, entered where the CPU has
-    /// them), into which the whole loop is then inlined, the visit's leaf tests with it.
+    /// [`Bvh::traverse_prefetching`] for a caller that chose the node test itself: `AVX` in a
+    /// function compiled for AVX2 and FMA (`#[target_feature]`), into which the whole loop is
+    /// then inlined, the visit's leaf tests with it.
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
     #[inline(always)]
-    pub(crate) fn traverse_compiled<const ORDERED: bool, const AVX: bool>(
+    pub(crate) unsafe fn traverse_compiled<const ORDERED: bool, const AVX: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
@@ -1102,12 +1117,7 @@ impl Bvh {
                 let mut rest = mask & !(1u32 << near);
                 if PREFETCH {
                     // the stacked children's memory, asked for as they are stacked
-                    let mut m = rest;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize & 7;
-                        m &= m - 1;
-                        prefetch_child(nodes, node.child[i], node.count[i], &prefetch);
-                    }
+                    prefetch_children(nodes, node, rest, &prefetch);
                 }
                 // the first two of the rest without a branch (a store above the top is
                 // harmless), then any others

@@ -51,7 +51,8 @@ impl Scene {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.occluded_cached_avx(ray, tmax, scratch, slot) };
         }
-        self.occluded_in::<false>(ray, tmax, scratch, slot)
+        // SAFETY: without AVX, the portable node test.
+        unsafe { self.occluded_in::<false>(ray, tmax, scratch, slot) }
     }
 
     /// [`Scene::occluded_in`] compiled with AVX2 and FMA.
@@ -67,13 +68,17 @@ impl Scene {
         scratch: &mut Scratch,
         slot: usize,
     ) -> bool {
-        self.occluded_in::<true>(ray, tmax, scratch, slot)
+        // SAFETY: the caller's contract.
+        unsafe { self.occluded_in::<true>(ray, tmax, scratch, slot) }
     }
 
     /// [`Scene::occluded_cached`], with the AVX node test when `AVX` is set (only by
     /// [`Scene::occluded_cached_avx`]).
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
     #[inline(always)]
-    fn occluded_in<const AVX: bool>(
+    unsafe fn occluded_in<const AVX: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
@@ -92,7 +97,8 @@ impl Scene {
             }
             return true;
         }
-        if let Some(found) = self.occluder_in_bvh::<AVX>(ray, tmax, scratch) {
+        // SAFETY: this function's contract.
+        if let Some(found) = unsafe { self.occluder_in_bvh::<AVX>(ray, tmax, scratch) } {
             self::set_cache(scratch, entry, found, 0);
             return true;
         }
@@ -140,10 +146,12 @@ impl Scene {
     }
 
     /// The first of the scene's own primitives found to block `ray` before `tmax`, through
-    /// its BVH, as a shadow-cache entry; `None` if none does. `AVX` as for
-    /// [`Scene::occluded_in`].
+    /// its BVH, as a shadow-cache entry; `None` if none does.
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
     #[inline(always)]
-    fn occluder_in_bvh<const AVX: bool>(
+    unsafe fn occluder_in_bvh<const AVX: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
@@ -156,45 +164,49 @@ impl Scene {
         let blocks = &self.tri_blocks;
         // made at the first triangle leaf: most shadow rays of an analytic scene meet none
         let mut lanes = None;
-        let r = self.bvh.traverse_compiled::<false, AVX>(
-            ray,
-            tmax,
-            &mut scratch.stack,
-            &mut scratch.work,
-            #[inline(always)]
-            |first, count, tmax| {
-                if let Some(leaf) = blocks.leaf(first, count) {
-                    let lanes = lanes.get_or_insert_with(|| RayLanes::new(ray));
-                    for b in leaf {
-                        if let Some(i) = b.any(lanes, 0.0, tmax) {
-                            found = (Hit::NO_INSTANCE, b.prim(i));
-                            return -1.0;
+        // SAFETY: this function's contract.
+        let r = unsafe {
+            self.bvh.traverse_compiled::<false, AVX>(
+                ray,
+                tmax,
+                &mut scratch.stack,
+                &mut scratch.work,
+                #[inline(always)]
+                |first, count, tmax| {
+                    if let Some(leaf) = blocks.leaf(first, count) {
+                        let lanes = lanes.get_or_insert_with(|| RayLanes::new(ray));
+                        for b in leaf {
+                            if let Some(i) = b.any(lanes, 0.0, tmax) {
+                                found = (Hit::NO_INSTANCE, b.prim(i));
+                                return -1.0;
+                            }
+                        }
+                        return tmax;
+                    }
+                    if let Some(range) = shapes.get(first..first + count) {
+                        // any hit will do: the cheap tests first, the cones (dearer) after
+                        for (k, s) in range.iter().enumerate() {
+                            if !matches!(s, Shape::Cone(_)) && geom.hit(s, ray, 0.0, tmax).is_some()
+                            {
+                                found = (Hit::NO_INSTANCE, (first + k) as u32);
+                                return -1.0;
+                            }
+                        }
+                        for (k, s) in range.iter().enumerate() {
+                            if !matches!(s, Shape::Cone(_)) || mailbox.seen(s) {
+                                continue;
+                            }
+                            if geom.hit(s, ray, 0.0, tmax).is_some() {
+                                found = (Hit::NO_INSTANCE, (first + k) as u32);
+                                return -1.0;
+                            }
                         }
                     }
-                    return tmax;
-                }
-                if let Some(range) = shapes.get(first..first + count) {
-                    // any hit will do: the cheap tests first, the cones (dearer) after
-                    for (k, s) in range.iter().enumerate() {
-                        if !matches!(s, Shape::Cone(_)) && geom.hit(s, ray, 0.0, tmax).is_some() {
-                            found = (Hit::NO_INSTANCE, (first + k) as u32);
-                            return -1.0;
-                        }
-                    }
-                    for (k, s) in range.iter().enumerate() {
-                        if !matches!(s, Shape::Cone(_)) || mailbox.seen(s) {
-                            continue;
-                        }
-                        if geom.hit(s, ray, 0.0, tmax).is_some() {
-                            found = (Hit::NO_INSTANCE, (first + k) as u32);
-                            return -1.0;
-                        }
-                    }
-                }
-                tmax
-            },
-            |first, count| blocks.prefetch(first, count),
-        );
+                    tmax
+                },
+                |first, count| blocks.prefetch(first, count),
+            )
+        };
         (r < 0.0).then_some(found)
     }
 
