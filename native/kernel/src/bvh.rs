@@ -29,7 +29,9 @@
 //! closer hit was found meanwhile. Shadow rays use the unordered any-hit loop, which stops at
 //! the first occluder: the last child entered is handled next and the first two others are
 //! stacked without a branch, so that an incoherent ray pays about one unpredictable branch per
-//! node. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
+//! node, and no entry distance is kept (the bound does not shrink before the first hit, which
+//! ends the query). The scene's shadow query inlines this loop, its leaf tests with it, into one
+//! function compiled for AVX2 and FMA. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
 //! Hierarchies too big for a core's L2 cache prefetch what a ray stacks, as it stacks it (a
 //! child node's four cache lines, a leaf's triangle blocks), so that the memory of the nodes
 //! it comes back to is on its way while it works on the nearest ones.
@@ -555,7 +557,8 @@ fn node_test<const AVX: bool>(node: &Node8, pre: &RayPre, tmax: f32) -> ([f32; W
     probe::NODES.with(|c| c.set(c.get() + 1));
     #[cfg(target_arch = "x86_64")]
     let hit = if AVX {
-        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA.
+        // SAFETY: AVX is only set by traverse_avx, which runs where the CPU has AVX2 and FMA,
+        // and by the callers of traverse_compiled, whose contract is the same.
         unsafe { hit_avx(node, pre, tmax) }
     } else {
         hit_portable(node, pre, tmax)
@@ -691,6 +694,16 @@ fn prefetch_child(nodes: &[Node8], child: u32, count: u32, leaf: &impl Fn(usize,
         leaf(child as usize, count as usize);
     } else if let Some(c) = nodes.get(child as usize) {
         prefetch_lines(c);
+    }
+}
+
+/// [`prefetch_child`] for each child of `node` in `mask`.
+#[inline(always)]
+fn prefetch_children(nodes: &[Node8], node: &Node8, mut mask: u32, leaf: &impl Fn(usize, usize)) {
+    while mask != 0 {
+        let i = mask.trailing_zeros() as usize & 7;
+        mask &= mask - 1;
+        prefetch_child(nodes, node.child[i], node.count[i], leaf);
     }
 }
 
@@ -876,6 +889,25 @@ impl Bvh {
         self.traverse_loop::<ORDERED, false>(ray, tmax, stack, work, visit, prefetch)
     }
 
+    /// [`Bvh::traverse_prefetching`] for a caller that chose the node test itself: `AVX` in a
+    /// function compiled for AVX2 and FMA (`#[target_feature]`), into which the whole loop is
+    /// then inlined, the visit's leaf tests with it.
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
+    #[inline(always)]
+    pub(crate) unsafe fn traverse_compiled<const ORDERED: bool, const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        self.traverse_loop::<ORDERED, AVX>(ray, tmax, stack, work, visit, prefetch)
+    }
+
     /// [`Bvh::traverse_loop`] compiled with AVX2 and FMA.
     ///
     /// # Safety
@@ -1016,14 +1048,38 @@ impl Bvh {
     }
 
     /// Any-hit traversal, which stops at the first visit that returns a negative value. Leaves
-    /// and inner nodes go through one stack of `(child, count, entry distance)`, in no order of
-    /// distance: per node, the last child entered is handled next, whether leaf or node, and
-    /// the others are stacked in slot order. The first two of those are stacked without a
-    /// branch (nearly every node enters at most three children), so a node costs one SIMD box
-    /// test and about one unpredictable branch, the one between leaf and node. The stack is
-    /// addressed modulo [`STACK_CAP`], which the build's depth cap keeps it below.
+    /// and inner nodes go through one stack of `(child, count)`, in no order of distance: per
+    /// node, the last child entered is handled next, whether leaf or node, and the others are
+    /// stacked in slot order. The first two of those are stacked without a branch (nearly every
+    /// node enters at most three children), so a node costs one SIMD box test and about one
+    /// unpredictable branch, the one between leaf and node. No entry distance is kept: an
+    /// any-hit visit leaves the bound as it is until it stops the traversal, so a stacked child
+    /// is never skipped when popped (a visit that lowers the bound still gets the lower bound,
+    /// and so do the node tests after it). The stack is addressed modulo [`STACK_CAP`], which
+    /// the build's depth cap keeps it below.
+    ///
+    /// Hierarchies that prefetch ([`Bvh::prefetch`]) and those that do not get a loop each, so
+    /// that neither tests the flag per node.
     #[inline(always)]
     fn any_loop<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        if self.prefetch {
+            self.any_walk::<AVX, true>(ray, tmax, stack, work, visit, prefetch)
+        } else {
+            self.any_walk::<AVX, false>(ray, tmax, stack, work, visit, prefetch)
+        }
+    }
+
+    /// [`Bvh::any_loop`] for a hierarchy that prefetches (`PREFETCH`) or does not.
+    #[inline(always)]
+    fn any_walk<const AVX: bool, const PREFETCH: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -1041,8 +1097,8 @@ impl Bvh {
         let nodes = &self.nodes[..];
         let pre = RayPre::new(ray);
         let mut sp = 0usize;
-        // the child handled next: (index, count as in Node8, entry distance)
-        let mut cur = (0u32, 0u32, 0.0f32);
+        // the child handled next: (index, count as in Node8)
+        let mut cur = (0u32, 0u32);
         // the work is counted here and added once (not stored to memory per node)
         let mut w = 0u64;
         let t = 'run: loop {
@@ -1052,39 +1108,36 @@ impl Bvh {
                     break 'run tmax;
                 };
                 w += 1;
-                if self.prefetch {
+                if PREFETCH {
                     prefetch_line(node.child.as_ptr());
                 }
-                let (tn, mask) = node_test::<AVX>(node, &pre, tmax);
+                let (_, mask) = node_test::<AVX>(node, &pre, tmax);
                 // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
                 let near = 31 - (mask | 1).leading_zeros() as usize;
                 let mut rest = mask & !(1u32 << near);
-                if self.prefetch {
+                if PREFETCH {
                     // the stacked children's memory, asked for as they are stacked
-                    let mut m = rest;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize & 7;
-                        m &= m - 1;
-                        prefetch_child(nodes, node.child[i], node.count[i], &prefetch);
-                    }
+                    prefetch_children(nodes, node, rest, &prefetch);
                 }
                 // the first two of the rest without a branch (a store above the top is
                 // harmless), then any others
                 for _ in 0..2 {
                     let i = rest.trailing_zeros() as usize & 7;
-                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    let e = &mut st[sp & (STACK_CAP - 1)];
+                    (e.0, e.1) = (node.child[i], node.count[i]);
                     sp += (rest != 0) as usize;
                     rest &= rest.wrapping_sub(1);
                 }
                 while rest != 0 {
                     let i = rest.trailing_zeros() as usize & 7;
-                    st[sp & (STACK_CAP - 1)] = (node.child[i], node.count[i], tn[i]);
+                    let e = &mut st[sp & (STACK_CAP - 1)];
+                    (e.0, e.1) = (node.child[i], node.count[i]);
                     sp += 1;
                     rest &= rest - 1;
                 }
                 if mask != 0 {
                     let i = near & 7;
-                    cur = (node.child[i], node.count[i], tn[i]);
+                    cur = (node.child[i], node.count[i]);
                     continue;
                 }
             } else {
@@ -1094,10 +1147,12 @@ impl Bvh {
                     break 'run tmax;
                 }
             }
-            match pop(st, &mut sp, tmax) {
-                Some(e) => cur = e,
-                None => break 'run tmax,
+            if sp == 0 {
+                break 'run tmax;
             }
+            sp -= 1;
+            let e = st[sp & (STACK_CAP - 1)];
+            cur = (e.0, e.1);
         };
         *work += w;
         t

@@ -6,8 +6,8 @@
 //!
 //! On a shared virtual machine, rates move by 10-30% between runs, more than most kernel
 //! changes are worth; these counts are the same on every run. For each mesh and ray kind
-//! (primary rays in tiles, incoherent ones, the incoherent ones as any-hit queries, one ray at
-//! a time) this program runs itself under callgrind once per kernel, with the branch
+//! (primary rays in tiles, incoherent ones, the incoherent ones as any-hit queries, the
+//! primary hits' shadow rays as any-hit queries, one ray at a time) this program runs itself under callgrind once per kernel, with the branch
 //! predictor and a two-level cache simulated (the last level `--ll` bytes, 16-way, default
 //! 32 MiB), and counts only the traced rays: a warm-up eighth of them first, then `N` inside
 //! [`counted`] (default 65,536, rounded down to the square of a multiple of 4: the primary
@@ -16,12 +16,12 @@
 //! rays.
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
-use ring_tracer_embree_bench::{single_hits, RaySets};
+use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
 use ring_tracer_kernel::Scene;
 use std::path::Path;
 use std::process::Command;
 
-const KINDS: [&str; 3] = ["primary", "incoherent", "any"];
+const KINDS: [&str; 4] = ["primary", "incoherent", "any", "shadow"];
 
 /// The part callgrind counts (`--toggle-collect`): what `f` does, callees included.
 #[inline(never)]
@@ -35,14 +35,26 @@ fn side(n: usize) -> u32 {
     (((n as f64).sqrt() as u32) / 4 * 4).max(4)
 }
 
-/// The child's work: `n` rays of `kind` through one kernel, after a warm-up eighth.
-fn one_side(mesh: &str, kernel: &str, kind: &str, n: usize, isa: Isa) -> Result<u64, String> {
+/// The child's work: `n` rays of `kind` through one kernel, after a warm-up eighth (for
+/// `shadow`, one per primary hit); returns (rays counted, hits).
+fn one_side(
+    mesh: &str,
+    kernel: &str,
+    kind: &str,
+    n: usize,
+    isa: Isa,
+) -> Result<(usize, u64), String> {
     let scene = Scene::load(Path::new(mesh)).map_err(|e| e.to_string())?;
     // primary rays over the whole view, in tiles: an image of `n` pixels
     let RaySets { tiled, incoherent } = RaySets::new(scene.bounds(), side(n));
-    let rays = if kind == "primary" { tiled } else { incoherent };
+    let rays = match kind {
+        "primary" => tiled,
+        // the primary hits' shadow rays (fewer than `n` where primary rays miss)
+        "shadow" => shadow_rays(&scene, &tiled),
+        _ => incoherent,
+    };
     let warm = &rays[..rays.len() / 8];
-    let any = kind == "any";
+    let any = kind == "any" || kind == "shadow";
     // the rays themselves are read once before the count (as Embree's copy of them is made)
     std::hint::black_box(rays.iter().map(|r| r.origin.x).sum::<f32>());
     if kernel == "embree" {
@@ -54,16 +66,23 @@ fn one_side(mesh: &str, kernel: &str, kind: &str, n: usize, isa: Isa) -> Result<
         };
         e.trace(call, &flat(warm));
         let f = flat(&rays);
-        Ok(counted(|| e.trace(call, &f)))
+        Ok((rays.len(), counted(|| e.trace(call, &f))))
     } else {
         single_hits(&scene, warm, any);
-        Ok(counted(|| single_hits(&scene, &rays, any)))
+        Ok((rays.len(), counted(|| single_hits(&scene, &rays, any))))
     }
 }
 
 /// Callgrind's totals for the counted part: (instructions, data reads, last-level read
-/// misses, conditional branches, of them mispredicted).
-fn measure(mesh: &str, kernel: &str, kind: &str, n: usize, ll: u64, isa: Isa) -> Option<[u64; 5]> {
+/// misses, conditional branches, of them mispredicted), and the rays counted.
+fn measure(
+    mesh: &str,
+    kernel: &str,
+    kind: &str,
+    n: usize,
+    ll: u64,
+    isa: Isa,
+) -> Option<([u64; 5], usize)> {
     let me = std::env::current_exe().ok()?;
     let out = Command::new("valgrind")
         .args([
@@ -94,7 +113,16 @@ fn measure(mesh: &str, kernel: &str, kind: &str, n: usize, ll: u64, isa: Isa) ->
         .split_whitespace()
         .filter_map(|x| x.parse().ok())
         .collect();
-    Some([*v.first()?, *v.get(1)?, *v.get(7)?, *v.get(9)?, *v.get(10)?])
+    // the child's "RAYS rays, HITS hits"
+    let rays = String::from_utf8_lossy(&out.stdout)
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()?;
+    Some((
+        [*v.first()?, *v.get(1)?, *v.get(7)?, *v.get(9)?, *v.get(10)?],
+        rays,
+    ))
 }
 
 fn main() {
@@ -110,7 +138,7 @@ fn main() {
             n,
             isa,
         ) {
-            Ok(hits) => println!("{hits} hits"),
+            Ok((rays, hits)) => println!("{rays} rays, {hits} hits"),
             Err(e) => {
                 eprintln!("{e}");
                 std::process::exit(1);
@@ -145,7 +173,7 @@ fn main() {
     };
     let n = (side(n) as usize).pow(2);
     println!(
-        "{n} rays of each kind after a warm-up eighth, one at a time; callgrind: simulated branch predictor, last-level cache {} MiB 16-way; Embree at most {}",
+        "{n} rays of each kind (shadow: one per primary hit) after a warm-up eighth, one at a time; callgrind: simulated branch predictor, last-level cache {} MiB 16-way; Embree at most {}",
         ll >> 20,
         isa.name()
     );
@@ -157,10 +185,10 @@ fn main() {
             .map_or(mesh.clone(), |f| f.to_string_lossy().into_owned());
         for kind in KINDS {
             for &kernel in kernels {
-                let Some(c) = measure(mesh, kernel, kind, n, ll, isa) else {
+                let Some((c, rays)) = measure(mesh, kernel, kind, n, ll, isa) else {
                     continue;
                 };
-                let per = |x: u64| x as f64 / n as f64;
+                let per = |x: u64| x as f64 / rays.max(1) as f64;
                 println!(
                     "| {name} | {kind} | {kernel} | {:.1} | {:.1} | {:.3} | {:.2} | {:.3} |",
                     per(c[0]),

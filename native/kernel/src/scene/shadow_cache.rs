@@ -2,7 +2,7 @@
 //! tree depth) kept in the caller's [`Scratch`].
 
 use super::{Hit, Mailbox, Scene};
-use crate::bvh::Scratch;
+use crate::bvh::{has_avx2_fma, Scratch};
 use crate::geometry::Shape;
 use crate::ray::Ray;
 use crate::tri4::RayLanes;
@@ -35,7 +35,50 @@ fn set_cache(scratch: &mut Scratch, entry: Option<usize>, occluder: (u32, u32), 
 impl Scene {
     /// Any-hit query with a shadow cache: `slot` (e.g. light and tree depth) remembers the last
     /// occluder found, which is tested first. The answer does not depend on the cache.
+    ///
+    /// Where the CPU has AVX2 and FMA, the whole query (the BVH's traversal and its leaf tests
+    /// included) is one function compiled for them, so a shadow ray pays one call.
+    #[inline]
     pub(crate) fn occluded_cached(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+        slot: usize,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.occluded_cached_avx(ray, tmax, scratch, slot) };
+        }
+        // SAFETY: without AVX, the portable node test.
+        unsafe { self.occluded_in::<false>(ray, tmax, scratch, slot) }
+    }
+
+    /// [`Scene::occluded_in`] compiled with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,fma")]
+    unsafe fn occluded_cached_avx(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+        slot: usize,
+    ) -> bool {
+        // SAFETY: the caller's contract.
+        unsafe { self.occluded_in::<true>(ray, tmax, scratch, slot) }
+    }
+
+    /// [`Scene::occluded_cached`], with the AVX node test when `AVX` is set (only by
+    /// [`Scene::occluded_cached_avx`]).
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
+    #[inline(always)]
+    unsafe fn occluded_in<const AVX: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
@@ -54,11 +97,17 @@ impl Scene {
             }
             return true;
         }
-        if let Some(found) = self.occluder_in_bvh(ray, tmax, scratch) {
+        // SAFETY: this function's contract.
+        if let Some(found) = unsafe { self.occluder_in_bvh::<AVX>(ray, tmax, scratch) } {
             self::set_cache(scratch, entry, found, 0);
             return true;
         }
-        let beyond = self.occluded_beyond_bvh(ray, tmax, scratch);
+        // the instances and planes: no call where there are none (most scenes)
+        let beyond = if self.instances.is_empty() && self.planes.is_empty() {
+            None
+        } else {
+            self.occluded_beyond_bvh(ray, tmax, scratch)
+        };
         if let Some(f) = beyond.filter(|&f| f != NO_CACHE) {
             self::set_cache(scratch, entry, f, 0);
             return true;
@@ -98,8 +147,16 @@ impl Scene {
 
     /// The first of the scene's own primitives found to block `ray` before `tmax`, through
     /// its BVH, as a shadow-cache entry; `None` if none does.
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
     #[inline(always)]
-    fn occluder_in_bvh(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<(u32, u32)> {
+    unsafe fn occluder_in_bvh<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<(u32, u32)> {
         let shapes = &self.geom.shapes;
         let geom = &self.geom;
         let mut found = NO_CACHE;
@@ -107,45 +164,49 @@ impl Scene {
         let blocks = &self.tri_blocks;
         // made at the first triangle leaf: most shadow rays of an analytic scene meet none
         let mut lanes = None;
-        let r = self.bvh.traverse_prefetching::<false>(
-            ray,
-            tmax,
-            &mut scratch.stack,
-            &mut scratch.work,
-            #[inline(always)]
-            |first, count, tmax| {
-                if let Some(leaf) = blocks.leaf(first, count) {
-                    let lanes = lanes.get_or_insert_with(|| RayLanes::new(ray));
-                    for b in leaf {
-                        if let Some(i) = b.any(lanes, 0.0, tmax) {
-                            found = (Hit::NO_INSTANCE, b.prim(i));
-                            return -1.0;
+        // SAFETY: this function's contract.
+        let r = unsafe {
+            self.bvh.traverse_compiled::<false, AVX>(
+                ray,
+                tmax,
+                &mut scratch.stack,
+                &mut scratch.work,
+                #[inline(always)]
+                |first, count, tmax| {
+                    if let Some(leaf) = blocks.leaf(first, count) {
+                        let lanes = lanes.get_or_insert_with(|| RayLanes::new(ray));
+                        for b in leaf {
+                            if let Some(i) = b.any(lanes, 0.0, tmax) {
+                                found = (Hit::NO_INSTANCE, b.prim(i));
+                                return -1.0;
+                            }
+                        }
+                        return tmax;
+                    }
+                    if let Some(range) = shapes.get(first..first + count) {
+                        // any hit will do: the cheap tests first, the cones (dearer) after
+                        for (k, s) in range.iter().enumerate() {
+                            if !matches!(s, Shape::Cone(_)) && geom.hit(s, ray, 0.0, tmax).is_some()
+                            {
+                                found = (Hit::NO_INSTANCE, (first + k) as u32);
+                                return -1.0;
+                            }
+                        }
+                        for (k, s) in range.iter().enumerate() {
+                            if !matches!(s, Shape::Cone(_)) || mailbox.seen(s) {
+                                continue;
+                            }
+                            if geom.hit(s, ray, 0.0, tmax).is_some() {
+                                found = (Hit::NO_INSTANCE, (first + k) as u32);
+                                return -1.0;
+                            }
                         }
                     }
-                    return tmax;
-                }
-                if let Some(range) = shapes.get(first..first + count) {
-                    // any hit will do: the cheap tests first, the cones (dearer) after
-                    for (k, s) in range.iter().enumerate() {
-                        if !matches!(s, Shape::Cone(_)) && geom.hit(s, ray, 0.0, tmax).is_some() {
-                            found = (Hit::NO_INSTANCE, (first + k) as u32);
-                            return -1.0;
-                        }
-                    }
-                    for (k, s) in range.iter().enumerate() {
-                        if !matches!(s, Shape::Cone(_)) || mailbox.seen(s) {
-                            continue;
-                        }
-                        if geom.hit(s, ray, 0.0, tmax).is_some() {
-                            found = (Hit::NO_INSTANCE, (first + k) as u32);
-                            return -1.0;
-                        }
-                    }
-                }
-                tmax
-            },
-            |first, count| blocks.prefetch(first, count),
-        );
+                    tmax
+                },
+                |first, count| blocks.prefetch(first, count),
+            )
+        };
         (r < 0.0).then_some(found)
     }
 
