@@ -79,9 +79,11 @@ defmodule RingTracer.DistributedTest do
         render_then(
           nodes,
           fn ->
+            # The supervisor may still list a child of the previous job that
+            # has exited (it handles the exit later): only living ones.
             kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
-            {_, pid, _, _} = Enum.random(kids)
-            pid
+            living = for {_, pid, _, _} <- kids, :erpc.call(n1, Process, :alive?, [pid]), do: pid
+            Enum.random(living)
           end,
           &Process.exit(&1, :kill)
         )
