@@ -140,32 +140,23 @@ defmodule RingTracer.Cluster do
 
   @check_ms 5_000
 
+  # One call: the node's own test (`RingTracer.Job.Host.check/1`, what a
+  # job's start asks too).
   defp remote_check(n) do
-    apps = :erpc.call(n, Application, :started_applications, [], @check_ms)
-
-    cond do
-      not Enum.any?(apps, &(elem(&1, 0) == :ring_tracer)) ->
-        {:error, "node #{n} does not run :ring_tracer; start it with mix ring_tracer.worker"}
-
-      not is_integer(:erpc.call(n, RingTracer.Native, :scene_live_count, [], @check_ms)) ->
-        {:error, "node #{n} has not loaded RingTracer's NIF"}
-
-      true ->
-        case Build.check(n, timeout: @check_ms) do
-          :ok -> :ok
-          {:error, %Error{} = error} -> {:error, error}
-          {:error, {:call, reason}} -> {:error, call_failure(n, reason, @check_ms)}
-        end
+    case :erpc.call(n, RingTracer.Job.Host, :check, [Build.identity()], @check_ms) do
+      :ok -> :ok
+      {:build, theirs} -> Build.compare(n, theirs)
+      {:error, {_reason, message}} -> {:error, message}
     end
-  rescue
-    e in ErlangError ->
-      case e.original do
-        {:erpc, reason} when reason in [:timeout, :noconnection] ->
-          {:error, call_failure(n, e.original, @check_ms)}
+  catch
+    :error, {:erpc, _} = reason ->
+      {:error, call_failure(n, reason, @check_ms)}
 
-        _ ->
-          {:error, "node #{n} lacks RingTracer's code or NIF: #{Exception.message(e)}"}
-      end
+    :error, {:exception, reason, _} ->
+      {:error, "node #{n} lacks RingTracer's code or NIF: #{inspect(reason)}"}
+
+    kind, reason ->
+      {:error, "node #{n}: #{inspect({kind, reason})}"}
   end
 
   @impl GenServer

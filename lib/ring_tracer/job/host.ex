@@ -45,11 +45,19 @@ defmodule RingTracer.Job.Host do
   @doc false
   @spec start(t()) :: reply()
   def start(%__MODULE__{} = request) do
-    with :ok <- running(),
-         :ok <- same_build(request.build),
+    with :ok <- check(request.build),
          :ok <- prepare(request) do
       start_children(request)
     end
+  end
+
+  @doc false
+  # Whether this node can host children of a node of build `build`: it
+  # runs the application, has loaded the NIF, and runs that build
+  # (`RingTracer.Cluster.check/1` asks this alone).
+  @spec check(Build.t()) :: :ok | {:build, Build.t()} | {:error, {atom(), String.t()}}
+  def check(build) do
+    with :ok <- running(), do: same_build(build)
   end
 
   defp running do
