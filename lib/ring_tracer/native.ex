@@ -53,6 +53,7 @@ defmodule RingTracer.Native do
   def to_srgb8_base64(_pixels), do: err()
   def settings_defaults, do: err()
   def settings_limits, do: err()
+  def thread_cpu_us, do: err()
   def ray_counters, do: err()
   def fs_write(_path, _data, _mode, _replace), do: err()
   def fs_write_in(_dir, _name, _data, _mode, _replace), do: err()

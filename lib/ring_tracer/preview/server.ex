@@ -14,9 +14,10 @@ defmodule RingTracer.Preview.Server do
   # before the preview opened. A handler only sends this process a message:
   # the job never waits for the preview, nor for any viewer. While the job
   # runs, the server spends at most `:cpu_share` of one core on atoms (0.01
-  # by default: after an atom's work the job's events wait in a queue 99
-  # times as long, until the job ends, while the server answers everything
-  # else), and it and the viewers run at low process priority. Of a
+  # by default: the job's events wait in a queue that pauses 99 times as
+  # long as the atoms' CPU time, in pauses of at least 20 ms, until the job
+  # ends, while the server answers everything else; `RingTracer.Preview.Pacing`),
+  # and it and the viewers run at low process priority. Of a
   # sequence, the queue keeps only what the log would keep: when a frame
   # completes, the queued atoms of the frames complete before it are dropped
   # (but the highest complete's), and only the `strip` highest numbers
@@ -24,7 +25,7 @@ defmodule RingTracer.Preview.Server do
   # the log's frames the sequence no longer needs are deleted from the table.
   use GenServer
 
-  alias RingTracer.Preview.{Backlog, Listener, Log}
+  alias RingTracer.Preview.{Backlog, Listener, Log, Pacing}
 
   # How long a viewer's connection may take no data, during a stop, before
   # it is dropped.
@@ -49,6 +50,7 @@ defmodule RingTracer.Preview.Server do
                 pending: [],
                 queue: :queue.new(),
                 pacing: nil,
+                debt_us: 0,
                 drain: nil,
                 waiting: %{}
               ]
@@ -60,7 +62,8 @@ defmodule RingTracer.Preview.Server do
   handlers attached for it, viewers waiting for more and those streaming
   (at most `max_viewers`), the job expected (`expect`) and the events that
   came before it was known (`pending`), the queue of atoms waiting for
-  their share of CPU (`cpu_share`) and its pacing timer, a stop's drain,
+  their share of CPU (`cpu_share`), its pacing timer and the work done
+  since its last pause (`debt_us`, `RingTracer.Preview.Pacing`), a stop's drain,
   the connections without a stream yet (`waiting`), and `ended`, an
   atomics the request processes read.
   """
@@ -84,7 +87,8 @@ defmodule RingTracer.Preview.Server do
           cpu_share: float(),
           pending: [term()],
           queue: :queue.queue(),
-          pacing: reference() | nil,
+          pacing: {reference(), reference()} | nil,
+          debt_us: non_neg_integer(),
           drain: term(),
           waiting: %{pid() => term()}
         }
@@ -400,9 +404,10 @@ defmodule RingTracer.Preview.Server do
 
   # While the job runs, the preview spends at most `cpu_share` of one core
   # on atoms (their pixels to sRGB and base64, and so what viewers send):
-  # the job's events wait in a queue, in order, and after each atom's work
-  # the queue pauses in proportion (a timer: meanwhile the server answers
-  # everything else, a stop at once). When the job ends, the queue runs
+  # the job's events wait in a queue, in order, and once the atoms' work
+  # since the last pause is worth a pause of `Pacing`'s quantum, the queue
+  # pauses in proportion (a timer: meanwhile the server answers everything
+  # else, a stop at once). When the job ends, the queue runs
   # through. On a render too light for the share, the page lags and catches
   # up at the end.
   defp enqueue(state, msg) do
@@ -427,16 +432,22 @@ defmodule RingTracer.Preview.Server do
         state
 
       {{:value, msg}, queue} when elem(msg, 0) in [:atom, :image_done] ->
-        t = System.monotonic_time(:microsecond)
+        mark = Pacing.start()
         state = apply_event(%{state | queue: queue}, msg)
-        work_us = System.monotonic_time(:microsecond) - t
-        wait_ms = round(work_us * (1 - state.cpu_share) / state.cpu_share / 1000)
+        debt = state.debt_us + Pacing.work_us(mark)
 
-        if wait_ms > 0 and not ended?(state) do
-          ref = make_ref()
-          %{state | pacing: {ref, Process.send_after(self(), {:pace, ref}, wait_ms)}}
-        else
-          run_queue(state)
+        case Pacing.pause(debt, state.cpu_share) do
+          {:pause, wait_ms} when wait_ms > 0 ->
+            if ended?(state) do
+              run_queue(%{state | debt_us: 0})
+            else
+              ref = make_ref()
+              timer = Process.send_after(self(), {:pace, ref}, wait_ms)
+              %{state | pacing: {ref, timer}, debt_us: 0}
+            end
+
+          _ ->
+            run_queue(%{state | debt_us: debt})
         end
 
       {{:value, msg}, queue} ->

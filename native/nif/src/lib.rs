@@ -4,6 +4,7 @@
 //!
 //! Loaded by `RingTracer.Native` with `:erlang.load_nif/2`.
 
+mod clock;
 mod convert;
 mod defaults;
 mod fs;
