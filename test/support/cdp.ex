@@ -52,10 +52,16 @@ defmodule RingTracer.Test.CDP do
         Process.sleep(100)
         await(cdp, expression, ms - 100)
 
-      _ ->
-        raise "the page never had #{expression}"
+      {_, cdp} ->
+        {page, _} = eval(cdp, @page_state)
+        raise "the page never had #{expression}; it shows #{page}"
     end
   end
+
+  # What a page shows, for a failure's message.
+  @page_state "JSON.stringify([document.body.dataset.state, document.body.dataset.seq] " <>
+                ".concat(['status', 'framesdone', 'showing'].map(i => " <>
+                "(document.getElementById(i) || {}).textContent)))"
 
   @doc "Ends chromium."
   def stop(%__MODULE__{port: port} = cdp) do
