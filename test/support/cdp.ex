@@ -42,6 +42,11 @@ defmodule RingTracer.Test.CDP do
     {Base.decode64!(r["data"]), cdp}
   end
 
+  # What a page shows, for a failure's message.
+  @page_state "JSON.stringify([document.body.dataset.state, document.body.dataset.seq] " <>
+                ".concat(['status', 'framesdone', 'showing'].map(i => " <>
+                "(document.getElementById(i) || {}).textContent)))"
+
   @doc "Waits until `expression` is true in the page, polling every 100 ms."
   def await(cdp, expression, ms \\ 60_000) do
     case eval(cdp, expression) do
@@ -57,11 +62,6 @@ defmodule RingTracer.Test.CDP do
         raise "the page never had #{expression}; it shows #{page}"
     end
   end
-
-  # What a page shows, for a failure's message.
-  @page_state "JSON.stringify([document.body.dataset.state, document.body.dataset.seq] " <>
-                ".concat(['status', 'framesdone', 'showing'].map(i => " <>
-                "(document.getElementById(i) || {}).textContent)))"
 
   @doc "Ends chromium."
   def stop(%__MODULE__{port: port} = cdp) do
