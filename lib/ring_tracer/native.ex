@@ -54,6 +54,7 @@ defmodule RingTracer.Native do
   def settings_defaults, do: err()
   def settings_limits, do: err()
   def thread_cpu_us, do: err()
+  def process_cpu_us, do: err()
   def ray_counters, do: err()
   def fs_write(_path, _data, _mode, _replace), do: err()
   def fs_write_in(_dir, _name, _data, _mode, _replace), do: err()

@@ -12,7 +12,10 @@ defmodule RingTracer.Bench.Kernel do
   `.pov` file (`povray +W512 +H512 -D -A +WT2`, when `povray` is installed and
   the `.pov` is in `--pov-dir`, by default `../shared/scenes/spd/pov`); the
   same render through the ring with `--children` children; and the ratios
-  ours/POV-Ray and ring/kernel. Times are medians of `--runs` runs (default 3);
+  ours/POV-Ray and ring/kernel; and the trace's CPU time, ours (the VM's OS
+  process while the kernel renders) and POV-Ray's (its report's
+  CPU-seconds of the trace threads), with their ratio, which other programs
+  sharing the cores move much less than the wall-clock times. Times are medians of `--runs` runs (default 3);
   kernel and ring renders alternate, and ring/kernel is the median of the
   pairs' ratios, so that both see the same drift in this machine's speed.
   `ring-kernel_ms` is the ring's fixed cost in milliseconds (the median of
@@ -76,7 +79,7 @@ defmodule RingTracer.Bench.Kernel do
     info("one dirty kernel call of one pixel: #{fmt(nif_call_us())} us (median of 200)")
 
     header =
-      ~w(scene setup_s trace_s Mrays/s pov_parse_s pov_trace_s ours/pov ring_s ring/kernel ring-kernel_ms)
+      ~w(scene setup_s trace_s Mrays/s pov_parse_s pov_trace_s ours/pov trace_cpu_s pov_cpu_s cpu_ours/pov ring_s ring/kernel ring-kernel_ms)
 
     rows =
       for name <- scenes do
@@ -86,11 +89,15 @@ defmodule RingTracer.Bench.Kernel do
         settings = %Settings{width: size, height: size}
         native = Settings.to_native(settings)
 
+        # Wall time, and the CPU time of the VM's OS process meanwhile (the
+        # kernel's threads; the VM is otherwise idle).
         kernel = fn ->
+          cpu0 = Native.process_cpu_us()
+
           {us, {:ok, {_pixels, rays}}} =
             :timer.tc(fn -> Native.render_image(scene.ref, native, threads) end)
 
-          {us, rays}
+          {us, rays, Native.process_cpu_us() - cpu0}
         end
 
         ring = fn ->
@@ -104,11 +111,12 @@ defmodule RingTracer.Bench.Kernel do
         # machine's speed; ring/kernel is the median of the pairs' ratios.
         {:ok, _} = RingTracer.render(path, children: children, atoms: 1, width: 8, height: 8)
         pairs = for _ <- 1..runs, do: {kernel.(), ring.()}
-        {_, rays} = pairs |> List.last() |> elem(0)
-        trace_us = median(Enum.map(pairs, fn {{k, _}, _} -> k end))
+        {_, rays, _} = pairs |> List.last() |> elem(0)
+        trace_us = median(Enum.map(pairs, fn {{k, _, _}, _} -> k end))
+        cpu_us = median(Enum.map(pairs, fn {{_, _, c}, _} -> c end))
         ring_us = median(Enum.map(pairs, fn {_, r} -> r end))
-        ring_ratio = median(Enum.map(pairs, fn {{k, _}, r} -> r / k end))
-        fixed_us = median(Enum.map(pairs, fn {{k, _}, r} -> r - k end))
+        ring_ratio = median(Enum.map(pairs, fn {{k, _, _}, r} -> r / k end))
+        fixed_us = median(Enum.map(pairs, fn {{k, _, _}, r} -> r - k end))
 
         pov = PovRay.times(povray, Path.join(pov_dir, name <> ".pov"), size, threads, runs)
 
@@ -120,6 +128,9 @@ defmodule RingTracer.Bench.Kernel do
           pov && secs(pov.parse_us),
           pov && secs(pov.trace_us),
           pov && fmt(trace_us / max(pov.trace_us, 1)),
+          secs(cpu_us),
+          pov && secs(pov.trace_cpu_us),
+          pov && fmt(cpu_us / max(pov.trace_cpu_us, 1)),
           secs(ring_us),
           fmt(ring_ratio),
           fmt(fixed_us / 1000)

@@ -23,7 +23,12 @@ defmodule RingTracer.Bench.PovRay do
   nil without POV-Ray or without the file.
   """
   @spec times(String.t() | nil, Path.t(), pos_integer(), pos_integer(), pos_integer()) ::
-          %{parse_us: non_neg_integer(), trace_us: non_neg_integer()} | nil
+          %{
+            parse_us: non_neg_integer(),
+            trace_us: non_neg_integer(),
+            trace_cpu_us: non_neg_integer()
+          }
+          | nil
   def times(nil, _file, _size, _threads, _runs), do: nil
 
   def times(povray, file, size, threads, runs) do
@@ -55,28 +60,46 @@ defmodule RingTracer.Bench.PovRay do
 
       %{
         parse_us: median(Enum.map(samples, & &1.parse_us)),
-        trace_us: median(Enum.map(samples, & &1.trace_us))
+        trace_us: median(Enum.map(samples, & &1.trace_us)),
+        trace_cpu_us: median(Enum.map(samples, & &1.trace_cpu_us))
       }
     end
   end
 
   @doc """
   The parse (with bounding) and trace times in POV-Ray's report, in
-  microseconds; a time it does not report counts 0.
+  microseconds, and the CPU time its trace threads used together (which
+  other programs on the machine take nothing from); a time it does not
+  report counts 0.
 
       iex> RingTracer.Bench.PovRay.parse(\"""
       ...> Parse Time:    0 hours  0 minutes  0 seconds (0.120 seconds)
+      ...>             using 1 thread(s) with 0.024 CPU-seconds total
       ...> Bounding Time: 0 hours  0 minutes  0 seconds (0.005 seconds)
+      ...>             using 1 thread(s) with 0.002 CPU-seconds total
       ...> Trace Time:    0 hours  0 minutes  1 seconds (1.500 seconds)
+      ...>             using 2 thread(s) with 2.900 CPU-seconds total
       ...> \""")
-      %{parse_us: 125_000, trace_us: 1_500_000}
+      %{parse_us: 125_000, trace_us: 1_500_000, trace_cpu_us: 2_900_000}
   """
-  @spec parse(String.t()) :: %{parse_us: non_neg_integer(), trace_us: non_neg_integer()}
+  @spec parse(String.t()) :: %{
+          parse_us: non_neg_integer(),
+          trace_us: non_neg_integer(),
+          trace_cpu_us: non_neg_integer()
+        }
   def parse(text) do
     %{
       parse_us: seconds(text, "Parse Time") + seconds(text, "Bounding Time"),
-      trace_us: seconds(text, "Trace Time")
+      trace_us: seconds(text, "Trace Time"),
+      trace_cpu_us: cpu_seconds(text, "Trace Time")
     }
+  end
+
+  defp cpu_seconds(text, label) do
+    case Regex.run(~r/#{label}:[^\n]*\n\s*using \d+ thread\(s\) with ([0-9.]+) CPU-seconds/, text) do
+      [_, s] -> round(String.to_float(s) * 1_000_000)
+      nil -> 0
+    end
   end
 
   defp seconds(text, label) do
