@@ -102,17 +102,19 @@ defmodule RingTracer.CLI.ServerTest do
   end
 
   test "a client killed outright cancels its job", ctx do
-    args = ~w(render mine.nff --width 96 --speeds 200 --progress bar)
+    args = ~w(render mine.nff --width 128 --speeds 200 --progress bar)
     # How long the job takes when nothing stops it.
     t0 = System.monotonic_time(:millisecond)
     {0, _} = run(served(ctx, args ++ ~w(-o whole.png)))
     whole_ms = System.monotonic_time(:millisecond) - t0
 
     {port, pid} = served(ctx, args ++ ~w(-o killed.png))
+    # The launcher's client (found before its job starts, so that only the
+    # kill stands between the job's start and the client's end).
+    client = child_of(pid)
     until(port, "atoms")
-    # The launcher's client, killed as a second Ctrl-C would.
-    {client, 0} = System.cmd("ps", ["-o", "pid=", "--ppid", "#{pid}"])
-    {_, 0} = System.cmd("kill", ["-KILL", String.trim(client)])
+    # Killed as a second Ctrl-C would.
+    {_, 0} = System.cmd("kill", ["-KILL", client])
     {status, _out} = collect(port)
     assert status != 0
 
@@ -154,5 +156,15 @@ defmodule RingTracer.CLI.ServerTest do
     {status, out} = run(open(["serve"], ctx.dir, [{"RINGTRACER_SOCKET", ctx.socket}]))
     assert status == 1
     assert out =~ "a server is already running"
+  end
+
+  # The OS pid of the thin client `pid` (the launcher) runs, once it runs it
+  # (10 s at most).
+  defp child_of(pid, tries \\ 200) do
+    case System.cmd("pgrep", ["-P", "#{pid}", "-x", "ringtracer-clie"]) do
+      {out, 0} -> String.trim(out)
+      _ when tries > 0 -> Process.sleep(50) && child_of(pid, tries - 1)
+      _ -> flunk("#{pid} started no client")
+    end
   end
 end
