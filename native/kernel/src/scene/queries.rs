@@ -28,7 +28,7 @@ impl Scene {
             .traverse_prefetching::<true>(
                 ray,
                 tmax,
-                &mut scratch.stack,
+                &mut scratch.ray,
                 &mut scratch.work,
                 #[inline(always)]
                 |first, count, tm| {
@@ -139,13 +139,13 @@ impl Scene {
     ) -> Option<(f32, u32, u32)> {
         let instances = &self.instances;
         let meshes = &self.meshes;
-        let inner = &mut scratch.inner_stack;
+        let inner = &mut scratch.inner;
         let mut inner_work = 0u64;
         let mut found = None;
         let t = self.instance_bvh.traverse_in::<ORDERED>(
             ray,
             tmax,
-            &mut scratch.stack,
+            &mut scratch.ray,
             &mut scratch.work,
             |first, count, tmax| {
                 let mut tm = tmax;
