@@ -982,13 +982,34 @@ impl Bvh {
     /// others are stacked far to near, each skipped when popped if a closer hit was found
     /// meanwhile. The stack is addressed modulo [`STACK_CAP`], which the build's depth cap
     /// keeps it below.
+    ///
+    /// Hierarchies that prefetch ([`Bvh::prefetch`]) and those that do not get a loop each, so
+    /// that neither tests the flag per node.
+    #[inline(always)]
+    fn ordered_loop<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        if self.prefetch {
+            self.ordered_walk::<AVX, true>(ray, tmax, stack, work, visit, prefetch)
+        } else {
+            self.ordered_walk::<AVX, false>(ray, tmax, stack, work, visit, prefetch)
+        }
+    }
+
+    /// [`Bvh::ordered_loop`] for a hierarchy that prefetches (`PREFETCH`) or does not.
     // Longer than 80 lines, kept whole: the loop of every closest-hit query, run per node.
     // The node test, the sorted stacking and the leaf visit share its state (the ray's
     // planes, the stack and its pointer, the bound, the work count), which must stay in
     // registers; split, its parts would pass it by reference, which only an instruction count
     // before and after could clear (docs/testing.md; tests/function_length.rs lists it).
     #[inline(always)]
-    fn ordered_loop<const AVX: bool>(
+    fn ordered_walk<const AVX: bool, const PREFETCH: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -1016,14 +1037,14 @@ impl Bvh {
                     break 'run tmax;
                 };
                 w += 1;
-                if self.prefetch {
+                if PREFETCH {
                     prefetch_line(node.child.as_ptr());
                 }
                 let (tn, mut mask) = node_test::<AVX>(node, &pre, tmax);
                 // a stacked child's memory is asked for as it is stacked (the nearest one is
                 // read at once anyway)
                 let stacked = |e: (u32, u32, f32)| {
-                    if self.prefetch {
+                    if PREFETCH {
                         prefetch_child(nodes, e.0, e.1, &prefetch);
                     }
                 };
