@@ -26,12 +26,13 @@
 //! branch per node). Both loops keep leaves and inner nodes on one stack. For closest-hit
 //! queries the children that are hit are sorted by entry distance: the nearest, leaf or node,
 //! is handled next and the others are stacked far to near, each skipped when popped if a
-//! closer hit was found meanwhile. Shadow rays use the unordered any-hit loop, which stops at
-//! the first occluder: the last child entered is handled next and the first two others are
-//! stacked without a branch, so that an incoherent ray pays about one unpredictable branch per
-//! node, and no entry distance is kept (the bound does not shrink before the first hit, which
-//! ends the query). The scene's shadow query inlines this loop, its leaf tests with it, into one
-//! function compiled for AVX2 and FMA. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
+//! closer hit was found meanwhile. Shadow rays use the any-hit loop made for occlusion
+//! (`any_hit.rs`), which stops at the first occluder and so keeps no order and no entry
+//! distance: every child a node enters is pushed at once, the children's indices and counts as
+//! two vectors permuted by a table row chosen by the mask of those entered (no branch on how
+//! many), and the highest slot entered is handled next. The scene's closest-hit and shadow
+//! queries each inline their loop, the leaf tests with it, into one function compiled for AVX2
+//! and FMA. The stacks live in a reusable [`Scratch`], so no allocation happens per ray.
 //! Hierarchies too big for a core's L2 cache prefetch what a ray stacks, as it stacks it (a
 //! child node's four cache lines, a leaf's triangle blocks), so that the memory of the nodes
 //! it comes back to is on its way while it works on the nearest ones.
