@@ -26,12 +26,13 @@
 //! branch per node). Both loops keep leaves and inner nodes on one stack. For closest-hit
 //! queries the children that are hit are sorted by entry distance: the nearest, leaf or node,
 //! is handled next and the others are stacked far to near, each skipped when popped if a
-//! closer hit was found meanwhile. Shadow rays use the unordered any-hit loop, which stops at
-//! the first occluder: the last child entered is handled next and the first two others are
-//! stacked without a branch, so that an incoherent ray pays about one unpredictable branch per
-//! node, and no entry distance is kept (the bound does not shrink before the first hit, which
-//! ends the query). The scene's shadow query inlines this loop, its leaf tests with it, into one
-//! function compiled for AVX2 and FMA. The stack lives in a reusable [`Scratch`], so no allocation happens per ray.
+//! closer hit was found meanwhile. Shadow rays use the any-hit loop made for occlusion
+//! (`any_hit.rs`), which stops at the first occluder and so keeps no order and no entry
+//! distance: every child a node enters is pushed at once, the children's indices and counts as
+//! two vectors permuted by a table row chosen by the mask of those entered (no branch on how
+//! many), and the highest slot entered is handled next. The scene's closest-hit and shadow
+//! queries each inline their loop, the leaf tests with it, into one function compiled for AVX2
+//! and FMA. The stacks live in a reusable [`Scratch`], so no allocation happens per ray.
 //! Hierarchies too big for a core's L2 cache prefetch what a ray stacks, as it stacks it (a
 //! child node's four cache lines, a leaf's triangle blocks), so that the memory of the nodes
 //! it comes back to is on its way while it works on the nearest ones.
@@ -452,12 +453,25 @@ impl Collapse {
 /// A traversal stack: (node, unused, entry distance) per deferred inner node.
 pub(crate) type Stack = Vec<(u32, u32, f32)>;
 
+mod any_hit;
+use any_hit::AnyStack;
+
+/// The stacks of one single-ray traversal: the ordered loop's and the any-hit loop's.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct RayStack {
+    ordered: Stack,
+    any: AnyStack,
+}
+
 /// Reusable traversal stacks (one per thread; avoids allocation and zeroing per ray).
 #[derive(Clone, Debug, Default)]
 pub struct Scratch {
+    /// The packet traversal's stack (`packet.rs`).
     pub(crate) stack: Stack,
-    /// The stack of a mesh's own BVH, traversed from a leaf of the instances' BVH.
-    pub(crate) inner_stack: Stack,
+    /// The stacks of single rays.
+    pub(crate) ray: RayStack,
+    /// The stacks of a mesh's own BVH, traversed from a leaf of the instances' BVH.
+    pub(crate) inner: RayStack,
     /// Last occluder found per shadow-cache slot: (instance or `u32::MAX` for the scene's own
     /// primitives, primitive); `(u32::MAX, u32::MAX)` = none.
     pub(crate) shadow_cache: Vec<(u32, u32)>,
@@ -474,7 +488,8 @@ impl Scratch {
     pub fn new() -> Scratch {
         Scratch {
             stack: Vec::new(),
-            inner_stack: Vec::new(),
+            ray: RayStack::default(),
+            inner: RayStack::default(),
             shadow_cache: Vec::new(),
             entered: Vec::new(),
             work: 0,
@@ -648,13 +663,31 @@ unsafe fn hit_avx(node: &Node8, r: &RayPre, tmax: f32) -> ([f32; WIDTH], u32) {
     (out, !missed & 0xff)
 }
 
-/// Whether the AVX node test can run here: the CPU has AVX2 and FMA (checked once by std, then
-/// cached flags). Elsewhere the portable test computes the same fused products in software.
+/// Whether the AVX node test can run here: the CPU has AVX2 and FMA, and the bit instructions
+/// every such CPU has (BMI1, BMI2, LZCNT, POPCNT), with which the single-ray traversals are
+/// compiled too. Asked of std once, then read from one flag. Elsewhere the portable test
+/// computes the same fused products in software.
 #[inline(always)]
 pub(crate) fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        use std::sync::atomic::{AtomicU8, Ordering};
+        // 0: not asked yet; 1: no; 2: yes
+        static KNOWN: AtomicU8 = AtomicU8::new(0);
+        match KNOWN.load(Ordering::Relaxed) {
+            0 => {
+                use std::arch::is_x86_feature_detected as has;
+                let yes = has!("avx2")
+                    && has!("fma")
+                    && has!("bmi1")
+                    && has!("bmi2")
+                    && has!("lzcnt")
+                    && has!("popcnt");
+                KNOWN.store(1 + u8::from(yes), Ordering::Relaxed);
+                yes
+            }
+            k => k == 2,
+        }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -845,7 +878,7 @@ impl Bvh {
         scratch: &mut Scratch,
         visit: impl FnMut(usize, usize, f32) -> f32,
     ) -> f32 {
-        self.traverse_in::<ORDERED>(ray, tmax, &mut scratch.stack, &mut scratch.work, visit)
+        self.traverse_in::<ORDERED>(ray, tmax, &mut scratch.ray, &mut scratch.work, visit)
     }
 
     /// Visits leaves, `visit(first, count, tmax) -> new tmax`, with the given stack and work
@@ -857,7 +890,7 @@ impl Bvh {
         &self,
         ray: &Ray,
         tmax: f32,
-        stack: &mut Stack,
+        stack: &mut RayStack,
         work: &mut u64,
         visit: impl FnMut(usize, usize, f32) -> f32,
     ) -> f32 {
@@ -874,7 +907,7 @@ impl Bvh {
         &self,
         ray: &Ray,
         tmax: f32,
-        stack: &mut Stack,
+        stack: &mut RayStack,
         work: &mut u64,
         visit: impl FnMut(usize, usize, f32) -> f32,
         prefetch: impl Fn(usize, usize),
@@ -900,7 +933,7 @@ impl Bvh {
         &self,
         ray: &Ray,
         tmax: f32,
-        stack: &mut Stack,
+        stack: &mut RayStack,
         work: &mut u64,
         visit: impl FnMut(usize, usize, f32) -> f32,
         prefetch: impl Fn(usize, usize),
@@ -913,12 +946,12 @@ impl Bvh {
     /// # Safety
     /// The CPU must have AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,avx2,fma")]
+    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn traverse_avx<const ORDERED: bool>(
         &self,
         ray: &Ray,
         tmax: f32,
-        stack: &mut Stack,
+        stack: &mut RayStack,
         work: &mut u64,
         visit: impl FnMut(usize, usize, f32) -> f32,
         prefetch: impl Fn(usize, usize),
@@ -933,15 +966,15 @@ impl Bvh {
         &self,
         ray: &Ray,
         tmax: f32,
-        stack: &mut Stack,
+        stack: &mut RayStack,
         work: &mut u64,
         visit: impl FnMut(usize, usize, f32) -> f32,
         prefetch: impl Fn(usize, usize),
     ) -> f32 {
         if ORDERED {
-            self.ordered_loop::<AVX>(ray, tmax, stack, work, visit, prefetch)
+            self.ordered_loop::<AVX>(ray, tmax, &mut stack.ordered, work, visit, prefetch)
         } else {
-            self.any_loop::<AVX>(ray, tmax, stack, work, visit, prefetch)
+            self.any_loop::<AVX>(ray, tmax, &mut stack.any, work, visit, prefetch)
         }
     }
 
@@ -950,13 +983,34 @@ impl Bvh {
     /// others are stacked far to near, each skipped when popped if a closer hit was found
     /// meanwhile. The stack is addressed modulo [`STACK_CAP`], which the build's depth cap
     /// keeps it below.
+    ///
+    /// Hierarchies that prefetch ([`Bvh::prefetch`]) and those that do not get a loop each, so
+    /// that neither tests the flag per node.
+    #[inline(always)]
+    fn ordered_loop<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        stack: &mut Stack,
+        work: &mut u64,
+        visit: impl FnMut(usize, usize, f32) -> f32,
+        prefetch: impl Fn(usize, usize),
+    ) -> f32 {
+        if self.prefetch {
+            self.ordered_walk::<AVX, true>(ray, tmax, stack, work, visit, prefetch)
+        } else {
+            self.ordered_walk::<AVX, false>(ray, tmax, stack, work, visit, prefetch)
+        }
+    }
+
+    /// [`Bvh::ordered_loop`] for a hierarchy that prefetches (`PREFETCH`) or does not.
     // Longer than 80 lines, kept whole: the loop of every closest-hit query, run per node.
     // The node test, the sorted stacking and the leaf visit share its state (the ray's
     // planes, the stack and its pointer, the bound, the work count), which must stay in
     // registers; split, its parts would pass it by reference, which only an instruction count
     // before and after could clear (docs/testing.md; tests/function_length.rs lists it).
     #[inline(always)]
-    fn ordered_loop<const AVX: bool>(
+    fn ordered_walk<const AVX: bool, const PREFETCH: bool>(
         &self,
         ray: &Ray,
         mut tmax: f32,
@@ -984,14 +1038,14 @@ impl Bvh {
                     break 'run tmax;
                 };
                 w += 1;
-                if self.prefetch {
+                if PREFETCH {
                     prefetch_line(node.child.as_ptr());
                 }
                 let (tn, mut mask) = node_test::<AVX>(node, &pre, tmax);
                 // a stacked child's memory is asked for as it is stacked (the nearest one is
                 // read at once anyway)
                 let stacked = |e: (u32, u32, f32)| {
-                    if self.prefetch {
+                    if PREFETCH {
                         prefetch_child(nodes, e.0, e.1, &prefetch);
                     }
                 };
@@ -1042,117 +1096,6 @@ impl Bvh {
                 Some(e) => cur = e,
                 None => break 'run tmax,
             }
-        };
-        *work += w;
-        t
-    }
-
-    /// Any-hit traversal, which stops at the first visit that returns a negative value. Leaves
-    /// and inner nodes go through one stack of `(child, count)`, in no order of distance: per
-    /// node, the last child entered is handled next, whether leaf or node, and the others are
-    /// stacked in slot order. The first two of those are stacked without a branch (nearly every
-    /// node enters at most three children), so a node costs one SIMD box test and about one
-    /// unpredictable branch, the one between leaf and node. No entry distance is kept: an
-    /// any-hit visit leaves the bound as it is until it stops the traversal, so a stacked child
-    /// is never skipped when popped (a visit that lowers the bound still gets the lower bound,
-    /// and so do the node tests after it). The stack is addressed modulo [`STACK_CAP`], which
-    /// the build's depth cap keeps it below.
-    ///
-    /// Hierarchies that prefetch ([`Bvh::prefetch`]) and those that do not get a loop each, so
-    /// that neither tests the flag per node.
-    #[inline(always)]
-    fn any_loop<const AVX: bool>(
-        &self,
-        ray: &Ray,
-        tmax: f32,
-        stack: &mut Stack,
-        work: &mut u64,
-        visit: impl FnMut(usize, usize, f32) -> f32,
-        prefetch: impl Fn(usize, usize),
-    ) -> f32 {
-        if self.prefetch {
-            self.any_walk::<AVX, true>(ray, tmax, stack, work, visit, prefetch)
-        } else {
-            self.any_walk::<AVX, false>(ray, tmax, stack, work, visit, prefetch)
-        }
-    }
-
-    /// [`Bvh::any_loop`] for a hierarchy that prefetches (`PREFETCH`) or does not.
-    #[inline(always)]
-    fn any_walk<const AVX: bool, const PREFETCH: bool>(
-        &self,
-        ray: &Ray,
-        mut tmax: f32,
-        stack: &mut Stack,
-        work: &mut u64,
-        mut visit: impl FnMut(usize, usize, f32) -> f32,
-        prefetch: impl Fn(usize, usize),
-    ) -> f32 {
-        if self.nodes.is_empty() {
-            return tmax;
-        }
-        let Some(st) = fixed_stack(stack) else {
-            return tmax;
-        };
-        let nodes = &self.nodes[..];
-        let pre = RayPre::new(ray);
-        let mut sp = 0usize;
-        // the child handled next: (index, count as in Node8)
-        let mut cur = (0u32, 0u32);
-        // the work is counted here and added once (not stored to memory per node)
-        let mut w = 0u64;
-        let t = 'run: loop {
-            if cur.1 == 0 {
-                // an inner node
-                let Some(node) = nodes.get(cur.0 as usize) else {
-                    break 'run tmax;
-                };
-                w += 1;
-                if PREFETCH {
-                    prefetch_line(node.child.as_ptr());
-                }
-                let (_, mask) = node_test::<AVX>(node, &pre, tmax);
-                // the last slot entered is handled next (slot 0 when none is: `rest` is then 0)
-                let near = 31 - (mask | 1).leading_zeros() as usize;
-                let mut rest = mask & !(1u32 << near);
-                if PREFETCH {
-                    // the stacked children's memory, asked for as they are stacked
-                    prefetch_children(nodes, node, rest, &prefetch);
-                }
-                // the first two of the rest without a branch (a store above the top is
-                // harmless), then any others
-                for _ in 0..2 {
-                    let i = rest.trailing_zeros() as usize & 7;
-                    let e = &mut st[sp & (STACK_CAP - 1)];
-                    (e.0, e.1) = (node.child[i], node.count[i]);
-                    sp += (rest != 0) as usize;
-                    rest &= rest.wrapping_sub(1);
-                }
-                while rest != 0 {
-                    let i = rest.trailing_zeros() as usize & 7;
-                    let e = &mut st[sp & (STACK_CAP - 1)];
-                    (e.0, e.1) = (node.child[i], node.count[i]);
-                    sp += 1;
-                    rest &= rest - 1;
-                }
-                if mask != 0 {
-                    let i = near & 7;
-                    cur = (node.child[i], node.count[i]);
-                    continue;
-                }
-            } else {
-                w += (cur.1 & !LEAF_BLOCKS) as u64;
-                tmax = visit(cur.0 as usize, cur.1 as usize, tmax);
-                if tmax < 0.0 {
-                    break 'run tmax;
-                }
-            }
-            if sp == 0 {
-                break 'run tmax;
-            }
-            sp -= 1;
-            let e = st[sp & (STACK_CAP - 1)];
-            cur = (e.0, e.1);
         };
         *work += w;
         t
@@ -1468,19 +1411,18 @@ mod tests {
                 let sse = bvh.traverse_loop::<false, false>(
                     &ray,
                     tmax,
-                    &mut scratch.stack,
+                    &mut scratch.ray,
                     &mut w_sse,
                     leaf_any,
                     |_, _| {},
                 );
-                let all =
-                    bvh.traverse_in::<false>(&ray, tmax, &mut scratch.stack, &mut w, leaf_any);
+                let all = bvh.traverse_in::<false>(&ray, tmax, &mut scratch.ray, &mut w, leaf_any);
                 assert_eq!((sse.to_bits(), w_sse), (all.to_bits(), w), "round {round}");
                 let mut best = f32::INFINITY;
                 bvh.traverse_prefetching::<true>(
                     &ray,
                     tmax,
-                    &mut scratch.stack,
+                    &mut scratch.ray,
                     &mut scratch.work,
                     |first, count, t| {
                         for &k in &order[first..first + count] {
@@ -1647,15 +1589,9 @@ mod stats_report {
                         tm
                     };
                     if any {
-                        bvh.traverse_in::<false>(
-                            r,
-                            f32::INFINITY,
-                            &mut s.stack,
-                            &mut s.work,
-                            visit,
-                        );
+                        bvh.traverse_in::<false>(r, f32::INFINITY, &mut s.ray, &mut s.work, visit);
                     } else {
-                        bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.stack, &mut s.work, visit);
+                        bvh.traverse_in::<true>(r, f32::INFINITY, &mut s.ray, &mut s.work, visit);
                     }
                 }
                 let nodes = probe::NODES.with(|c| c.get());
@@ -1696,7 +1632,7 @@ mod stats_report {
                             bvh.traverse_in::<false>(
                                 r,
                                 f32::INFINITY,
-                                &mut s.stack,
+                                &mut s.ray,
                                 &mut s.work,
                                 visit,
                             );
@@ -1704,7 +1640,7 @@ mod stats_report {
                             bvh.traverse_in::<true>(
                                 r,
                                 f32::INFINITY,
-                                &mut s.stack,
+                                &mut s.ray,
                                 &mut s.work,
                                 visit,
                             );

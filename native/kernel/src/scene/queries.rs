@@ -1,7 +1,7 @@
 //! A scene's closest-hit and any-hit queries, one ray at a time and in packets.
 
 use super::{Hit, Scene};
-use crate::bvh::Scratch;
+use crate::bvh::{has_avx2_fma, Scratch};
 use crate::geometry::{hit_triangle, Shape};
 use crate::ray::Ray;
 use crate::tri4::RayLanes;
@@ -17,25 +17,60 @@ impl Scene {
     ///
     /// Among hits at the same distance the lowest primitive index wins (whatever the order the
     /// leaves are visited in), so [`Scene::intersect_packet`] finds the same hits.
+    ///
+    /// Where the CPU has AVX2 and FMA, the whole query (the BVH's traversal and its leaf tests
+    /// included) is one function compiled for them, so a ray pays one call.
     #[inline]
     pub fn intersect_with(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        if has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe { self.intersect_avx(ray, tmax, scratch) };
+        }
+        // SAFETY: without AVX, the portable node test.
+        unsafe { self.intersect_in::<false>(ray, tmax, scratch) }
+    }
+
+    /// [`Scene::intersect_in`] compiled with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA ([`has_avx2_fma`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn intersect_avx(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<Hit> {
+        // SAFETY: the caller's contract.
+        unsafe { self.intersect_in::<true>(ray, tmax, scratch) }
+    }
+
+    /// [`Scene::intersect_with`], with the AVX node test when `AVX` is set (only by
+    /// [`Scene::intersect_avx`]).
+    ///
+    /// # Safety
+    /// With `AVX`, the CPU must have AVX2 and FMA.
+    #[inline(always)]
+    unsafe fn intersect_in<const AVX: bool>(
+        &self,
+        ray: &Ray,
+        tmax: f32,
+        scratch: &mut Scratch,
+    ) -> Option<Hit> {
         let mut prim = u32::MAX;
         let mut mailbox = Mailbox::default();
         let lanes = RayLanes::new(ray);
-        let best = self
-            .bvh
-            // inlined into the traversal: a call there would spill the ray's vectors per node
-            .traverse_prefetching::<true>(
+        // SAFETY: this function's contract.
+        let best = unsafe {
+            self.bvh.traverse_compiled::<true, AVX>(
                 ray,
                 tmax,
-                &mut scratch.stack,
+                &mut scratch.ray,
                 &mut scratch.work,
                 #[inline(always)]
                 |first, count, tm| {
                     self.leaf_closest(first, count, ray, &lanes, &mut mailbox, tm, &mut prim)
                 },
                 |first, count| self.tri_blocks.prefetch(first, count),
-            );
+            )
+        };
         self.finish_closest(ray, best, prim, scratch)
     }
 
@@ -139,13 +174,13 @@ impl Scene {
     ) -> Option<(f32, u32, u32)> {
         let instances = &self.instances;
         let meshes = &self.meshes;
-        let inner = &mut scratch.inner_stack;
+        let inner = &mut scratch.inner;
         let mut inner_work = 0u64;
         let mut found = None;
         let t = self.instance_bvh.traverse_in::<ORDERED>(
             ray,
             tmax,
-            &mut scratch.stack,
+            &mut scratch.ray,
             &mut scratch.work,
             |first, count, tmax| {
                 let mut tm = tmax;

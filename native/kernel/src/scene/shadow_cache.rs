@@ -60,7 +60,7 @@ impl Scene {
     /// # Safety
     /// The CPU must have AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,avx2,fma")]
+    #[target_feature(enable = "avx,avx2,fma,bmi1,bmi2,lzcnt,popcnt")]
     unsafe fn occluded_cached_avx(
         &self,
         ray: &Ray,
@@ -169,7 +169,7 @@ impl Scene {
             self.bvh.traverse_compiled::<false, AVX>(
                 ray,
                 tmax,
-                &mut scratch.stack,
+                &mut scratch.ray,
                 &mut scratch.work,
                 #[inline(always)]
                 |first, count, tmax| {
