@@ -1638,6 +1638,84 @@ mod tests {
         }
     }
 
+    /// What the old per-ray reading of a packet said: coherent (directions within
+    /// [`DIR_SPREAD`], origins within [`ORIGIN_SPREAD`] of `size`, no NaN), and its sign class
+    /// when all rays share one.
+    fn reference(rays: &[Ray], size: f32) -> (bool, bool, Option<usize>) {
+        let r0 = rays[0];
+        let (mut dlo, mut dhi, mut olo, mut ohi) = (r0.dir, r0.dir, r0.origin, r0.origin);
+        for r in rays {
+            (dlo, dhi) = (dlo.min(r.dir), dhi.max(r.dir));
+            (olo, ohi) = (olo.min(r.origin), ohi.max(r.origin));
+        }
+        let nan = rays
+            .iter()
+            .any(|r| r.dir.is_nan_mask().any() || r.origin.is_nan_mask().any());
+        let close = (dhi - dlo).max_element() <= DIR_SPREAD;
+        let coherent = !nan && close && (ohi - olo).max_element() <= ORIGIN_SPREAD * size;
+        let class = rays
+            .iter()
+            .all(|r| signs(r) == signs(&r0))
+            .then(|| signs(&r0));
+        (coherent, close || nan, class)
+    }
+
+    #[test]
+    fn a_loaded_packet_reads_as_its_rays() {
+        let mut seed = 0x5851_f42d_4c95_7f2du64;
+        let (mut coherent, mut classes) = (0, 0);
+        for round in 0..20_000 {
+            let k = 1 + round % PACKET;
+            let o = v(&mut seed);
+            let d = v(&mut seed);
+            let (jo, jd) = (
+                [0.0, 0.005, 0.05][round % 3],
+                [0.0, 0.02, 0.3][round % 5 % 3],
+            );
+            let mut rays: Vec<Ray> = (0..k)
+                .map(|_| Ray::new(o + v(&mut seed) * jo, d + v(&mut seed) * jd))
+                .collect();
+            match round % 13 {
+                // a NaN, a zero component (whose reciprocal is infinite) and a negative zero
+                0 => rays[k / 2].dir.y = f32::NAN,
+                1 => rays[k - 1].origin.z = f32::NAN,
+                2 => rays
+                    .iter_mut()
+                    .for_each(|r| *r = Ray::new(r.origin, r.dir * Vec3A::new(1.0, 0.0, 1.0))),
+                3 => rays
+                    .iter_mut()
+                    .for_each(|r| *r = Ray::new(r.origin, r.dir * Vec3A::new(-0.0, 1.0, 1.0))),
+                _ => {}
+            }
+            let mut soa = Soa::empty();
+            for (g, four) in rays.chunks(4).enumerate() {
+                soa.fill4(g, four);
+            }
+            soa.pad(k);
+            let sum = Summary::of(&soa);
+            let (want, close, class) = reference(&rays, 2.0);
+            if round % 13 > 1 {
+                // (a NaN makes the packet incoherent, whatever else it reads)
+                assert_eq!(directions_close(&rays), close, "round {round}");
+            }
+            assert_eq!(sum.coherent(2.0), want, "round {round}");
+            assert_eq!(sum.class(), class, "round {round}");
+            coherent += want as u32;
+            classes += class.is_some() as u32;
+            if let (Some(c), false) = (class, sum.nan) {
+                let f = Frustum::of(&soa, c, false);
+                let same = rays.iter().all(|r| r.origin == rays[0].origin);
+                let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+                assert_eq!(f.shared, same && tame, "round {round}");
+                for a in 0..3 {
+                    assert_eq!(f.inv_lo[a].to_bits(), row_min(&soa.inv[a]).to_bits());
+                    assert_eq!(f.oinv_hi[a].to_bits(), row_max(&soa.oinv[a]).to_bits());
+                }
+            }
+        }
+        assert!(coherent > 3000 && classes > 10_000, "{coherent} {classes}");
+    }
+
     #[test]
     fn the_packet_test_bounds_every_rays_own_test_and_avx_agrees() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
