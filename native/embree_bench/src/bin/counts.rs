@@ -22,8 +22,8 @@
 //! rays.
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
-use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
-use ring_tracer_kernel::{raysets, Aabb, Ray, Scene, Scratch};
+use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets};
+use ring_tracer_kernel::{raysets, Aabb, Ray, Scene};
 use std::path::Path;
 use std::process::Command;
 
@@ -31,25 +31,6 @@ const KINDS: [&str; 4] = ["primary", "incoherent", "any", "shadow"];
 
 /// The kernels and ways of calling them, in the table's order.
 const KERNELS: [&str; 4] = ["ours", "embree", "ours16", "embree16"];
-
-/// How many of `rays` hit `scene` (any hit: are occluded), sixteen consecutive rays at a time
-/// (`Scene::intersect_packet` / `Scene::occluded_packet`), as the bench traces its packets.
-fn packet_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {
-    let mut s = Scratch::new();
-    let mut hits = 0u64;
-    for p in rays.chunks(16) {
-        if any {
-            let mut out = [false; 16];
-            scene.occluded_packet(p, f32::INFINITY, &mut s, &mut out);
-            hits += out.iter().filter(|&&h| h).count() as u64;
-        } else {
-            let mut out = [None; 16];
-            scene.intersect_packet(p, f32::INFINITY, &mut s, &mut out);
-            hits += out.iter().filter(|h| h.is_some()).count() as u64;
-        }
-    }
-    hits
-}
 
 /// The part callgrind counts (`--toggle-collect`): what `f` does, callees included.
 #[inline(never)]
