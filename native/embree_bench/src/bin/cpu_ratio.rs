@@ -83,21 +83,23 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
         let mut hits = (0, 0);
         for _ in 0..rounds {
             let r = timed(|| {
-                (0..passes)
-                    .map(|_| match packets {
+                let mut h = 0;
+                for _ in 0..passes {
+                    h = match packets {
                         true => packet_hits(&scene, rays, any),
                         false => single_hits(&scene, rays, any),
-                    })
-                    .last()
-                    .unwrap_or(0)
+                    };
+                }
+                h
             });
             hits.0 = r.2;
             o.push((n / r.0, n / r.1.max(0.01)));
             let r = timed(|| {
-                (0..passes)
-                    .map(|_| embree.trace(call, fr))
-                    .last()
-                    .unwrap_or(0)
+                let mut h = 0;
+                for _ in 0..passes {
+                    h = embree.trace(call, fr);
+                }
+                h
             });
             hits.1 = r.2;
             e.push((n / r.0, n / r.1.max(0.01)));
