@@ -31,11 +31,15 @@
 //! its single-ray any-hit query says so (that query looks for a hit of the same primitive
 //! tests on the same interval; mesh instances and planes are asked per ray as it asks them).
 //!
-//! Rays whose direction signs differ are split into groups by sign; a group of fewer than
-//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time. The rays of a
-//! packet and their nearest hits so far are kept in one SoA block ([`Soa`]); a packet of one
-//! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
-//! are taken row by row.
+//! The rays of a packet and their nearest hits so far are kept in one SoA block ([`Soa`]). A
+//! packet whose directions are close is loaded into it with 4 x 4 transposes, and what decides
+//! its path is read from those rows ([`Summary`]): its spreads, its direction signs, a NaN. A
+//! coherent packet of one sign class (nearly every tile of eye rays, and their shadow rays) is
+//! traced as loaded, its bounds taken row by row. Rays whose direction signs differ are split
+//! into groups by sign; a group of fewer than [`MIN_GROUP`] rays, where a packet would not
+//! pay, is traced one ray at a time. Set-up and answers are compiled with AVX where the
+//! traversal is. Work ([`Scratch::work`]) is counted for the renderer's tiles only
+//! ([`trace`]'s `every_ray`).
 
 use crate::bvh::{has_avx2_fma, Node8, Scratch, EMPTY, WIDTH};
 #[cfg(target_arch = "x86_64")]
