@@ -62,6 +62,25 @@ pub fn single_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {
         .count() as u64
 }
 
+/// How many of `rays` hit `scene` (any hit: are occluded), sixteen consecutive rays at a time
+/// (`Scene::intersect_packet` / `Scene::occluded_packet`), as the bench traces its packets.
+pub fn packet_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {
+    let mut s = Scratch::new();
+    let mut hits = 0u64;
+    for p in rays.chunks(16) {
+        if any {
+            let mut out = [false; 16];
+            scene.occluded_packet(p, f32::INFINITY, &mut s, &mut out);
+            hits += out.iter().filter(|&&h| h).count() as u64;
+        } else {
+            let mut out = [None; 16];
+            scene.intersect_packet(p, f32::INFINITY, &mut s, &mut out);
+            hits += out.iter().filter(|h| h.is_some()).count() as u64;
+        }
+    }
+    hits
+}
+
 /// This process's CPU time in seconds (user + system, from `/proc/self/stat`, in clock ticks
 /// of 10 ms); 0 where that file is missing. On a busy machine, rays per CPU second vary less
 /// than rays per wall second.

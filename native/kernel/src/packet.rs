@@ -31,11 +31,15 @@
 //! its single-ray any-hit query says so (that query looks for a hit of the same primitive
 //! tests on the same interval; mesh instances and planes are asked per ray as it asks them).
 //!
-//! Rays whose direction signs differ are split into groups by sign; a group of fewer than
-//! [`MIN_GROUP`] rays, where a packet would not pay, is traced one ray at a time. The rays of a
-//! packet and their nearest hits so far are kept in one SoA block ([`Soa`]); a packet of one
-//! sign class (nearly every tile of eye rays) is loaded with 4 x 4 transposes, and its bounds
-//! are taken row by row.
+//! The rays of a packet and their nearest hits so far are kept in one SoA block ([`Soa`]). A
+//! packet whose directions are close is loaded into it with 4 x 4 transposes, and what decides
+//! its path is read from those rows ([`Summary`]): its spreads, its direction signs, a NaN. A
+//! coherent packet of one sign class (nearly every tile of eye rays, and their shadow rays) is
+//! traced as loaded, its bounds taken row by row. Rays whose direction signs differ are split
+//! into groups by sign; a group of fewer than [`MIN_GROUP`] rays, where a packet would not
+//! pay, is traced one ray at a time. Set-up and answers are compiled with AVX where the
+//! traversal is. Work ([`Scratch::work`]) is counted for the renderer's tiles only
+//! ([`trace`]'s `every_ray`).
 
 use crate::bvh::{has_avx2_fma, Node8, Scratch, EMPTY, WIDTH};
 #[cfg(target_arch = "x86_64")]
@@ -53,31 +57,15 @@ pub(crate) const MIN_GROUP: usize = 3;
 
 /// A packet whose unit directions differ by more than this on some axis, or whose origins lie
 /// further apart than [`ORIGIN_SPREAD`] times the scene's size, is not coherent: its intervals
-/// would let nearly every box through, so its rays are traced one by one.
+/// would let nearly every box through, so its rays are traced one by one
+/// ([`Summary::coherent`]; a NaN in a direction or an origin makes a packet incoherent too).
 const DIR_SPREAD: f32 = 0.125;
 
-/// See [`DIR_SPREAD`].
-const ORIGIN_SPREAD: f32 = 0.01;
-
-/// Whether a packet of rays is coherent enough for a packet traversal (see [`DIR_SPREAD`]);
-/// then so is every sign group of it, whose spreads are within the packet's. A NaN in a
-/// direction or an origin makes it incoherent.
-#[inline(always)]
-fn coherent(scene: &Scene, rays: &[Ray]) -> bool {
-    let Some(r0) = rays.first() else {
-        return true;
-    };
-    let (mut dlo, mut dhi, mut olo, mut ohi) = (r0.dir, r0.dir, r0.origin, r0.origin);
-    for r in rays {
-        // `min`/`max` with the ray second: a NaN there is kept (as _mm_min_ps keeps it)
-        (dlo, dhi) = (dlo.min(r.dir), dhi.max(r.dir));
-        (olo, ohi) = (olo.min(r.origin), ohi.max(r.origin));
-    }
-    let b = scene.bounds();
-    let size = (b.max - b.min).max_element();
-    (dhi - dlo).max_element() <= DIR_SPREAD
-        && (!size.is_finite() || (ohi - olo).max_element() <= ORIGIN_SPREAD * size)
-}
+/// See [`DIR_SPREAD`]. The shadow rays of a 4 x 4 pixel tile's hit points (and the sixteens
+/// that straddle two tiles) spread further than eye rays, and still gain from the packet
+/// traversal at a few hundredths of the scene (counted with callgrind on the SPD teapot: 0.01
+/// left most of them to single rays, 0.3 lets through packets the single rays beat).
+const ORIGIN_SPREAD: f32 = 0.03;
 
 /// The least of a row, NaN ignored (`f32::min` over it).
 #[inline(always)]
@@ -513,7 +501,7 @@ unsafe fn rays_enter<L: Lanes>(
 /// against the rays that entered, with the operations of the four-triangle test of
 /// [`crate::tri4`] (which are those of the one-triangle test) on the same values, so the same
 /// distances; among equal distances the lowest index wins, as in [`Scene::leaf_closest`].
-/// Records the rays that entered in `entered` (see [`traverse`]). Returns whether some ray's
+/// With `WORK`, records the rays that entered in `entered` (see [`traverse`]). Returns whether some ray's
 /// nearest hit changed, and the mask of the rays (of these `L::N`) that entered but were left
 /// to the caller, when fewer than [`FEW`] of them entered a leaf of more than four triangles.
 ///
@@ -527,7 +515,7 @@ unsafe fn rays_enter<L: Lanes>(
 #[cfg(target_arch = "x86_64")]
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-unsafe fn leaf_lanes<L: Lanes>(
+unsafe fn leaf_lanes<L: Lanes, const WORK: bool>(
     node: &Node8,
     i: usize,
     f: &Frustum,
@@ -565,7 +553,9 @@ unsafe fn leaf_lanes<L: Lanes>(
         let j = m.trailing_zeros() as usize & (PACKET - 1);
         m &= m - 1;
         let l = (base + j) & (PACKET - 1);
-        entered.push((l, tns[j], n as u32));
+        if WORK {
+            entered.push((l, tns[j], n as u32));
+        }
         let (t, pr) = (soa.tmax[l], soa.prim[l]);
         limit[j] = if pr == u32::MAX { t } else { t.next_up() };
     }
@@ -583,7 +573,12 @@ unsafe fn leaf_lanes<L: Lanes>(
         };
         let (v0, e1, e2) = b.corners();
         let (t, mut hit) = unsafe {
-            let sp = |x: &[Vec4; 3], a: usize| L::splat(x[a & 3][k & 3]);
+            // lane `k & 3` read from memory (a broadcast), not through `Vec4`'s `Index`, whose
+            // `match` becomes a jump on the lane, mispredicted as the lanes take turns
+            let sp = |x: &[Vec4; 3], a: usize| {
+                let row: &[f32; 4] = x[a % 3].as_ref();
+                L::splat(row[k & 3])
+            };
             let (e1x, e1y, e1z) = (sp(e1, 0), sp(e1, 1), sp(e1, 2));
             let (e2x, e2y, e2z) = (sp(e2, 0), sp(e2, 1), sp(e2, 2));
             let (mul, sub, add) = (L::mul, L::sub, L::add);
@@ -646,6 +641,9 @@ pub(crate) trait Answer: Sized {
     fn single(scene: &Scene, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Self;
     /// The answer for a ray once the packet's traversal of the scene's own BVH is done with it.
     fn finish(scene: &Scene, left: Left<'_>, scratch: &mut Scratch) -> Self;
+    /// [`Answer::finish`] in a scene without mesh instances and planes, whose answers are the
+    /// BVH's: `prim` at `t` (`u32::MAX`: none).
+    fn plain(t: f32, prim: u32) -> Self;
 }
 
 /// What the packet's traversal of the scene's own BVH left for a ray: `prim` at `t`
@@ -667,14 +665,18 @@ impl Answer for Option<Hit> {
         let Left { ray, t, prim, .. } = left;
         // without instances and planes the hit is the BVH's (what finish_closest would return)
         if scene.instances.is_empty() && scene.planes.is_empty() {
-            (prim != u32::MAX).then_some(Hit {
-                t,
-                prim,
-                instance: Hit::NO_INSTANCE,
-            })
+            Self::plain(t, prim)
         } else {
             scene.finish_closest(ray, t, prim, scratch)
         }
+    }
+    #[inline(always)]
+    fn plain(t: f32, prim: u32) -> Self {
+        (prim != u32::MAX).then_some(Hit {
+            t,
+            prim,
+            instance: Hit::NO_INSTANCE,
+        })
     }
 }
 
@@ -692,13 +694,22 @@ impl Answer for bool {
         } = left;
         prim != u32::MAX || scene.occluded_beyond_bvh(ray, tmax, scratch).is_some()
     }
+    #[inline(always)]
+    fn plain(_: f32, prim: u32) -> Self {
+        prim != u32::MAX
+    }
 }
 
 /// A packet query: `out`'s answer for `rays[i]` is the single-ray query's with the bound
 /// `tmax(i)`, for every `i < min(rays.len(), out.len())`. Unless `every_ray`, incoherent
-/// packets ([`coherent`]) and sign groups of fewer than [`MIN_GROUP`] rays are traced one ray
+/// packets ([`Summary::coherent`]) and sign groups of fewer than [`MIN_GROUP`] rays are traced one ray
 /// at a time; with `every_ray` all go through the packet traversal, and then the work a ray
-/// adds to `scratch.work` does not depend on the other rays of its packet (see [`traverse`]).
+/// adds to `scratch.work` does not depend on the other rays of its packet (see [`traverse`]);
+/// without it, the packet traversal adds no work.
+///
+/// A packet is first loaded into its rows ([`Soa`]), and what decides its path (its spreads,
+/// its direction signs, a NaN) is read from them ([`Summary`]): a packet of one sign class
+/// (nearly every tile of eye rays, and their shadow rays) is traced from those rows as loaded.
 pub(crate) fn trace<A: Answer>(
     scene: &Scene,
     rays: &[Ray],
@@ -707,28 +718,90 @@ pub(crate) fn trace<A: Answer>(
     out: &mut [A],
     every_ray: bool,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    if use_avx() {
+        // SAFETY: the CPU has AVX2 and FMA (checked just above).
+        unsafe { trace_avx(scene, rays, tmax, scratch, out, every_ray) };
+        return;
+    }
+    trace_in(scene, rays, tmax, scratch, out, every_ray);
+}
+
+/// [`trace_in`] compiled with AVX and FMA (three-operand forms of the same operations on the
+/// same values: Rust contracts no multiply and add into a fused one by itself).
+///
+/// # Safety
+/// The CPU must have AVX and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx,fma")]
+unsafe fn trace_avx<A: Answer>(
+    scene: &Scene,
+    rays: &[Ray],
+    tmax: impl Fn(usize) -> f32,
+    scratch: &mut Scratch,
+    out: &mut [A],
+    every_ray: bool,
+) {
+    trace_in(scene, rays, tmax, scratch, out, every_ray);
+}
+
+/// [`trace`], compiled for the caller's features.
+#[inline(always)]
+fn trace_in<A: Answer>(
+    scene: &Scene,
+    rays: &[Ray],
+    tmax: impl Fn(usize) -> f32,
+    scratch: &mut Scratch,
+    out: &mut [A],
+    every_ray: bool,
+) {
     let n = rays.len().min(out.len());
+    let b = scene.bounds();
+    let size = (b.max - b.min).max_element();
     for start in (0..n).step_by(PACKET) {
         let end = (start + PACKET).min(n);
         let rays = &rays[start..end];
+        let k = rays.len();
         let mut bounds = [0.0f32; PACKET];
-        for (i, b) in bounds.iter_mut().enumerate().take(rays.len()) {
+        for (i, b) in bounds.iter_mut().enumerate().take(k) {
             *b = tmax(start + i);
         }
-        if !every_ray && !coherent(scene, rays) {
-            let all = (1u32 << rays.len()) - 1;
+        if !every_ray && !directions_close(rays) {
+            let all = (1u32 << k) - 1;
             singles(scene, rays, all, &bounds, scratch, start, out);
             continue;
         }
+        let mut soa = Soa::empty();
+        for (g, four) in rays.chunks(4).enumerate() {
+            soa.fill4(g, four);
+        }
+        soa.pad(k);
+        let sum = Summary::of(&soa);
+        if !every_ray && !sum.coherent(size) {
+            let all = (1u32 << k) - 1;
+            singles(scene, rays, all, &bounds, scratch, start, out);
+            continue;
+        }
+        if let (false, Some(class)) = (sum.nan, sum.class()) {
+            if !scene.bvh.nodes.is_empty() && (every_ray || k >= MIN_GROUP) {
+                soa.tmax[..k].copy_from_slice(&bounds[..k]);
+                let idx: [usize; PACKET] = std::array::from_fn(|j| j);
+                let run = Run {
+                    scene,
+                    rays,
+                    idx: &idx[..k],
+                    class,
+                    tmax: &bounds,
+                    every_ray,
+                };
+                run.go(&mut soa, scratch, start, out);
+                continue;
+            }
+        }
         // group by direction signs; small groups go one ray at a time
         let mut groups = [0u32; 8];
-        let c0 = rays.first().map_or(0, signs);
-        if rays.iter().all(|r| signs(r) == c0) {
-            groups[c0 & 7] = (1u32 << rays.len()) - 1;
-        } else {
-            for (i, r) in rays.iter().enumerate() {
-                groups[signs(r)] |= 1 << i;
-            }
+        for (i, r) in rays.iter().enumerate() {
+            groups[signs(r)] |= 1 << i;
         }
         for (class, &members) in groups.iter().enumerate() {
             if members == 0 {
@@ -738,9 +811,98 @@ pub(crate) fn trace<A: Answer>(
             if single || scene.bvh.nodes.is_empty() {
                 singles(scene, rays, members, &bounds, scratch, start, out);
             } else {
-                group(scene, rays, members, class, &bounds, scratch, start, out);
+                group(
+                    scene, rays, members, class, &bounds, scratch, start, out, every_ray,
+                );
             }
         }
+    }
+}
+
+/// Whether the directions of `rays` are within [`DIR_SPREAD`] of each other on every axis
+/// (false for a NaN): the first test of [`Summary::coherent`], made before a packet is loaded
+/// so that incoherent rays (most of them fail it) cost little more than one by one.
+#[inline(always)]
+fn directions_close(rays: &[Ray]) -> bool {
+    let Some(r0) = rays.first() else {
+        return true;
+    };
+    let (mut lo, mut hi) = (r0.dir, r0.dir);
+    for r in rays {
+        // the ray second: a NaN there is kept (_mm_min_ps gives its second operand then)
+        (lo, hi) = (lo.min(r.dir), hi.max(r.dir));
+    }
+    (hi - lo).max_element() <= DIR_SPREAD
+}
+
+/// What decides a loaded packet's path, read from its rows in one pass: the least and the
+/// greatest origin and direction per axis, whether some origin or direction holds a NaN, and
+/// per axis the lanes whose direction is negative (as [`signs`] reads it).
+struct Summary {
+    o: [[f32; 3]; 2],
+    d: [[f32; 3]; 2],
+    nan: bool,
+    neg: [u32; 3],
+}
+
+impl Summary {
+    /// The summary of `soa`'s sixteen lanes (padding lanes are copies of lane 0).
+    #[inline(always)]
+    fn of(soa: &Soa) -> Summary {
+        let mut nan = Vec4::ZERO.cmpne(Vec4::ZERO);
+        let mut sum = Summary {
+            o: [[0.0; 3]; 2],
+            d: [[0.0; 3]; 2],
+            nan: false,
+            neg: [0; 3],
+        };
+        /// (least, greatest) of a row, and the lanes that are NaN.
+        #[inline(always)]
+        fn bounds(row: &[f32; PACKET], nan: &mut glam::BVec4A) -> (f32, f32) {
+            let (mut lo, mut hi) = (Vec4::from_slice(row), Vec4::from_slice(row));
+            for q in row.chunks_exact(4) {
+                let v = Vec4::from_slice(q);
+                *nan |= v.cmpne(v);
+                (lo, hi) = (lo.min(v), hi.max(v));
+            }
+            (lo.min_element(), hi.max_element())
+        }
+        for a in 0..3 {
+            (sum.o[0][a], sum.o[1][a]) = bounds(&soa.o[a], &mut nan);
+            (sum.d[0][a], sum.d[1][a]) = bounds(&soa.d[a], &mut nan);
+            let mut neg = 0;
+            for (i, q) in soa.inv[a].chunks_exact(4).enumerate() {
+                neg |= Vec4::from_slice(q).cmplt(Vec4::ZERO).bitmask() << (4 * i);
+            }
+            sum.neg[a] = neg;
+        }
+        sum.nan = nan.any();
+        sum
+    }
+
+    /// Whether the packet's rays are coherent enough for a packet traversal (`size`: the scene's largest extent): no
+    /// NaN, directions within [`DIR_SPREAD`] and origins within [`ORIGIN_SPREAD`] times the
+    /// size on every axis.
+    #[inline(always)]
+    fn coherent(&self, size: f32) -> bool {
+        let spread = |x: &[[f32; 3]; 2]| (0..3).fold(0.0f32, |m, a| m.max(x[1][a] - x[0][a]));
+        !self.nan
+            && spread(&self.d) <= DIR_SPREAD
+            && (!size.is_finite() || spread(&self.o) <= ORIGIN_SPREAD * size)
+    }
+
+    /// The packet's sign class when all its rays have the same direction signs.
+    #[inline(always)]
+    fn class(&self) -> Option<usize> {
+        let mut class = 0;
+        for (a, &m) in self.neg.iter().enumerate() {
+            match m & 0xffff {
+                0 => {}
+                0xffff => class |= 1 << a,
+                _ => return None,
+            }
+        }
+        Some(class)
     }
 }
 
@@ -765,11 +927,9 @@ fn singles<A: Answer>(
     }
 }
 
-/// One sign class of a packet (`members`: bit `i` for `rays[i]`, all with the signs `class`,
-/// with the bound `tmax[i]`), traced as one packet; its answer goes to `out`'s `at + i`.
-// Longer than 80 lines, kept whole: run per packet of a tile's eye or shadow rays. Split into
-// #[inline(always)] parts (the gathering of the rays, the frustum), the same renders took
-// 2.7% more instructions in `Scene::intersect_tile` (callgrind, balls_s3 at 256 x 256).
+/// One sign class of a packet of mixed signs (`members`: bit `i` for `rays[i]`, all with the
+/// signs `class`, with the bound `tmax[i]`), gathered into a packet of its own and traced; its
+/// answer goes to `out`'s `at + i`.
 #[allow(clippy::too_many_arguments)]
 fn group<A: Answer>(
     scene: &Scene,
@@ -780,30 +940,23 @@ fn group<A: Answer>(
     scratch: &mut Scratch,
     at: usize,
     out: &mut [A],
+    every_ray: bool,
 ) {
     let mut soa = Soa::empty();
     let mut idx = [0usize; PACKET];
-    let k = members.count_ones() as usize;
-    if members == (1u32 << rays.len().min(PACKET)) - 1 {
-        // the whole packet, in order: four rays at a time
-        for (g, four) in rays.chunks(4).enumerate() {
-            soa.fill4(g, four);
+    let mut m = members;
+    let mut k = 0usize;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        if let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(k)) {
+            soa.set(k, r, tmax[i & 15]);
+            *slot = i;
+            k += 1;
         }
-        for (j, slot) in idx.iter_mut().enumerate().take(k) {
-            *slot = j;
-        }
-    } else {
-        let mut m = members;
-        let mut j = 0usize;
-        while m != 0 {
-            let i = m.trailing_zeros() as usize;
-            m &= m - 1;
-            if let (Some(r), Some(slot)) = (rays.get(i), idx.get_mut(j)) {
-                soa.set(j, r, tmax[i & 15]);
-                *slot = i;
-                j += 1;
-            }
-        }
+    }
+    if k == 0 {
+        return;
     }
     // lanes past the rays: copies of the first ray (so that the packet's bounds are the
     // rays'), never entering a box
@@ -811,62 +964,131 @@ fn group<A: Answer>(
     for (t, &i) in soa.tmax.iter_mut().zip(&idx).take(k) {
         *t = tmax[i & 15];
     }
-    if k == 0 {
-        return;
-    }
-    let neg = [class & 1 != 0, class & 2 != 0, class & 4 != 0];
-    let mut f = Frustum {
-        near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
-        far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
-        inv_lo: [0, 1, 2].map(|a| row_min(&soa.inv[a])),
-        inv_hi: [0, 1, 2].map(|a| row_max(&soa.inv[a])),
-        oinv_lo: [0, 1, 2].map(|a| row_min(&soa.oinv[a])),
-        oinv_hi: [0, 1, 2].map(|a| row_max(&soa.oinv[a])),
-        shared: false,
-        o: [0.0; 3],
-        k: [0.0; 3],
-        any: A::ANY,
+    let run = Run {
+        scene,
+        rays,
+        idx: &idx[..k],
+        class,
+        tmax,
+        every_ray,
     };
-    let o = [0, 1, 2].map(|a| soa.o[a][0]);
-    let same = (0..3).all(|a| soa.o[a].iter().all(|&x| x == o[a]));
-    let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
-    if same && tame {
-        f.shared = true;
-        f.o = o;
-        f.k = [0, 1, 2].map(|a| ROUNDING * f.inv_lo[a].abs().max(f.inv_hi[a].abs()));
-    }
-    let idx = &idx[..k];
-    #[cfg(test)]
-    probe::add(5, 1);
-    #[cfg(target_arch = "x86_64")]
-    if use_avx512() {
-        // SAFETY: the CPU has AVX, FMA and AVX-512F (checked just above).
-        unsafe { traverse_avx512(scene, rays, idx, &f, &mut soa, scratch) };
-    } else if use_avx() {
-        // SAFETY: the CPU has AVX and FMA (checked just above).
-        unsafe { traverse_avx(scene, rays, idx, &f, &mut soa, scratch) };
-    } else {
-        traverse::<false, false>(scene, rays, idx, &f, &mut soa, scratch);
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    traverse::<false, false>(scene, rays, idx, &f, &mut soa, scratch);
-    for (j, &i) in idx.iter().enumerate() {
-        let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
-        if let Some(r) = rays.get(i) {
-            let left = Left {
-                ray: r,
-                tmax: tmax[i & 15],
-                t,
-                prim,
-            };
-            if let Some(o) = out.get_mut(at + i) {
+    run.go(&mut soa, scratch, at, out);
+}
+
+/// A loaded packet of one sign class, to be traced: lane `j` is `rays[idx[j]]`, whose bound is
+/// `tmax[idx[j]]`.
+struct Run<'a> {
+    scene: &'a Scene,
+    rays: &'a [Ray],
+    idx: &'a [usize],
+    class: usize,
+    tmax: &'a [f32; PACKET],
+    every_ray: bool,
+}
+
+impl Run<'_> {
+    /// Traces the packet loaded in `soa` (its lanes past `idx`: padding, bound -inf); ray `i`'s
+    /// answer goes to `out`'s `at + i`.
+    #[inline(always)]
+    fn go<A: Answer>(&self, soa: &mut Soa, scratch: &mut Scratch, at: usize, out: &mut [A]) {
+        let Run {
+            scene,
+            rays,
+            idx,
+            class,
+            tmax,
+            every_ray,
+        } = *self;
+        let f = Frustum::of(soa, class, A::ANY);
+        #[cfg(test)]
+        probe::add(5, 1);
+        #[cfg(target_arch = "x86_64")]
+        if use_avx512() {
+            // SAFETY: the CPU has AVX, FMA and AVX-512F (checked just above).
+            unsafe { traverse_avx512(scene, rays, idx, &f, soa, scratch, every_ray) };
+        } else if use_avx() {
+            // SAFETY: the CPU has AVX and FMA (checked just above).
+            unsafe { traverse_avx(scene, rays, idx, &f, soa, scratch, every_ray) };
+        } else if every_ray {
+            traverse::<false, false, true>(scene, rays, idx, &f, soa, scratch);
+        } else {
+            traverse::<false, false, false>(scene, rays, idx, &f, soa, scratch);
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        if every_ray {
+            traverse::<false, false, true>(scene, rays, idx, &f, soa, scratch);
+        } else {
+            traverse::<false, false, false>(scene, rays, idx, &f, soa, scratch);
+        }
+        if scene.instances.is_empty() && scene.planes.is_empty() {
+            for (j, &i) in idx.iter().enumerate() {
+                if let Some(o) = out.get_mut(at + i) {
+                    *o = A::plain(soa.tmax[j & 15], soa.prim[j & 15]);
+                }
+            }
+            return;
+        }
+        for (j, &i) in idx.iter().enumerate() {
+            let (t, prim) = (soa.tmax[j & 15], soa.prim[j & 15]);
+            if let (Some(r), Some(o)) = (rays.get(i), out.get_mut(at + i)) {
+                let left = Left {
+                    ray: r,
+                    tmax: tmax[i & 15],
+                    t,
+                    prim,
+                };
                 *o = A::finish(scene, left, scratch);
             }
         }
     }
 }
 
-/// [`traverse`] compiled with AVX.
+impl Frustum {
+    /// The node test's bounds of the rays loaded in `soa` (sign class `class`; padding lanes
+    /// copies of lane 0), shared-origin ones when every lane starts at lane 0's origin and no
+    /// reciprocal is huge; `any` for any-hit queries.
+    #[inline(always)]
+    fn of(soa: &Soa, class: usize, any: bool) -> Frustum {
+        let mut f = Frustum {
+            near: [0; 3],
+            far: [0; 3],
+            inv_lo: [0.0; 3],
+            inv_hi: [0.0; 3],
+            oinv_lo: [0.0; 3],
+            oinv_hi: [0.0; 3],
+            shared: false,
+            o: [0.0; 3],
+            k: [0.0; 3],
+            any,
+        };
+        let mut same = true;
+        let mut tame = true;
+        for a in 0..3 {
+            let neg = class & (1 << a) != 0;
+            f.near[a] = if neg { 3 + a } else { a };
+            f.far[a] = if neg { a } else { 3 + a };
+            f.inv_lo[a] = row_min(&soa.inv[a]);
+            f.inv_hi[a] = row_max(&soa.inv[a]);
+            f.oinv_lo[a] = row_min(&soa.oinv[a]);
+            f.oinv_hi[a] = row_max(&soa.oinv[a]);
+            f.o[a] = soa.o[a][0];
+            let o = Vec4::splat(f.o[a]);
+            for q in soa.o[a].chunks_exact(4) {
+                same &= Vec4::from_slice(q).cmpeq(o).all();
+            }
+            let wide = f.inv_lo[a].abs().max(f.inv_hi[a].abs());
+            tame &= wide < 1e6;
+            f.k[a] = ROUNDING * wide;
+        }
+        f.shared = same && tame;
+        if !f.shared {
+            (f.o, f.k) = ([0.0; 3], [0.0; 3]);
+        }
+        f
+    }
+}
+
+/// [`traverse`] compiled with AVX, counting work when `work` is set.
 ///
 /// # Safety
 /// The CPU must have AVX and FMA.
@@ -879,12 +1101,18 @@ unsafe fn traverse_avx(
     f: &Frustum,
     soa: &mut Soa,
     scratch: &mut Scratch,
+    work: bool,
 ) {
-    traverse::<true, false>(scene, rays, idx, f, soa, scratch);
+    if work {
+        traverse::<true, false, true>(scene, rays, idx, f, soa, scratch);
+    } else {
+        traverse::<true, false, false>(scene, rays, idx, f, soa, scratch);
+    }
 }
 
 /// [`traverse`] compiled with AVX-512F too, whose leaf tests take the sixteen rays of a packet
-/// in one vector (the same operations on each lane, so the same bits, as eight to a vector).
+/// in one vector (the same operations on each lane, so the same bits, as eight to a vector),
+/// counting work when `work` is set.
 ///
 /// # Safety
 /// The CPU must have AVX, FMA and AVX-512F.
@@ -897,8 +1125,13 @@ unsafe fn traverse_avx512(
     f: &Frustum,
     soa: &mut Soa,
     scratch: &mut Scratch,
+    work: bool,
 ) {
-    traverse::<true, true>(scene, rays, idx, f, soa, scratch);
+    if work {
+        traverse::<true, true, true>(scene, rays, idx, f, soa, scratch);
+    } else {
+        traverse::<true, true, false>(scene, rays, idx, f, soa, scratch);
+    }
 }
 
 /// The packet traversal of the scene's own BVH for the rays `idx` (lane `j` is `rays[idx[j]]`);
@@ -908,14 +1141,15 @@ unsafe fn traverse_avx512(
 /// whose box it enters before its final nearest hit. That set does not depend on the order the
 /// leaves were met in, nor on the other rays of the packet (all of them are met, since a ray's
 /// bound never falls below its final hit), so a pixel costs the same in any tile. In an
-/// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met.
+/// any-hit query ([`Frustum::any`]) a ray is charged for every leaf it met. Without `WORK`
+/// nothing is recorded or charged.
 // Longer than 80 lines, kept whole: the packet traversal's loop, run per node. The node
 // test, the leaf tests and the stacking share its state (the packet's bound, the stack and
 // its pointer, the mailboxes, the children being sorted), which must stay in registers;
 // split, its parts would pass it by reference, which only an instruction count before and
 // after could clear (docs/testing.md; tests/function_length.rs lists it).
 #[inline(always)]
-fn traverse<const AVX: bool, const WIDE: bool>(
+fn traverse<const AVX: bool, const WIDE: bool, const WORK: bool>(
     scene: &Scene,
     rays: &[Ray],
     idx: &[usize],
@@ -980,9 +1214,13 @@ fn traverse<const AVX: bool, const WIDE: bool>(
                             // AVX-512F as well.
                             let (ch, mut left) = unsafe {
                                 if WIDE {
-                                    leaf_lanes::<Avx16>(node, i, f, soa, part, blocks, n, entered)
+                                    leaf_lanes::<Avx16, WORK>(
+                                        node, i, f, soa, part, blocks, n, entered,
+                                    )
                                 } else {
-                                    leaf_lanes::<Avx8>(node, i, f, soa, part, blocks, n, entered)
+                                    leaf_lanes::<Avx8, WORK>(
+                                        node, i, f, soa, part, blocks, n, entered,
+                                    )
                                 }
                             };
                             changed |= ch;
@@ -1014,7 +1252,9 @@ fn traverse<const AVX: bool, const WIDE: bool>(
                         let l = lane & 15;
                         if let Some(t) = enters(node, i, f, soa.lane(l), soa.tmax[l]) {
                             if let Some(r) = rays.get(ri) {
-                                entered.push((l, t, n as u32));
+                                if WORK {
+                                    entered.push((l, t, n as u32));
+                                }
                                 soa.tmax[l] = scene.leaf_closest(
                                     first,
                                     c as usize,
@@ -1047,6 +1287,9 @@ fn traverse<const AVX: bool, const WIDE: bool>(
         // pop the next inner node that some ray may still enter before its nearest hit
         loop {
             if sp == 0 {
+                if !WORK {
+                    return;
+                }
                 let mut w = 0u64;
                 for &(lane, t, c) in entered.iter() {
                     // (an any-hit query's closed lanes: every leaf they met)
@@ -1397,6 +1640,84 @@ mod tests {
                 c[6] as f64 / pk,
             );
         }
+    }
+
+    /// What the old per-ray reading of a packet said: coherent (directions within
+    /// [`DIR_SPREAD`], origins within [`ORIGIN_SPREAD`] of `size`, no NaN), and its sign class
+    /// when all rays share one.
+    fn reference(rays: &[Ray], size: f32) -> (bool, bool, Option<usize>) {
+        let r0 = rays[0];
+        let (mut dlo, mut dhi, mut olo, mut ohi) = (r0.dir, r0.dir, r0.origin, r0.origin);
+        for r in rays {
+            (dlo, dhi) = (dlo.min(r.dir), dhi.max(r.dir));
+            (olo, ohi) = (olo.min(r.origin), ohi.max(r.origin));
+        }
+        let nan = rays
+            .iter()
+            .any(|r| r.dir.is_nan_mask().any() || r.origin.is_nan_mask().any());
+        let close = (dhi - dlo).max_element() <= DIR_SPREAD;
+        let coherent = !nan && close && (ohi - olo).max_element() <= ORIGIN_SPREAD * size;
+        let class = rays
+            .iter()
+            .all(|r| signs(r) == signs(&r0))
+            .then(|| signs(&r0));
+        (coherent, close || nan, class)
+    }
+
+    #[test]
+    fn a_loaded_packet_reads_as_its_rays() {
+        let mut seed = 0x5851_f42d_4c95_7f2du64;
+        let (mut coherent, mut classes) = (0, 0);
+        for round in 0..20_000 {
+            let k = 1 + round % PACKET;
+            let o = v(&mut seed);
+            let d = v(&mut seed);
+            let (jo, jd) = (
+                [0.0, 0.005, 0.05][round % 3],
+                [0.0, 0.02, 0.3][round % 5 % 3],
+            );
+            let mut rays: Vec<Ray> = (0..k)
+                .map(|_| Ray::new(o + v(&mut seed) * jo, d + v(&mut seed) * jd))
+                .collect();
+            match round % 13 {
+                // a NaN, a zero component (whose reciprocal is infinite) and a negative zero
+                0 => rays[k / 2].dir.y = f32::NAN,
+                1 => rays[k - 1].origin.z = f32::NAN,
+                2 => rays
+                    .iter_mut()
+                    .for_each(|r| *r = Ray::new(r.origin, r.dir * Vec3A::new(1.0, 0.0, 1.0))),
+                3 => rays
+                    .iter_mut()
+                    .for_each(|r| *r = Ray::new(r.origin, r.dir * Vec3A::new(-0.0, 1.0, 1.0))),
+                _ => {}
+            }
+            let mut soa = Soa::empty();
+            for (g, four) in rays.chunks(4).enumerate() {
+                soa.fill4(g, four);
+            }
+            soa.pad(k);
+            let sum = Summary::of(&soa);
+            let (want, close, class) = reference(&rays, 2.0);
+            if round % 13 > 1 {
+                // (a NaN makes the packet incoherent, whatever else it reads)
+                assert_eq!(directions_close(&rays), close, "round {round}");
+            }
+            assert_eq!(sum.coherent(2.0), want, "round {round}");
+            assert_eq!(sum.class(), class, "round {round}");
+            coherent += want as u32;
+            classes += class.is_some() as u32;
+            if let (Some(c), false) = (class, sum.nan) {
+                let f = Frustum::of(&soa, c, false);
+                let same = rays.iter().all(|r| r.origin == rays[0].origin);
+                let tame = (0..3).all(|a| f.inv_lo[a].abs().max(f.inv_hi[a].abs()) < 1e6);
+                assert_eq!(f.shared, same && tame, "round {round}");
+                for a in 0..3 {
+                    assert_eq!(f.inv_lo[a].to_bits(), row_min(&soa.inv[a]).to_bits());
+                    assert_eq!(f.oinv_hi[a].to_bits(), row_max(&soa.oinv[a]).to_bits());
+                }
+            }
+        }
+        assert!(coherent > 3000 && classes > 10_000, "{coherent} {classes}");
     }
 
     #[test]

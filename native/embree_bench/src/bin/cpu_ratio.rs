@@ -1,19 +1,28 @@
 //! Single-ray rates of RingTracer's kernel and Embree per CPU second, for a busy machine:
 //! `cargo run --release -p ring_tracer_embree_bench --bin cpu_ratio -- [--rounds R]
-//! [--embree-isa ISA] MESH.obj...` (ISA as for `embree_bench`).
+//! [--embree-isa ISA] [--packets] MESH.obj...` (ISA as for `embree_bench`).
 //!
 //! The same rays as `embree_bench` (1024 x 1024 primary rays in tiles, as many incoherent ones,
-//! closest hit and any hit), one thread, ours and Embree alternating. Each cell is timed by the
+//! closest hit and any hit), one thread, ours and Embree alternating. With `--packets`, the
+//! bench's packet cells instead (`Scene::intersect_packet` / `occluded_packet` against
+//! `rtcIntersect16` / `rtcOccluded16`, coherent flag on primary and shadow rays), the shadow
+//! rays of the primary hits too, each timing over eight passes of its rays (a packet pass of
+//! the teapot takes a few 10 ms ticks). Each cell is timed by the
 //! process's CPU time (`/proc/self/stat`, 10 ms ticks) as well as by the clock: when other
 //! programs share the cores, wall-clock rates swing with their load, while CPU-second rates
 //! only feel what they do to the caches. The ratio compares the best rounds.
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
-use ring_tracer_embree_bench::{single_hits, timed_cpu as timed, RaySets};
+use ring_tracer_embree_bench::{
+    packet_hits, shadow_rays, single_hits, timed_cpu as timed, RaySets,
+};
 use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
 
-fn bench(path: &str, rounds: usize, isa: Isa) {
+/// Passes over a cell's rays per timing with `--packets`.
+const PACKET_PASSES: usize = 8;
+
+fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
     let (lw, lc, scene) = timed(|| Scene::load(Path::new(path)));
     let scene = match scene {
         Ok(s) => s,
@@ -37,30 +46,61 @@ fn bench(path: &str, rounds: usize, isa: Isa) {
     );
     let b = scene.bounds();
     let RaySets { tiled, incoherent } = RaySets::new(b, 1024);
-    let (ft, fi) = (flat(&tiled), flat(&incoherent));
-    let rows: [(&str, &[Ray], &[f32], bool); 3] = [
+    let shadow = if packets {
+        shadow_rays(&scene, &tiled)
+    } else {
+        Vec::new()
+    };
+    let (ft, fi, fs) = (flat(&tiled), flat(&incoherent), flat(&shadow));
+    let mut rows: Vec<(&str, &[Ray], &[f32], bool)> = vec![
         ("primary", &tiled, &ft, false),
         ("incoherent", &incoherent, &fi, false),
         ("incoherent, any hit", &incoherent, &fi, true),
     ];
-    let n = tiled.len() as f64 / 1e6;
+    let (passes, e, ours) = if packets {
+        rows.push(("shadow rays of primary hits", &shadow, &fs, true));
+        (PACKET_PASSES, "16", "ours, packets of 16")
+    } else {
+        (1, "1", "ours")
+    };
     println!(
-        "| rays | ours, Mrays/CPU s | Embree rtcIntersect1 | ours / E1 (CPU) | ours / E1 (wall) |"
+        "| rays | {ours}, Mrays/CPU s | Embree rtcIntersect{e} | ours / E{e} (CPU) | ours / E{e} (wall) |"
     );
     println!("|---|---|---|---|---|");
     for (label, rays, fr, any) in rows {
+        let n = (rays.len() * passes) as f64 / 1e6;
+        let call = match (packets, any) {
+            (false, false) => Call::Intersect1,
+            (false, true) => Call::Occluded1,
+            (true, false) => Call::Intersect16 {
+                coherent: label != "incoherent",
+            },
+            (true, true) => Call::Occluded16 {
+                coherent: label != "incoherent, any hit",
+            },
+        };
         let (mut o, mut e) = (Vec::new(), Vec::new());
         let mut hits = (0, 0);
         for _ in 0..rounds {
-            let r = timed(|| single_hits(&scene, rays, any));
+            let r = timed(|| {
+                let mut h = 0;
+                for _ in 0..passes {
+                    h = match packets {
+                        true => packet_hits(&scene, rays, any),
+                        false => single_hits(&scene, rays, any),
+                    };
+                }
+                h
+            });
             hits.0 = r.2;
             o.push((n / r.0, n / r.1.max(0.01)));
-            let call = if any {
-                Call::Occluded1
-            } else {
-                Call::Intersect1
-            };
-            let r = timed(|| embree.trace(call, fr));
+            let r = timed(|| {
+                let mut h = 0;
+                for _ in 0..passes {
+                    h = embree.trace(call, fr);
+                }
+                h
+            });
             hits.1 = r.2;
             e.push((n / r.0, n / r.1.max(0.01)));
         }
@@ -90,16 +130,18 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let mut rounds = 3;
     let mut isa = Isa::Best;
+    let mut packets = false;
     let mut meshes = Vec::new();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
             "--embree-isa" => isa = Isa::from_arg(args.next()),
+            "--packets" => packets = true,
             _ => meshes.push(a),
         }
     }
     if meshes.is_empty() {
-        eprintln!("usage: cpu_ratio [--rounds R] [--embree-isa ISA] MESH.obj...");
+        eprintln!("usage: cpu_ratio [--rounds R] [--embree-isa ISA] [--packets] MESH.obj...");
         std::process::exit(2);
     }
     if let Err(e) = Embree::version() {
@@ -107,6 +149,6 @@ fn main() {
         std::process::exit(1);
     }
     for m in &meshes {
-        bench(m, rounds.max(1), isa);
+        bench(m, rounds.max(1), isa, packets);
     }
 }
