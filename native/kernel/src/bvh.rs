@@ -41,6 +41,11 @@ use crate::ray::Ray;
 use crate::{limits, Error};
 use glam::{Vec3A, Vec4};
 
+mod sah;
+mod triangle_tree;
+
+pub use triangle_tree::TriangleTree;
+
 /// Number of SAH bins per axis.
 const BINS: usize = 32;
 /// Leaves never hold more than this unless the primitives cannot be separated.

@@ -146,6 +146,11 @@ pub(crate) struct TriBlocks {
 }
 
 impl TriBlocks {
+    /// The number of blocks.
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
     /// Blocks for every leaf of `bvh` over `shapes` (in BVH order) that holds triangles only;
     /// each such leaf is rewritten to name its blocks ([`Bvh::mark_block_leaves`]).
     pub fn build(bvh: &mut Bvh, shapes: &[Shape]) -> TriBlocks {
