@@ -15,6 +15,7 @@ mod ffi {
             ntris: usize,
             config: *const c_char,
         ) -> c_int;
+        pub fn eb_cpu_seconds() -> f64;
         pub fn eb_free(h: c_int);
         pub fn eb_build_figures(
             verts: *const f32,
@@ -23,6 +24,7 @@ mod ffi {
             ntris: usize,
             config: *const c_char,
             commit_s: *mut f64,
+            cpu_s: *mut f64,
             build_s: *mut f64,
             sah: *mut f64,
         ) -> c_int;
@@ -136,6 +138,8 @@ impl Isa {
 pub struct BuildFigures {
     /// Wall time of `rtcCommitScene`, seconds.
     pub commit_seconds: f64,
+    /// The process's CPU time over `rtcCommitScene` (all its threads), seconds.
+    pub cpu_seconds: f64,
     /// Embree's own clock around the BVH build (from the triangles to the finished tree,
     /// primitive references and leaf blocks included), seconds.
     pub build_seconds: f64,
@@ -231,6 +235,7 @@ impl Embree {
             let config = isa.config(",benchmark=1");
             let mut f = BuildFigures {
                 commit_seconds: 0.0,
+                cpu_seconds: 0.0,
                 build_seconds: 0.0,
                 sah: 0.0,
             };
@@ -246,6 +251,7 @@ impl Embree {
                     tris.len(),
                     config.as_ptr(),
                     &mut f.commit_seconds,
+                    &mut f.cpu_seconds,
                     &mut f.build_seconds,
                     &mut f.sah,
                 )
@@ -262,6 +268,20 @@ impl Embree {
         {
             let _ = (tris, isa);
             Err(Embree::version().unwrap_err())
+        }
+    }
+
+    /// The process's CPU time in seconds (all its threads, nanosecond resolution), or `None`
+    /// without the harness.
+    pub fn cpu_seconds() -> Option<f64> {
+        #[cfg(embree)]
+        {
+            // SAFETY: reads a clock; no arguments, no state.
+            Some(unsafe { ffi::eb_cpu_seconds() })
+        }
+        #[cfg(not(embree))]
+        {
+            None
         }
     }
 

@@ -106,16 +106,19 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Builds both BVHs over `tris` `builds` times, ours and Embree's alternating, and prints the
-/// median times and both SAH figures.
+/// median times (wall and CPU) and both SAH figures.
 fn build_figures(tris: &[[Vec3A; 3]], builds: usize, isa: Isa) {
-    let (mut ours, mut theirs) = (Vec::new(), Vec::<BuildFigures>::new());
-    let mut sah = 0.0;
-    let mut refused = None;
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let mut theirs = Vec::<BuildFigures>::new();
+    let (mut sah, mut refused) = (0.0, None);
     for _ in 0..builds {
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), Embree::cpu_seconds());
         match TriangleTree::build(tris) {
             Ok(tree) => {
-                ours.push(t.elapsed().as_secs_f64());
+                wall.push(t.elapsed().as_secs_f64());
+                if let (Some(c), Some(now)) = (c, Embree::cpu_seconds()) {
+                    cpu.push(now - c);
+                }
                 sah = tree.sah();
             }
             Err(e) => {
@@ -128,15 +131,22 @@ fn build_figures(tris: &[[Vec3A; 3]], builds: usize, isa: Isa) {
             Err(e) => refused = Some(e),
         }
     }
+    let cpu = if cpu.is_empty() {
+        String::new()
+    } else {
+        format!(" (CPU {:.4} s)", median(cpu))
+    };
     println!(
-        "BVH build, median of {builds}, 1 thread: ours {:.4} s, SAH {sah:.3}",
-        median(ours)
+        "BVH build, median of {builds}, 1 thread: ours {:.4} s{cpu}, SAH {sah:.3}",
+        median(wall)
     );
+    let of = |f: fn(&BuildFigures) -> f64| median(theirs.iter().map(f).collect());
     match (theirs.last(), refused) {
         (Some(last), _) => println!(
-            "  Embree {:.4} s (its own clock; rtcCommitScene {:.4} s), SAH {:.3}",
-            median(theirs.iter().map(|f| f.build_seconds).collect()),
-            median(theirs.iter().map(|f| f.commit_seconds).collect()),
+            "  Embree {:.4} s by its own clock (rtcCommitScene {:.4} s, CPU {:.4} s), SAH {:.3}",
+            of(|f| f.build_seconds),
+            of(|f| f.commit_seconds),
+            of(|f| f.cpu_seconds),
             last.sah
         ),
         (None, Some(e)) => println!("  Embree: {e}"),

@@ -41,13 +41,16 @@ use crate::ray::Ray;
 use crate::{limits, Error};
 use glam::{Vec3A, Vec4};
 
+mod binned;
 mod sah;
 mod triangle_tree;
 
+use binned::build_binary;
+#[cfg(test)]
+use binned::BuildRef;
+
 pub use triangle_tree::TriangleTree;
 
-/// Number of SAH bins per axis.
-const BINS: usize = 32;
 /// Leaves never hold more than this unless the primitives cannot be separated.
 const MAX_LEAF: usize = 8;
 /// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
@@ -136,88 +139,16 @@ impl Node {
     }
 }
 
-#[derive(Clone, Copy)]
-struct Bin {
-    bounds: Aabb,
-    count: u32,
-}
-
-const EMPTY_BIN: Bin = Bin {
-    bounds: Aabb::EMPTY,
-    count: 0,
-};
-
 /// Leaves at most this big are never split: for primitives tested one at a time.
 pub(crate) const LEAF_MIN: usize = 2;
 /// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
 /// one test, and the SAH counts a leaf's cost in blocks of four.
 pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
 
-/// A primitive reference during the build: its box and centre, kept in the order of the
-/// primitive array so that every pass over a node's range reads memory in sequence.
-#[derive(Clone, Copy)]
-struct BuildRef {
-    bounds: Aabb,
-    centre: Vec3A,
-}
-
 /// Tests needed for `n` primitives met `block` at a time.
 #[inline(always)]
 fn blocks_of(n: u32, block: u32) -> f32 {
     n.div_ceil(block) as f32
-}
-
-/// The best binned-SAH split of `refs` over the three axes at once: (cost, axis, bin), cost as
-/// the children's area-weighted block counts (infinite when no split separates anything).
-fn best_split(refs: &[BuildRef], cb: &Aabb, block: u32) -> (f32, usize, usize) {
-    let ext = cb.max - cb.min;
-    let lo = cb.min;
-    // a flat axis gets scale 0: everything in bin 0, which offers no split
-    let scale = Vec3A::select(
-        ext.cmpgt(Vec3A::ZERO),
-        Vec3A::splat(BINS as f32 * 0.999_99) / ext,
-        Vec3A::ZERO,
-    );
-    let mut bins = [[EMPTY_BIN; BINS]; 3];
-    for r in refs {
-        let b = ((r.centre - lo) * scale).to_array();
-        for a in 0..3 {
-            let k = (b[a] as usize).min(BINS - 1);
-            let bin = &mut bins[a][k];
-            bin.count += 1;
-            bin.bounds = bin.bounds.union(r.bounds);
-        }
-    }
-    let mut best = (f32::INFINITY, 0usize, 0usize);
-    for (axis, bins) in bins.iter().enumerate() {
-        let mut right_cost = [0.0f32; BINS];
-        let mut acc = Aabb::EMPTY;
-        let mut c = 0;
-        for k in (1..BINS).rev() {
-            acc = acc.union(bins[k].bounds);
-            c += bins[k].count;
-            right_cost[k] = if c == 0 {
-                f32::NAN
-            } else {
-                acc.half_area() * blocks_of(c, block)
-            };
-        }
-        let mut acc = Aabb::EMPTY;
-        let mut c = 0;
-        for k in 0..BINS - 1 {
-            acc = acc.union(bins[k].bounds);
-            c += bins[k].count;
-            let rc = right_cost[k + 1];
-            if c == 0 || rc.is_nan() {
-                continue;
-            }
-            let cost = acc.half_area() * blocks_of(c, block) + rc;
-            if cost < best.0 {
-                best = (cost, axis, k);
-            }
-        }
-    }
-    best
 }
 
 /// Primitives met at once in a leaf: four for triangle blocks, else one.
@@ -232,86 +163,6 @@ fn block_size(leaf_min_chosen: usize) -> u32 {
 /// The largest leaf the build makes unless primitives cannot be separated.
 fn max_leaf(block: u32) -> usize {
     MAX_LEAF.max(2 * block as usize)
-}
-
-/// Binary binned-SAH build; returns the nodes and the primitive order. Leaves of up to
-/// `block` primitives cost one test (they are met `block` at a time).
-fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
-    let n = boxes.len();
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    if n == 0 {
-        return (Vec::new(), order);
-    }
-    let leaf_min = leaf_min(leaf_min_chosen);
-    let block = block_size(leaf_min_chosen);
-    let max_leaf = max_leaf(block);
-    let mut refs: Vec<BuildRef> = boxes
-        .iter()
-        .map(|&b| BuildRef {
-            bounds: b,
-            centre: b.centre(),
-        })
-        .collect();
-    let mut nodes = Vec::with_capacity(2 * n / leaf_min.max(1) + 1);
-    nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-    // (node index, start, end, depth)
-    let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
-    while let Some((ni, start, end, depth)) = work.pop() {
-        let rs = &mut refs[start..end];
-        let idx = &mut order[start..end];
-        let mut bounds = Aabb::EMPTY;
-        let mut cb = Aabb::EMPTY;
-        for r in rs.iter() {
-            bounds = bounds.union(r.bounds);
-            cb = cb.grow(r.centre);
-        }
-        let count = end - start;
-        if count <= leaf_min || depth >= MAX_DEPTH {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        let best = best_split(rs, &cb, block);
-        let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-        let split_cost = split_cost() + best.0 / parent_area;
-        let leaf_cost = blocks_of(count as u32, block);
-        let mid;
-        if best.0.is_finite() && (split_cost < leaf_cost || count > max_leaf) {
-            let (axis, bin) = (best.1, best.2);
-            let lo = cb.min[axis];
-            let scale = BINS as f32 * 0.999_99 / (cb.max[axis] - lo);
-            // in-place partition of the references and the order alike
-            let mut l = 0;
-            let mut r = rs.len();
-            while l < r {
-                let b = (((rs[l].centre[axis] - lo) * scale) as usize).min(BINS - 1);
-                if b <= bin {
-                    l += 1;
-                } else {
-                    r -= 1;
-                    rs.swap(l, r);
-                    idx.swap(l, r);
-                }
-            }
-            mid = start + l;
-        } else if count > max_leaf {
-            // centroids coincide: split by position in the array to bound leaf size
-            mid = start + count / 2;
-        } else {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        if mid == start || mid == end {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        let left = nodes.len();
-        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-        nodes[ni] = Node::new(bounds, left as u32, 0);
-        work.push((left + 1, mid, end, depth + 1));
-        work.push((left, start, mid, depth + 1));
-    }
-    (nodes, order)
 }
 
 /// Cost of one 8-wide node visit relative to one leaf test (a block of four triangles or one
@@ -347,6 +198,7 @@ enum Choice {
 }
 
 impl Collapse {
+    #[inline(never)]
     fn plan(bin: &[Node], block: u32, max_leaf: usize) -> Collapse {
         let n = bin.len();
         let mut c = Collapse {
@@ -799,6 +651,7 @@ impl Bvh {
     }
 
     /// The binary tree `bin` collapsed into 8-wide nodes.
+    #[inline(never)]
     fn collapse(bin: &[Node], order: Vec<u32>, leaf_min: usize) -> (Bvh, Vec<u32>) {
         let block = block_size(leaf_min);
         let plan = Collapse::plan(bin, block, max_leaf(block));
