@@ -145,10 +145,13 @@ pub(crate) const LEAF_MIN: usize = 2;
 /// one test, and the SAH counts a leaf's cost in blocks of four.
 pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
 
-/// Tests needed for `n` primitives met `block` at a time.
+/// Tests needed for `n` primitives met `block` at a time (`block` a power of two, as
+/// [`block_size`] gives: a shift and a mask rather than a division, which the binning's sweeps
+/// make per bin).
 #[inline(always)]
 fn blocks_of(n: u32, block: u32) -> f32 {
-    n.div_ceil(block) as f32
+    let shift = block.trailing_zeros();
+    ((n >> shift) + u32::from(n & (block - 1) != 0)) as f32
 }
 
 /// Primitives met at once in a leaf: four for triangle blocks, else one.
@@ -197,6 +200,31 @@ enum Choice {
     Split(u8),
 }
 
+/// The least costs (and how they are reached) of a binary node in 1..=8 slots, given its
+/// cost in one slot (`one`) and its children's costs `lc` and `rc` in 1..=8 slots each: in
+/// `j` slots, either as in `j - 1` or `i` slots to the left child and `j - i` to the right.
+#[inline(always)]
+fn shared_slots(
+    lc: &[f32; WIDTH],
+    rc: &[f32; WIDTH],
+    one: (f32, Choice),
+) -> ([f32; WIDTH], [Choice; WIDTH]) {
+    let mut cost = [one.0; WIDTH];
+    let mut choice = [one.1; WIDTH];
+    for j in 2..=WIDTH {
+        let mut v = (cost[j - 2], choice[j - 2]);
+        for i in 1..j {
+            let s = lc[i - 1] + rc[j - i - 1];
+            if s < v.0 {
+                v = (s, Choice::Split(i as u8));
+            }
+        }
+        cost[j - 1] = v.0;
+        choice[j - 1] = v.1;
+    }
+    (cost, choice)
+}
+
 impl Collapse {
     #[inline(never)]
     fn plan(bin: &[Node], block: u32, max_leaf: usize) -> Collapse {
@@ -239,10 +267,11 @@ impl Collapse {
             if r >= n {
                 continue;
             }
+            let (lc, rc) = (c.slot_costs(l), c.slot_costs(r));
             // as an 8-wide node: the children share its eight slots
             let mut best = (f32::INFINITY, 1u8);
             for i in 1..WIDTH {
-                let v = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + WIDTH - i - 1];
+                let v = lc[i - 1] + rc[WIDTH - i - 1];
                 if v < best.0 {
                     best = (v, i as u8);
                 }
@@ -250,26 +279,25 @@ impl Collapse {
             c.node_split[k] = best.1;
             let node_cost = NODE8_COST * area + best.0;
             // one slot: a leaf (when small enough) or a node
-            let (one, why) = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
+            let one = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
                 (leaf_cost, Choice::Leaf)
             } else {
                 (node_cost, Choice::Node)
             };
-            c.cost[base] = one;
-            c.choice[base] = why;
-            for j in 2..=WIDTH {
-                let mut v = (c.cost[base + j - 2], c.choice[base + j - 2]);
-                for i in 1..j {
-                    let s = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + j - i - 1];
-                    if s < v.0 {
-                        v = (s, Choice::Split(i as u8));
-                    }
-                }
-                c.cost[base + j - 1] = v.0;
-                c.choice[base + j - 1] = v.1;
-            }
+            let (cost, choice) = shared_slots(&lc, &rc, one);
+            c.cost[base..base + WIDTH].copy_from_slice(&cost);
+            c.choice[base..base + WIDTH].copy_from_slice(&choice);
         }
         c
+    }
+
+    /// The least costs of binary node `k`'s subtree in 1..=8 slots (infinite if unknown).
+    #[inline(always)]
+    fn slot_costs(&self, k: usize) -> [f32; WIDTH] {
+        self.cost
+            .get(WIDTH * k..WIDTH * (k + 1))
+            .and_then(|c| <[f32; WIDTH]>::try_from(c).ok())
+            .unwrap_or([f32::INFINITY; WIDTH])
     }
 
     /// The primitive range of binary node `k`, as a leaf's (first, count).

@@ -242,14 +242,17 @@ fn side_cost(b: &Aabb, count: u32, block: u32) -> f32 {
 }
 
 /// Moves the references of `refs` whose bin on `s.axis` is at most `s.bin` to the front;
-/// returns their number and both sides' extents.
-#[inline(never)]
+/// returns their number and both sides' extents. The bin test is [`Mapping::bin`]'s without
+/// the integers: a truncation is at most `s.bin` exactly when its argument is below
+/// `s.bin + 1` (the cap at the last bin does not matter, as `s.bin` is below it).
 fn partition(refs: &mut [BuildRef], m: &Mapping, s: &Split) -> (usize, Extent, Extent) {
+    let (axis, limit) = (s.axis.min(2), Vec3A::splat((s.bin + 1) as f32));
+    let left_of =
+        |r: &BuildRef| ((r.centroid() - m.lo) * m.scale).cmplt(limit).bitmask() >> axis & 1 != 0;
     let (mut left, mut right) = (Extent::EMPTY, Extent::EMPTY);
     let (mut l, mut r) = (0, refs.len());
     while l < r {
-        let k = m.bin(&refs[l])[s.axis & 3];
-        if k <= s.bin {
+        if left_of(&refs[l]) {
             left.add(&refs[l]);
             l += 1;
         } else {

@@ -4,7 +4,7 @@
 //! same triangles, and whose tree quality it reports ([`TriangleTree::sah`]).
 
 use super::{sah, Bvh, LEAF_MIN_TRIANGLES};
-use crate::geometry::{Aabb, Shape};
+use crate::geometry::Aabb;
 use crate::tri4::TriBlocks;
 use crate::{memory, Error};
 use glam::Vec3A;
@@ -31,16 +31,10 @@ impl TriangleTree {
             format!("the BVH of {} triangles", tris.len())
         })?;
         drop(boxes);
-        let mut shapes: Vec<Shape> = memory::try_with_capacity(order.len(), what)?;
-        shapes.extend(order.iter().filter_map(|&i| {
-            let [v0, v1, v2] = *tris.get(i as usize)?;
-            Some(Shape::Triangle {
-                v0,
-                e1: v1 - v0,
-                e2: v2 - v0,
-            })
-        }));
-        let blocks = TriBlocks::build(&mut bvh, &shapes);
+        let blocks = TriBlocks::build_from(&mut bvh, |k| {
+            let [v0, v1, v2] = *tris.get(*order.get(k)? as usize)?;
+            Some((v0, v1 - v0, v2 - v0))
+        });
         Ok(TriangleTree { bvh, blocks })
     }
 
