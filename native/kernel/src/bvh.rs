@@ -1,9 +1,9 @@
 //! Bounding volume hierarchy: binned SAH build, 8-wide flattened nodes, ordered traversal.
 //!
-//! Build: a binary tree with binned SAH (32 bins on each axis, the three axes binned in one
-//! pass over primitive references kept in the order of their range, iterative, depth-capped)
-//! in 32-byte nodes (box + first/count packed in the w lanes, children adjacent). For
-//! triangles, which are met four at a time (the `tri4` module), the SAH counts a leaf's cost in
+//! Build: a binary tree with binned SAH (up to 32 bins on each axis, fewer for small nodes,
+//! the three axes binned in one pass over 32-byte primitive references partitioned in place;
+//! iterative, depth-capped: the `binned` module) in 32-byte nodes (box + first/count packed
+//! in the w lanes, children adjacent). For triangles, which are met four at a time (the `tri4` module), the SAH counts a leaf's cost in
 //! blocks of four. The binary tree is then collapsed into 8-wide nodes (`Node8`: the eight
 //! child boxes in SoA layout, 256 bytes, i.e. 32 bytes per child) by SAH: bottom-up, the least
 //! cost of each binary subtree as at most 1..8 children of a wide node (a leaf, a small
@@ -1473,31 +1473,8 @@ mod stats_report {
             blocks,
             slots as f64 / bvh.nodes.len() as f64
         );
-        // Embree's SAH figure (its `verbose=2` statistics): every inner node's area at cost 1
-        // and every leaf's times its blocks of four, over the root's area
-        let child = |n: &Node8, i: usize| Aabb {
-            min: Vec3A::from([0, 1, 2].map(|a| n.bounds[a][i])),
-            max: Vec3A::from([0, 1, 2].map(|a| n.bounds[3 + a][i])),
-        };
-        let mut sah = 0.0f64;
-        let mut root = Aabb::EMPTY;
-        for (k, n) in bvh.nodes.iter().enumerate() {
-            for i in (0..WIDTH).filter(|&i| n.count[i] != EMPTY) {
-                let cost = match n.count[i] {
-                    0 => 1,
-                    c => block_leaf_len(c as usize).unwrap_or(c as usize).div_ceil(4),
-                };
-                sah += child(n, i).half_area() as f64 * cost as f64;
-                if k == 0 {
-                    root = root.union(child(n, i));
-                }
-            }
-        }
-        let root = root.half_area() as f64;
-        println!(
-            "SAH as Embree counts it {:.3}",
-            (sah + root) / root.max(1e-30)
-        );
+        // Embree's SAH figure (its `verbose=2` statistics), see the `sah` module
+        println!("SAH as Embree counts it {:.3}", sah::embree_sah(&bvh.nodes));
         let mut hist = [0usize; 9];
         for l in &leaves {
             hist[l.1.min(8)] += 1;
