@@ -3,7 +3,7 @@
 //! Each node's box and centroid box come from its parent's partition, which gathers them as it
 //! moves each reference, so a node reads its references twice: once to bin them (the three
 //! axes in one pass, bin numbers computed for the three at once), once to partition them.
-//! Nodes get fewer bins the fewer references they hold (4 + count / 16, at most [`BINS`]), so
+//! Nodes get fewer bins the fewer references they hold (4 + count / 4, at most [`BINS`]), so
 //! that the many small nodes near the leaves do not pay for 32 bins they cannot fill.
 
 use super::{blocks_of, leaf_min, max_leaf, split_cost, Node, MAX_DEPTH};
@@ -86,7 +86,7 @@ struct Mapping {
 
 impl Mapping {
     fn new(count: usize, centroids: &Aabb) -> Mapping {
-        let bins = (4 + count / 16).min(BINS);
+        let bins = (4 + count / 4).min(BINS);
         let ext = centroids.max - centroids.min;
         let scale = Vec3A::select(
             ext.cmpgt(Vec3A::ZERO),
