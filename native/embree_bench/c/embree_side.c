@@ -4,11 +4,15 @@
  * times batches of rays through eb_intersect1 (one rtcIntersect1 per ray), eb_intersect16
  * (rtcIntersect16 on consecutive groups of 16 rays; the caller orders coherent rays in tiles)
  * and the shadow forms eb_occluded1 / eb_occluded16. Rays are 6 floats each (origin, unit
- * direction), tnear 0, tfar infinity. Each call returns the number of rays that hit. */
+ * direction), tnear 0, tfar infinity. Each call returns the number of rays that hit.
+ * eb_build_figures builds a mesh's BVH once more for its build time and SAH figure. */
 #include <embree3/rtcore.h>
 #include <stdint.h>
 #include <stddef.h>
 #include <string.h>
+#include <stdio.h>
+#include <time.h>
+#include <unistd.h>
 
 struct eb_scene {
   RTCDevice device;
@@ -31,6 +35,30 @@ static void release_slot(int h) { __atomic_store_n(&the_claimed[h], 0, __ATOMIC_
 
 const char *eb_version(void) { return RTC_VERSION_STRING; }
 
+/* The mesh as Embree's scene on `device`, committed only when `commit` is set; NULL when
+ * Embree refuses a buffer. */
+static RTCScene mesh_scene(RTCDevice device, const float *verts, size_t nverts,
+                           const uint32_t *idx, size_t ntris, int commit) {
+  RTCScene scene = rtcNewScene(device);
+  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  float *v = (float *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                              RTC_FORMAT_FLOAT3, 3 * sizeof(float), nverts);
+  unsigned *t = (unsigned *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                    RTC_FORMAT_UINT3, 3 * sizeof(unsigned), ntris);
+  if (v == NULL || t == NULL) {
+    rtcReleaseGeometry(geom);
+    rtcReleaseScene(scene);
+    return NULL;
+  }
+  memcpy(v, verts, nverts * 3 * sizeof(float));
+  memcpy(t, idx, ntris * 3 * sizeof(unsigned));
+  rtcCommitGeometry(geom);
+  rtcAttachGeometry(scene, geom);
+  rtcReleaseGeometry(geom);
+  if (commit) rtcCommitScene(scene);
+  return scene;
+}
+
 /* Returns a handle >= 0, or -1 when Embree refuses the device or the scene. `config` is the
  * device's configuration string (the caller passes one of a fixed set: "threads=1", optionally
  * with ",isa=..."). */
@@ -44,27 +72,9 @@ int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
     release_slot(h);
     return -1;
   }
-  RTCScene scene = rtcNewScene(device);
-  RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  float *v = (float *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
-                                              RTC_FORMAT_FLOAT3, 3 * sizeof(float), nverts);
-  unsigned *t = (unsigned *)rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
-                                                    RTC_FORMAT_UINT3, 3 * sizeof(unsigned), ntris);
-  if (v == NULL || t == NULL) {
-    rtcReleaseGeometry(geom);
-    rtcReleaseScene(scene);
-    rtcReleaseDevice(device);
-    release_slot(h);
-    return -1;
-  }
-  memcpy(v, verts, nverts * 3 * sizeof(float));
-  memcpy(t, idx, ntris * 3 * sizeof(unsigned));
-  rtcCommitGeometry(geom);
-  rtcAttachGeometry(scene, geom);
-  rtcReleaseGeometry(geom);
-  rtcCommitScene(scene);
-  if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
-    rtcReleaseScene(scene);
+  RTCScene scene = mesh_scene(device, verts, nverts, idx, ntris, 1);
+  if (scene == NULL || rtcGetDeviceError(device) != RTC_ERROR_NONE) {
+    if (scene != NULL) rtcReleaseScene(scene);
     rtcReleaseDevice(device);
     release_slot(h);
     return -1;
@@ -72,6 +82,62 @@ int eb_new(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
   the_scenes[h].device = device;
   the_scenes[h].scene = scene;
   return h;
+}
+
+static double clock_seconds(clockid_t clock) {
+  struct timespec ts;
+  clock_gettime(clock, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* The process's CPU time (all its threads), seconds: on a shared machine, a build's CPU time
+ * varies much less than its wall time. */
+double eb_cpu_seconds(void) { return clock_seconds(CLOCK_PROCESS_CPUTIME_ID); }
+
+/* Builds the mesh's BVH once on a device of `config` (which must ask for `benchmark=1`) and
+ * gives: in commit_s the wall time of rtcCommitScene, in cpu_s the process's CPU time over
+ * it; in build_s and sah the figures of the
+ * BENCHMARK_BUILD line Embree prints in benchmark mode (its own clock around the BVH build,
+ * from the triangles to the finished tree, and the SAH of its BVH statistics). That line goes
+ * to the standard output, which is sent to a temporary file for the commit (the process's
+ * file descriptor 1: call with no other thread writing to it). Returns 0, or -1 when the
+ * device, the scene or the capture fails or no such line was printed. */
+int eb_build_figures(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
+                     const char *config, double *commit_s, double *cpu_s, double *build_s,
+                     double *sah) {
+  RTCDevice device = rtcNewDevice(config);
+  if (device == NULL) return -1;
+  RTCScene scene = mesh_scene(device, verts, nverts, idx, ntris, 0);
+  FILE *capture = tmpfile();
+  int saved = dup(1);
+  if (scene == NULL || capture == NULL || saved < 0) {
+    if (scene != NULL) rtcReleaseScene(scene);
+    if (capture != NULL) fclose(capture);
+    if (saved >= 0) close(saved);
+    rtcReleaseDevice(device);
+    return -1;
+  }
+  fflush(stdout);
+  int redirected = dup2(fileno(capture), 1) >= 0;
+  double t0 = clock_seconds(CLOCK_MONOTONIC), c0 = eb_cpu_seconds();
+  rtcCommitScene(scene);
+  *cpu_s = eb_cpu_seconds() - c0;
+  *commit_s = clock_seconds(CLOCK_MONOTONIC) - t0;
+  fflush(stdout);
+  dup2(saved, 1);
+  close(saved);
+  int ok = redirected && rtcGetDeviceError(device) == RTC_ERROR_NONE;
+  int found = 0;
+  char line[512];
+  rewind(capture);
+  while (ok && !found && fgets(line, sizeof line, capture) != NULL) {
+    double rate;
+    found = sscanf(line, "BENCHMARK_BUILD %lf %lf %lf", build_s, &rate, sah) == 3;
+  }
+  fclose(capture);
+  rtcReleaseScene(scene);
+  rtcReleaseDevice(device);
+  return ok && found ? 0 : -1;
 }
 
 void eb_free(int h) {

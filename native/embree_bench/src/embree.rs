@@ -15,7 +15,19 @@ mod ffi {
             ntris: usize,
             config: *const c_char,
         ) -> c_int;
+        pub fn eb_cpu_seconds() -> f64;
         pub fn eb_free(h: c_int);
+        pub fn eb_build_figures(
+            verts: *const f32,
+            nverts: usize,
+            idx: *const u32,
+            ntris: usize,
+            config: *const c_char,
+            commit_s: *mut f64,
+            cpu_s: *mut f64,
+            build_s: *mut f64,
+            sah: *mut f64,
+        ) -> c_int;
         pub fn eb_intersect1(h: c_int, rays: *const f32, n: usize) -> u64;
         pub fn eb_occluded1(h: c_int, rays: *const f32, n: usize) -> u64;
         pub fn eb_intersect16(h: c_int, rays: *const f32, n: usize, coherent: c_int) -> u64;
@@ -108,17 +120,44 @@ impl Isa {
             .map_or("best", |(n, _)| n)
     }
 
-    /// The device configuration: one build thread, and the ISA cap (Embree's own names are
-    /// those of [`Isa::NAMES`]).
+    /// The device configuration: one build thread, the ISA cap (Embree's own names are
+    /// those of [`Isa::NAMES`]), then `extra` (`",benchmark=1"` or nothing).
     #[cfg_attr(not(embree), allow(dead_code))]
-    fn config(self) -> std::ffi::CString {
+    fn config(self, extra: &str) -> std::ffi::CString {
         let cap = match self {
             Isa::Best => String::new(),
             isa => format!(",isa={}", isa.name()),
         };
         // the names hold no NUL
-        std::ffi::CString::new(format!("threads=1{cap}")).unwrap_or_default()
+        std::ffi::CString::new(format!("threads=1{cap}{extra}")).unwrap_or_default()
     }
+}
+
+/// One build of Embree's BVH, timed ([`Embree::build_figures`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildFigures {
+    /// Wall time of `rtcCommitScene`, seconds.
+    pub commit_seconds: f64,
+    /// The process's CPU time over `rtcCommitScene` (all its threads), seconds.
+    pub cpu_seconds: f64,
+    /// Embree's own clock around the BVH build (from the triangles to the finished tree,
+    /// primitive references and leaf blocks included), seconds.
+    pub build_seconds: f64,
+    /// The SAH of its BVH statistics (node traversal 1, a leaf block 1, half areas relative to
+    /// the root's).
+    pub sah: f64,
+}
+
+/// The mesh as the harness takes it: 3 floats a vertex, 3 vertices a triangle, and the
+/// indices 0, 1, 2, ...
+#[cfg_attr(not(embree), allow(dead_code))]
+fn mesh_arrays(tris: &[[Vec3A; 3]]) -> (Vec<f32>, Vec<u32>) {
+    let verts: Vec<f32> = tris
+        .iter()
+        .flat_map(|t| t.iter().flat_map(|v| [v.x, v.y, v.z]))
+        .collect();
+    let idx: Vec<u32> = (0..(3 * tris.len()) as u32).collect();
+    (verts, idx)
 }
 
 /// Rays as the harness takes them: origin and direction, 6 floats each.
@@ -155,18 +194,14 @@ impl Embree {
     pub fn new(tris: &[[Vec3A; 3]], isa: Isa) -> Result<Embree, String> {
         #[cfg(embree)]
         {
-            let verts: Vec<f32> = tris
-                .iter()
-                .flat_map(|t| t.iter().flat_map(|v| [v.x, v.y, v.z]))
-                .collect();
-            let idx: Vec<u32> = (0..(3 * tris.len()) as u32).collect();
+            let (verts, idx) = mesh_arrays(tris);
             // SAFETY: `verts` holds 3 floats per vertex for 3 * tris.len() vertices and `idx`
             // 3 indices per triangle, all below the vertex count; eb_new copies both before
             // returning and keeps no pointer to them; `config` is a NUL-terminated string that
             // outlives the call. Calls on several threads at once are sound: each claims its
             // slot of the C side's table with one atomic exchange, so no two live values share
             // a handle (`scenes_built_on_several_threads_at_once_stay_apart`).
-            let config = isa.config();
+            let config = isa.config("");
             let handle = unsafe {
                 ffi::eb_new(
                     verts.as_ptr(),
@@ -185,6 +220,68 @@ impl Embree {
         {
             let _ = (tris, isa);
             Err(Embree::version().unwrap_err())
+        }
+    }
+
+    /// Builds Embree's BVH over the triangles once more, on a device capped at `isa` in
+    /// benchmark mode, and gives its build time and SAH figure (which Embree prints to the
+    /// standard output: the harness captures file descriptor 1 for the build, so nothing else
+    /// may print meanwhile; this flushes Rust's buffer first).
+    pub fn build_figures(tris: &[[Vec3A; 3]], isa: Isa) -> Result<BuildFigures, String> {
+        #[cfg(embree)]
+        {
+            use std::io::Write;
+            let (verts, idx) = mesh_arrays(tris);
+            let config = isa.config(",benchmark=1");
+            let mut f = BuildFigures {
+                commit_seconds: 0.0,
+                cpu_seconds: 0.0,
+                build_seconds: 0.0,
+                sah: 0.0,
+            };
+            let _ = std::io::stdout().flush();
+            // SAFETY: the arrays are as for eb_new (copied before the call returns, no pointer
+            // kept), `config` is NUL-terminated and outlives the call, and the three outputs
+            // are valid, distinct f64s. The call claims no slot and frees all it makes.
+            let status = unsafe {
+                ffi::eb_build_figures(
+                    verts.as_ptr(),
+                    idx.len(),
+                    idx.as_ptr(),
+                    tris.len(),
+                    config.as_ptr(),
+                    &mut f.commit_seconds,
+                    &mut f.cpu_seconds,
+                    &mut f.build_seconds,
+                    &mut f.sah,
+                )
+            };
+            if status < 0 {
+                return Err(
+                    "Embree refused the device or the scene, or printed no BENCHMARK_BUILD line"
+                        .into(),
+                );
+            }
+            Ok(f)
+        }
+        #[cfg(not(embree))]
+        {
+            let _ = (tris, isa);
+            Err(Embree::version().unwrap_err())
+        }
+    }
+
+    /// The process's CPU time in seconds (all its threads, nanosecond resolution), or `None`
+    /// without the harness.
+    pub fn cpu_seconds() -> Option<f64> {
+        #[cfg(embree)]
+        {
+            // SAFETY: reads a clock; no arguments, no state.
+            Some(unsafe { ffi::eb_cpu_seconds() })
+        }
+        #[cfg(not(embree))]
+        {
+            None
         }
     }
 
@@ -317,6 +414,34 @@ mod tests {
                 }
             });
         }
+    }
+
+    /// Forty unit squares in a row, a triangle pair each: Embree's build reports a time and
+    /// an SAH of at least the root's own 1, as our figure of the same triangles does.
+    #[test]
+    fn build_figures_report_time_and_sah() {
+        let mut tris = Vec::new();
+        for k in 0..40 {
+            let x = k as f32;
+            let q = [
+                Vec3A::new(x, 0.0, 0.0),
+                Vec3A::new(x + 1.0, 0.0, 0.0),
+                Vec3A::new(x + 1.0, 1.0, 0.0),
+                Vec3A::new(x, 1.0, 0.0),
+            ];
+            tris.push([q[0], q[1], q[2]]);
+            tris.push([q[0], q[2], q[3]]);
+        }
+        let f = Embree::build_figures(&tris, Isa::Best).unwrap();
+        assert!((1.0..100.0).contains(&f.sah), "{f:?}");
+        assert!(
+            f.build_seconds > 0.0 && f.commit_seconds >= f.build_seconds,
+            "{f:?}"
+        );
+        let ours = ring_tracer_kernel::bvh::TriangleTree::build(&tris)
+            .unwrap()
+            .sah();
+        assert!((1.0..100.0).contains(&ours), "{ours}");
     }
 
     #[test]

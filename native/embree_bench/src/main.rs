@@ -1,7 +1,7 @@
 //! Ray casting, RingTracer's kernel next to Intel Embree 3, same rays, same run.
 //!
-//! `cargo run --release -p ring_tracer_embree_bench -- [--rounds R] [--size N] [--embree-isa ISA]
-//! MESH.obj...`
+//! `cargo run --release -p ring_tracer_embree_bench -- [--rounds R] [--size N] [--builds B]
+//! [--embree-isa ISA] MESH.obj...`
 //!
 //! `--embree-isa` caps the instruction set of Embree's device (`best`, the default: the widest
 //! the CPU has; `sse4.2`, `avx`, `avx2`, `avx512`). On a CPU with AVX-512 Embree's packets of
@@ -9,7 +9,13 @@
 //! leaves' tests across rays (AVX or AVX2 elsewhere); `--embree-isa avx2` shows how much of the
 //! gap is the width.
 //!
-//! For each mesh: both BVHs are built once, then R rounds (default 3) each time every
+//! For each mesh, first the BVH builds: B times each (default 5), ours and Embree's
+//! alternating, from the mesh's triangles (ours: [`ring_tracer_kernel::bvh::TriangleTree`], the
+//! boxes, the binary SAH build, the collapse into 8-wide nodes and the leaves' blocks of four;
+//! Embree: its own clock around its BVH build on a device with one build thread, from its
+//! `BENCHMARK_BUILD` line, and the wall time of `rtcCommitScene`), the medians, and the SAH
+//! figure of both trees by the definition of Embree's BVH statistics. Then both BVHs are
+//! built once more for tracing, and R rounds (default 3) each time every
 //! measurement below, ours and Embree's alternating, and the table gives each one's range
 //! over the rounds (Mrays/s, the machine may be busy: compare columns of one run only).
 //! Rays ([`ring_tracer_kernel::raysets`]): N x N primary rays (default 1024) of the default
@@ -26,8 +32,10 @@
 //!
 //! Without Embree's headers at build time the bench says so and times ours only.
 
-use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
+use ring_tracer_embree_bench::embree::{flat, BuildFigures, Call, Embree, Isa};
 use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
+use ring_tracer_kernel::bvh::TriangleTree;
+use ring_tracer_kernel::glam::Vec3A;
 use ring_tracer_kernel::{Ray, Scene, Scratch};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -91,10 +99,65 @@ impl Figure {
 
 const CHUNK: usize = 4096;
 
+/// The median of `v` (0 when empty).
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Builds both BVHs over `tris` `builds` times, ours and Embree's alternating, and prints the
+/// median times (wall and CPU) and both SAH figures.
+fn build_figures(tris: &[[Vec3A; 3]], builds: usize, isa: Isa) {
+    let (mut wall, mut cpu) = (Vec::new(), Vec::new());
+    let mut theirs = Vec::<BuildFigures>::new();
+    let (mut sah, mut refused) = (0.0, None);
+    for _ in 0..builds {
+        let (t, c) = (Instant::now(), Embree::cpu_seconds());
+        match TriangleTree::build(tris) {
+            Ok(tree) => {
+                wall.push(t.elapsed().as_secs_f64());
+                if let (Some(c), Some(now)) = (c, Embree::cpu_seconds()) {
+                    cpu.push(now - c);
+                }
+                sah = tree.sah();
+            }
+            Err(e) => {
+                println!("  our BVH: {e}");
+                return;
+            }
+        }
+        match Embree::build_figures(tris, isa) {
+            Ok(f) => theirs.push(f),
+            Err(e) => refused = Some(e),
+        }
+    }
+    let cpu = if cpu.is_empty() {
+        String::new()
+    } else {
+        format!(" (CPU {:.4} s)", median(cpu))
+    };
+    println!(
+        "BVH build, median of {builds}, 1 thread: ours {:.4} s{cpu}, SAH {sah:.3}",
+        median(wall)
+    );
+    let of = |f: fn(&BuildFigures) -> f64| median(theirs.iter().map(f).collect());
+    match (theirs.last(), refused) {
+        (Some(last), _) => println!(
+            "  Embree {:.4} s by its own clock (rtcCommitScene {:.4} s, CPU {:.4} s), SAH {:.3}",
+            of(|f| f.build_seconds),
+            of(|f| f.commit_seconds),
+            of(|f| f.cpu_seconds),
+            last.sah
+        ),
+        (None, Some(e)) => println!("  Embree: {e}"),
+        (None, None) => {}
+    }
+}
+
 /// A table row: label, our rays, Embree's (flat), coherent, any-hit.
 type Row<'a> = (&'static str, &'a [Ray], &'a [f32], bool, bool);
 
-fn bench(path: &str, rounds: usize, size: u32, isa: Isa) {
+fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
     let t0 = Instant::now();
     let scene = match Scene::load(Path::new(path)) {
         Ok(s) => s,
@@ -124,6 +187,7 @@ fn bench(path: &str, rounds: usize, size: u32, isa: Isa) {
             tris.len()
         ),
     }
+    build_figures(&tris, builds, isa);
     let b = scene.bounds();
     let RaySets { tiled, incoherent } = RaySets::new(b, size);
     let n = tiled.len();
@@ -234,18 +298,22 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let mut rounds = 3;
     let mut size = 1024;
+    let mut builds = 5;
     let mut isa = Isa::Best;
     let mut meshes = Vec::new();
     while let Some(a) = args.next() {
         match a.as_str() {
             "--rounds" => rounds = args.next().and_then(|v| v.parse().ok()).unwrap_or(rounds),
             "--size" => size = args.next().and_then(|v| v.parse().ok()).unwrap_or(size),
+            "--builds" => builds = args.next().and_then(|v| v.parse().ok()).unwrap_or(builds),
             "--embree-isa" => isa = Isa::from_arg(args.next()),
             _ => meshes.push(a),
         }
     }
     if meshes.is_empty() {
-        eprintln!("usage: embree_bench [--rounds R] [--size N] [--embree-isa ISA] MESH.obj...");
+        eprintln!(
+            "usage: embree_bench [--rounds R] [--size N] [--builds B] [--embree-isa ISA] MESH.obj..."
+        );
         std::process::exit(2);
     }
     match Embree::version() {
@@ -259,6 +327,6 @@ fn main() {
         Err(e) => println!("{e}"),
     }
     for m in &meshes {
-        bench(m, rounds.max(1), size.max(4), isa);
+        bench(m, rounds.max(1), size.max(4), builds.max(1), isa);
     }
 }

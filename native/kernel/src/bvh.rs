@@ -1,9 +1,9 @@
 //! Bounding volume hierarchy: binned SAH build, 8-wide flattened nodes, ordered traversal.
 //!
-//! Build: a binary tree with binned SAH (32 bins on each axis, the three axes binned in one
-//! pass over primitive references kept in the order of their range, iterative, depth-capped)
-//! in 32-byte nodes (box + first/count packed in the w lanes, children adjacent). For
-//! triangles, which are met four at a time (the `tri4` module), the SAH counts a leaf's cost in
+//! Build: a binary tree with binned SAH (up to 32 bins on each axis, fewer for small nodes,
+//! the three axes binned in one pass over 32-byte primitive references partitioned in place;
+//! iterative, depth-capped: the `binned` module) in 32-byte nodes (box + first/count packed
+//! in the w lanes, children adjacent). For triangles, which are met four at a time (the `tri4` module), the SAH counts a leaf's cost in
 //! blocks of four. The binary tree is then collapsed into 8-wide nodes (`Node8`: the eight
 //! child boxes in SoA layout, 256 bytes, i.e. 32 bytes per child) by SAH: bottom-up, the least
 //! cost of each binary subtree as at most 1..8 children of a wide node (a leaf, a small
@@ -42,8 +42,16 @@ use crate::ray::Ray;
 use crate::{limits, Error};
 use glam::{Vec3A, Vec4};
 
-/// Number of SAH bins per axis.
-const BINS: usize = 32;
+mod binned;
+mod sah;
+mod triangle_tree;
+
+use binned::build_binary;
+#[cfg(test)]
+use binned::BuildRef;
+
+pub use triangle_tree::TriangleTree;
+
 /// Leaves never hold more than this unless the primitives cannot be separated.
 const MAX_LEAF: usize = 8;
 /// Build depth cap (leaves below it are forced), bounding tree depth on pathological input.
@@ -132,88 +140,19 @@ impl Node {
     }
 }
 
-#[derive(Clone, Copy)]
-struct Bin {
-    bounds: Aabb,
-    count: u32,
-}
-
-const EMPTY_BIN: Bin = Bin {
-    bounds: Aabb::EMPTY,
-    count: 0,
-};
-
 /// Leaves at most this big are never split: for primitives tested one at a time.
 pub(crate) const LEAF_MIN: usize = 2;
 /// For triangles only, tested four at a time ([`crate::tri4`]): a leaf of up to four costs
 /// one test, and the SAH counts a leaf's cost in blocks of four.
 pub(crate) const LEAF_MIN_TRIANGLES: usize = 4;
 
-/// A primitive reference during the build: its box and centre, kept in the order of the
-/// primitive array so that every pass over a node's range reads memory in sequence.
-#[derive(Clone, Copy)]
-struct BuildRef {
-    bounds: Aabb,
-    centre: Vec3A,
-}
-
-/// Tests needed for `n` primitives met `block` at a time.
+/// Tests needed for `n` primitives met `block` at a time (`block` a power of two, as
+/// [`block_size`] gives: a shift and a mask rather than a division, which the binning's sweeps
+/// make per bin).
 #[inline(always)]
 fn blocks_of(n: u32, block: u32) -> f32 {
-    n.div_ceil(block) as f32
-}
-
-/// The best binned-SAH split of `refs` over the three axes at once: (cost, axis, bin), cost as
-/// the children's area-weighted block counts (infinite when no split separates anything).
-fn best_split(refs: &[BuildRef], cb: &Aabb, block: u32) -> (f32, usize, usize) {
-    let ext = cb.max - cb.min;
-    let lo = cb.min;
-    // a flat axis gets scale 0: everything in bin 0, which offers no split
-    let scale = Vec3A::select(
-        ext.cmpgt(Vec3A::ZERO),
-        Vec3A::splat(BINS as f32 * 0.999_99) / ext,
-        Vec3A::ZERO,
-    );
-    let mut bins = [[EMPTY_BIN; BINS]; 3];
-    for r in refs {
-        let b = ((r.centre - lo) * scale).to_array();
-        for a in 0..3 {
-            let k = (b[a] as usize).min(BINS - 1);
-            let bin = &mut bins[a][k];
-            bin.count += 1;
-            bin.bounds = bin.bounds.union(r.bounds);
-        }
-    }
-    let mut best = (f32::INFINITY, 0usize, 0usize);
-    for (axis, bins) in bins.iter().enumerate() {
-        let mut right_cost = [0.0f32; BINS];
-        let mut acc = Aabb::EMPTY;
-        let mut c = 0;
-        for k in (1..BINS).rev() {
-            acc = acc.union(bins[k].bounds);
-            c += bins[k].count;
-            right_cost[k] = if c == 0 {
-                f32::NAN
-            } else {
-                acc.half_area() * blocks_of(c, block)
-            };
-        }
-        let mut acc = Aabb::EMPTY;
-        let mut c = 0;
-        for k in 0..BINS - 1 {
-            acc = acc.union(bins[k].bounds);
-            c += bins[k].count;
-            let rc = right_cost[k + 1];
-            if c == 0 || rc.is_nan() {
-                continue;
-            }
-            let cost = acc.half_area() * blocks_of(c, block) + rc;
-            if cost < best.0 {
-                best = (cost, axis, k);
-            }
-        }
-    }
-    best
+    let shift = block.trailing_zeros();
+    ((n >> shift) + u32::from(n & (block - 1) != 0)) as f32
 }
 
 /// Primitives met at once in a leaf: four for triangle blocks, else one.
@@ -228,86 +167,6 @@ fn block_size(leaf_min_chosen: usize) -> u32 {
 /// The largest leaf the build makes unless primitives cannot be separated.
 fn max_leaf(block: u32) -> usize {
     MAX_LEAF.max(2 * block as usize)
-}
-
-/// Binary binned-SAH build; returns the nodes and the primitive order. Leaves of up to
-/// `block` primitives cost one test (they are met `block` at a time).
-fn build_binary(boxes: &[Aabb], leaf_min_chosen: usize) -> (Vec<Node>, Vec<u32>) {
-    let n = boxes.len();
-    let mut order: Vec<u32> = (0..n as u32).collect();
-    if n == 0 {
-        return (Vec::new(), order);
-    }
-    let leaf_min = leaf_min(leaf_min_chosen);
-    let block = block_size(leaf_min_chosen);
-    let max_leaf = max_leaf(block);
-    let mut refs: Vec<BuildRef> = boxes
-        .iter()
-        .map(|&b| BuildRef {
-            bounds: b,
-            centre: b.centre(),
-        })
-        .collect();
-    let mut nodes = Vec::with_capacity(2 * n / leaf_min.max(1) + 1);
-    nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-    // (node index, start, end, depth)
-    let mut work: Vec<(usize, usize, usize, usize)> = vec![(0, 0, n, 0)];
-    while let Some((ni, start, end, depth)) = work.pop() {
-        let rs = &mut refs[start..end];
-        let idx = &mut order[start..end];
-        let mut bounds = Aabb::EMPTY;
-        let mut cb = Aabb::EMPTY;
-        for r in rs.iter() {
-            bounds = bounds.union(r.bounds);
-            cb = cb.grow(r.centre);
-        }
-        let count = end - start;
-        if count <= leaf_min || depth >= MAX_DEPTH {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        let best = best_split(rs, &cb, block);
-        let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
-        let split_cost = split_cost() + best.0 / parent_area;
-        let leaf_cost = blocks_of(count as u32, block);
-        let mid;
-        if best.0.is_finite() && (split_cost < leaf_cost || count > max_leaf) {
-            let (axis, bin) = (best.1, best.2);
-            let lo = cb.min[axis];
-            let scale = BINS as f32 * 0.999_99 / (cb.max[axis] - lo);
-            // in-place partition of the references and the order alike
-            let mut l = 0;
-            let mut r = rs.len();
-            while l < r {
-                let b = (((rs[l].centre[axis] - lo) * scale) as usize).min(BINS - 1);
-                if b <= bin {
-                    l += 1;
-                } else {
-                    r -= 1;
-                    rs.swap(l, r);
-                    idx.swap(l, r);
-                }
-            }
-            mid = start + l;
-        } else if count > max_leaf {
-            // centroids coincide: split by position in the array to bound leaf size
-            mid = start + count / 2;
-        } else {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        if mid == start || mid == end {
-            nodes[ni] = Node::new(bounds, start as u32, count as u32);
-            continue;
-        }
-        let left = nodes.len();
-        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-        nodes.push(Node::new(Aabb::EMPTY, 0, 0));
-        nodes[ni] = Node::new(bounds, left as u32, 0);
-        work.push((left + 1, mid, end, depth + 1));
-        work.push((left, start, mid, depth + 1));
-    }
-    (nodes, order)
 }
 
 /// Cost of one 8-wide node visit relative to one leaf test (a block of four triangles or one
@@ -342,7 +201,33 @@ enum Choice {
     Split(u8),
 }
 
+/// The least costs (and how they are reached) of a binary node in 1..=8 slots, given its
+/// cost in one slot (`one`) and its children's costs `lc` and `rc` in 1..=8 slots each: in
+/// `j` slots, either as in `j - 1` or `i` slots to the left child and `j - i` to the right.
+#[inline(always)]
+fn shared_slots(
+    lc: &[f32; WIDTH],
+    rc: &[f32; WIDTH],
+    one: (f32, Choice),
+) -> ([f32; WIDTH], [Choice; WIDTH]) {
+    let mut cost = [one.0; WIDTH];
+    let mut choice = [one.1; WIDTH];
+    for j in 2..=WIDTH {
+        let mut v = (cost[j - 2], choice[j - 2]);
+        for i in 1..j {
+            let s = lc[i - 1] + rc[j - i - 1];
+            if s < v.0 {
+                v = (s, Choice::Split(i as u8));
+            }
+        }
+        cost[j - 1] = v.0;
+        choice[j - 1] = v.1;
+    }
+    (cost, choice)
+}
+
 impl Collapse {
+    #[inline(never)]
     fn plan(bin: &[Node], block: u32, max_leaf: usize) -> Collapse {
         let n = bin.len();
         let mut c = Collapse {
@@ -383,10 +268,11 @@ impl Collapse {
             if r >= n {
                 continue;
             }
+            let (lc, rc) = (c.slot_costs(l), c.slot_costs(r));
             // as an 8-wide node: the children share its eight slots
             let mut best = (f32::INFINITY, 1u8);
             for i in 1..WIDTH {
-                let v = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + WIDTH - i - 1];
+                let v = lc[i - 1] + rc[WIDTH - i - 1];
                 if v < best.0 {
                     best = (v, i as u8);
                 }
@@ -394,26 +280,25 @@ impl Collapse {
             c.node_split[k] = best.1;
             let node_cost = NODE8_COST * area + best.0;
             // one slot: a leaf (when small enough) or a node
-            let (one, why) = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
+            let one = if (count as usize) <= max_leaf && leaf_cost <= node_cost {
                 (leaf_cost, Choice::Leaf)
             } else {
                 (node_cost, Choice::Node)
             };
-            c.cost[base] = one;
-            c.choice[base] = why;
-            for j in 2..=WIDTH {
-                let mut v = (c.cost[base + j - 2], c.choice[base + j - 2]);
-                for i in 1..j {
-                    let s = c.cost[WIDTH * l + i - 1] + c.cost[WIDTH * r + j - i - 1];
-                    if s < v.0 {
-                        v = (s, Choice::Split(i as u8));
-                    }
-                }
-                c.cost[base + j - 1] = v.0;
-                c.choice[base + j - 1] = v.1;
-            }
+            let (cost, choice) = shared_slots(&lc, &rc, one);
+            c.cost[base..base + WIDTH].copy_from_slice(&cost);
+            c.choice[base..base + WIDTH].copy_from_slice(&choice);
         }
         c
+    }
+
+    /// The least costs of binary node `k`'s subtree in 1..=8 slots (infinite if unknown).
+    #[inline(always)]
+    fn slot_costs(&self, k: usize) -> [f32; WIDTH] {
+        self.cost
+            .get(WIDTH * k..WIDTH * (k + 1))
+            .and_then(|c| <[f32; WIDTH]>::try_from(c).ok())
+            .unwrap_or([f32::INFINITY; WIDTH])
     }
 
     /// The primitive range of binary node `k`, as a leaf's (first, count).
@@ -827,6 +712,7 @@ impl Bvh {
     }
 
     /// The binary tree `bin` collapsed into 8-wide nodes.
+    #[inline(never)]
     fn collapse(bin: &[Node], order: Vec<u32>, leaf_min: usize) -> (Bvh, Vec<u32>) {
         let block = block_size(leaf_min);
         let plan = Collapse::plan(bin, block, max_leaf(block));
@@ -1529,31 +1415,8 @@ mod stats_report {
             blocks,
             slots as f64 / bvh.nodes.len() as f64
         );
-        // Embree's SAH figure (its `verbose=2` statistics): every inner node's area at cost 1
-        // and every leaf's times its blocks of four, over the root's area
-        let child = |n: &Node8, i: usize| Aabb {
-            min: Vec3A::from([0, 1, 2].map(|a| n.bounds[a][i])),
-            max: Vec3A::from([0, 1, 2].map(|a| n.bounds[3 + a][i])),
-        };
-        let mut sah = 0.0f64;
-        let mut root = Aabb::EMPTY;
-        for (k, n) in bvh.nodes.iter().enumerate() {
-            for i in (0..WIDTH).filter(|&i| n.count[i] != EMPTY) {
-                let cost = match n.count[i] {
-                    0 => 1,
-                    c => block_leaf_len(c as usize).unwrap_or(c as usize).div_ceil(4),
-                };
-                sah += child(n, i).half_area() as f64 * cost as f64;
-                if k == 0 {
-                    root = root.union(child(n, i));
-                }
-            }
-        }
-        let root = root.half_area() as f64;
-        println!(
-            "SAH as Embree counts it {:.3}",
-            (sah + root) / root.max(1e-30)
-        );
+        // Embree's SAH figure (its `verbose=2` statistics), see the `sah` module
+        println!("SAH as Embree counts it {:.3}", sah::embree_sah(&bvh.nodes));
         let mut hist = [0usize; 9];
         for l in &leaves {
             hist[l.1.min(8)] += 1;

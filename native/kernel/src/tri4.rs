@@ -146,19 +146,39 @@ pub(crate) struct TriBlocks {
 }
 
 impl TriBlocks {
+    /// The number of blocks.
+    pub fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
     /// Blocks for every leaf of `bvh` over `shapes` (in BVH order) that holds triangles only;
     /// each such leaf is rewritten to name its blocks ([`Bvh::mark_block_leaves`]).
     pub fn build(bvh: &mut Bvh, shapes: &[Shape]) -> TriBlocks {
-        let mut blocks = Vec::new();
+        TriBlocks::build_from(bvh, |k| match shapes.get(k)? {
+            Shape::Triangle { v0, e1, e2 } => Some((*v0, *e1, *e2)),
+            _ => None,
+        })
+    }
+
+    /// [`TriBlocks::build`] over primitives given by `tri(k)`: primitive `k` (in BVH order)
+    /// as a triangle `(v0, e1, e2)`, or `None` for any other primitive. The blocks' array is
+    /// allocated once, at the size the leaves need.
+    pub fn build_from(
+        bvh: &mut Bvh,
+        tri: impl Fn(usize) -> Option<(Vec3A, Vec3A, Vec3A)>,
+    ) -> TriBlocks {
+        let needed: usize = bvh
+            .nodes
+            .iter()
+            .flat_map(|n| n.counts().iter())
+            .filter(|&&c| c != 0 && c != crate::bvh::EMPTY && c & crate::bvh::LEAF_BLOCKS == 0)
+            .map(|&c| (c as usize).div_ceil(4))
+            .sum();
+        let mut blocks = Vec::with_capacity(needed);
         let mut tris = Vec::with_capacity(8);
         bvh.mark_block_leaves(|first, count| {
-            let range = shapes.get(first..first + count)?;
             tris.clear();
-            for s in range {
-                if let Shape::Triangle { v0, e1, e2 } = *s {
-                    tris.push((v0, e1, e2));
-                }
-            }
+            tris.extend((first..first + count).map_while(&tri));
             if tris.len() != count || count == 0 || blocks.len() >= (u32::MAX / 2) as usize {
                 return None;
             }

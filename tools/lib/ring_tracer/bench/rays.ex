@@ -3,7 +3,7 @@ defmodule RingTracer.Bench.Rays do
   Rays per second in the kernel alone, next to Intel Embree's.
 
       mix ring_tracer.bench rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024]
-                                 [--embree-isa best|sse4.2|avx|avx2|avx512]
+                                 [--builds 5] [--embree-isa best|sse4.2|avx|avx2|avx512]
 
   For each mesh (the SPD teapot tessellation is
   `../shared/scenes/meshes/spd_teapot_s12_tess.obj`): the same triangles and the
@@ -18,6 +18,10 @@ defmodule RingTracer.Bench.Rays do
   `--embree-isa` caps the instruction set Embree may use (by default the
   widest the CPU has: AVX-512 where there is, which ours uses only in its
   packets' leaf tests).
+  First, for each mesh, both BVH builds from its triangles, `builds` times
+  each, alternating: the medians of their wall and CPU times (Embree's by its
+  own clock too) and both trees' SAH figures, by the definition of Embree's
+  BVH statistics (docs/benchmarks.md).
   `cargo run --release -p ring_tracer_kernel --example big_mesh -- OUT.obj`
   writes a 600k-triangle mesh.
   """
@@ -28,12 +32,15 @@ defmodule RingTracer.Bench.Rays do
   def help, do: @help
 
   @impl RingTracer.Bench
-  def usage, do: "rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024] [--embree-isa ISA]"
+  def usage,
+    do: "rays MESH.obj [MORE.obj ...] [--rounds 3] [--size 1024] [--builds 5] [--embree-isa ISA]"
 
   @impl RingTracer.Bench
   def run(argv) do
     {opts, meshes, _} =
-      OptionParser.parse(argv, strict: [rounds: :integer, size: :integer, embree_isa: :string])
+      OptionParser.parse(argv,
+        strict: [rounds: :integer, size: :integer, builds: :integer, embree_isa: :string]
+      )
 
     if meshes == [], do: Mix.raise("usage: mix ring_tracer.bench #{usage()}")
     cargo = System.find_executable("cargo") || Path.expand("~/.cargo/bin/cargo")
