@@ -51,10 +51,17 @@ defmodule RingTracer.Farm.RestartTest do
     {:ok, id} = Farm.submit(head, scene, width: @w, height: @h, atoms: 4, user: "ann")
     {:ok, queued} = Farm.submit(head, scene, width: 32, height: 24, frames: 1..2, user: "bob")
 
-    # Killed part way: some frames done, not all.
+    # Killed part way: some frames done, not all. The workers are stopped
+    # (SIGSTOP) from the moment three are done until the head is dead, so
+    # that however late this process runs on a loaded machine, the job
+    # cannot finish before the kill.
+    os_pids = for {p, n} <- workers, do: Peers.call(p, n, System, :pid, [])
+    on_exit(fn -> System.cmd("kill", ["-CONT" | os_pids], stderr_to_stdout: true) end)
     assert Wait.eventually(fn -> length(elem(Farm.status(head, id), 1).done) >= 3 end, 3000)
+    {_, 0} = System.cmd("kill", ["-STOP" | os_pids])
     before = done_at(peer, head, id)
     kill9(peer, head)
+    {_, 0} = System.cmd("kill", ["-CONT" | os_pids])
     assert map_size(before) < 48
 
     {peer, ^head} = start_head(name, dir)
