@@ -71,6 +71,12 @@ defmodule RingTracer.DistributedTest do
       :rand.seed(:exsss, {unquote(seed), 1, 1})
       [n1 | _] = nodes
 
+      # The previous test's children are gone from n1 (their job's end
+      # stops them asynchronously): every child there is this job's.
+      assert RingTracer.Test.Wait.eventually(fn ->
+               :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children]) == []
+             end)
+
       # The victim is picked at the first atom, so the kill itself is one
       # asynchronous signal; with every child slowed down 20x at least 30
       # atoms (about 10 ms of work) remain when it lands, and the victim still
@@ -79,8 +85,7 @@ defmodule RingTracer.DistributedTest do
         render_then(
           nodes,
           fn ->
-            # The supervisor may still list a child of the previous job that
-            # has exited (it handles the exit later): only living ones.
+            # Only living ones: a child's exit is seen by its supervisor later.
             kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
             living = for {_, pid, _, _} <- kids, :erpc.call(n1, Process, :alive?, [pid]), do: pid
             Enum.random(living)
