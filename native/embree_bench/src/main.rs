@@ -33,10 +33,10 @@
 //! Without Embree's headers at build time the bench says so and times ours only.
 
 use ring_tracer_embree_bench::embree::{flat, BuildFigures, Call, Embree, Isa};
-use ring_tracer_embree_bench::{shadow_rays, single_hits, RaySets};
+use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets};
 use ring_tracer_kernel::bvh::TriangleTree;
 use ring_tracer_kernel::glam::Vec3A;
-use ring_tracer_kernel::{Ray, Scene, Scratch};
+use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -213,22 +213,7 @@ fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
     for _ in 0..rounds {
         for (k, &(_, rays, fr, coherent, any)) in rows.iter().enumerate() {
             let ours_single = |part: &[Ray]| single_hits(&scene, part, any);
-            let ours_packet = |part: &[Ray]| {
-                let mut s = Scratch::new();
-                let mut hits = 0u64;
-                for p in part.chunks(16) {
-                    if any {
-                        let mut out = [false; 16];
-                        scene.occluded_packet(p, f32::INFINITY, &mut s, &mut out);
-                        hits += out.iter().filter(|&&h| h).count() as u64;
-                    } else {
-                        let mut out = [None; 16];
-                        scene.intersect_packet(p, f32::INFINITY, &mut s, &mut out);
-                        hits += out.iter().filter(|h| h.is_some()).count() as u64;
-                    }
-                }
-                hits
-            };
+            let ours_packet = |part: &[Ray]| packet_hits(&scene, part, any);
             let (one, sixteen) = if any {
                 (Call::Occluded1, Call::Occluded16 { coherent })
             } else {
