@@ -1,19 +1,7 @@
 defmodule RingTracer.CLI.ServerFaultsTest do
   # `ringtracer serve` under faults: a failing job beside others, a killed
   # server, no file descriptors left, a preview's token (`RingTracer.CLI.ServerTest`).
-  use ExUnit.Case, async: true
-
-  import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
-  import RingTracer.Test.Serve
-
-  alias RingTracer.Test.Serve
-
-  @moduletag :distributed
-  @moduletag timeout: 240_000
-
-  setup_all do
-    {:ok, Serve.folder()}
-  end
+  use RingTracer.Test.ServeCase, async: true
 
   test "a job that fails takes no other with it, and each client prints its own reason", ctx do
     {socket, server, _vm} = own_server(ctx, "isolation")

@@ -3,22 +3,14 @@ defmodule RingTracer.CLI.ServerTest do
   # processes, from another folder, interrupted with real signals. The
   # servers that stop answering, and other faults, are in
   # `server_wedged_test.exs` and `server_faults_test.exs`.
-  use ExUnit.Case, async: true
-
-  import RingTracer.Test.PortOutput, only: [collect: 1, until: 2]
-  import RingTracer.Test.Serve
+  use RingTracer.Test.ServeCase, async: true
 
   alias RingTracer.CLI.Server
-  alias RingTracer.Test.Serve
-
-  @moduletag :distributed
-  @moduletag timeout: 240_000
 
   doctest RingTracer.CLI.Server.Session
 
-  setup_all do
-    folder = Serve.folder()
-    {:ok, Map.merge(folder, Serve.shared_server(folder.dir))}
+  setup_all ctx do
+    {:ok, Serve.shared_server(ctx.dir)}
   end
 
   test "renders from the caller's folder, the same image as a VM of its own", ctx do

@@ -1,19 +1,7 @@
 defmodule RingTracer.CLI.ServerWedgedTest do
   # `ringtracer serve` stopped (SIGSTOP) before or during a render: what its
   # clients do, and what it does once woken (`RingTracer.CLI.ServerTest`).
-  use ExUnit.Case, async: true
-
-  import RingTracer.Test.PortOutput, only: [collect: 1]
-  import RingTracer.Test.Serve
-
-  alias RingTracer.Test.Serve
-
-  @moduletag :distributed
-  @moduletag timeout: 240_000
-
-  setup_all do
-    {:ok, Serve.folder()}
-  end
+  use RingTracer.Test.ServeCase, async: true
 
   test "a stopped server: the render goes to a VM of its own within seconds, and never runs twice",
        ctx do
