@@ -117,9 +117,11 @@ defmodule RingTracer.CLITest do
 
   for {signal, status} <- [{"INT", 130}, {"TERM", 143}] do
     test "SIG#{signal} while the VM boots still cancels: status #{status}, no file", ctx do
-      # Slowed down, so that however late a loaded machine lets the signal
+      # Slowed down and large enough to take seconds (at 64 pixels wide it
+      # took half a second, and a loaded machine once let the whole render
+      # end before `kill` ran), so that however late the signal comes
       # through, the render has not ended by then.
-      {port, pid} = start(ctx, ~w(render mine.nff -o early.png --width 64 --speeds 400))
+      {port, pid} = start(ctx, ~w(render mine.nff -o early.png --width 256 --speeds 400))
       # The launcher's VM has just been started: the signal comes while it
       # boots, or while the scene parses (the launcher holds it until the VM
       # takes it).

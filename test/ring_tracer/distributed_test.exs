@@ -77,10 +77,11 @@ defmodule RingTracer.DistributedTest do
                :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children]) == []
              end)
 
-      # The victim is picked at the first atom, so the kill itself is one
-      # asynchronous signal; with every child slowed down 20x at least 30
-      # atoms (about 10 ms of work) remain when it lands, and the victim still
-      # holds atoms, so the job cannot end before its DOWN reaches the parent.
+      # The victim is picked at the first atom and held still from then on
+      # (it keeps the atoms it was dealt), so that the job cannot end before
+      # its DOWN reaches the parent however late the kill lands on a busy
+      # machine; the kill comes after a random number of atoms, traced by
+      # the others meanwhile.
       {:ok, result} =
         render_then(
           nodes,
@@ -88,7 +89,9 @@ defmodule RingTracer.DistributedTest do
             # Only living ones: a child's exit is seen by its supervisor later.
             kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
             living = for {_, pid, _, _} <- kids, :erpc.call(n1, Process, :alive?, [pid]), do: pid
-            Enum.random(living)
+            victim = Enum.random(living)
+            :ok = RingTracer.Test.Hold.process(victim)
+            victim
           end,
           &Process.exit(&1, :kill)
         )
