@@ -1,5 +1,7 @@
 defmodule RingTracer.DistributedTest do
   use ExUnit.Case, async: false
+  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
+  @moduletag :second_vm
 
   @moduletag :distributed
   @moduletag timeout: 120_000

@@ -20,6 +20,8 @@ defmodule RingTracer.ProtocolPropertyTest do
   test/ring_tracer/protocol_property_test.exs --include slow` runs more.
   """
   use ExUnit.Case, async: false
+  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
+  @moduletag :second_vm
 
   alias RingTracer.TestScenes
 

@@ -1,5 +1,7 @@
 defmodule Mix.Tasks.RingTracer.ChaosTest do
   use ExUnit.Case, async: false
+  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
+  @moduletag :second_vm
 
   import ExUnit.CaptureIO
 

@@ -6,6 +6,8 @@ defmodule RingTracer.Preview.BrowserTest do
   # every child. Installs chromium with apt-get when missing; without it the
   # test says so and checks nothing.
   use ExUnit.Case, async: false
+  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
+  @moduletag :second_vm
 
   alias RingTracer.Test.{CDP, PNG}
 

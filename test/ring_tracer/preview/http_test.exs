@@ -1,5 +1,7 @@
 defmodule RingTracer.Preview.HTTPTest do
   use ExUnit.Case, async: false
+  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
+  @moduletag :second_vm
   doctest RingTracer.Preview
   doctest RingTracer.Preview.HTTP
 
