@@ -100,8 +100,10 @@ double eb_cpu_seconds(void) { return clock_seconds(CLOCK_PROCESS_CPUTIME_ID); }
  * BENCHMARK_BUILD line Embree prints in benchmark mode (its own clock around the BVH build,
  * from the triangles to the finished tree, and the SAH of its BVH statistics). That line goes
  * to the standard output, which is sent to a temporary file for the commit (the process's
- * file descriptor 1: call with no other thread writing to it). Returns 0, or -1 when the
- * device, the scene or the capture fails or no such line was printed. */
+ * file descriptor 1: call with no other thread writing to it). Returns 0; -1 when the
+ * device, the scene or the capture cannot be made; -2 when file descriptor 1 could not be
+ * redirected; -100 - E when the device reports error E after the commit; -3 when no such
+ * line was printed. */
 int eb_build_figures(const float *verts, size_t nverts, const uint32_t *idx, size_t ntris,
                      const char *config, double *commit_s, double *cpu_s, double *build_s,
                      double *sah) {
@@ -126,18 +128,24 @@ int eb_build_figures(const float *verts, size_t nverts, const uint32_t *idx, siz
   fflush(stdout);
   dup2(saved, 1);
   close(saved);
-  int ok = redirected && rtcGetDeviceError(device) == RTC_ERROR_NONE;
+  enum RTCError error = rtcGetDeviceError(device);
   int found = 0;
   char line[512];
   rewind(capture);
-  while (ok && !found && fgets(line, sizeof line, capture) != NULL) {
+  while (redirected && error == RTC_ERROR_NONE && !found &&
+         fgets(line, sizeof line, capture) != NULL) {
+    /* anywhere in the line: another thread's output without a newline (a test harness's
+     * progress dot) may come first */
+    const char *at = strstr(line, "BENCHMARK_BUILD ");
     double rate;
-    found = sscanf(line, "BENCHMARK_BUILD %lf %lf %lf", build_s, &rate, sah) == 3;
+    found = at != NULL && sscanf(at, "BENCHMARK_BUILD %lf %lf %lf", build_s, &rate, sah) == 3;
   }
   fclose(capture);
   rtcReleaseScene(scene);
   rtcReleaseDevice(device);
-  return ok && found ? 0 : -1;
+  if (!redirected) return -2;
+  if (error != RTC_ERROR_NONE) return -100 - (int)error;
+  return found ? 0 : -3;
 }
 
 void eb_free(int h) {

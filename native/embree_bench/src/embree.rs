@@ -256,13 +256,16 @@ impl Embree {
                     &mut f.sah,
                 )
             };
-            if status < 0 {
-                return Err(
-                    "Embree refused the device or the scene, or printed no BENCHMARK_BUILD line"
-                        .into(),
-                );
+            match status {
+                0 => Ok(f),
+                -1 => Err("Embree refused the device or the scene".into()),
+                -2 => Err("the standard output could not be captured for Embree's build".into()),
+                -3 => Err("Embree's build printed no BENCHMARK_BUILD line".into()),
+                e => Err(format!(
+                    "Embree's build failed with device error {}",
+                    -100 - e
+                )),
             }
-            Ok(f)
         }
         #[cfg(not(embree))]
         {
