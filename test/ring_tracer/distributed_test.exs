@@ -72,35 +72,43 @@ defmodule RingTracer.DistributedTest do
     } do
       :rand.seed(:exsss, {unquote(seed), 1, 1})
       [n1 | _] = nodes
+      ref = make_ref()
 
-      # The previous test's children are gone from n1 (their job's end
-      # stops them asynchronously): every child there is this job's.
-      assert RingTracer.Test.Wait.eventually(fn ->
-               :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children]) == []
-             end)
-
-      # The victim is picked at the first atom and held still from then on
-      # (it keeps the atoms it was dealt), so that the job cannot end before
-      # its DOWN reaches the parent however late the kill lands on a busy
-      # machine; the kill comes after a random number of atoms, traced by
-      # the others meanwhile.
-      {:ok, result} =
-        render_then(
-          nodes,
-          fn ->
-            # Only living ones: a child's exit is seen by its supervisor later.
-            kids = :erpc.call(n1, DynamicSupervisor, :which_children, [RingTracer.Children])
-            living = for {_, pid, _, _} <- kids, :erpc.call(n1, Process, :alive?, [pid]), do: pid
-            victim = Enum.random(living)
-            :ok = RingTracer.Test.Hold.process(victim)
-            victim
-          end,
-          &Process.exit(&1, :kill)
+      # The first atom traced on n1 never comes back, so the child holding
+      # it (the victim) cannot finish, and the job cannot end, before the
+      # kill, however late a busy machine lets this test act; the kill comes
+      # after a random number of the other children's atoms.
+      {:ok, job} =
+        RingTracer.render_async(
+          TestScenes.path(@scene),
+          [
+            nodes: nodes,
+            children: 6,
+            atoms: 10,
+            speeds: [20],
+            kernel: {RingTracer.Test.FaultyKernel, block_first: {n1, self(), ref}}
+          ] ++ @size
         )
+
+      id = job.id
+      assert_receive {:blocked, ^ref, grandchild}, 30_000
+      victim = child_of(n1, grandchild)
+      at = Enum.random(2..30)
+      assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= at, 30_000
+      Process.exit(victim, :kill)
+      assert_receive {RingTracer, ^id, {:ok, result}}, 60_000
 
       assert result.pixels == reference
       assert length(result.failures) == 1
     end
+  end
+
+  # The render child on `node` that `grandchild` was spawned by (linked to).
+  defp child_of(node, grandchild) do
+    {:links, links} = :erpc.call(node, Process, :info, [grandchild, :links])
+    children = :erpc.call(node, DynamicSupervisor, :which_children, [RingTracer.Children])
+    [child] = for {_, pid, _, _} <- children, pid in links, do: pid
+    child
   end
 
   test "losing a whole peer node mid-render still gives the identical image", %{

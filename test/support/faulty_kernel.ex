@@ -8,7 +8,11 @@ defmodule RingTracer.Test.FaultyKernel do
   milliseconds more, drawn at random, before it goes to its child (and
   `:delay` milliseconds more, always); and, with
   `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) as
-  the parent prepares it, as a node that hangs while a job starts.
+  the parent prepares it, as a node that hangs while a job starts; and,
+  with `block_first: {node, pid, ref}`, the first atom traced on that node
+  never comes back: its grandchild sends `{:blocked, ref, grandchild}` to
+  `pid` and waits until it is killed (with its child), so that the child
+  holding it cannot finish, and the job cannot end, before the test acts.
   """
   @behaviour RingTracer.Kernel
 
@@ -26,6 +30,15 @@ defmodule RingTracer.Test.FaultyKernel do
       _ -> :ok
     end
 
+    # One flag per job on the node, set by the first atom traced there.
+    case opts[:block_first] do
+      {node, _pid, ref} when node == node() ->
+        :persistent_term.put({__MODULE__, ref}, :atomics.new(1, []))
+
+      _ ->
+        :ok
+    end
+
     Native.prepare_node(spec, [], owner)
   end
 
@@ -34,6 +47,7 @@ defmodule RingTracer.Test.FaultyKernel do
 
   @impl true
   def trace({context, opts}, first, count, atom) do
+    block_if_first(opts[:block_first])
     pixel = opts[:fail_pixel]
 
     holds? = fn p -> is_integer(p) and p >= first and p < first + count end
@@ -60,4 +74,15 @@ defmodule RingTracer.Test.FaultyKernel do
 
     result
   end
+
+  defp block_if_first({node, pid, ref}) when node == node() do
+    flag = :persistent_term.get({__MODULE__, ref})
+
+    if :atomics.compare_exchange(flag, 1, 0, 1) == :ok do
+      send(pid, {:blocked, ref, self()})
+      Process.sleep(:infinity)
+    end
+  end
+
+  defp block_if_first(_), do: :ok
 end

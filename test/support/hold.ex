@@ -20,35 +20,6 @@ defmodule RingTracer.Test.Hold do
     end
   end
 
-  @doc """
-  Suspends the one process `pid` (on whatever node it runs) and returns once
-  it is suspended; it stays so until it exits or its node stops. A kill
-  still ends it.
-  """
-  @spec process(pid()) :: :ok
-  def process(pid) do
-    ref = make_ref()
-    Node.spawn(node(pid), __MODULE__, :suspend_one_and_wait, [pid, self(), ref])
-
-    receive do
-      {^ref, :held} -> :ok
-    after
-      10_000 -> raise "#{inspect(pid)} was not suspended within 10 s"
-    end
-  end
-
-  @doc false
-  @spec suspend_one_and_wait(pid(), pid(), reference()) :: :ok
-  def suspend_one_and_wait(pid, caller, ref) do
-    monitor = Process.monitor(pid)
-    :erlang.suspend_process(pid)
-    send(caller, {ref, :held})
-
-    receive do
-      {:DOWN, ^monitor, _, _, _} -> :ok
-    end
-  end
-
   @doc false
   @spec suspend_and_wait(pid(), reference()) :: no_return()
   def suspend_and_wait(caller, ref) do
