@@ -231,10 +231,10 @@ defmodule RingTracer.DistributedTest do
     end
   end
 
-  # Renders on `nodes` (and this node), every child slowed down 20x. At the
-  # first atom `pick` chooses a victim; after a random number of atoms (at
-  # most half of the 60) `kill` gets it.
-  defp render_then(nodes, pick, kill, speeds \\ [20]) do
+  # Renders on `nodes` (and this node), the children slowed down by
+  # `speeds`. At the first atom `pick` chooses a victim; after a random
+  # number of atoms (at most half of the 60) `kill` gets it.
+  defp render_then(nodes, pick, kill, speeds) do
     {:ok, job} =
       RingTracer.render_async(
         TestScenes.path(@scene),
