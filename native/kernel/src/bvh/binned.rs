@@ -233,16 +233,18 @@ impl Bins {
         }
     }
 
-    /// The best split of `refs`, whose centroids' box is `centroids`, over `N` bins on each
-    /// axis, and the bins' mapping.
+    /// The best split of `refs`, whose centroids' box is `centroids`, over `used` bins on
+    /// each axis (at most `N`; those past `used` stay empty, and a split with an empty side is
+    /// never the best, so the split is the one `used` bins give), and the bins' mapping.
     #[inline(always)]
     fn split<const AVX: bool, const N: usize>(
         &mut self,
         refs: &[BuildRef],
+        used: usize,
         centroids: &Aabb,
         block: u32,
     ) -> Option<(Split, Mapping)> {
-        let m = Mapping::new(N, centroids);
+        let m = Mapping::new(used.min(N), centroids);
         self.fill::<AVX, N>(refs, &m);
         Some((self.best::<AVX, N>(block)?, m))
     }
@@ -416,10 +418,12 @@ fn divide<const AVX: bool>(
     let [a, b] = refs;
     let (src, dst) = if t.side == 0 { (&*a, b) } else { (&*b, a) };
     let (src, dst) = (src.get(t.start..t.end)?, dst.get_mut(t.start..t.end)?);
-    let best = match count {
-        ..16 => bins.split::<AVX, 8>(src, &t.extent.centroids, z.block),
-        16..64 => bins.split::<AVX, 16>(src, &t.extent.centroids, z.block),
-        _ => bins.split::<AVX, BINS>(src, &t.extent.centroids, z.block),
+    // 4 + count / 4 bins, in loops over 8, 16 or 32 (the bins past a node's own stay empty)
+    let (used, c) = ((4 + count / 4).min(BINS), &t.extent.centroids);
+    let best = match used {
+        ..=8 => bins.split::<AVX, 8>(src, used, c, z.block),
+        9..=16 => bins.split::<AVX, 16>(src, used, c, z.block),
+        _ => bins.split::<AVX, BINS>(src, used, c, z.block),
     };
     let parent_area = t.extent.bounds.half_area().max(f32::MIN_POSITIVE);
     let leaf_cost = blocks_of(count as u32, z.block);
