@@ -94,7 +94,8 @@ pub const MAX_WARNINGS: usize = 100;
 /// allocations made on the way, which cannot fail gracefully.
 pub const MEMORY_HEADROOM: u64 = 256 << 20;
 /// Bytes a BVH's binary build makes per box (a primitive's box; an oblique cone has up to 16):
-/// the primitive order (4), the build references (48) and up to two binary nodes (64), rounded
+/// the primitive order (4), two arrays of build references (64: each partition copies a node's
+/// from one to the other) and up to one binary node (32: at most `2n / 2 + 1` nodes), rounded
 /// up. Checked against the memory left before the build ([`crate::memory`]);
 /// `bvh_bytes_per_box_covers_the_build` in bvh.rs keeps it honest.
 pub const BVH_BYTES_PER_BOX: u64 = 128;
