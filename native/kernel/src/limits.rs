@@ -17,7 +17,7 @@
 //! | [`MAX_TOKEN_BYTES`] | 4 096 | one token: an NFF or OBJ word, a TOML key, string or number | by a scan of the file before parsing |
 //! | [`MAX_WARNINGS`] | 100 | warnings kept per scene (the rest only counted) | [`crate::warning::Warnings::add`] |
 //! | [`MEMORY_HEADROOM`] | 256 MiB | address space kept free under `RLIMIT_AS` when an input-sized array is made | [`crate::memory::check`], before each such array grows |
-//! | [`BVH_BYTES_PER_BOX`], [`BVH_BYTES_PER_NODE`] | 128, 128 | what a BVH build makes per box, then its collapse per binary node | before each stage, against the address space left |
+//! | [`BVH_BYTES_PER_BOX`], [`BVH_BYTES_PER_NODE`] | 160, 128 | what a BVH build makes per box, then its collapse per binary node | before each stage, against the address space left |
 //!
 //! ## Memory
 //!
@@ -94,10 +94,10 @@ pub const MAX_WARNINGS: usize = 100;
 /// allocations made on the way, which cannot fail gracefully.
 pub const MEMORY_HEADROOM: u64 = 256 << 20;
 /// Bytes a BVH's binary build makes per box (a primitive's box; an oblique cone has up to 16):
-/// the primitive order (4), the build references (48) and up to two binary nodes (64), rounded
-/// up. Checked against the memory left before the build ([`crate::memory`]);
+/// the primitive order (4), two arrays of build references (64: each partition copies a node's
+/// from one to the other) and up to two binary nodes (64), rounded up. Checked against the memory left before the build ([`crate::memory`]);
 /// `bvh_bytes_per_box_covers_the_build` in bvh.rs keeps it honest.
-pub const BVH_BYTES_PER_BOX: u64 = 128;
+pub const BVH_BYTES_PER_BOX: u64 = 160;
 /// Bytes the collapse of a binary BVH into 8-wide nodes makes per binary node: its cost and
 /// choice tables (57) and its share of the 8-wide nodes (64), rounded up; checked likewise
 /// before the collapse.
