@@ -36,7 +36,6 @@ const DIGIT: u32 = 11;
 const RADIX_FROM: usize = 1024;
 
 const _: () = assert!(KEY_BITS + INDEX_BITS <= 64);
-const _: () = assert!(KEY_BITS.div_ceil(DIGIT) * DIGIT >= KEY_BITS);
 
 /// What a stream query keeps between calls: the sort's two arrays, the window's rays and bounds
 /// in sorted order, and the traversal's stacks and shadow cache. One per thread; it grows to
@@ -158,45 +157,53 @@ fn cells(v: Vec3A) -> [u32; 4] {
     }
 }
 
+/// Radix passes of a sort: enough [`DIGIT`]s for a key.
+const PASSES: usize = KEY_BITS.div_ceil(DIGIT) as usize;
+
+/// Buckets of a radix pass.
+const BUCKETS: usize = 1 << DIGIT;
+
 impl StreamScratch {
     /// Orders `rays` (at most [`WINDOW`]): afterwards `self.order` holds one entry per ray,
     /// sorted by key, each with its ray's index in its low [`INDEX_BITS`] bits.
     pub(crate) fn sort(&mut self, keys: &Keys, rays: &[Ray]) {
         debug_assert!(rays.len() <= WINDOW);
         self.order.clear();
-        self.order.extend(
-            rays.iter()
-                .enumerate()
-                .map(|(i, r)| keys.of(r) << INDEX_BITS | i as u64),
-        );
         if rays.len() < RADIX_FROM {
+            self.order.extend(
+                rays.iter()
+                    .enumerate()
+                    .map(|(i, r)| keys.of(r) << INDEX_BITS | i as u64),
+            );
             self.order.sort_unstable();
             return;
         }
+        // the entries and every pass's counts in one pass over the rays
+        let mut counts = [[0usize; BUCKETS]; PASSES];
+        self.order.extend(rays.iter().enumerate().map(|(i, r)| {
+            let key = keys.of(r);
+            for (p, c) in counts.iter_mut().enumerate() {
+                c[digit(key, p)] += 1;
+            }
+            key << INDEX_BITS | i as u64
+        }));
         self.spare.resize(self.order.len(), 0);
-        let mut shift = INDEX_BITS;
-        while shift < INDEX_BITS + KEY_BITS {
-            radix_pass(&self.order, &mut self.spare, shift);
+        for (p, count) in counts.iter().enumerate() {
+            radix_pass(&self.order, &mut self.spare, p, count);
             std::mem::swap(&mut self.order, &mut self.spare);
-            shift += DIGIT;
         }
     }
-}
 
-impl StreamScratch {
     /// Copies `rays` and their bounds `tmax` into `sorted` and `bounds`, in the order of
     /// `order` (a pass of independent reads, which the CPU overlaps, rather than a read at
     /// random before each ray's traversal).
     pub(crate) fn gather(&mut self, rays: &[Ray], tmax: &[f32]) {
         self.sorted.clear();
         self.bounds.clear();
-        for &e in &self.order {
-            let i = index(e);
-            if let (Some(r), Some(&t)) = (rays.get(i), tmax.get(i)) {
-                self.sorted.push(*r);
-                self.bounds.push(t);
-            }
-        }
+        let ray = |e: &u64| rays.get(index(*e)).copied();
+        self.sorted.extend(self.order.iter().filter_map(ray));
+        let bound = |e: &u64| tmax.get(index(*e)).copied();
+        self.bounds.extend(self.order.iter().filter_map(bound));
     }
 }
 
@@ -206,20 +213,22 @@ pub(crate) fn index(entry: u64) -> usize {
     (entry & ((1 << INDEX_BITS) - 1)) as usize
 }
 
-/// One stable counting-sort pass of `from` into `to` by the [`DIGIT`] bits at `shift`.
-fn radix_pass(from: &[u64], to: &mut [u64], shift: u32) {
-    let mask = (1u64 << DIGIT) - 1;
-    let digit = |e: u64| ((e >> shift) & mask) as usize;
-    let mut start = [0usize; 1 << DIGIT];
-    for &e in from {
-        start[digit(e)] += 1;
-    }
+/// Digit `pass` of `key` (the lowest [`DIGIT`] bits first).
+#[inline(always)]
+fn digit(key: u64, pass: usize) -> usize {
+    ((key >> (pass as u32 * DIGIT)) as usize) & (BUCKETS - 1)
+}
+
+/// One stable counting-sort pass of `from` into `to` by the key's digit `pass`, whose values
+/// occur `count` times each.
+fn radix_pass(from: &[u64], to: &mut [u64], pass: usize, count: &[usize; BUCKETS]) {
+    let mut start = [0usize; BUCKETS];
     let mut sum = 0;
-    for s in start.iter_mut() {
-        (*s, sum) = (sum, sum + *s);
+    for (s, &c) in start.iter_mut().zip(count) {
+        (*s, sum) = (sum, sum + c);
     }
     for &e in from {
-        let slot = &mut start[digit(e)];
+        let slot = &mut start[digit(e >> INDEX_BITS, pass)];
         if let Some(t) = to.get_mut(*slot) {
             *t = e;
         }

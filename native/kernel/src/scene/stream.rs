@@ -8,9 +8,6 @@ use crate::ray::Ray;
 use crate::stream::{index, Keys, StreamScratch, WINDOW};
 use crate::Error;
 
-/// The shadow-cache slot of a stream's any-hit queries (its own scratch holds no other).
-const STREAM_SLOT: usize = 0;
-
 /// `Ok` when the stream's three slices are as long as each other.
 fn same_lengths(rays: usize, tmax: usize, out: usize, what: &str) -> Result<(), Error> {
     if rays == tmax && rays == out {
@@ -46,10 +43,8 @@ impl Scene {
     }
 
     /// Any-hit queries of a stream of rays: `occluded[i]` gets what [`Scene::occluded_with`]
-    /// returns for `rays[i]` with the bound `tmax[i]`. Traced in the order of
-    /// [`Scene::intersect_stream`], and the last occluder found is tried first on the next
-    /// ray (neighbours in that order are often blocked by the same triangle), which changes
-    /// no answer.
+    /// returns for `rays[i]` with the bound `tmax[i]`, traced in the order of
+    /// [`Scene::intersect_stream`].
     ///
     /// Errors with [`Error::InvalidArgument`] when the three slices differ in length.
     pub fn occluded_stream(
@@ -61,7 +56,7 @@ impl Scene {
     ) -> Result<(), Error> {
         same_lengths(rays.len(), tmax.len(), occluded.len(), "answers")?;
         self.each_window(rays, tmax, occluded, scratch, |scene, ray, t, s| {
-            scene.occluded_cached(ray, t, s, STREAM_SLOT)
+            scene.occluded_with(ray, t, s)
         });
         Ok(())
     }
