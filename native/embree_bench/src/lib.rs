@@ -93,6 +93,16 @@ pub struct Streams {
 }
 
 impl Streams {
+    /// Makes room for streams of `rays` rays: the calls that follow on as many allocate
+    /// nothing.
+    pub fn reserve(&mut self, rays: usize) {
+        self.scratch.reserve(rays);
+        let more = |len: usize| rays.saturating_sub(len);
+        self.tmax.reserve(more(self.tmax.len()));
+        self.hits.reserve(more(self.hits.len()));
+        self.occluded.reserve(more(self.occluded.len()));
+    }
+
     /// How many of `rays` hit `scene` (any hit: are occluded), all of them one stream with
     /// no bound.
     pub fn hits(&mut self, scene: &Scene, rays: &[Ray], any: bool) -> u64 {

@@ -13,6 +13,7 @@
 use crate::bvh::Scratch;
 use crate::geometry::Aabb;
 use crate::ray::Ray;
+use crate::scene::Hit;
 use glam::Vec3A;
 
 /// Bits per dimension of the Morton code.
@@ -39,7 +40,7 @@ const _: () = assert!(KEY_BITS + INDEX_BITS <= 64);
 
 /// What a stream query keeps between calls: the sort's two arrays, the window's rays and bounds
 /// in sorted order, and the traversal's stacks and shadow cache. One per thread; it grows to
-/// the longest window it has ordered (68 bytes a ray, at most 68 MiB), so that calls after
+/// the longest window it has ordered (at most 84 bytes a ray, 84 MiB), so that calls after
 /// the first on as many rays allocate nothing.
 #[derive(Clone, Debug, Default)]
 pub struct StreamScratch {
@@ -51,6 +52,10 @@ pub struct StreamScratch {
     pub(crate) sorted: Vec<Ray>,
     /// Their bounds.
     pub(crate) bounds: Vec<f32>,
+    /// The window's closest hits, in sorted order.
+    pub(crate) hits: Vec<Option<Hit>>,
+    /// The window's any-hit answers, in sorted order.
+    pub(crate) occluded: Vec<bool>,
     /// The single-ray traversal's stacks and shadow cache.
     pub(crate) rays: Scratch,
 }
@@ -59,6 +64,19 @@ impl StreamScratch {
     /// An empty scratch area (allocates on first use, then is reused).
     pub fn new() -> StreamScratch {
         StreamScratch::default()
+    }
+
+    /// Makes room for streams of `rays` rays (windows of at most a million), so that the
+    /// calls that follow allocate nothing for their sort.
+    pub fn reserve(&mut self, rays: usize) {
+        let n = rays.min(WINDOW);
+        let more = |len: usize| n.saturating_sub(len);
+        self.order.reserve(more(self.order.len()));
+        self.spare.reserve(more(self.spare.len()));
+        self.sorted.reserve(more(self.sorted.len()));
+        self.bounds.reserve(more(self.bounds.len()));
+        self.hits.reserve(more(self.hits.len()));
+        self.occluded.reserve(more(self.occluded.len()));
     }
 }
 

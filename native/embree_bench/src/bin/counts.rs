@@ -11,8 +11,8 @@
 //! primary hits' shadow rays as any-hit queries) this program runs itself under callgrind once
 //! per kernel: one ray at a time (`ours`: `Scene::intersect_with` / `occluded_with`; `embree`:
 //! `rtcIntersect1` / `rtcOccluded1`), all the rays as one stream (`ours-stream`:
-//! `Scene::intersect_stream` / `occluded_stream`, the sort included; its warm-up is a call on
-//! all the rays) and in packets of sixteen consecutive rays (`ours16`:
+//! `Scene::intersect_stream` / `occluded_stream`, the sort included, its arrays sized for the
+//! stream before the warm-up) and in packets of sixteen consecutive rays (`ours16`:
 //! `Scene::intersect_packet` / `occluded_packet`; `embree16`: `rtcIntersect16` /
 //! `rtcOccluded16`, with the coherent flag on primary and shadow rays, as the bench), with the branch
 //! predictor and a two-level cache simulated (the last level `--ll` bytes, 16-way, default
@@ -115,10 +115,11 @@ fn one_side(
         let f = flat(&rays);
         Ok((rays.len(), counted(|| e.trace(call, &f))))
     } else if kernel == "ours-stream" {
-        // the warm-up is the whole stream, so that the counted call finds its arrays sized
-        // (as a renderer's stay allocated) and copies none of them to grow them
+        // arrays sized for the whole stream first (as a renderer's stay allocated), so that
+        // the counted call copies none of them to grow them; the warm-up as the others'
         let mut streams = Streams::default();
-        streams.hits(&scene, &rays, any);
+        streams.reserve(rays.len());
+        streams.hits(&scene, warm, any);
         Ok((rays.len(), counted(|| streams.hits(&scene, &rays, any))))
     } else if kernel == "ours16" {
         packet_hits(&scene, &warm[..warm.len() / 16 * 16], any);

@@ -19,6 +19,25 @@ fn same_lengths(rays: usize, tmax: usize, out: usize, what: &str) -> Result<(), 
     }
 }
 
+/// An answer of a stream query, with the scratch array that holds a window's answers in
+/// sorted order.
+trait Answer: Copy {
+    /// That array.
+    fn buffer(scratch: &mut StreamScratch) -> &mut Vec<Self>;
+}
+
+impl Answer for Option<Hit> {
+    fn buffer(scratch: &mut StreamScratch) -> &mut Vec<Self> {
+        &mut scratch.hits
+    }
+}
+
+impl Answer for bool {
+    fn buffer(scratch: &mut StreamScratch) -> &mut Vec<Self> {
+        &mut scratch.occluded
+    }
+}
+
 impl Scene {
     /// Closest hits of a stream of rays: `hits[i]` gets what [`Scene::intersect_with`] returns
     /// for `rays[i]` with the bound `tmax[i]`, bit for bit. The rays are traced one at a time
@@ -36,7 +55,8 @@ impl Scene {
         scratch: &mut StreamScratch,
     ) -> Result<(), Error> {
         same_lengths(rays.len(), tmax.len(), hits.len(), "hits")?;
-        self.each_window(rays, tmax, hits, scratch, |scene, ray, t, s| {
+        let reorder = self.reordering_pays();
+        self.each_window(rays, tmax, hits, scratch, reorder, |scene, ray, t, s| {
             scene.intersect_with(ray, t, s)
         });
         Ok(())
@@ -55,24 +75,47 @@ impl Scene {
         scratch: &mut StreamScratch,
     ) -> Result<(), Error> {
         same_lengths(rays.len(), tmax.len(), occluded.len(), "answers")?;
-        self.each_window(rays, tmax, occluded, scratch, |scene, ray, t, s| {
-            scene.occluded_with(ray, t, s)
-        });
+        let reorder = self.reordering_pays();
+        self.each_window(
+            rays,
+            tmax,
+            occluded,
+            scratch,
+            reorder,
+            |scene, ray, t, s| scene.occluded_with(ray, t, s),
+        );
         Ok(())
     }
 
-    /// Sorts the stream window by window ([`WINDOW`] rays at most), gathers each window's
-    /// rays and bounds in that order, and answers them with `query` one after another; the
-    /// slices are as long as each other.
+    /// Whether reordering a stream pays: where a hierarchy is beyond a core's L2 cache (one
+    /// that prefetches, [`crate::bvh::Bvh::prefetch`]), rays in order find its nodes in the
+    /// caches far more often than in their own order; where all of it fits there, the order
+    /// saves some mispredicted branches but less than the sort costs, and the rays are traced
+    /// in the caller's order.
+    fn reordering_pays(&self) -> bool {
+        self.bvh.prefetch || self.meshes.iter().any(|m| m.bvh.prefetch)
+    }
+
+    /// With `reorder`, sorts the stream window by window ([`WINDOW`] rays at most), gathers
+    /// each window's rays and bounds in that order, and answers them with `query` one after
+    /// another; without, answers them in their own order. The slices are as long as each
+    /// other.
     #[inline(always)]
-    fn each_window<A>(
+    fn each_window<A: Answer>(
         &self,
         rays: &[Ray],
         tmax: &[f32],
         out: &mut [A],
         scratch: &mut StreamScratch,
+        reorder: bool,
         mut query: impl FnMut(&Scene, &Ray, f32, &mut Scratch) -> A,
     ) {
+        if !reorder {
+            for ((r, &t), o) in rays.iter().zip(tmax).zip(out.iter_mut()) {
+                *o = query(self, r, t, &mut scratch.rays);
+            }
+            return;
+        }
         let keys = Keys::new(self.bounds(), rays);
         for ((rays, tmax), out) in rays
             .chunks(WINDOW)
@@ -81,18 +124,28 @@ impl Scene {
         {
             scratch.sort(&keys, rays);
             scratch.gather(rays, tmax);
+            let mut answers = std::mem::take(A::buffer(scratch));
+            answers.clear();
             let StreamScratch {
-                order,
                 sorted,
                 bounds,
                 rays: s,
                 ..
             } = scratch;
-            for ((&entry, ray), &t) in order.iter().zip(sorted.iter()).zip(bounds.iter()) {
+            answers.extend(
+                sorted
+                    .iter()
+                    .zip(bounds.iter())
+                    .map(|(ray, &t)| query(self, ray, t, s)),
+            );
+            // the answers in the caller's order: a pass of independent stores, rather than a
+            // store at random after each ray's traversal
+            for (&entry, &a) in scratch.order.iter().zip(&answers) {
                 if let Some(o) = out.get_mut(index(entry)) {
-                    *o = query(self, ray, t, s);
+                    *o = a;
                 }
             }
+            *A::buffer(scratch) = answers;
         }
     }
 }
