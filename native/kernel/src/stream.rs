@@ -6,7 +6,7 @@
 //! Each ray gets a key: its direction's octant (the sign of each component, which fixes the
 //! order a node's children are visited in), then a six-dimensional Morton code of its origin
 //! (quantized in the box of the stream's origins) and of its direction's magnitudes,
-//! [`LEVELS`] bits each. The keys are sorted with their ray's index by a radix sort of three
+//! 5 bits each. The keys are sorted with their ray's index by a radix sort of three
 //! passes of 11 bits (short windows by `sort_unstable`), and the rays and their bounds copied
 //! in that order, in arrays kept in a [`StreamScratch`] between calls.
 

@@ -1,6 +1,7 @@
 //! A scene's closest-hit and any-hit queries over a stream of rays: each ray gets what the
-//! one-ray query answers, in the caller's order, but the rays are traced in the order of
-//! [`crate::stream`] (by octant, origin and direction), one at a time.
+//! one-ray query answers, in the caller's order, but where the scene's hierarchy is beyond a
+//! core's L2 cache the rays are traced in the order of [`crate::stream`] (by octant, origin
+//! and direction), one at a time.
 
 use super::{Hit, Scene};
 use crate::bvh::Scratch;
@@ -44,7 +45,9 @@ impl Scene {
     /// in an order of their own (`crate::stream`: rays from near each other, going the same
     /// way, one after another), so that a long stream of incoherent rays (reflections,
     /// refractions, a path tracer's bounces) finds the hierarchy in the caches more often than
-    /// in its own order. `scratch` keeps the sort's arrays between calls.
+    /// in its own order. Where the whole hierarchy fits a core's L2 cache, the sort would cost
+    /// more than it saves, and the rays are traced in their own order. `scratch` keeps the
+    /// sort's arrays between calls.
     ///
     /// Errors with [`Error::InvalidArgument`] when the three slices differ in length.
     pub fn intersect_stream(
