@@ -3,7 +3,7 @@
 
 pub mod embree;
 
-use ring_tracer_kernel::{raysets, Aabb, Ray, Scene, Scratch};
+use ring_tracer_kernel::{raysets, Aabb, Hit, Ray, Scene, Scratch, StreamScratch};
 use std::time::Instant;
 
 /// The rays of one bench: `size x size` primary rays of the default OBJ view in 4 x 4 pixel
@@ -79,6 +79,49 @@ pub fn packet_hits(scene: &Scene, rays: &[Ray], any: bool) -> u64 {
         }
     }
     hits
+}
+
+/// Our stream queries (`Scene::intersect_stream` / `Scene::occluded_stream`) with their
+/// arrays kept between calls, as a renderer would keep them: after the first call on as many
+/// rays, a call allocates nothing.
+#[derive(Default)]
+pub struct Streams {
+    scratch: StreamScratch,
+    tmax: Vec<f32>,
+    hits: Vec<Option<Hit>>,
+    occluded: Vec<bool>,
+}
+
+impl Streams {
+    /// Makes room for streams of `rays` rays: the calls that follow on as many allocate
+    /// nothing.
+    pub fn reserve(&mut self, rays: usize) {
+        self.scratch.reserve(rays);
+        let more = |len: usize| rays.saturating_sub(len);
+        self.tmax.reserve(more(self.tmax.len()));
+        self.hits.reserve(more(self.hits.len()));
+        self.occluded.reserve(more(self.occluded.len()));
+    }
+
+    /// How many of `rays` hit `scene` (any hit: are occluded), all of them one stream with
+    /// no bound.
+    pub fn hits(&mut self, scene: &Scene, rays: &[Ray], any: bool) -> u64 {
+        let n = rays.len();
+        self.tmax.resize(n, f32::INFINITY);
+        let done = if any {
+            self.occluded.resize(n, false);
+            scene
+                .occluded_stream(rays, &self.tmax, &mut self.occluded, &mut self.scratch)
+                .map(|()| self.occluded.iter().filter(|&&o| o).count())
+        } else {
+            self.hits.resize(n, None);
+            scene
+                .intersect_stream(rays, &self.tmax, &mut self.hits, &mut self.scratch)
+                .map(|()| self.hits.iter().filter(|h| h.is_some()).count())
+        };
+        // the slices are as long as each other: the stream queries cannot refuse them
+        done.unwrap_or(0) as u64
+    }
 }
 
 /// This process's CPU time in seconds (user + system, from `/proc/self/stat`, in clock ticks

@@ -24,7 +24,10 @@
 //! and the shadow rays of the primary hits towards a point light outside the box
 //! ([`ring_tracer_embree_bench::shadow_rays`]), coherent any-hit queries.
 //! Columns: single rays on 1 thread (`Scene::intersect_with` / `occluded_with` against
-//! `rtcIntersect1` / `rtcOccluded1`), packets of 16 on 1 thread (ours: `Scene::intersect_packet`
+//! `rtcIntersect1` / `rtcOccluded1`), for the incoherent rows our stream queries on 1 thread
+//! (`Scene::intersect_stream` / `occluded_stream`, all the rays as one stream, which the
+//! query reorders; its arrays are kept between rounds and sized before the first) against the
+//! same `rtcIntersect1` / `rtcOccluded1` over the rays in their own order, packets of 16 on 1 thread (ours: `Scene::intersect_packet`
 //! and `occluded_packet` on 4 x 4 pixel tiles and their shadow rays; Embree: `rtcIntersect16` /
 //! `rtcOccluded16` on the same sixteens, with the coherent flag for those two), and single
 //! rays on 2 threads. Hit counts must agree (they are printed
@@ -33,12 +36,13 @@
 //! Without Embree's headers at build time the bench says so and times ours only.
 
 use ring_tracer_embree_bench::embree::{flat, BuildFigures, Call, Embree, Isa};
-use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets};
+use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets, Streams};
 use ring_tracer_kernel::bvh::TriangleTree;
 use ring_tracer_kernel::glam::Vec3A;
 use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 /// Runs `f` over `items` split in small chunks handed out to `threads` threads; returns
@@ -157,6 +161,13 @@ fn build_figures(tris: &[[Vec3A; 3]], builds: usize, isa: Isa) {
 /// A table row: label, our rays, Embree's (flat), coherent, any-hit.
 type Row<'a> = (&'static str, &'a [Ray], &'a [f32], bool, bool);
 
+/// The cells of a row, in the order they are timed: ours 1, Embree 1, ours 16, Embree 16,
+/// ours 2 threads, Embree 2 threads, ours as a stream (incoherent rows only).
+const CELLS: usize = 7;
+
+/// The cell of our stream queries.
+const STREAM: usize = 6;
+
 fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
     let t0 = Instant::now();
     let scene = match Scene::load(Path::new(path)) {
@@ -208,8 +219,15 @@ fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
             true,
         ),
     ];
-    // per row: ours 1, Embree 1, ours 16, Embree 16, ours 2 threads, Embree 2 threads
-    let mut figs: Vec<[Figure; 6]> = rows.iter().map(|_| Default::default()).collect();
+    let mut figs: Vec<[Figure; CELLS]> = rows.iter().map(|_| Default::default()).collect();
+    // the stream's arrays sized once, before the rounds (as a renderer's stay allocated)
+    let streams = Mutex::new(Streams::default());
+    let stream_hits = |part: &[Ray], any: bool| match streams.lock() {
+        Ok(mut s) => s.hits(&scene, part, any),
+        Err(_) => 0,
+    };
+    stream_hits(&incoherent, false);
+    stream_hits(&incoherent, true);
     for _ in 0..rounds {
         for (k, &(_, rays, fr, coherent, any)) in rows.iter().enumerate() {
             let ours_single = |part: &[Ray]| single_hits(&scene, part, any);
@@ -232,6 +250,10 @@ fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
             if let Ok(e) = &embree {
                 f[5].add(rays.len(), timed(2, fr, 6 * CHUNK, |p| e.trace(one, p)));
             }
+            if !coherent {
+                let all = rays.len().max(1);
+                f[STREAM].add(rays.len(), timed(1, rays, all, |p| stream_hits(p, any)));
+            }
         }
     }
     println!(
@@ -239,9 +261,9 @@ fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
         size
     );
     println!(
-        "| rays | ours, single | Embree rtcIntersect1 | ours / E1 | ours, packets of 16 | Embree rtcIntersect16 | ours / E16 | ours, 2 threads | scaling | Embree 1, 2 threads |"
+        "| rays | ours, single | Embree rtcIntersect1 | ours / E1 | ours, stream | stream / E1 | ours, packets of 16 | Embree rtcIntersect16 | ours / E16 | ours, 2 threads | scaling | Embree 1, 2 threads |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (k, row) in rows.iter().enumerate() {
         let f = &figs[k];
         let ratio = |a: &Figure, b: &Figure| {
@@ -252,11 +274,17 @@ fn bench(path: &str, rounds: usize, size: u32, builds: usize, isa: Isa) {
             }
         };
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.2} | {} |",
             row.0,
             f[0].range(),
             f[1].range(),
             ratio(&f[0], &f[1]),
+            f[STREAM].range(),
+            if f[STREAM].rates.is_empty() {
+                "-".to_string()
+            } else {
+                ratio(&f[STREAM], &f[1])
+            },
             f[2].range(),
             f[3].range(),
             ratio(&f[2], &f[3]),

@@ -35,7 +35,9 @@
 //!   portable code);
 //!   `packet` (private): coherent rays through it sixteen at a time
 //!   ([`Scene::intersect_packet`], [`Scene::occluded_packet`], the same answers as one ray at a
-//!   time), its leaf tests eight or sixteen rays to a vector (`lanes`, private);
+//!   time), its leaf tests eight or sixteen rays to a vector (`lanes`, private); [`stream`]:
+//!   long streams of incoherent rays reordered for coherence and traced one by one
+//!   ([`Scene::intersect_stream`], [`Scene::occluded_stream`], the same answers);
 //!   [`instance`]: a mesh referenced many times is stored once (triangles and BVH) and drawn
 //!   by instances (transform, inverse, material) under a top-level BVH.
 //! - [`raysets`]: the fixed ray sets of the ray-casting benchmarks.
@@ -78,6 +80,7 @@ pub mod render;
 pub mod safe_fs;
 pub mod scene;
 pub mod stats;
+pub mod stream;
 #[cfg(test)]
 mod test_support;
 pub mod toml_scene;
@@ -103,4 +106,5 @@ pub use render::{
 };
 pub use scene::{Format, Hit, Scene};
 pub use stats::{Counter, RayStats};
+pub use stream::StreamScratch;
 pub use warning::{Warning, Warnings};

@@ -10,6 +10,7 @@ mod builder;
 mod frames;
 mod queries;
 mod shadow_cache;
+mod stream;
 mod surface;
 #[cfg(test)]
 mod tuning;

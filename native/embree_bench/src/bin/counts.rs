@@ -2,14 +2,17 @@
 //! by Valgrind's callgrind (Debian `valgrind`) rather than timed:
 //! `cargo run --release -p ring_tracer_embree_bench --bin counts -- [--rays N] [--ll BYTES]
 //! [--embree-isa ISA] [--kernels LIST] MESH.obj...` (ISA as for `embree_bench`, default `avx2`:
-//! Valgrind runs no AVX-512; LIST: some of `ours,embree,ours16,embree16`, default all four).
+//! Valgrind runs no AVX-512; LIST: some of
+//! `ours,ours-stream,embree,ours16,embree16`, default all five).
 //!
 //! On a shared virtual machine, rates move by 10-30% between runs, more than most kernel
 //! changes are worth; these counts are the same on every run. For each mesh and ray kind
 //! (primary rays in tiles, incoherent ones, the incoherent ones as any-hit queries, the
 //! primary hits' shadow rays as any-hit queries) this program runs itself under callgrind once
 //! per kernel: one ray at a time (`ours`: `Scene::intersect_with` / `occluded_with`; `embree`:
-//! `rtcIntersect1` / `rtcOccluded1`) and in packets of sixteen consecutive rays (`ours16`:
+//! `rtcIntersect1` / `rtcOccluded1`), all the rays as one stream (`ours-stream`:
+//! `Scene::intersect_stream` / `occluded_stream`, the sort included, its arrays sized for the
+//! stream before the warm-up) and in packets of sixteen consecutive rays (`ours16`:
 //! `Scene::intersect_packet` / `occluded_packet`; `embree16`: `rtcIntersect16` /
 //! `rtcOccluded16`, with the coherent flag on primary and shadow rays, as the bench), with the branch
 //! predictor and a two-level cache simulated (the last level `--ll` bytes, 16-way, default
@@ -22,7 +25,7 @@
 //! rays.
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
-use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets};
+use ring_tracer_embree_bench::{packet_hits, shadow_rays, single_hits, RaySets, Streams};
 use ring_tracer_kernel::{raysets, Aabb, Ray, Scene};
 use std::path::Path;
 use std::process::Command;
@@ -30,7 +33,7 @@ use std::process::Command;
 const KINDS: [&str; 4] = ["primary", "incoherent", "any", "shadow"];
 
 /// The kernels and ways of calling them, in the table's order.
-const KERNELS: [&str; 4] = ["ours", "embree", "ours16", "embree16"];
+const KERNELS: [&str; 5] = ["ours", "ours-stream", "embree", "ours16", "embree16"];
 
 /// The part callgrind counts (`--toggle-collect`): what `f` does, callees included.
 #[inline(never)]
@@ -111,6 +114,13 @@ fn one_side(
         e.trace(call, &flat(&warm[..warm.len() / 16 * 16]));
         let f = flat(&rays);
         Ok((rays.len(), counted(|| e.trace(call, &f))))
+    } else if kernel == "ours-stream" {
+        // arrays sized for the whole stream first (as a renderer's stay allocated), so that
+        // the counted call copies none of them to grow them; the warm-up as the others'
+        let mut streams = Streams::default();
+        streams.reserve(rays.len());
+        streams.hits(&scene, warm, any);
+        Ok((rays.len(), counted(|| streams.hits(&scene, &rays, any))))
     } else if kernel == "ours16" {
         packet_hits(&scene, &warm[..warm.len() / 16 * 16], any);
         Ok((rays.len(), counted(|| packet_hits(&scene, &rays, any))))

@@ -3,7 +3,10 @@
 //! [--embree-isa ISA] [--packets] MESH.obj...` (ISA as for `embree_bench`).
 //!
 //! The same rays as `embree_bench` (1024 x 1024 primary rays in tiles, as many incoherent ones,
-//! closest hit and any hit), one thread, ours and Embree alternating. With `--packets`, the
+//! closest hit and any hit), one thread, ours and Embree alternating; the incoherent rows also
+//! through our stream queries (`Scene::intersect_stream` / `occluded_stream`, all the rays as
+//! one stream, its arrays sized before the rounds) against the same `rtcIntersect1` /
+//! `rtcOccluded1` over the rays in their own order. With `--packets`, the
 //! bench's packet cells instead (`Scene::intersect_packet` / `occluded_packet` against
 //! `rtcIntersect16` / `rtcOccluded16`, coherent flag on primary and shadow rays), the shadow
 //! rays of the primary hits too, each timing over eight passes of its rays (a packet pass of
@@ -14,7 +17,7 @@
 
 use ring_tracer_embree_bench::embree::{flat, Call, Embree, Isa};
 use ring_tracer_embree_bench::{
-    packet_hits, shadow_rays, single_hits, timed_cpu as timed, RaySets,
+    packet_hits, shadow_rays, single_hits, timed_cpu as timed, RaySets, Streams,
 };
 use ring_tracer_kernel::{Ray, Scene};
 use std::path::Path;
@@ -63,10 +66,20 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
     } else {
         (1, "1", "ours")
     };
-    println!(
-        "| rays | {ours}, Mrays/CPU s | Embree rtcIntersect{e} | ours / E{e} (CPU) | ours / E{e} (wall) |"
-    );
-    println!("|---|---|---|---|---|");
+    let mut streams = Streams::default();
+    if !packets {
+        streams.hits(&scene, &incoherent, false);
+        streams.hits(&scene, &incoherent, true);
+        println!(
+            "| rays | {ours}, Mrays/CPU s | Embree rtcIntersect{e} | ours / E{e} (CPU) | ours / E{e} (wall) | ours, stream | stream / E{e} (CPU) | stream / E{e} (wall) |"
+        );
+        println!("|---|---|---|---|---|---|---|---|");
+    } else {
+        println!(
+            "| rays | {ours}, Mrays/CPU s | Embree rtcIntersect{e} | ours / E{e} (CPU) | ours / E{e} (wall) |"
+        );
+        println!("|---|---|---|---|---|");
+    }
     for (label, rays, fr, any) in rows {
         let n = (rays.len() * passes) as f64 / 1e6;
         let call = match (packets, any) {
@@ -79,8 +92,9 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
                 coherent: label != "incoherent, any hit",
             },
         };
-        let (mut o, mut e) = (Vec::new(), Vec::new());
-        let mut hits = (0, 0);
+        let (mut o, mut e, mut st) = (Vec::new(), Vec::new(), Vec::new());
+        let stream = !packets && label != "primary";
+        let mut hits = (0, 0, None);
         for _ in 0..rounds {
             let r = timed(|| {
                 let mut h = 0;
@@ -103,6 +117,11 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
             });
             hits.1 = r.2;
             e.push((n / r.0, n / r.1.max(0.01)));
+            if stream {
+                let r = timed(|| streams.hits(&scene, rays, any));
+                hits.2 = Some(r.2);
+                st.push((n / r.0, n / r.1.max(0.01)));
+            }
         }
         let best = |v: &[(f64, f64)], k: usize| {
             v.iter()
@@ -113,8 +132,20 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
             let lo = v.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
             format!("{lo:.2}-{:.2}", best(v, 1))
         };
+        let streamed = if packets {
+            String::new()
+        } else if stream {
+            format!(
+                " {} | {:.2} | {:.2} |",
+                range(&st),
+                best(&st, 1) / best(&e, 1),
+                best(&st, 0) / best(&e, 0)
+            )
+        } else {
+            " - | - | - |".to_string()
+        };
         println!(
-            "| {label} | {} | {} | {:.2} | {:.2} |",
+            "| {label} | {} | {} | {:.2} | {:.2} |{streamed}",
             range(&o),
             range(&e),
             best(&o, 1) / best(&e, 1),
@@ -122,6 +153,9 @@ fn bench(path: &str, rounds: usize, isa: Isa, packets: bool) {
         );
         if hits.0.abs_diff(hits.1) > rays.len() as u64 / 10_000 + 2 {
             println!("  (hit counts differ: ours {}, Embree {})", hits.0, hits.1);
+        }
+        if let Some(h) = hits.2.filter(|&h| h != hits.0) {
+            println!("  (our stream's hit count differs from our single rays': {h})");
         }
     }
 }

@@ -1,22 +1,27 @@
 //! Ray casting with the kernel alone, for profiling (`perf stat` / `perf record`) and for
 //! checking that a kernel change keeps every hit:
-//! `cargo run --release -p ring_tracer_embree_bench --bin raycast -- MESH.obj [KIND] [REPEAT] [DUMP]`
+//! `cargo run --release -p ring_tracer_embree_bench --bin raycast -- [--stream] MESH.obj [KIND] [REPEAT] [DUMP]`
 //!
 //! KIND: `primary`, `incoherent` (default) or `any` (the incoherent rays as shadow queries),
 //! the rays of [`ring_tracer_kernel::raysets`] (1024 x 1024). Prints the load time, the rate
 //! and a checksum of the answers; with DUMP, writes each ray's answer (primitive and `t` bits,
 //! or the any-hit flag) to that file, one per line, so two builds can be compared with `cmp`.
+//! With `--stream`, the rays go through the stream queries (`Scene::intersect_stream` /
+//! `occluded_stream`, all of them one stream) instead of one query per ray: the checksum must
+//! be the one-ray queries'.
 
 use ring_tracer_embree_bench::cpu_seconds;
-use ring_tracer_kernel::{raysets, Scene, Scratch};
+use ring_tracer_kernel::{raysets, Hit, Ray, Scene, Scratch, StreamScratch};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
 fn main() -> std::io::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let all: Vec<String> = std::env::args().skip(1).collect();
+    let stream = all.iter().any(|a| a == "--stream");
+    let args: Vec<String> = all.into_iter().filter(|a| a != "--stream").collect();
     let Some(mesh) = args.first() else {
-        eprintln!("usage: raycast MESH.obj [primary|incoherent|any] [REPEAT] [DUMP]");
+        eprintln!("usage: raycast [--stream] MESH.obj [primary|incoherent|any] [REPEAT] [DUMP]");
         std::process::exit(2);
     };
     let kind = args.get(1).map(String::as_str).unwrap_or("incoherent");
@@ -44,20 +49,15 @@ fn main() -> std::io::Result<()> {
             })
         })
     };
-    let mut answers = vec![(u32::MAX, 0u32); rays.len()];
-    let mut s = Scratch::new();
     let t1 = Instant::now();
     let c1 = cpu_seconds();
+    let mut answers = Vec::new();
     for _ in 0..repeat {
-        for (r, a) in rays.iter().zip(answers.iter_mut()) {
-            *a = if kind == "any" {
-                (scene.occluded_with(r, f32::INFINITY, &mut s) as u32, 0)
-            } else {
-                scene
-                    .intersect_with(r, f32::INFINITY, &mut s)
-                    .map_or((u32::MAX, 0), |h| (h.prim, h.t.to_bits()))
-            };
-        }
+        answers = if stream {
+            streamed(&scene, &rays, kind == "any")
+        } else {
+            one_by_one(&scene, &rays, kind == "any")
+        };
     }
     let secs = t1.elapsed().as_secs_f64();
     let cpu = cpu_seconds() - c1;
@@ -93,4 +93,44 @@ fn main() -> std::io::Result<()> {
         }
     }
     Ok(())
+}
+
+/// (primitive or `u32::MAX`, `t` bits) of each closest hit, or (occluded, 0), one query a ray.
+fn one_by_one(scene: &Scene, rays: &[Ray], any: bool) -> Vec<(u32, u32)> {
+    let mut s = Scratch::new();
+    rays.iter()
+        .map(|r| {
+            if any {
+                (scene.occluded_with(r, f32::INFINITY, &mut s) as u32, 0)
+            } else {
+                answer(scene.intersect_with(r, f32::INFINITY, &mut s))
+            }
+        })
+        .collect()
+}
+
+/// [`one_by_one`]'s answers, from one stream query over all the rays.
+fn streamed(scene: &Scene, rays: &[Ray], any: bool) -> Vec<(u32, u32)> {
+    let mut s = StreamScratch::new();
+    let tmax = vec![f32::INFINITY; rays.len()];
+    let done = if any {
+        let mut out = vec![false; rays.len()];
+        scene
+            .occluded_stream(rays, &tmax, &mut out, &mut s)
+            .map(|()| out.iter().map(|&o| (o as u32, 0)).collect())
+    } else {
+        let mut out = vec![None; rays.len()];
+        scene
+            .intersect_stream(rays, &tmax, &mut out, &mut s)
+            .map(|()| out.into_iter().map(answer).collect())
+    };
+    done.unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(1)
+    })
+}
+
+/// A closest hit as (primitive, `t` bits), a miss as (`u32::MAX`, 0).
+fn answer(h: Option<Hit>) -> (u32, u32) {
+    h.map_or((u32::MAX, 0), |h| (h.prim, h.t.to_bits()))
 }
