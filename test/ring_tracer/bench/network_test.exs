@@ -4,8 +4,6 @@ defmodule RingTracer.Bench.NetworkTest do
   # the reason, only where network namespaces cannot be created (tried when
   # this file loads).
   use ExUnit.Case, async: false
-  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
-  @moduletag :second_vm
 
   alias RingTracer.Bench.Network.{Lab, Remote}
   alias RingTracer.TestScenes

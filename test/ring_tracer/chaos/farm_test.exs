@@ -1,7 +1,5 @@
 defmodule RingTracer.Chaos.FarmTest do
   use ExUnit.Case, async: false
-  # `bin/ringtracer test` runs it in a second test VM (docs/testing.md).
-  @moduletag :second_vm
 
   @moduletag :distributed
   @moduletag timeout: 180_000
