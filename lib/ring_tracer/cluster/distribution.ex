@@ -557,15 +557,42 @@ defmodule RingTracer.Cluster.Distribution do
   end
 
   # OTP reports a distribution that fails to start with pages of
-  # supervisor reports; the error returned says it in one line.
+  # supervisor reports and a notice; the error returned says it in one line.
+  # While any start runs, a primary filter drops OTP's own reports (the
+  # `[:otp, :sasl]` domain and legacy `error_logger` messages) and nothing
+  # else: the logger's level is the VM's, and lowering it here lost other
+  # processes' logs meanwhile (and, with two starts at once, could stay
+  # lowered).
   defp quietly(fun) do
-    %{level: level} = :logger.get_primary_config()
-    :ok = :logger.update_primary_config(%{level: :none})
+    starting = starting()
+    :atomics.add(starting, 1, 1)
+    _ = :logger.add_primary_filter(__MODULE__, {&__MODULE__.drop_start_reports/2, starting})
 
     try do
       fun.()
     after
-      :logger.update_primary_config(%{level: level})
+      :atomics.sub(starting, 1, 1)
+    end
+  end
+
+  defp starting, do: :persistent_term.get({__MODULE__, :starting})
+
+  # The count of starts under way, made once as the module loads (the code
+  # server loads a module once, so no two callers make two).
+  @on_load :make_starting
+  defp make_starting do
+    :persistent_term.put({__MODULE__, :starting}, :atomics.new(1, []))
+  end
+
+  @doc false
+  # The primary filter of `quietly/1`: while a start runs, OTP's reports go.
+  @spec drop_start_reports(:logger.log_event(), :atomics.atomics_ref()) :: :logger.filter_return()
+  def drop_start_reports(%{meta: meta}, starting) do
+    cond do
+      :atomics.get(starting, 1) == 0 -> :ignore
+      Map.get(meta, :domain) == [:otp, :sasl] -> :stop
+      Map.has_key?(meta, :error_logger) -> :stop
+      true -> :ignore
     end
   end
 

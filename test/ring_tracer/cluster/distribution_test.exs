@@ -53,4 +53,21 @@ defmodule RingTracer.Cluster.DistributionTest do
       assert {:ok, "w1@::1", :longnames} = Distribution.node_name([name: "w1@::1"], {0, 0, 0, 0})
     end
   end
+
+  test "while a start runs, OTP's reports of it are dropped and nothing else is" do
+    alias RingTracer.Cluster.Distribution
+    starting = :atomics.new(1, [])
+    sasl = %{level: :error, msg: {:string, ~c"x"}, meta: %{domain: [:otp, :sasl]}}
+    legacy = %{level: :notice, msg: {:string, ~c"x"}, meta: %{error_logger: %{tag: :info_msg}}}
+    ours = %{level: :warning, msg: {:string, ~c"x"}, meta: %{domain: [:elixir]}}
+
+    # No start under way: every event goes on.
+    for e <- [sasl, legacy, ours],
+        do: assert(Distribution.drop_start_reports(e, starting) == :ignore)
+
+    :atomics.add(starting, 1, 1)
+    assert Distribution.drop_start_reports(sasl, starting) == :stop
+    assert Distribution.drop_start_reports(legacy, starting) == :stop
+    assert Distribution.drop_start_reports(ours, starting) == :ignore
+  end
 end
