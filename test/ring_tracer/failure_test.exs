@@ -73,8 +73,19 @@ defmodule RingTracer.FailureTest do
     test "killing a child mid-render still gives the identical image (seed #{seed})", %{
       reference: reference
     } do
-      {:ok, result} =
-        render_killing(unquote(seed), fn -> Process.exit(Enum.random(children()), :kill) end)
+      # The victim holds the job's first atom until it is killed, so the job
+      # cannot end before the kill however late the test acts.
+      ref = make_ref()
+      kernel = {RingTracer.Test.FaultyKernel, block_first: {node(), self(), ref}}
+
+      kill = fn ->
+        assert_receive {:blocked, ^ref, held}, 10_000
+        {:links, links} = Process.info(held, :links)
+        [victim] = Enum.filter(children(), &(&1 in links))
+        Process.exit(victim, :kill)
+      end
+
+      {:ok, result} = render_killing(unquote(seed), kill, kernel: kernel)
 
       assert result.pixels == reference
       assert [%{reason: ":killed"}] = result.failures

@@ -10,9 +10,10 @@ defmodule RingTracer.Test.FaultyKernel do
   `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) as
   the parent prepares it, as a node that hangs while a job starts; and,
   with `block_first: {node, pid, ref}`, the first atom traced on that node
-  never comes back: its grandchild sends `{:blocked, ref, grandchild}` to
-  `pid` and waits until it is killed (with its child), so that the child
-  holding it cannot finish, and the job cannot end, before the test acts.
+  is held: its grandchild sends `{:blocked, ref, grandchild}` to `pid` and
+  waits until it gets `{:release, ref}` or is killed (with its child), so
+  that the child holding it cannot finish, and the job cannot end, before
+  the test acts.
   """
   @behaviour RingTracer.Kernel
 
@@ -80,7 +81,10 @@ defmodule RingTracer.Test.FaultyKernel do
 
     if :atomics.compare_exchange(flag, 1, 0, 1) == :ok do
       send(pid, {:blocked, ref, self()})
-      Process.sleep(:infinity)
+
+      receive do
+        {:release, ^ref} -> :ok
+      end
     end
   end
 

@@ -658,20 +658,25 @@ defmodule RingTracer.Preview.HTTPTest do
   end
 
   test "open/2 previews a job already running, from the atoms traced so far" do
-    # Slow enough (about a second) to be still running when the preview
-    # opens, even on a loaded machine.
+    # The first atom is held until the preview has opened, so that the job
+    # is still running then however late a loaded machine lets this test
+    # act (slowed down to about a second, it had once ended before).
+    ref = make_ref()
+
     {:ok, job} =
       RingTracer.render_async(@scene,
         width: 160,
         height: 120,
         children: 2,
         atoms: 8,
-        speeds: [100, 100]
+        kernel: {RingTracer.Test.FaultyKernel, block_first: {node(), self(), ref}}
       )
 
     id = job.id
+    assert_receive {:blocked, ^ref, held}, 20_000
     assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= 2, 20_000
     {:ok, p} = Preview.open(job)
+    send(held, {:release, ref})
     assert_receive {RingTracer, ^id, {:ok, result}}, 60_000
 
     late = frames(p.url)
