@@ -139,20 +139,28 @@ defmodule RingTracer.DistributedTest do
   test "a frozen node is declared dead after the liveness timeout and its atoms traced elsewhere",
        %{reference: reference} do
     with_peer("frozen", fn frozen, os_pid ->
+      # The frozen node must still hold atoms when it stops, or the job may
+      # end without it: the first atom traced there is held (and with it the
+      # child's), however late a busy machine lets the `kill` run. The
+      # children are not slowed down, so that once the node is declared
+      # dead the others trace its atoms at once (slowed 1000x, they took
+      # over 20 s on a loaded machine).
+      ref = make_ref()
+
       {:ok, job} =
         RingTracer.render_async(
           TestScenes.path(@scene),
-          [nodes: [frozen], children: 4, atoms: 8, speeds: [1000], liveness: 1_000] ++ @size
+          [
+            nodes: [frozen],
+            children: 4,
+            atoms: 8,
+            liveness: 1_000,
+            kernel: {RingTracer.Test.FaultyKernel, block_first: {frozen, self(), ref}}
+          ] ++ @size
         )
 
       id = job.id
-      assert_receive {RingTracer, ^id, {:progress, 1, _}}, 10_000
-      # The frozen node must still hold atoms when it stops, or the job may
-      # end without it. A `kill` is a fork, which a busy machine can delay
-      # past the whole job (about a second at this slowdown), so its
-      # children are first suspended: from then on they hold the atoms they
-      # have.
-      RingTracer.Test.Hold.children(frozen)
+      assert_receive {:blocked, ^ref, _}, 10_000
       {_, 0} = System.cmd("kill", ["-STOP", os_pid])
       t0 = System.monotonic_time(:millisecond)
       assert_receive {RingTracer, ^id, {:ok, result}}, 30_000
