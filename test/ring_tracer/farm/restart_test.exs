@@ -10,8 +10,8 @@ defmodule RingTracer.Farm.RestartTest do
   alias RingTracer.Test.Wait
   alias RingTracer.TestScenes
 
-  @w 160
-  @h 120
+  @w 640
+  @h 480
 
   setup do
     Peers.ensure_distributed()
@@ -52,9 +52,11 @@ defmodule RingTracer.Farm.RestartTest do
     {:ok, queued} = Farm.submit(head, scene, width: 32, height: 24, frames: 1..2, user: "bob")
 
     # Killed part way: some frames done, not all. The workers are stopped
-    # (SIGSTOP) from the moment three are done until the head is dead, so
-    # that however late this process runs on a loaded machine, the job
-    # cannot finish before the kill.
+    # (SIGSTOP) from the moment three frames are done until the head is
+    # dead, so that the job cannot finish before the kill; the frames are
+    # 640 x 480 so that the 45 after the third take seconds, longer than a
+    # loaded machine delays the stop (at 160 x 120 all 48 were once done
+    # before it ran).
     os_pids = for {p, n} <- workers, do: Peers.call(p, n, System, :pid, [])
     on_exit(fn -> System.cmd("kill", ["-CONT" | os_pids], stderr_to_stdout: true) end)
     assert Wait.eventually(fn -> length(elem(Farm.status(head, id), 1).done) >= 3 end, 3000)
