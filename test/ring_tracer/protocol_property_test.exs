@@ -114,9 +114,12 @@ defmodule RingTracer.ProtocolPropertyTest do
               false
           end
 
-        # Give stopped processes a moment to be reaped, then look for leftovers.
-        Process.sleep(5)
-        left = {children(), DynamicSupervisor.which_children(RingTracer.Jobs)}
+        # Stopped processes are reaped asynchronously (5 ms was once too
+        # little on a loaded machine): leftovers are what is still there
+        # after up to 5 s (500 tries 10 ms apart).
+        leftovers = fn -> {children(), DynamicSupervisor.which_children(RingTracer.Jobs)} end
+        RingTracer.Test.Wait.eventually(fn -> leftovers.() == {[], []} end, 500)
+        left = leftovers.()
 
         if System.get_env("PROPER_VERBOSE") && not (ok and left == {[], []}) do
           summary =
