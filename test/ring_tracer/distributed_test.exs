@@ -92,7 +92,7 @@ defmodule RingTracer.DistributedTest do
 
       id = job.id
       assert_receive {:blocked, ^ref, grandchild}, 30_000
-      victim = child_of(n1, grandchild)
+      victim = RingTracer.Test.FaultyKernel.child_of(grandchild)
       at = Enum.random(2..30)
       assert_receive {RingTracer, ^id, {:progress, done, _}} when done >= at, 30_000
       Process.exit(victim, :kill)
@@ -101,14 +101,6 @@ defmodule RingTracer.DistributedTest do
       assert result.pixels == reference
       assert length(result.failures) == 1
     end
-  end
-
-  # The render child on `node` that `grandchild` was spawned by (linked to).
-  defp child_of(node, grandchild) do
-    {:links, links} = :erpc.call(node, Process, :info, [grandchild, :links])
-    children = :erpc.call(node, DynamicSupervisor, :which_children, [RingTracer.Children])
-    [child] = for {_, pid, _, _} <- children, pid in links, do: pid
-    child
   end
 
   test "losing a whole peer node mid-render still gives the identical image", %{

@@ -80,9 +80,7 @@ defmodule RingTracer.FailureTest do
 
       kill = fn ->
         assert_receive {:blocked, ^ref, held}, 10_000
-        {:links, links} = Process.info(held, :links)
-        [victim] = Enum.filter(children(), &(&1 in links))
-        Process.exit(victim, :kill)
+        Process.exit(RingTracer.Test.FaultyKernel.child_of(held), :kill)
       end
 
       {:ok, result} = render_killing(unquote(seed), kill, kernel: kernel)

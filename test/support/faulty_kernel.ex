@@ -89,4 +89,20 @@ defmodule RingTracer.Test.FaultyKernel do
   end
 
   defp block_if_first(_), do: :ok
+
+  @doc """
+  The render child that spawned `grandchild` (a `block_first` one): the
+  process it is linked to under `RingTracer.Children`, on its node.
+  """
+  @spec child_of(pid()) :: pid()
+  def child_of(grandchild),
+    do: :erpc.call(node(grandchild), __MODULE__, :local_child_of, [grandchild])
+
+  @doc false
+  def local_child_of(grandchild) do
+    {:links, links} = Process.info(grandchild, :links)
+    children = DynamicSupervisor.which_children(RingTracer.Children)
+    [child] = for {_, pid, _, _} <- children, pid in links, do: pid
+    child
+  end
 end
