@@ -9,11 +9,13 @@ defmodule RingTracer.Test.FaultyKernel do
   `:delay` milliseconds more, always); and, with
   `freeze: {node, os_pid}`, that node's OS process is stopped (SIGSTOP) as
   the parent prepares it, as a node that hangs while a job starts; and,
-  with `block_first: {node, pid, ref}`, the first atom traced on that node
-  is held: its grandchild sends `{:blocked, ref, grandchild}` to `pid` and
-  waits until it gets `{:release, ref}` or is killed (with its child), so
-  that the child holding it cannot finish, and the job cannot end, before
-  the test acts.
+  with `block: {node, nth, pid, ref}`, the `nth` atom traced on that node
+  under `ref` (counted across the jobs that use `ref`: a job started
+  again does not block again) is held: its grandchild sends
+  `{:blocked, ref, grandchild}` to `pid` and waits until it gets
+  `{:release, ref}` or is killed (with its child), so that the child
+  holding it cannot finish, and the job cannot end, before the test acts.
+  `block_first: {node, pid, ref}` is `block: {node, 1, pid, ref}`.
   """
   @behaviour RingTracer.Kernel
 
@@ -31,10 +33,11 @@ defmodule RingTracer.Test.FaultyKernel do
       _ -> :ok
     end
 
-    # One flag per job on the node, set by the first atom traced there.
-    case opts[:block_first] do
-      {node, _pid, ref} when node == node() ->
-        :persistent_term.put({__MODULE__, ref}, :atomics.new(1, []))
+    # One count per ref on the node, of the atoms traced there.
+    case block(opts) do
+      {node, _nth, _pid, ref} when node == node() ->
+        if :persistent_term.get({__MODULE__, ref}, nil) == nil,
+          do: :persistent_term.put({__MODULE__, ref}, :atomics.new(1, []))
 
       _ ->
         :ok
@@ -48,7 +51,7 @@ defmodule RingTracer.Test.FaultyKernel do
 
   @impl true
   def trace({context, opts}, first, count, atom) do
-    block_if_first(opts[:block_first])
+    block_if_nth(block(opts))
     pixel = opts[:fail_pixel]
 
     holds? = fn p -> is_integer(p) and p >= first and p < first + count end
@@ -76,10 +79,17 @@ defmodule RingTracer.Test.FaultyKernel do
     result
   end
 
-  defp block_if_first({node, pid, ref}) when node == node() do
-    flag = :persistent_term.get({__MODULE__, ref})
+  defp block(opts) do
+    case opts[:block_first] do
+      {node, pid, ref} -> {node, 1, pid, ref}
+      nil -> opts[:block]
+    end
+  end
 
-    if :atomics.compare_exchange(flag, 1, 0, 1) == :ok do
+  defp block_if_nth({node, nth, pid, ref}) when node == node() do
+    count = :persistent_term.get({__MODULE__, ref})
+
+    if :atomics.add_get(count, 1, 1) == nth do
       send(pid, {:blocked, ref, self()})
 
       receive do
@@ -88,10 +98,10 @@ defmodule RingTracer.Test.FaultyKernel do
     end
   end
 
-  defp block_if_first(_), do: :ok
+  defp block_if_nth(_), do: :ok
 
   @doc """
-  The render child that spawned `grandchild` (a `block_first` one): the
+  The render child that spawned `grandchild` (a blocked one): the
   process it is linked to under `RingTracer.Children`, on its node.
   """
   @spec child_of(pid()) :: pid()
