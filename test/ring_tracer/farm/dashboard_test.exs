@@ -49,7 +49,10 @@ defmodule RingTracer.Farm.DashboardTest do
     {:ok, url: url, worker: n}
   end
 
+  # A connection per request (see the preview's HTTP test).
   defp get(url, headers \\ [], method \\ :get) do
+    headers = [{~c"connection", ~c"close"} | headers]
+
     {:ok, {{_, code, _}, head, body}} =
       :httpc.request(method, {String.to_charlist(url), headers}, [autoredirect: false], [])
 
