@@ -152,7 +152,8 @@ defmodule RingTracer.CLI.ServerTest do
 
   # The OS pid of the thin client `pid` (the launcher) runs, once it runs it
   # (10 s at most).
-  defp child_of(pid, tries \\ 200) do
+  # Up to 60 s: a loaded machine once took over 10 s to start the launcher's client.
+  defp child_of(pid, tries \\ 1200) do
     case System.cmd("pgrep", ["-P", "#{pid}", "-x", "ringtracer-clie"]) do
       {out, 0} -> String.trim(out)
       _ when tries > 0 -> Process.sleep(50) && child_of(pid, tries - 1)
