@@ -385,17 +385,24 @@ defmodule RingTracer.Farm do
   def wait(head, id, opts \\ []) do
     on_frame = opts[:on_frame] || fn _, _ -> :ok end
     deadline = deadline(opts[:timeout] || :infinity)
-    watch(head, id, MapSet.new(opts[:skip] || []), on_frame, deadline)
+    # A head that cannot be reached at first is an error; once subscribed,
+    # one that goes is waited for.
+    with :ok <- subscribe(head, id),
+         do: watch(head, id, MapSet.new(opts[:skip] || []), on_frame, deadline)
   end
 
-  # Subscribes and watches the head: one that restarts (its subscribers
-  # gone with it) is subscribed to again once it is back.
+  # Subscribed: watches the head, fetching the frames done so far, then each
+  # as it completes. A head lost at any point (its subscribers gone with it)
+  # is subscribed to again once it is back; the frames handed over stay
+  # handed over.
   defp watch(head, id, seen, on_frame, deadline) do
-    with :ok <- subscribe(head, id),
-         ref = Process.monitor(Names.farm_head(head)),
-         {:ok, info} <- status(head, id),
+    ref = Process.monitor(Names.farm_head(head))
+
+    with {:ok, info} <- status(head, id),
          {:ok, seen} <- fetch_each(head, id, info.done, seen, on_frame) do
       wait_loop(head, id, ref, seen, on_frame, deadline)
+    else
+      error -> lost(error, head, id, ref, seen, on_frame, deadline)
     end
   end
 
@@ -403,15 +410,8 @@ defmodule RingTracer.Farm do
     receive do
       {RingTracer.Farm, ^id, {:frame, n}} ->
         case fetch_each(head, id, [n], seen, on_frame) do
-          {:ok, seen} ->
-            wait_loop(head, id, ref, seen, on_frame, deadline)
-
-          {:error, %Error{reason: :farm_unreachable}} ->
-            Process.demonitor(ref, [:flush])
-            rewatch(head, id, seen, on_frame, deadline)
-
-          error ->
-            error
+          {:ok, seen} -> wait_loop(head, id, ref, seen, on_frame, deadline)
+          error -> lost(error, head, id, ref, seen, on_frame, deadline)
         end
 
       {RingTracer.Farm, ^id, {:end, _state, _error}} ->
@@ -427,6 +427,8 @@ defmodule RingTracer.Farm do
           else
             wait_loop(head, id, ref, seen, on_frame, deadline)
           end
+        else
+          error -> lost(error, head, id, ref, seen, on_frame, deadline)
         end
 
       {:DOWN, ^ref, :process, _, _} ->
@@ -434,6 +436,27 @@ defmodule RingTracer.Farm do
     after
       remaining(deadline) ->
         {:error, Error.new(:timeout, "job #{id} did not end in time")}
+    end
+  end
+
+  # A call that failed while watching: a head that cannot be reached is
+  # waited for (with the frames handed over before the failure); any other
+  # error ends the wait.
+  defp lost(error, head, id, ref, seen, on_frame, deadline) do
+    Process.demonitor(ref, [:flush])
+
+    case error do
+      {:error, %Error{reason: :farm_unreachable}, seen} ->
+        rewatch(head, id, seen, on_frame, deadline)
+
+      {:error, %Error{reason: :farm_unreachable}} ->
+        rewatch(head, id, seen, on_frame, deadline)
+
+      {:error, error, _seen} ->
+        {:error, error}
+
+      {:error, _} ->
+        error
     end
   end
 
@@ -448,16 +471,21 @@ defmodule RingTracer.Farm do
         {:error, Error.new(:timeout, "job #{id} did not end in time")}
 
       _ ->
-        case watch(head, id, seen, on_frame, deadline) do
+        case subscribe(head, id) do
+          :ok ->
+            watch(head, id, seen, on_frame, deadline)
+
           {:error, %Error{reason: :farm_unreachable}} ->
             rewatch(head, id, seen, on_frame, deadline)
 
-          other ->
-            other
+          error ->
+            error
         end
     end
   end
 
+  # {:ok, seen}, or {:error, error, seen}: the frames handed over before the
+  # error are seen.
   defp fetch_each(head, id, numbers, seen, on_frame) do
     Enum.reduce_while(numbers, {:ok, seen}, fn n, {:ok, seen} ->
       if MapSet.member?(seen, n) do
@@ -467,7 +495,7 @@ defmodule RingTracer.Farm do
              :ok <- on_frame.(n, bytes) do
           {:cont, {:ok, MapSet.put(seen, n)}}
         else
-          {:error, _} = error -> {:halt, error}
+          {:error, error} -> {:halt, {:error, error, seen}}
         end
       end
     end)

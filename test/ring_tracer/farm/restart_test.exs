@@ -40,6 +40,11 @@ defmodule RingTracer.Farm.RestartTest do
     |> Map.new(fn {_, {_, n}, at} -> {n, at} end)
   end
 
+  defp messages do
+    {:messages, messages} = Process.info(self(), :messages)
+    messages
+  end
+
   test "after kill -9 of the head every job resumes, workers join again by themselves, " <>
          "no frame done is rendered again and every frame is whole",
        %{dir: dir, name: name, workers: workers} do
@@ -71,7 +76,31 @@ defmodule RingTracer.Farm.RestartTest do
     assert Wait.eventually(fn -> length(elem(Farm.status(head, id), 1).done) >= 3 end, 3000)
     {_, 0} = System.cmd("kill", ["-STOP" | os_pids])
     before = done_at(peer, head, id)
+
+    # A wait that has subscribed and is handed the frames done so far: the
+    # head is killed as it hands over the first, and the wait goes on once
+    # the head is back, every frame handed over once.
+    me = self()
+
+    waiting =
+      Task.async(fn ->
+        Farm.wait(head, id,
+          on_frame: fn n, bytes ->
+            send(me, {:frame, n, bytes})
+
+            if Process.put(:held, true) == nil do
+              send(me, {:first, self()})
+              receive do: (:go_on -> :ok)
+            end
+
+            :ok
+          end
+        )
+      end)
+
+    assert_receive {:first, waiter}, 30_000
     kill9(peer, head)
+    send(waiter, :go_on)
     {_, 0} = System.cmd("kill", ["-CONT" | os_pids])
     assert map_size(before) in 3..47
 
@@ -80,15 +109,14 @@ defmodule RingTracer.Farm.RestartTest do
     # The workers find the head again without being told.
     assert Wait.eventually(fn -> match?({:ok, [_, _]}, Farm.workers(head)) end, 1000)
 
-    me = self()
-
-    {:ok, info} =
-      Farm.wait(head, id, on_frame: fn n, bytes -> send(me, {:frame, n, bytes}) && :ok end)
-
+    {:ok, info} = Task.await(waiting, 180_000)
     assert {info.state, info.done} == {:done, Enum.to_list(1..48)}
     # The frames done before the kill kept their rows: none was traced again.
     after_ = done_at(peer, head, id)
     for {n, at} <- before, do: assert(after_[n] == at)
+
+    handed = for {:frame, n, _} <- messages(), do: n
+    assert Enum.sort(handed) == Enum.to_list(1..48)
 
     for n <- [1, 24, 48] do
       assert_received {:frame, ^n, png}
