@@ -77,10 +77,10 @@ defmodule RingTracer.LocalCluster do
         Enum.map(Keyword.get(opts, :args, []), &String.to_charlist/1) ++
         [~c"-kernel", ~c"prevent_overlapping_partitions", ~c"false"] ++ paths
 
-    # A peer's boot is not what anyone waits on for long: a minute, as it
+    # A peer's boot is not what anyone waits on for long: two minutes, as it
     # took over 30 s on a 2-core machine running two test VMs, dialyzer and
-    # cargo's tests at once.
-    options = %{name: name, host: ~c"localhost", args: args, wait_boot: 60_000}
+    # cargo's tests at once, and over 60 s with two busy loops besides.
+    options = %{name: name, host: ~c"localhost", args: args, wait_boot: 120_000}
     options = if stdio?, do: Map.put(options, :connection, :standard_io), else: options
     {:ok, peer, node} = :peer.start(options)
 
