@@ -519,7 +519,7 @@ mod tests {
             rng
         };
         // repeats, colliding slots, specials and values outside [0, 1]
-        let mut vals: Vec<f32> = (0..20_000)
+        let vals: Vec<f32> = (0..20_000)
             .map(|i| match i % 5 {
                 0 => 0.25,
                 1 => f32::from_bits(next()),
