@@ -209,7 +209,9 @@ impl ConeData {
     }
 }
 
-#[inline]
+/// Inlined into the leaf tests (the prefilter, which rejects about half the cones a ray meets
+/// in a leaf, without a call); the quadratic stays a function of its own.
+#[inline(always)]
 fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
     if c.surely_missed(c.base - ray.origin, ray.dir) {
         return None;
@@ -218,7 +220,7 @@ fn hit_cone(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
 }
 
 /// The cone's quadratic, without [`ConeData::surely_missed`] before it.
-#[inline]
+#[inline(never)]
 fn hit_cone_exact(c: &ConeData, ray: &Ray, tmin: f32, tmax: f32) -> Option<f32> {
     let bo = c.base - ray.origin;
     // Solved from the ray's point nearest the base, not from its origin: far from a thin cone,
