@@ -435,15 +435,36 @@ struct RayPre {
     oinv: [f32; 3],
 }
 
+/// [`RayPre`]'s near and far rows by the signs of the reciprocal direction (bit `a` of the
+/// index set: component `a` below zero): one comparison of the three components and a load
+/// per ray, in place of six selections, which took a tenth of a shadow ray's instructions.
+const PLANE_ROWS: [([usize; 3], [usize; 3]); 8] = {
+    let mut t = [([0; 3], [0; 3]); 8];
+    let mut m = 0;
+    while m < 8 {
+        let mut a = 0;
+        while a < 3 {
+            let neg = (m >> a) & 1 == 1;
+            t[m].0[a] = if neg { 3 + a } else { a };
+            t[m].1[a] = if neg { a } else { 3 + a };
+            a += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
 impl RayPre {
     #[inline(always)]
     fn new(ray: &Ray) -> RayPre {
         let o = ray.origin;
         let i = ray.inv_dir;
-        let neg = [i.x < 0.0, i.y < 0.0, i.z < 0.0];
+        // the mask of `i < 0` on each axis (as the comparison of floats: NaN and -0 are not)
+        let neg = i.cmplt(Vec3A::ZERO).bitmask() as usize & 7;
+        let (near, far) = PLANE_ROWS[neg];
         RayPre {
-            near: [0, 1, 2].map(|a| if neg[a] { 3 + a } else { a }),
-            far: [0, 1, 2].map(|a| if neg[a] { a } else { 3 + a }),
+            near,
+            far,
             inv: [i.x, i.y, i.z],
             oinv: [o.x * i.x, o.y * i.y, o.z * i.z],
         }

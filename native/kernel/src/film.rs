@@ -113,13 +113,15 @@ pub fn from_srgb(v: f32) -> f32 {
 /// [`from_srgb`] over a buffer in place, bit for bit, with a small cache of the values met: an
 /// image repeats a few values often (the background, surfaces in shadow), and `powf` is a
 /// large part of tracing a simple scene. Each slot holds an input's bits and `from_srgb` of
-/// it, so a hit gives exactly what the call would.
+/// it, so a hit gives exactly what the call would. Before the cache, each triple of values (a
+/// pixel, where the buffer is RGB) is compared with the one before it: a run of equal pixels,
+/// such as the background, costs a comparison and a copy per pixel.
 pub fn decode_srgb_in_place(values: &mut [f32]) {
     const SLOTS: usize = 256;
     // slot k holds (bits, from_srgb(f32::from_bits(bits))); 0.0 decodes to 0.0
     let mut keys = [0u32; SLOTS];
     let mut vals = [0.0f32; SLOTS];
-    for v in values.iter_mut() {
+    let mut decode = |v: &mut f32| {
         let bits = v.to_bits();
         let k = (bits.wrapping_mul(0x9E37_79B1) >> 24) as usize % SLOTS;
         if keys[k] == bits {
@@ -130,7 +132,21 @@ pub fn decode_srgb_in_place(values: &mut [f32]) {
             vals[k] = d;
             *v = d;
         }
+    };
+    // the last triple's input bits and its decoded values; all bits set is a NaN, which
+    // decodes to 0.0, so the start is a true pair too
+    let mut last = ([u32::MAX; 3], [0.0f32; 3]);
+    let mut triples = values.chunks_exact_mut(3);
+    for t in &mut triples {
+        let bits = [t[0].to_bits(), t[1].to_bits(), t[2].to_bits()];
+        if bits == last.0 {
+            t.copy_from_slice(&last.1);
+        } else {
+            t.iter_mut().for_each(&mut decode);
+            last = (bits, [t[0], t[1], t[2]]);
+        }
     }
+    triples.into_remainder().iter_mut().for_each(decode);
 }
 
 /// Converts linear RGB floats to 8-bit sRGB bytes (same length).
@@ -503,7 +519,7 @@ mod tests {
             rng
         };
         // repeats, colliding slots, specials and values outside [0, 1]
-        let mut vals: Vec<f32> = (0..20_000)
+        let vals: Vec<f32> = (0..20_000)
             .map(|i| match i % 5 {
                 0 => 0.25,
                 1 => f32::from_bits(next()),
@@ -512,6 +528,21 @@ mod tests {
                 _ => f32::from_bits(0x3F00_0000 | (next() % 64)),
             })
             .collect();
+        // runs of equal pixels (triples), the first of all-ones NaNs (the start's pair); the
+        // length is not a multiple of 3
+        let nan = f32::from_bits(u32::MAX);
+        let runs = [
+            [nan; 3],
+            [0.5, 0.25, 0.75],
+            [0.5, 0.25, 0.7],
+            [-0.0, 0.0, 2.0],
+        ];
+        let mut pixels: Vec<f32> = runs.iter().flat_map(|p| p.repeat(4)).collect();
+        pixels.extend(&vals[..19_998]);
+        pixels.extend(runs.iter().rev().flat_map(|p| p.repeat(3)));
+        pixels.push(0.5);
+        let mut vals = pixels;
+        assert_eq!(vals.len() % 3, 1);
         let want: Vec<u32> = vals.iter().map(|&v| from_srgb(v).to_bits()).collect();
         decode_srgb_in_place(&mut vals);
         let got: Vec<u32> = vals.iter().map(|v| v.to_bits()).collect();

@@ -30,17 +30,22 @@ pub struct Material {
     pub checker: Option<Checker>,
 }
 
+impl Material {
+    /// The default material: white, diffuse only.
+    pub const DEFAULT: Material = Material {
+        color: Vec3A::ONE,
+        kd: 1.0,
+        ks: 0.0,
+        shine: 0.0,
+        t: 0.0,
+        ior: 1.0,
+        checker: None,
+    };
+}
+
 impl Default for Material {
     fn default() -> Self {
-        Material {
-            color: Vec3A::ONE,
-            kd: 1.0,
-            ks: 0.0,
-            shine: 0.0,
-            t: 0.0,
-            ior: 1.0,
-            checker: None,
-        }
+        Material::DEFAULT
     }
 }
 

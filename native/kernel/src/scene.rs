@@ -259,11 +259,12 @@ impl Scene {
         self.bounds
     }
 
-    pub(crate) fn material(&self, index: u32) -> Material {
+    /// Material `index` (the default one if there is no such material), by reference: the
+    /// shading of a hit reads a few of its fields, not all of it.
+    pub(crate) fn material(&self, index: u32) -> &Material {
         self.materials
             .get(index as usize)
-            .copied()
-            .unwrap_or_default()
+            .unwrap_or(&Material::DEFAULT)
     }
 }
 

@@ -27,6 +27,14 @@ impl Scene {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.intersect_avx(ray, tmax, scratch) };
         }
+        self.intersect_portable(ray, tmax, scratch)
+    }
+
+    /// [`Scene::intersect_in`] with the portable node test, for CPUs without AVX2 and FMA.
+    /// Never inlined: inlined into the callers of [`Scene::intersect_with`] (the integrator's
+    /// recursion), this traversal, never run where AVX2 is, made their code larger and slower.
+    #[inline(never)]
+    fn intersect_portable(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch) -> Option<Hit> {
         // SAFETY: without AVX, the portable node test.
         unsafe { self.intersect_in::<false>(ray, tmax, scratch) }
     }
@@ -71,6 +79,15 @@ impl Scene {
                 |first, count| self.tri_blocks.prefetch(first, count),
             )
         };
+        // without instances and planes (most scenes) the hit is the BVH's, what
+        // finish_closest would return, without its call
+        if self.instances.is_empty() && self.planes.is_empty() {
+            return (prim != u32::MAX).then_some(Hit {
+                t: best,
+                prim,
+                instance: Hit::NO_INSTANCE,
+            });
+        }
         self.finish_closest(ray, best, prim, scratch)
     }
 

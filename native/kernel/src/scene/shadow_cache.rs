@@ -51,6 +51,14 @@ impl Scene {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             return unsafe { self.occluded_cached_avx(ray, tmax, scratch, slot) };
         }
+        self.occluded_portable(ray, tmax, scratch, slot)
+    }
+
+    /// [`Scene::occluded_in`] with the portable node test, for CPUs without AVX2 and FMA. Never
+    /// inlined: inlined into the callers of [`Scene::occluded_cached`] (the shading of a hit),
+    /// this traversal, never run where AVX2 is, made their code larger and slower.
+    #[inline(never)]
+    fn occluded_portable(&self, ray: &Ray, tmax: f32, scratch: &mut Scratch, slot: usize) -> bool {
         // SAFETY: without AVX, the portable node test.
         unsafe { self.occluded_in::<false>(ray, tmax, scratch, slot) }
     }
