@@ -52,14 +52,17 @@ defmodule RingTracer.Farm.RestartTest do
     for {p, n} <- workers, do: {:ok, _} = Peers.call(p, n, Farm, :join, [head, [slots: 1]])
     assert Wait.eventually(fn -> match?({:ok, [_, _]}, Farm.workers(head)) end, 1000)
 
-    # The sixth atom traced on the first worker is held until the head is
-    # killed, so that its frame cannot be done before the kill; the frames
-    # after it in the window (4) are, so that some frames are done. The
-    # held atom's child dies with the head; the job, started again, goes on
+    # The twentieth atom traced on the first worker is held until the head
+    # is killed, so that its frame cannot be done before the kill. A frame
+    # has eight atoms (whole: the ring does not split them by default), so
+    # it is the third frame's or a later one's, and the frames before it are
+    # done: nothing holds them (the held atom's grandchild holds one more,
+    # the next in its child's queue, no earlier). The held
+    # atom's child dies with the head; the job, started again, goes on
     # counting and does not hold another.
     [{_, rw1} | _] = workers
     ref = make_ref()
-    kernel = {RingTracer.Test.FaultyKernel, block: {rw1, 6, self(), ref}}
+    kernel = {RingTracer.Test.FaultyKernel, block: {rw1, 20, self(), ref}}
     scene = TestScenes.path("whitted_orbit.toml")
 
     {:ok, id} =
@@ -67,13 +70,13 @@ defmodule RingTracer.Farm.RestartTest do
 
     {:ok, queued} = Farm.submit(head, scene, width: 32, height: 24, frames: 1..2, user: "bob")
 
-    # The workers are stopped (SIGSTOP) from the moment three frames are done
-    # until the head is dead, so that no frame is stored between the read of
-    # those done and the kill.
+    # The workers are stopped (SIGSTOP) once the held atom's frame and those
+    # before it are reached, until the head is dead, so that no frame is
+    # stored between the read of those done and the kill.
     assert_receive {:blocked, ^ref, _}, 60_000
     os_pids = for {p, n} <- workers, do: Peers.call(p, n, System, :pid, [])
     on_exit(fn -> System.cmd("kill", ["-CONT" | os_pids], stderr_to_stdout: true) end)
-    assert Wait.eventually(fn -> length(elem(Farm.status(head, id), 1).done) >= 3 end, 3000)
+    assert Wait.eventually(fn -> elem(Farm.status(head, id), 1).done != [] end, 3000)
     {_, 0} = System.cmd("kill", ["-STOP" | os_pids])
     before = done_at(peer, head, id)
 
@@ -102,7 +105,7 @@ defmodule RingTracer.Farm.RestartTest do
     kill9(peer, head)
     send(waiter, :go_on)
     {_, 0} = System.cmd("kill", ["-CONT" | os_pids])
-    assert map_size(before) in 3..47
+    assert map_size(before) in 1..47
 
     {peer, ^head} = start_head(name, dir)
     on_exit(fn -> Peers.stop(peer) end)
