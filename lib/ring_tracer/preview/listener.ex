@@ -34,6 +34,8 @@ defmodule RingTracer.Preview.Listener do
   # Seconds a connection has to send its request line and headers; the
   # application's `:request_deadline_s` sets it where a test needs less.
   @request_deadline_s 5
+  # How long a connection is kept, whatever the others, to show the token.
+  @grace_ms 1_000
 
   @doc "A new random token: 128 bits, URL-safe base64."
   @spec token() :: String.t()
@@ -196,16 +198,30 @@ defmodule RingTracer.Preview.Listener do
   its way without the token, a kept-alive connection that never showed
   it), each with when a sweep first saw it (`seen`, from the previous
   sweep): beyond `max`, the oldest are killed, but never one this sweep
-  sees for the first time. A connection is admitted as soon as its request
+  sees for the first time, nor one first seen less than `grace_ms` ago
+  (default #{@grace_ms}: time for a request to show the token on a loaded
+  machine, where one sweep's interval was once too little). A connection
+  is admitted as soon as its request
   passes `check/3`, however long its answer then takes (a stream joining
   a server that runs late on a loaded machine), so clients that hold
   connections open without the token (or many of them, reconnecting as
   fast as they are dropped) cannot keep the owner from the page. Returns
   the new `seen`.
   """
-  @spec sweep(t(), %{pid() => integer()}, %{optional(pid()) => term()}, non_neg_integer()) ::
-          %{pid() => integer()}
-  def sweep(%__MODULE__{connections: sup, admitted: admitted}, seen, streams, max) do
+  @spec sweep(
+          t(),
+          %{pid() => integer()},
+          %{optional(pid()) => term()},
+          non_neg_integer(),
+          non_neg_integer()
+        ) :: %{pid() => integer()}
+  def sweep(
+        %__MODULE__{connections: sup, admitted: admitted},
+        seen,
+        streams,
+        max,
+        grace_ms \\ @grace_ms
+      ) do
     now = System.monotonic_time(:millisecond)
     live = connections(sup)
     admitted = forget_gone(admitted, live)
@@ -225,7 +241,7 @@ defmodule RingTracer.Preview.Listener do
       # many others keep reconnecting as fast as they are dropped.
       dropped =
         waiting
-        |> Enum.filter(&is_map_key(seen, elem(&1, 0)))
+        |> Enum.filter(fn {pid, at} -> is_map_key(seen, pid) and now - at >= grace_ms end)
         |> Enum.sort_by(&elem(&1, 1))
         |> Enum.take(excess)
         |> Enum.map(&elem(&1, 0))

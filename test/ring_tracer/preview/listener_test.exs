@@ -75,18 +75,21 @@ defmodule RingTracer.Preview.ListenerTest do
       await_connections(l, 4)
 
       # Seen for the first time: none dropped, however many.
-      seen = Listener.sweep(l, %{}, %{}, 1)
+      seen = Listener.sweep(l, %{}, %{}, 1, 0)
       assert map_size(seen) == 3
       new = for _ <- 1..3, do: connect(l.port)
       await_connections(l, 7)
 
       # Beyond 1 waiting: the 3 old ones go (the new ones are seen for the
-      # first time), then 2 of the new ones; the owner's stays.
-      seen = Listener.sweep(l, seen, %{}, 1)
+      # first time), then 2 of the new ones; the owner's stays. Within their
+      # grace (here a minute), none goes.
+      assert Listener.sweep(l, seen, %{}, 1, 60_000) |> map_size() == 6
+      await_connections(l, 7)
+      seen = Listener.sweep(l, seen, %{}, 1, 0)
       assert map_size(seen) == 3
       await_connections(l, 4)
       for sock <- old, do: assert(:gen_tcp.recv(sock, 0, 5_000) == {:error, :closed})
-      seen = Listener.sweep(l, seen, %{}, 1)
+      seen = Listener.sweep(l, seen, %{}, 1, 0)
       assert map_size(seen) == 1
       # Their processes gone, their sockets are closed.
       await_connections(l, 2)
