@@ -663,12 +663,7 @@ impl Answer for Option<Hit> {
     }
     fn finish(scene: &Scene, left: Left<'_>, scratch: &mut Scratch) -> Self {
         let Left { ray, t, prim, .. } = left;
-        // without instances and planes the hit is the BVH's (what finish_closest would return)
-        if scene.instances.is_empty() && scene.planes.is_empty() {
-            Self::plain(t, prim)
-        } else {
-            scene.finish_closest(ray, t, prim, scratch)
-        }
+        scene.finish_closest(ray, t, prim, scratch)
     }
     #[inline(always)]
     fn plain(t: f32, prim: u32) -> Self {

@@ -79,15 +79,6 @@ impl Scene {
                 |first, count| self.tri_blocks.prefetch(first, count),
             )
         };
-        // without instances and planes (most scenes) the hit is the BVH's, what
-        // finish_closest would return, without its call
-        if self.instances.is_empty() && self.planes.is_empty() {
-            return (prim != u32::MAX).then_some(Hit {
-                t: best,
-                prim,
-                instance: Hit::NO_INSTANCE,
-            });
-        }
         self.finish_closest(ray, best, prim, scratch)
     }
 
@@ -139,9 +130,30 @@ impl Scene {
     }
 
     /// The rest of a closest-hit query after the scene's own BVH gave `prim` at `best`
-    /// (`u32::MAX`: nothing before `best`): the mesh instances, then the planes.
-    #[inline]
+    /// (`u32::MAX`: nothing before `best`): the mesh instances, then the planes. Without
+    /// either (most scenes) the hit is the BVH's, inlined into every query, without a call
+    /// (it took 1.5% of a glass scene's instructions).
+    #[inline(always)]
     pub(crate) fn finish_closest(
+        &self,
+        ray: &Ray,
+        best: f32,
+        prim: u32,
+        scratch: &mut Scratch,
+    ) -> Option<Hit> {
+        if self.instances.is_empty() && self.planes.is_empty() {
+            return (prim != u32::MAX).then_some(Hit {
+                t: best,
+                prim,
+                instance: Hit::NO_INSTANCE,
+            });
+        }
+        self.finish_closest_beyond(ray, best, prim, scratch)
+    }
+
+    /// [`Scene::finish_closest`] where the scene has mesh instances or planes.
+    #[inline]
+    fn finish_closest_beyond(
         &self,
         ray: &Ray,
         mut best: f32,
