@@ -813,17 +813,20 @@ defmodule RingTracer.Preview.HTTPTest do
     assert message =~ "--preview takes an integer from 0 to 65535"
   end
 
+  # The timeout covers the scene's loading and the preview's start: 3 s leaves them time on a
+  # loaded machine (200 ms once did not: the render timed out before the preview started),
+  # and the image, every atom slowed a thousandfold, takes far longer.
   test "a preview render/2 started goes with it when the render times out" do
     err =
       capture_io(:stderr, fn ->
         assert {:error, %RingTracer.Error{reason: :timeout}} =
                  RingTracer.render("priv/scenes/balls_s1.nff",
-                   width: 96,
-                   height: 72,
+                   width: 320,
+                   height: 240,
                    children: 2,
                    atoms: 8,
                    speeds: [1000, 1000],
-                   timeout: 200,
+                   timeout: 3_000,
                    preview: true
                  )
       end)
