@@ -16,6 +16,8 @@ defmodule RingTracer.LocalCluster do
 
   alias RingTracer.Cluster.{Distribution, TLS}
 
+  @join_ms 60_000
+
   @doc """
   Makes this node distributed (starting epmd first) unless it already is;
   raises `RingTracer.Error` when it cannot (a VM booted without TLS).
@@ -77,12 +79,22 @@ defmodule RingTracer.LocalCluster do
         Enum.map(Keyword.get(opts, :args, []), &String.to_charlist/1) ++
         [~c"-kernel", ~c"prevent_overlapping_partitions", ~c"false"] ++ paths
 
-    # A peer's boot is not what anyone waits on for long: two minutes, as it
-    # took over 30 s on a 2-core machine running two test VMs, dialyzer and
-    # cargo's tests at once, and over 60 s with two busy loops besides.
-    options = %{name: name, host: ~c"localhost", args: args, wait_boot: 120_000}
-    options = if stdio?, do: Map.put(options, :connection, :standard_io), else: options
+    # Every peer boots controlled through its standard I/O, and one this node
+    # can talk to is then joined over distribution, with a deadline: a peer
+    # booted to report over distribution (OTP's `-origin`) does so in a call
+    # of 5 s, which a loaded machine once missed (the peer halted, and this
+    # node waited out the whole boot deadline). A boot takes about a second,
+    # here as with four busy loops beside it.
+    options = %{
+      name: name,
+      host: ~c"localhost",
+      args: args,
+      wait_boot: 120_000,
+      connection: :standard_io
+    }
+
     {:ok, peer, node} = :peer.start(options)
+    unless stdio?, do: join!(node, System.monotonic_time(:millisecond) + @join_ms)
 
     if code? do
       :ok = call(peer, node, Application, :put_env, [:logger, :level, :warning])
@@ -90,6 +102,22 @@ defmodule RingTracer.LocalCluster do
     end
 
     {peer, node}
+  end
+
+  # Connects to a booted peer, again until the deadline: a connection's set-up
+  # (TLS on both sides) can fail on a loaded machine and succeed a moment later.
+  defp join!(node, deadline) do
+    cond do
+      Node.connect(node) == true ->
+        :ok
+
+      System.monotonic_time(:millisecond) < deadline ->
+        Process.sleep(100)
+        join!(node, deadline)
+
+      true ->
+        raise "could not connect to the peer #{node} within #{@join_ms} ms"
+    end
   end
 
   @doc "Calls `m.f(a...)` on a peer, over distribution or its standard I/O."
