@@ -17,7 +17,8 @@ defmodule RingTracer.Preview.Log do
   # the image complete with the highest number (what the page shows when no
   # image is in flight), keeps the `frame` frames of the `strip` images
   # complete with the highest numbers (12 by default: images complete in
-  # about their order, so those completed last), counts hand-overs with the protocol events against
+  # about their order, so those completed last) and the newest `frame` frame
+  # (the count complete and the images in flight, for a page that lagged), counts hand-overs with the protocol events against
   # `max_events`, and its final frame has the atoms and events of the last
   # `strip` images only. What stays: the job frame, the images in flight,
   # one image completed, `strip` thumbnails, at most `max_events` events.
@@ -74,6 +75,7 @@ defmodule RingTracer.Preview.Log do
             flight: %{},
             held: {0, []},
             thumbs: [],
+            newest: nil,
             unindexed: %{},
             completed: 0,
             timed: 0,
@@ -86,7 +88,8 @@ defmodule RingTracer.Preview.Log do
   image in flight by index (`unindexed`: by number, the `release` frames
   of an index unknown), `held` those of the image completed with the
   highest number (and that number), `thumbs` the `frame` frames kept (at
-  most `strip`, `{number, seq}`, by number), `completed` images
+  most `strip`, `{number, seq}`, by number; `newest` the latest `frame`
+  frame when it is not one of them), `completed` images
   (`timed` of them seen complete, and the sum of their times), `forget` the
   frames to delete.
   """
@@ -321,6 +324,13 @@ defmodule RingTracer.Preview.Log do
         do: {[elem(hd(thumbs), 1)], tl(thumbs)},
         else: {[], thumbs}
 
+    # The newest `frame` frame stays until the next one, in the strip or not:
+    # it has the count complete and the images in flight, which a page that
+    # lagged past the others' needs (the image completed last may have the
+    # lowest number, and then no later `frame` frame would tell the page).
+    {old, newest} = if old == [log.seq], do: {[], log.seq}, else: {old, nil}
+    old = List.wrap(log.newest) ++ old
+
     # The image shown when none is in flight: the highest number complete.
     {held, gone} =
       case log.held do
@@ -336,6 +346,7 @@ defmodule RingTracer.Preview.Log do
         unindexed: unindexed,
         held: held,
         thumbs: thumbs,
+        newest: newest,
         atoms: atoms,
         forget: old ++ gone ++ log.forget
     }
