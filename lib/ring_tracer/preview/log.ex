@@ -18,9 +18,9 @@ defmodule RingTracer.Preview.Log do
   # image is in flight), keeps the `frame` frames of the `strip` images
   # complete with the highest numbers (12 by default: images complete in
   # about their order, so those completed last) and the newest `frame` frame
-  # (the count complete and the images in flight, for a page that lagged), counts hand-overs with the protocol events against
-  # `max_events`, and its final frame has the atoms and events of the last
-  # `strip` images only. What stays: the job frame, the images in flight,
+  # (the count complete and the images in flight, for a page that lagged),
+  # counts hand-overs with the protocol events against `max_events`, and its
+  # final frame has the atoms and events of the last `strip` images only. What stays: the job frame, the images in flight,
   # one image completed, `strip` thumbnails, at most `max_events` events.
   #
   # Frames (`event:` name, `data:` one JSON object):

@@ -223,8 +223,6 @@ defmodule RingTracer.Preview.BrowserTest do
     end
   end
 
-  # Suspends this node's render children until the process returned is
-  # sent :release (a suspension ends with the process that made it).
   # The children held, the page caught up, and what it shows as the oldest
   # frame in flight. Held just as a frame completes, before an atom of the
   # next has come, no frame is in flight (the page shows none): then the
@@ -260,6 +258,8 @@ defmodule RingTracer.Preview.BrowserTest do
     end
   end
 
+  # Suspends this node's render children until the process returned is
+  # sent :release (a suspension ends with the process that made it).
   defp hold_children do
     me = self()
 
